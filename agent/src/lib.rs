@@ -1,0 +1,1 @@
+//! `mech-agent`: the robot side of MECH.

@@ -1,0 +1,1 @@
+//! `mech-gcs`: the MECH ground-control station.

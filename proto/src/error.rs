@@ -1,0 +1,107 @@
+//! The one error type of the codec and framing, with a coarse [`ErrorKind`]
+//! that routers and agents use as a counter key.
+
+use std::fmt;
+
+/// Why bytes could not become a message, or a message could not become bytes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Error {
+    /// Zero bytes where a message was expected.
+    #[error("empty message")]
+    Empty,
+    /// More bytes than [`crate::MAX_MESSAGE_LEN`]; the input was not parsed.
+    #[error("message of {len} bytes exceeds the {max}-byte limit")]
+    Oversized { len: usize, max: usize },
+    /// The sender speaks another protocol version.
+    #[error("protocol version {found} is not supported (this build speaks version {supported})")]
+    Version { found: u64, supported: u8 },
+    /// The header names a message kind this build does not know.
+    #[error("unknown message kind {0}")]
+    UnknownKind(u64),
+    /// Not a well-formed MECH message: truncated, wrong types or shape.
+    #[error("malformed message: {0}")]
+    Malformed(String),
+    /// Well-formed, but a field is out of range (NaN speed, name too long...).
+    #[error("invalid message: {0}")]
+    Invalid(String),
+    /// A serial frame whose CRC-32 does not match its contents.
+    #[error("frame checksum mismatch: frame says {expected:#010x}, contents give {computed:#010x}")]
+    Checksum { expected: u32, computed: u32 },
+    /// A serial or stream frame that cannot be undone (bad COBS, short frame).
+    #[error("bad frame: {0}")]
+    Framing(&'static str),
+    /// A message could not be encoded (only for invalid values).
+    #[error("cannot encode message: {0}")]
+    Encode(String),
+}
+
+/// Coarse classes of [`Error`], for counters ("dropped: 3 malformed, 1 version").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ErrorKind {
+    Empty,
+    Oversized,
+    Version,
+    UnknownKind,
+    Malformed,
+    Invalid,
+    Checksum,
+    Framing,
+    Encode,
+}
+
+impl Error {
+    /// The class of this error.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Error::Empty => ErrorKind::Empty,
+            Error::Oversized { .. } => ErrorKind::Oversized,
+            Error::Version { .. } => ErrorKind::Version,
+            Error::UnknownKind(_) => ErrorKind::UnknownKind,
+            Error::Malformed(_) => ErrorKind::Malformed,
+            Error::Invalid(_) => ErrorKind::Invalid,
+            Error::Checksum { .. } => ErrorKind::Checksum,
+            Error::Framing(_) => ErrorKind::Framing,
+            Error::Encode(_) => ErrorKind::Encode,
+        }
+    }
+
+    pub(crate) fn invalid(text: impl Into<String>) -> Error {
+        Error::Invalid(text.into())
+    }
+}
+
+impl ErrorKind {
+    /// Every kind, for tables of counters.
+    pub const ALL: [ErrorKind; 9] = [
+        ErrorKind::Empty,
+        ErrorKind::Oversized,
+        ErrorKind::Version,
+        ErrorKind::UnknownKind,
+        ErrorKind::Malformed,
+        ErrorKind::Invalid,
+        ErrorKind::Checksum,
+        ErrorKind::Framing,
+        ErrorKind::Encode,
+    ];
+
+    /// Short lowercase name for counters and logs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorKind::Empty => "empty",
+            ErrorKind::Oversized => "oversized",
+            ErrorKind::Version => "version",
+            ErrorKind::UnknownKind => "unknown-kind",
+            ErrorKind::Malformed => "malformed",
+            ErrorKind::Invalid => "invalid",
+            ErrorKind::Checksum => "checksum",
+            ErrorKind::Framing => "framing",
+            ErrorKind::Encode => "encode",
+        }
+    }
+}
+
+impl fmt::Display for ErrorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}

@@ -1,0 +1,237 @@
+//! Framing for byte streams: length-prefixed frames on TCP
+//! ([`write_stream_frame`], [`StreamDecoder`]) and COBS + CRC-32 frames on
+//! serial radios ([`write_serial_frame`], [`SerialDecoder`]). UDP needs no
+//! framing: one datagram is one message.
+//!
+//! Decoders are push-based (feed them whatever `read` returned) and never
+//! allocate more than one maximum-size frame.
+
+use crate::envelope::{Envelope, decode, encode_into};
+use crate::error::Error;
+use crate::MAX_MESSAGE_LEN;
+
+/// Bytes of the big-endian length that precedes each TCP frame.
+pub const STREAM_PREFIX_LEN: usize = 4;
+
+/// Bytes of the CRC-32 appended to each serial frame before COBS encoding.
+pub const SERIAL_CRC_LEN: usize = 4;
+
+/// Longest serial frame on the wire (COBS adds one byte per 254, plus the
+/// leading code byte and the delimiter).
+pub const MAX_SERIAL_FRAME_LEN: usize =
+    MAX_MESSAGE_LEN + SERIAL_CRC_LEN + (MAX_MESSAGE_LEN + SERIAL_CRC_LEN) / 254 + 2;
+
+/// Appends `env` to `out` as `u32 big-endian length || message`.
+pub fn write_stream_frame(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
+    let start = out.len();
+    out.extend_from_slice(&[0; STREAM_PREFIX_LEN]);
+    if let Err(e) = encode_into(env, out) {
+        out.truncate(start);
+        return Err(e);
+    }
+    let len = (out.len() - start - STREAM_PREFIX_LEN) as u32;
+    out[start..start + STREAM_PREFIX_LEN].copy_from_slice(&len.to_be_bytes());
+    Ok(())
+}
+
+/// Splits a TCP byte stream into messages.
+///
+/// A frame whose body fails to decode yields an error and the stream goes on
+/// (the length prefix still marks the next frame). A length prefix of zero or
+/// above [`MAX_MESSAGE_LEN`] means the stream is out of step for good: the
+/// decoder yields that error and then nothing more; close the connection.
+#[derive(Debug, Default)]
+pub struct StreamDecoder {
+    buf: Vec<u8>,
+    /// Start of unread data in `buf`; compacted lazily to avoid a memmove
+    /// per frame.
+    read: usize,
+    broken: bool,
+}
+
+impl StreamDecoder {
+    pub fn new() -> StreamDecoder {
+        StreamDecoder::default()
+    }
+
+    /// Adds bytes read from the stream.
+    pub fn push(&mut self, bytes: &[u8]) {
+        if self.broken {
+            return;
+        }
+        if self.read > 0 && self.read == self.buf.len() {
+            self.buf.clear();
+            self.read = 0;
+        } else if self.read > MAX_MESSAGE_LEN {
+            self.buf.drain(..self.read);
+            self.read = 0;
+        }
+        self.buf.extend_from_slice(bytes);
+    }
+
+    /// Whether a bad length prefix has ended this stream.
+    pub fn is_broken(&self) -> bool {
+        self.broken
+    }
+
+    /// The next complete frame's message bytes, if one has arrived.
+    pub fn next_frame(&mut self) -> Option<Result<&[u8], Error>> {
+        if self.broken {
+            return None;
+        }
+        let avail = &self.buf[self.read..];
+        if avail.len() < STREAM_PREFIX_LEN {
+            return None;
+        }
+        let mut prefix = [0; STREAM_PREFIX_LEN];
+        prefix.copy_from_slice(&avail[..STREAM_PREFIX_LEN]);
+        let len = u32::from_be_bytes(prefix) as usize;
+        if len == 0 {
+            self.broken = true;
+            return Some(Err(Error::Framing("zero-length stream frame")));
+        }
+        if len > MAX_MESSAGE_LEN {
+            self.broken = true;
+            return Some(Err(Error::Oversized { len, max: MAX_MESSAGE_LEN }));
+        }
+        if avail.len() < STREAM_PREFIX_LEN + len {
+            return None;
+        }
+        let start = self.read + STREAM_PREFIX_LEN;
+        self.read = start + len;
+        Some(Ok(&self.buf[start..start + len]))
+    }
+
+    /// The next complete message, decoded.
+    pub fn next_message(&mut self) -> Option<Result<Envelope, Error>> {
+        self.next_frame().map(|frame| frame.and_then(decode))
+    }
+}
+
+/// Appends `env` to `out` as `COBS(message || crc32_le(message)) || 0x00`.
+///
+/// A leading `0x00` is not written; receivers ignore empty frames, so a
+/// sender may add one to flush a receiver's half-received garbage.
+pub fn write_serial_frame(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
+    let mut raw = Vec::with_capacity(64);
+    encode_into(env, &mut raw)?;
+    let crc = crc32fast::hash(&raw);
+    raw.extend_from_slice(&crc.to_le_bytes());
+    cobs_encode(&raw, out);
+    out.push(0);
+    Ok(())
+}
+
+/// Splits a serial byte stream into messages, resynchronising at every
+/// `0x00`: a corrupted byte costs the frame it is in, never the next one.
+#[derive(Debug, Default)]
+pub struct SerialDecoder {
+    /// COBS-encoded bytes of the frame being received.
+    frame: Vec<u8>,
+    /// The current frame overflowed; skip to the next delimiter.
+    skipping: bool,
+    /// Complete frames' results, oldest first.
+    ready: std::collections::VecDeque<Result<Envelope, Error>>,
+}
+
+impl SerialDecoder {
+    pub fn new() -> SerialDecoder {
+        SerialDecoder::default()
+    }
+
+    /// Adds bytes read from the port; complete frames become available from
+    /// [`SerialDecoder::next_message`].
+    pub fn push(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            if b == 0 {
+                if self.skipping {
+                    self.skipping = false;
+                } else if !self.frame.is_empty() {
+                    let result = decode_serial_frame(&self.frame);
+                    self.ready.push_back(result);
+                }
+                self.frame.clear();
+            } else if !self.skipping {
+                if self.frame.len() >= MAX_SERIAL_FRAME_LEN {
+                    self.ready.push_back(Err(Error::Oversized {
+                        len: self.frame.len() + 1,
+                        max: MAX_SERIAL_FRAME_LEN,
+                    }));
+                    self.frame.clear();
+                    self.skipping = true;
+                } else {
+                    self.frame.push(b);
+                }
+            }
+        }
+    }
+
+    /// The next received message (or why a frame was dropped).
+    pub fn next_message(&mut self) -> Option<Result<Envelope, Error>> {
+        self.ready.pop_front()
+    }
+}
+
+/// Undoes COBS and checks the CRC of one frame (without its delimiter).
+fn decode_serial_frame(encoded: &[u8]) -> Result<Envelope, Error> {
+    let raw = cobs_decode(encoded)?;
+    if raw.len() <= SERIAL_CRC_LEN {
+        return Err(Error::Framing("serial frame shorter than its checksum"));
+    }
+    let (msg, crc) = raw.split_at(raw.len() - SERIAL_CRC_LEN);
+    let mut le = [0; SERIAL_CRC_LEN];
+    le.copy_from_slice(crc);
+    let expected = u32::from_le_bytes(le);
+    let computed = crc32fast::hash(msg);
+    if expected != computed {
+        return Err(Error::Checksum { expected, computed });
+    }
+    decode(msg)
+}
+
+/// Consistent Overhead Byte Stuffing: removes every zero byte from `data`.
+pub fn cobs_encode(data: &[u8], out: &mut Vec<u8>) {
+    let mut code_at = out.len();
+    out.push(0);
+    let mut code: u8 = 1;
+    for &b in data {
+        if b == 0 {
+            out[code_at] = code;
+            code_at = out.len();
+            out.push(0);
+            code = 1;
+        } else {
+            out.push(b);
+            code += 1;
+            if code == 0xff {
+                out[code_at] = code;
+                code_at = out.len();
+                out.push(0);
+                code = 1;
+            }
+        }
+    }
+    out[code_at] = code;
+}
+
+/// Inverse of [`cobs_encode`]; `encoded` holds no zero bytes.
+pub fn cobs_decode(encoded: &[u8]) -> Result<Vec<u8>, Error> {
+    let mut out = Vec::with_capacity(encoded.len());
+    let mut i = 0;
+    while i < encoded.len() {
+        let code = encoded[i] as usize;
+        if code == 0 {
+            return Err(Error::Framing("zero byte inside a COBS frame"));
+        }
+        let end = i + code;
+        if end > encoded.len() {
+            return Err(Error::Framing("COBS block runs past the frame"));
+        }
+        out.extend_from_slice(&encoded[i + 1..end]);
+        i = end;
+        if code < 0xff && i < encoded.len() {
+            out.push(0);
+        }
+    }
+    Ok(out)
+}
