@@ -17,9 +17,9 @@ pub const STREAM_PREFIX_LEN: usize = 4;
 pub const SERIAL_CRC_LEN: usize = 4;
 
 /// Longest serial frame on the wire (COBS adds one byte per 254, plus the
-/// leading code byte and the delimiter).
+/// first code byte and the two delimiters).
 pub const MAX_SERIAL_FRAME_LEN: usize =
-    MAX_MESSAGE_LEN + SERIAL_CRC_LEN + (MAX_MESSAGE_LEN + SERIAL_CRC_LEN) / 254 + 2;
+    MAX_MESSAGE_LEN + SERIAL_CRC_LEN + (MAX_MESSAGE_LEN + SERIAL_CRC_LEN) / 254 + 3;
 
 /// Appends `env` to `out` as `u32 big-endian length || message`.
 pub fn write_stream_frame(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
@@ -108,15 +108,17 @@ impl StreamDecoder {
     }
 }
 
-/// Appends `env` to `out` as `COBS(message || crc32_le(message)) || 0x00`.
+/// Appends `env` to `out` as `0x00 || COBS(message || crc32_le(message)) || 0x00`.
 ///
-/// A leading `0x00` is not written; receivers ignore empty frames, so a
-/// sender may add one to flush a receiver's half-received garbage.
+/// The leading delimiter ends whatever half-received garbage a receiver holds
+/// (a radio that dropped the previous frame's tail), so a damaged frame never
+/// swallows the next one; receivers ignore the empty frame it makes.
 pub fn write_serial_frame(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
     let mut raw = Vec::with_capacity(64);
     encode_into(env, &mut raw)?;
     let crc = crc32fast::hash(&raw);
     raw.extend_from_slice(&crc.to_le_bytes());
+    out.push(0);
     cobs_encode(&raw, out);
     out.push(0);
     Ok(())

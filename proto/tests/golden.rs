@@ -1,0 +1,163 @@
+//! Golden bytes: decode(golden) == fixture and encode(fixture) == golden, with
+//! every byte explained. A change here is a change of the wire protocol.
+
+use mech_proto::framing::{SerialDecoder, StreamDecoder, write_serial_frame, write_stream_frame};
+use mech_proto::{Body, Command, Envelope, Header, Heartbeat, Route, Twist, decode, encode};
+
+fn header(sender: &str, destination: &str, channel: &str) -> Header {
+    Header {
+        seq: 7,
+        stamp_us: 1_000_000,
+        sender: sender.into(),
+        destination: destination.into(),
+        channel: channel.into(),
+    }
+}
+
+fn heartbeat() -> Envelope {
+    Envelope::new(
+        header("robot_1", "router", ""),
+        Body::Heartbeat(Heartbeat { uptime_ms: 1500 }),
+    )
+}
+
+#[rustfmt::skip]
+const HEARTBEAT: &[u8] = &[
+    0x99,                                     // fixarray, 9 elements: the envelope
+    0x01,                                     // version 1
+    0x03,                                     // kind 3 = Heartbeat
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us: uint32 1_000_000
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // sender "robot_1"
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // destination "router"
+    0xa0,                                     // channel "" (not a command)
+    0x91,                                     // body: fixarray, 1 field
+    0xcd, 0x05, 0xdc,                         //   uptime_ms: uint16 1500
+    0xc0,                                     // auth: nil (unsigned)
+];
+
+fn twist() -> Envelope {
+    Envelope::new(
+        header("gcs", "robot_1", "joy/0"),
+        Body::Command(Command::Twist(Twist { vx: 0.5, vy: 0.0, vz: 0.0, wz: -0.25 })),
+    )
+}
+
+#[rustfmt::skip]
+const TWIST: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x05,                                     // kind 5 = Command
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa3, b'g', b'c', b's',                   // sender "gcs"
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // destination "robot_1"
+    0xa5, b'j', b'o', b'y', b'/', b'0',       // channel "joy/0"
+    0x92,                                     // body: [command kind, payload]
+    0x04,                                     //   command kind 4 = Twist
+    0x94,                                     //   payload: fixarray, 4 fields
+    0xcb, 0x3f, 0xe0, 0, 0, 0, 0, 0, 0,       //     vx  float64  0.5 m/s
+    0xcb, 0, 0, 0, 0, 0, 0, 0, 0,             //     vy  float64  0.0 m/s
+    0xcb, 0, 0, 0, 0, 0, 0, 0, 0,             //     vz  float64  0.0 m/s
+    0xcb, 0xbf, 0xd0, 0, 0, 0, 0, 0, 0,       //     wz  float64 -0.25 rad/s
+    0xc0,                                     // auth: nil
+];
+
+fn route() -> Envelope {
+    Envelope::new(
+        header("gcs", "robot_1", ""),
+        Body::Route(Route { robot: "robot_1".into(), channel: "joy/0".into(), epoch: 3 }),
+    )
+}
+
+#[rustfmt::skip]
+const ROUTE: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x09,                                     // kind 9 = Route
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa3, b'g', b'c', b's',                   // sender "gcs"
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // destination "robot_1"
+    0xa0,                                     // channel ""
+    0x93,                                     // body: fixarray, 3 fields
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', //   robot "robot_1"
+    0xa5, b'j', b'o', b'y', b'/', b'0',       //   channel "joy/0"
+    0x03,                                     //   epoch 3
+    0xc0,                                     // auth: nil
+];
+
+#[test]
+fn golden_messages_decode_to_fixtures() {
+    assert_eq!(decode(HEARTBEAT), Ok(heartbeat()));
+    assert_eq!(decode(TWIST), Ok(twist()));
+    assert_eq!(decode(ROUTE), Ok(route()));
+}
+
+#[test]
+fn fixtures_encode_to_golden_messages() {
+    assert_eq!(encode(&heartbeat()).as_deref(), Ok(HEARTBEAT));
+    assert_eq!(encode(&twist()).as_deref(), Ok(TWIST));
+    assert_eq!(encode(&route()).as_deref(), Ok(ROUTE));
+}
+
+#[test]
+fn golden_stream_frame_is_length_prefixed() {
+    let mut frame = Vec::new();
+    write_stream_frame(&heartbeat(), &mut frame).unwrap();
+    // u32 big-endian length 30, then the message itself.
+    assert_eq!(&frame[..4], &[0x00, 0x00, 0x00, HEARTBEAT.len() as u8]);
+    assert_eq!(&frame[4..], HEARTBEAT);
+    let mut dec = StreamDecoder::new();
+    dec.push(&frame);
+    assert_eq!(dec.next_message(), Some(Ok(heartbeat())));
+    assert_eq!(dec.next_message(), None);
+}
+
+#[rustfmt::skip]
+const HEARTBEAT_SERIAL: &[u8] = &[
+    0x00,                                     // leading delimiter: flushes receiver garbage
+    0x06,                                     // COBS code: 5 data bytes, then a zero
+    0x99, 0x01, 0x03, 0x07, 0xce,             // envelope, version, kind, seq, uint32 marker
+    0x1d,                                     // COBS code: 28 data bytes, no zero, end
+    0x0f, 0x42, 0x40,                         // rest of stamp_us (its 0x00 became the code above)
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // sender
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // destination
+    0xa0, 0x91, 0xcd, 0x05, 0xdc, 0xc0,       // channel, body, auth
+    0x66, 0x4f, 0xfa, 0xbd,                   // CRC-32 (IEEE) of the message, little-endian
+    0x00,                                     // frame delimiter
+];
+
+#[test]
+fn golden_serial_frame_is_cobs_with_crc32() {
+    let mut frame = Vec::new();
+    write_serial_frame(&heartbeat(), &mut frame).unwrap();
+    assert_eq!(frame, HEARTBEAT_SERIAL);
+    assert_eq!(
+        crc32_ieee(HEARTBEAT).to_le_bytes(),
+        HEARTBEAT_SERIAL[HEARTBEAT_SERIAL.len() - 5..HEARTBEAT_SERIAL.len() - 1]
+    );
+    let mut dec = SerialDecoder::new();
+    dec.push(HEARTBEAT_SERIAL);
+    assert_eq!(dec.next_message(), Some(Ok(heartbeat())));
+    assert_eq!(dec.next_message(), None);
+}
+
+/// Bitwise CRC-32/ISO-HDLC, written out so the test does not trust the
+/// crate under test's own dependency.
+fn crc32_ieee(data: &[u8]) -> u32 {
+    let mut crc = 0xffff_ffffu32;
+    for &b in data {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn crc_reference_matches_known_check_value() {
+    // The standard check value of CRC-32/ISO-HDLC for "123456789".
+    assert_eq!(crc32_ieee(b"123456789"), 0xcbf4_3926);
+}
