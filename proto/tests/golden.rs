@@ -161,3 +161,24 @@ fn crc_reference_matches_known_check_value() {
     // The standard check value of CRC-32/ISO-HDLC for "123456789".
     assert_eq!(crc32_ieee(b"123456789"), 0xcbf4_3926);
 }
+
+#[test]
+fn floats_may_arrive_as_float32_or_integers() {
+    // Clients in other languages often shrink numbers: 0.5 as float32,
+    // 0 as a positive fixint, -1 as a negative fixint.
+    let mut bytes = TWIST[..TWIST.len() - 38].to_vec();
+    #[rustfmt::skip]
+    bytes.extend_from_slice(&[
+        0x94,                               // payload, 4 fields
+        0xca, 0x3f, 0x00, 0x00, 0x00,       // vx float32 0.5
+        0x00,                               // vy 0
+        0x00,                               // vz 0
+        0xff,                               // wz -1
+        0xc0,                               // auth nil
+    ]);
+    let env = decode(&bytes).unwrap();
+    assert_eq!(
+        env.body,
+        Body::Command(Command::Twist(Twist { vx: 0.5, vy: 0.0, vz: 0.0, wz: -1.0 }))
+    );
+}
