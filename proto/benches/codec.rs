@@ -21,13 +21,28 @@ fn header(channel: &str) -> Header {
 fn bench(c: &mut Criterion) {
     let command = Envelope::new(
         header("joy/0"),
-        Body::Command(Command::Twist(Twist { vx: 0.5, vy: 0.0, vz: 0.0, wz: -0.25 })),
+        Body::Command(Command::Twist(Twist {
+            vx: 0.5,
+            vy: 0.0,
+            vz: 0.0,
+            wz: -0.25,
+        })),
     );
     let telemetry = Envelope::new(
         header(""),
         Body::Telemetry(Telemetry {
-            pose: Pose { x: 1.25, y: -3.5, z: 0.0, heading: 1.2 },
-            velocity: Velocity { vx: 0.3, vy: 0.1, vz: 0.0, wz: 0.05 },
+            pose: Pose {
+                x: 1.25,
+                y: -3.5,
+                z: 0.0,
+                heading: 1.2,
+            },
+            velocity: Velocity {
+                vx: 0.3,
+                vy: 0.1,
+                vz: 0.0,
+                wz: 0.05,
+            },
             mode: ControlMode::Waypoints,
             channel: "wp/gcs".into(),
             computation: Computation::Onboard,
@@ -36,7 +51,11 @@ fn bench(c: &mut Criterion) {
             battery: Some(0.82),
             position_quality: 0.9,
             actuators: vec![0.4, 0.45],
-            mission: Some(MissionProgress { id: 7, next: 2, total: 5 }),
+            mission: Some(MissionProgress {
+                id: 7,
+                next: 2,
+                total: 5,
+            }),
         }),
     );
     for (name, env) in [("command", &command), ("telemetry", &telemetry)] {

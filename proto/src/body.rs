@@ -342,7 +342,9 @@ pub struct ClusterCommand {
 }
 
 /// Severity of a [`Notice`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr,
+)]
 #[repr(u8)]
 pub enum Level {
     Debug = 0,
@@ -493,7 +495,11 @@ impl Body {
             Body::Hello(h) => {
                 nonempty_name(&h.name, "robot name")?;
                 nonempty_name(&h.platform, "platform")?;
-                count(h.capabilities.len(), CommandKind::ALL.len() * 4, "capabilities")?;
+                count(
+                    h.capabilities.len(),
+                    CommandKind::ALL.len() * 4,
+                    "capabilities",
+                )?;
                 count(h.motors as usize, crate::MAX_MOTORS, "motors")?;
                 finite(h.max_speed, "max speed")?;
                 finite(h.max_yaw_rate, "max yaw rate")?;

@@ -70,7 +70,9 @@ tagged_enum! {
 /// The kinds of command a robot can accept; a robot lists its capabilities in
 /// [`crate::Hello`]. The numbers equal the [`Command`] kinds, plus
 /// `Waypoints` for [`crate::Mission`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr,
+)]
 #[repr(u8)]
 pub enum CommandKind {
     Actuators = 1,

@@ -54,7 +54,11 @@ pub struct Envelope {
 impl Envelope {
     /// An unsigned envelope.
     pub fn new(header: Header, body: Body) -> Envelope {
-        Envelope { header, body, auth: None }
+        Envelope {
+            header,
+            body,
+            auth: None,
+        }
     }
 
     /// Checks the header names and the body (see [`Body::validate`]).
@@ -100,7 +104,10 @@ impl<'de> Deserialize<'de> for Envelope {
             fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
                 f.write_str("a nine-element MECH envelope array")
             }
-            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Envelope, A::Error> {
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Envelope, A::Error> {
                 use serde::de::Error as _;
                 let next = |i: usize| move || A::Error::invalid_length(i, &EnvelopeVisitor);
                 let version: u8 = seq.next_element()?.ok_or_else(next(0))?;
@@ -147,7 +154,10 @@ pub fn encode_into(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
     let len = out.len() - start;
     if len > MAX_MESSAGE_LEN {
         out.truncate(start);
-        return Err(Error::Oversized { len, max: MAX_MESSAGE_LEN });
+        return Err(Error::Oversized {
+            len,
+            max: MAX_MESSAGE_LEN,
+        });
     }
     Ok(())
 }
@@ -164,7 +174,10 @@ pub fn decode(bytes: &[u8]) -> Result<Envelope, Error> {
         Envelope::deserialize(&mut de).map_err(|e| Error::Malformed(e.to_string()))?
     };
     if !rest.is_empty() {
-        return Err(Error::Malformed(format!("{} bytes after the message", rest.len())));
+        return Err(Error::Malformed(format!(
+            "{} bytes after the message",
+            rest.len()
+        )));
     }
     env.validate()?;
     Ok(env)
@@ -189,14 +202,20 @@ pub fn peek(bytes: &[u8]) -> Result<Peek<'_>, Error> {
         return Err(Error::Empty);
     }
     if bytes.len() > MAX_MESSAGE_LEN {
-        return Err(Error::Oversized { len: bytes.len(), max: MAX_MESSAGE_LEN });
+        return Err(Error::Oversized {
+            len: bytes.len(),
+            max: MAX_MESSAGE_LEN,
+        });
     }
     let malformed = |what: &str| Error::Malformed(format!("bad header: {what}"));
     let mut rd = bytes;
     let len = rmp::decode::read_array_len(&mut rd).map_err(|_| malformed("not an array"))?;
     let version: u64 = rmp::decode::read_int(&mut rd).map_err(|_| malformed("version"))?;
     if version != u64::from(PROTOCOL_VERSION) {
-        return Err(Error::Version { found: version, supported: PROTOCOL_VERSION });
+        return Err(Error::Version {
+            found: version,
+            supported: PROTOCOL_VERSION,
+        });
     }
     if len != ENVELOPE_LEN {
         return Err(malformed("envelope must have nine elements"));
@@ -211,7 +230,14 @@ pub fn peek(bytes: &[u8]) -> Result<Peek<'_>, Error> {
     let (destination, rd) =
         rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("destination"))?;
     let (channel, _) = rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("channel"))?;
-    Ok(Peek { kind: kind as u8, seq, stamp_us, sender, destination, channel })
+    Ok(Peek {
+        kind: kind as u8,
+        seq,
+        stamp_us,
+        sender,
+        destination,
+        channel,
+    })
 }
 
 /// The bytes an authentication tag covers: the whole message up to, not
@@ -231,7 +257,10 @@ pub fn signed_region<'a>(bytes: &'a [u8], env: &Envelope) -> Result<&'a [u8], Er
                 .len()
                 .checked_sub(n + 2)
                 .ok_or(Error::Framing("message shorter than its tag"))?;
-            if bytes[at] != 0xc4 || usize::from(bytes[at + 1]) != n || &bytes[at + 2..] != tag.as_slice() {
+            if bytes[at] != 0xc4
+                || usize::from(bytes[at + 1]) != n
+                || &bytes[at + 2..] != tag.as_slice()
+            {
                 return Err(Error::Framing("auth element is not a bin 8 at the end"));
             }
             n + 2

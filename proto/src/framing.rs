@@ -6,9 +6,9 @@
 //! Decoders are push-based (feed them whatever `read` returned) and never
 //! allocate more than one maximum-size frame.
 
+use crate::MAX_MESSAGE_LEN;
 use crate::envelope::{Envelope, decode, encode_into};
 use crate::error::Error;
-use crate::MAX_MESSAGE_LEN;
 
 /// Bytes of the big-endian length that precedes each TCP frame.
 pub const STREAM_PREFIX_LEN: usize = 4;
@@ -92,7 +92,10 @@ impl StreamDecoder {
         }
         if len > MAX_MESSAGE_LEN {
             self.broken = true;
-            return Some(Err(Error::Oversized { len, max: MAX_MESSAGE_LEN }));
+            return Some(Err(Error::Oversized {
+                len,
+                max: MAX_MESSAGE_LEN,
+            }));
         }
         if avail.len() < STREAM_PREFIX_LEN + len {
             return None;

@@ -22,6 +22,7 @@ mod error;
 pub mod framing;
 mod tagged;
 
+pub use body::Body;
 pub use body::{
     Bye, Channel as ChannelInfo, Channels, ChannelsRequest, ClusterCommand, ClusterGoal,
     ClusterPose, ClusterVelocity, Computation, ControlMode, EStop, EStopAck, FailsafeState,
@@ -29,11 +30,12 @@ pub use body::{
     MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix, RobotCommand, Route, RouteAck,
     Subscribe, Telemetry, Velocity, Waypoint, Welcome,
 };
-pub use body::Body;
 pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,
 };
-pub use envelope::{AuthTag, Envelope, Header, Peek, decode, encode, encode_into, peek, signed_region};
+pub use envelope::{
+    AuthTag, Envelope, Header, Peek, decode, encode, encode_into, peek, signed_region,
+};
 pub use error::{Error, ErrorKind};
 
 /// Protocol version this build speaks. A message with another version is

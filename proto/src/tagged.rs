@@ -33,7 +33,9 @@ macro_rules! tagged_enum {
 
             /// Whether `kind` names a variant this build knows.
             pub fn is_known(kind: u64) -> bool {
-                matches!(kind, $( $kind )|*)
+                #[allow(clippy::manual_range_patterns)]
+                let known = matches!(kind, $( $kind )|*);
+                known
             }
 
             /// Writes the payload (without the kind) as the next tuple element.

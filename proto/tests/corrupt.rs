@@ -32,14 +32,32 @@ fn samples() -> Vec<Envelope> {
         channel: channel.into(),
     };
     vec![
-        Envelope::new(h("joy/0"), Body::Command(Command::Twist(Twist { vx: 0.4, vy: 0.1, vz: 0.0, wz: 0.3 }))),
+        Envelope::new(
+            h("joy/0"),
+            Body::Command(Command::Twist(Twist {
+                vx: 0.4,
+                vy: 0.1,
+                vz: 0.0,
+                wz: 0.3,
+            })),
+        ),
         Envelope::new(
             h("wp/gcs"),
             Body::Mission(Mission {
                 id: 9,
                 waypoints: vec![
-                    Waypoint { x: 1.0, y: 2.0, z: 0.0, time: None },
-                    Waypoint { x: 3.0, y: 2.0, z: 0.0, time: Some(15.0) },
+                    Waypoint {
+                        x: 1.0,
+                        y: 2.0,
+                        z: 0.0,
+                        time: None,
+                    },
+                    Waypoint {
+                        x: 3.0,
+                        y: 2.0,
+                        z: 0.0,
+                        time: Some(15.0),
+                    },
                 ],
                 looped: true,
                 arrival_radius: 0.05,
@@ -49,7 +67,12 @@ fn samples() -> Vec<Envelope> {
         Envelope::new(
             h(""),
             Body::Telemetry(Telemetry {
-                pose: Pose { x: 1.0, y: -2.0, z: 0.0, heading: 0.5 },
+                pose: Pose {
+                    x: 1.0,
+                    y: -2.0,
+                    z: 0.0,
+                    heading: 0.5,
+                },
                 velocity: Velocity::default(),
                 mode: ControlMode::Twist,
                 channel: "joy/0".into(),
@@ -66,10 +89,15 @@ fn samples() -> Vec<Envelope> {
             h("fleet/c1"),
             Body::FleetCommand(FleetCommand {
                 parts: vec![
-                    RobotCommand { robot: "robot_1".into(), command: Command::Stop(Stop {}) },
+                    RobotCommand {
+                        robot: "robot_1".into(),
+                        command: Command::Stop(Stop {}),
+                    },
                     RobotCommand {
                         robot: "robot_2".into(),
-                        command: Command::Actuators(Actuators { outputs: vec![0.5, -0.5, 0.25] }),
+                        command: Command::Actuators(Actuators {
+                            outputs: vec![0.5, -0.5, 0.25],
+                        }),
                     },
                 ],
             }),
@@ -82,7 +110,11 @@ fn every_truncation_is_an_error() {
     for env in samples() {
         let bytes = encode(&env).unwrap();
         for n in 0..bytes.len() {
-            assert!(decode(&bytes[..n]).is_err(), "{} truncated to {n} bytes decoded", env.body.name());
+            assert!(
+                decode(&bytes[..n]).is_err(),
+                "{} truncated to {n} bytes decoded",
+                env.body.name()
+            );
         }
     }
 }
@@ -102,7 +134,13 @@ fn typed_errors_for_empty_oversized_version_and_kind() {
 
     let mut bytes = encode(&samples()[0]).unwrap();
     bytes[1] = 2; // version 2
-    assert_eq!(decode(&bytes), Err(Error::Version { found: 2, supported: 1 }));
+    assert_eq!(
+        decode(&bytes),
+        Err(Error::Version {
+            found: 2,
+            supported: 1
+        })
+    );
     bytes[1] = 1;
     bytes[2] = 0x7f; // kind 127
     assert_eq!(decode(&bytes), Err(Error::UnknownKind(127)));
@@ -112,7 +150,12 @@ fn typed_errors_for_empty_oversized_version_and_kind() {
 #[test]
 fn non_finite_and_out_of_range_values_are_rejected_both_ways() {
     let mut env = samples()[0].clone();
-    env.body = Body::Command(Command::Twist(Twist { vx: f64::NAN, vy: 0.0, vz: 0.0, wz: 0.0 }));
+    env.body = Body::Command(Command::Twist(Twist {
+        vx: f64::NAN,
+        vy: 0.0,
+        vz: 0.0,
+        wz: 0.0,
+    }));
     assert!(matches!(encode(&env), Err(Error::Invalid(_))));
 
     // A peer that sends NaN anyway: patch the float bytes of vx.
@@ -121,12 +164,18 @@ fn non_finite_and_out_of_range_values_are_rejected_both_ways() {
     bytes[at + 1..at + 9].copy_from_slice(&f64::NAN.to_be_bytes());
     assert!(matches!(decode(&bytes), Err(Error::Invalid(_))));
 
-    env.body = Body::Command(Command::SteeringThrottle(SteeringThrottle { steering: 1.5, throttle: 0.0 }));
+    env.body = Body::Command(Command::SteeringThrottle(SteeringThrottle {
+        steering: 1.5,
+        throttle: 0.0,
+    }));
     assert!(matches!(encode(&env), Err(Error::Invalid(_))));
 
     env.body = Body::Command(Command::Twist(Twist::default()));
     env.header.channel = "joy 0".into();
-    assert!(matches!(encode(&env), Err(Error::Invalid(_))), "names hold no whitespace");
+    assert!(
+        matches!(encode(&env), Err(Error::Invalid(_))),
+        "names hold no whitespace"
+    );
 }
 
 #[test]
@@ -199,7 +248,11 @@ fn hundred_thousand_mutated_frames_never_panic_and_serial_crc_catches_them() {
         while let Some(r) = rd.next_message() {
             results.push(r);
         }
-        assert_eq!(results.last(), Some(&Ok(env.clone())), "decoder resynchronises");
+        assert_eq!(
+            results.last(),
+            Some(&Ok(env.clone())),
+            "decoder resynchronises"
+        );
         // Mutating only a delimiter leaves the message intact; anything
         // else must be caught.
         undetected_serial += results[..results.len() - 1]
@@ -207,7 +260,10 @@ fn hundred_thousand_mutated_frames_never_panic_and_serial_crc_catches_them() {
             .filter(|r| matches!(r, Ok(m) if m != env))
             .count();
     }
-    assert_eq!(undetected_serial, 0, "CRC-32 lets no mutated serial frame through");
+    assert_eq!(
+        undetected_serial, 0,
+        "CRC-32 lets no mutated serial frame through"
+    );
 }
 
 fn mutate(rng: &mut Rng, bytes: &mut Vec<u8>) {
@@ -243,8 +299,15 @@ fn stream_decoder_stops_on_a_bad_length_and_keeps_earlier_frames() {
     bytes.extend_from_slice(&u32::MAX.to_be_bytes());
     let mut dec = StreamDecoder::new();
     dec.push(&bytes);
-    assert_eq!(dec.next_message(), Some(Ok(env.clone())), "what arrived first is kept");
-    assert!(matches!(dec.next_message(), Some(Err(Error::Oversized { .. }))));
+    assert_eq!(
+        dec.next_message(),
+        Some(Ok(env.clone())),
+        "what arrived first is kept"
+    );
+    assert!(matches!(
+        dec.next_message(),
+        Some(Err(Error::Oversized { .. }))
+    ));
     assert!(dec.is_broken());
     assert_eq!(dec.next_message(), None);
 }
@@ -253,7 +316,10 @@ fn stream_decoder_stops_on_a_bad_length_and_keeps_earlier_frames() {
 fn serial_decoder_survives_an_endless_frame() {
     let mut dec = SerialDecoder::new();
     dec.push(&vec![0x55; framing::MAX_SERIAL_FRAME_LEN + 10]);
-    assert!(matches!(dec.next_message(), Some(Err(Error::Oversized { .. }))));
+    assert!(matches!(
+        dec.next_message(),
+        Some(Err(Error::Oversized { .. }))
+    ));
     let env = &samples()[0];
     let mut frame = Vec::new();
     write_serial_frame(env, &mut frame).unwrap();

@@ -39,7 +39,12 @@ const HEARTBEAT: &[u8] = &[
 fn twist() -> Envelope {
     Envelope::new(
         header("gcs", "robot_1", "joy/0"),
-        Body::Command(Command::Twist(Twist { vx: 0.5, vy: 0.0, vz: 0.0, wz: -0.25 })),
+        Body::Command(Command::Twist(Twist {
+            vx: 0.5,
+            vy: 0.0,
+            vz: 0.0,
+            wz: -0.25,
+        })),
     )
 }
 
@@ -66,7 +71,11 @@ const TWIST: &[u8] = &[
 fn route() -> Envelope {
     Envelope::new(
         header("gcs", "robot_1", ""),
-        Body::Route(Route { robot: "robot_1".into(), channel: "joy/0".into(), epoch: 3 }),
+        Body::Route(Route {
+            robot: "robot_1".into(),
+            channel: "joy/0".into(),
+            epoch: 3,
+        }),
     )
 }
 
@@ -150,7 +159,11 @@ fn crc32_ieee(data: &[u8]) -> u32 {
     for &b in data {
         crc ^= u32::from(b);
         for _ in 0..8 {
-            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xedb8_8320
+            } else {
+                crc >> 1
+            };
         }
     }
     !crc
@@ -179,6 +192,11 @@ fn floats_may_arrive_as_float32_or_integers() {
     let env = decode(&bytes).unwrap();
     assert_eq!(
         env.body,
-        Body::Command(Command::Twist(Twist { vx: 0.5, vy: 0.0, vz: 0.0, wz: -1.0 }))
+        Body::Command(Command::Twist(Twist {
+            vx: 0.5,
+            vy: 0.0,
+            vz: 0.0,
+            wz: -1.0
+        }))
     );
 }

@@ -41,12 +41,15 @@ fn command() -> impl Strategy<Value = Command> {
         (unit(), unit()).prop_map(|(steering, throttle)| Command::SteeringThrottle(
             SteeringThrottle { steering, throttle }
         )),
-        (real(), real()).prop_map(|(speed, heading)| Command::VelocityHeading(VelocityHeading {
-            speed,
-            heading
+        (real(), real()).prop_map(
+            |(speed, heading)| Command::VelocityHeading(VelocityHeading { speed, heading })
+        ),
+        (real(), real(), real(), real()).prop_map(|(vx, vy, vz, wz)| Command::Twist(Twist {
+            vx,
+            vy,
+            vz,
+            wz
         })),
-        (real(), real(), real(), real())
-            .prop_map(|(vx, vy, vz, wz)| Command::Twist(Twist { vx, vy, vz, wz })),
         Just(Command::Stop(Stop {})),
     ]
 }
@@ -56,17 +59,43 @@ fn capability() -> impl Strategy<Value = CommandKind> {
 }
 
 fn route() -> impl Strategy<Value = Route> {
-    (name(), maybe_name(), any::<u32>()).prop_map(|(robot, channel, epoch)| Route { robot, channel, epoch })
+    (name(), maybe_name(), any::<u32>()).prop_map(|(robot, channel, epoch)| Route {
+        robot,
+        channel,
+        epoch,
+    })
 }
 
 fn body() -> impl Strategy<Value = Body> {
-    let hello = (name(), name(), vec(capability(), 0..6), 0..=32u8, real(), real(), text()).prop_map(
-        |(name, platform, capabilities, motors, max_speed, max_yaw_rate, agent_version)| {
-            Body::Hello(Hello { name, platform, capabilities, motors, max_speed, max_yaw_rate, agent_version })
-        },
-    );
-    let welcome = (any::<u16>(), route(), text())
-        .prop_map(|(robot_id, route, router_version)| Body::Welcome(Welcome { robot_id, route, router_version }));
+    let hello = (
+        name(),
+        name(),
+        vec(capability(), 0..6),
+        0..=32u8,
+        real(),
+        real(),
+        text(),
+    )
+        .prop_map(
+            |(name, platform, capabilities, motors, max_speed, max_yaw_rate, agent_version)| {
+                Body::Hello(Hello {
+                    name,
+                    platform,
+                    capabilities,
+                    motors,
+                    max_speed,
+                    max_yaw_rate,
+                    agent_version,
+                })
+            },
+        );
+    let welcome = (any::<u16>(), route(), text()).prop_map(|(robot_id, route, router_version)| {
+        Body::Welcome(Welcome {
+            robot_id,
+            route,
+            router_version,
+        })
+    });
     let telemetry = (
         pose(),
         (real(), real(), real(), real()),
@@ -78,83 +107,148 @@ fn body() -> impl Strategy<Value = Body> {
         vec(unit(), 0..8),
         proptest::option::of((any::<u32>(), any::<u32>(), any::<u32>())),
     )
-        .prop_map(|(pose, (vx, vy, vz, wz), mode, channel, (off, fs, health), battery, q, actuators, mission)| {
-            Body::Telemetry(Telemetry {
+        .prop_map(
+            |(
                 pose,
-                velocity: Velocity { vx, vy, vz, wz },
-                mode: [
-                    ControlMode::Idle,
-                    ControlMode::Actuators,
-                    ControlMode::SteeringThrottle,
-                    ControlMode::VelocityHeading,
-                    ControlMode::Twist,
-                    ControlMode::Waypoints,
-                    ControlMode::Stopped,
-                ][mode as usize],
+                (vx, vy, vz, wz),
+                mode,
                 channel,
-                computation: if off { Computation::Offboard } else { Computation::Onboard },
-                failsafe: [
-                    FailsafeState::Ok,
-                    FailsafeState::ChannelSilent,
-                    FailsafeState::RouterLost,
-                    FailsafeState::EStopped,
-                    FailsafeState::Fault,
-                ][fs as usize],
-                health: [Health::Ok, Health::Degraded, Health::Fault][health as usize],
+                (off, fs, health),
                 battery,
-                position_quality: q,
+                q,
                 actuators,
-                mission: mission.map(|(id, next, total)| MissionProgress { id, next, total }),
-            })
-        });
+                mission,
+            )| {
+                Body::Telemetry(Telemetry {
+                    pose,
+                    velocity: Velocity { vx, vy, vz, wz },
+                    mode: [
+                        ControlMode::Idle,
+                        ControlMode::Actuators,
+                        ControlMode::SteeringThrottle,
+                        ControlMode::VelocityHeading,
+                        ControlMode::Twist,
+                        ControlMode::Waypoints,
+                        ControlMode::Stopped,
+                    ][mode as usize],
+                    channel,
+                    computation: if off {
+                        Computation::Offboard
+                    } else {
+                        Computation::Onboard
+                    },
+                    failsafe: [
+                        FailsafeState::Ok,
+                        FailsafeState::ChannelSilent,
+                        FailsafeState::RouterLost,
+                        FailsafeState::EStopped,
+                        FailsafeState::Fault,
+                    ][fs as usize],
+                    health: [Health::Ok, Health::Degraded, Health::Fault][health as usize],
+                    battery,
+                    position_quality: q,
+                    actuators,
+                    mission: mission.map(|(id, next, total)| MissionProgress { id, next, total }),
+                })
+            },
+        );
     let waypoint = (real(), real(), real(), proptest::option::of(0.0..1.0e5f64))
         .prop_map(|(x, y, z, time)| Waypoint { x, y, z, time });
-    let mission = (any::<u32>(), vec(waypoint, 0..20), any::<bool>(), 0.001..10.0f64, any::<u32>())
+    let mission = (
+        any::<u32>(),
+        vec(waypoint, 0..20),
+        any::<bool>(),
+        0.001..10.0f64,
+        any::<u32>(),
+    )
         .prop_map(|(id, waypoints, looped, arrival_radius, start)| {
             let start_index = start % (waypoints.len() as u32 + 1);
-            Body::Mission(Mission { id, waypoints, looped, arrival_radius, start_index })
+            Body::Mission(Mission {
+                id,
+                waypoints,
+                looped,
+                arrival_radius,
+                start_index,
+            })
         });
     let fleet = vec((name(), command()), 0..10).prop_map(|parts| {
         Body::FleetCommand(FleetCommand {
-            parts: parts.into_iter().map(|(robot, command)| RobotCommand { robot, command }).collect(),
+            parts: parts
+                .into_iter()
+                .map(|(robot, command)| RobotCommand { robot, command })
+                .collect(),
         })
     });
-    let channels = vec((name(), maybe_name(), 0.0..1000.0f64, vec(name(), 0..4), any::<u64>()), 0..5)
-        .prop_map(|list| {
-            Body::Channels(Channels {
-                channels: list
-                    .into_iter()
-                    .map(|(name, publisher, rate_hz, robots, idle_ms)| ChannelInfo {
-                        name,
-                        publisher,
-                        rate_hz,
-                        robots,
-                        idle_ms,
-                    })
-                    .collect(),
+    let channels = vec(
+        (
+            name(),
+            maybe_name(),
+            0.0..1000.0f64,
+            vec(name(), 0..4),
+            any::<u64>(),
+        ),
+        0..5,
+    )
+    .prop_map(|list| {
+        Body::Channels(Channels {
+            channels: list
+                .into_iter()
+                .map(|(name, publisher, rate_hz, robots, idle_ms)| ChannelInfo {
+                    name,
+                    publisher,
+                    rate_hz,
+                    robots,
+                    idle_ms,
+                })
+                .collect(),
+        })
+    });
+    let goal = prop_oneof![
+        (real(), real(), real(), real()).prop_map(
+            |(vx, vy, wz, scale_rate)| ClusterGoal::Velocity(ClusterVelocity {
+                vx,
+                vy,
+                wz,
+                scale_rate
+            })
+        ),
+        (real(), real(), real(), real()).prop_map(|(x, y, heading, scale)| ClusterGoal::Pose(
+            ClusterPose {
+                x,
+                y,
+                heading,
+                scale
+            }
+        )),
+    ];
+    let formation =
+        (0..=4u8, real(), vec((real(), real()), 0..6)).prop_map(|(k, spacing, offsets)| {
+            Formation {
+                kind: [
+                    FormationKind::Line,
+                    FormationKind::Column,
+                    FormationKind::Wedge,
+                    FormationKind::Circle,
+                    FormationKind::Custom,
+                ][k as usize],
+                spacing,
+                offsets: offsets.into_iter().map(|(x, y)| Offset { x, y }).collect(),
+            }
+        });
+    let cluster = (
+        name(),
+        vec(name(), 0..6),
+        goal,
+        proptest::option::of(formation),
+    )
+        .prop_map(|(cluster, members, goal, formation)| {
+            Body::Cluster(ClusterCommand {
+                cluster,
+                members,
+                goal,
+                formation,
             })
         });
-    let goal = prop_oneof![
-        (real(), real(), real(), real()).prop_map(|(vx, vy, wz, scale_rate)| ClusterGoal::Velocity(
-            ClusterVelocity { vx, vy, wz, scale_rate }
-        )),
-        (real(), real(), real(), real())
-            .prop_map(|(x, y, heading, scale)| ClusterGoal::Pose(ClusterPose { x, y, heading, scale })),
-    ];
-    let formation = (0..=4u8, real(), vec((real(), real()), 0..6)).prop_map(|(k, spacing, offsets)| Formation {
-        kind: [
-            FormationKind::Line,
-            FormationKind::Column,
-            FormationKind::Wedge,
-            FormationKind::Circle,
-            FormationKind::Custom,
-        ][k as usize],
-        spacing,
-        offsets: offsets.into_iter().map(|(x, y)| Offset { x, y }).collect(),
-    });
-    let cluster = (name(), vec(name(), 0..6), goal, proptest::option::of(formation)).prop_map(
-        |(cluster, members, goal, formation)| Body::Cluster(ClusterCommand { cluster, members, goal, formation }),
-    );
     let notice = (0..=3u8, 0..=6u16, text()).prop_map(|(level, code, text)| {
         Body::Notice(Notice {
             level: [Level::Debug, Level::Info, Level::Warn, Level::Error][level as usize],
@@ -178,19 +272,34 @@ fn body() -> impl Strategy<Value = Body> {
         command().prop_map(Body::Command),
         fleet,
         mission,
-        (any::<u32>(), any::<bool>(), text())
-            .prop_map(|(id, accepted, reason)| Body::MissionAck(MissionAck { id, accepted, reason })),
+        (any::<u32>(), any::<bool>(), text()).prop_map(|(id, accepted, reason)| Body::MissionAck(
+            MissionAck {
+                id,
+                accepted,
+                reason
+            }
+        )),
         route().prop_map(Body::Route),
-        route().prop_map(|r| Body::RouteAck(RouteAck { robot: r.robot, channel: r.channel, epoch: r.epoch })),
+        route().prop_map(|r| Body::RouteAck(RouteAck {
+            robot: r.robot,
+            channel: r.channel,
+            epoch: r.epoch
+        })),
         (any::<bool>(), any::<u32>()).prop_map(|(engage, id)| Body::EStop(EStop { engage, id })),
-        (any::<bool>(), any::<u32>()).prop_map(|(engage, id)| Body::EStopAck(EStopAck { engage, id })),
+        (any::<bool>(), any::<u32>())
+            .prop_map(|(engage, id)| Body::EStopAck(EStopAck { engage, id })),
         Just(Body::ChannelsRequest(ChannelsRequest {})),
         channels,
         cluster,
         notice,
         any::<bool>().prop_map(|telemetry| Body::Subscribe(Subscribe { telemetry })),
-        (name(), pose(), fraction())
-            .prop_map(|(robot, pose, quality)| Body::PositionFix(PositionFix { robot, pose, quality })),
+        (name(), pose(), fraction()).prop_map(|(robot, pose, quality)| Body::PositionFix(
+            PositionFix {
+                robot,
+                pose,
+                quality
+            }
+        )),
         text().prop_map(|reason| Body::Bye(Bye { reason })),
     ]
 }
@@ -205,11 +314,19 @@ fn envelope() -> impl Strategy<Value = Envelope> {
         body(),
         proptest::option::of(vec(any::<u8>(), 0..=MAX_AUTH_LEN)),
     )
-        .prop_map(|(seq, stamp_us, sender, destination, channel, body, auth)| Envelope {
-            header: Header { seq, stamp_us, sender, destination, channel },
-            body,
-            auth: auth.map(AuthTag::from),
-        })
+        .prop_map(
+            |(seq, stamp_us, sender, destination, channel, body, auth)| Envelope {
+                header: Header {
+                    seq,
+                    stamp_us,
+                    sender,
+                    destination,
+                    channel,
+                },
+                body,
+                auth: auth.map(AuthTag::from),
+            },
+        )
 }
 
 proptest! {
@@ -307,19 +424,40 @@ fn every_known_kind_round_trips_through_each_framing() {
     assert_eq!(bodies.len(), known, "the generator covers every body kind");
     for body in bodies {
         let env = Envelope::new(
-            Header { seq: 1, stamp_us: 2, sender: "gcs".into(), destination: "robot_1".into(), channel: "joy/0".into() },
+            Header {
+                seq: 1,
+                stamp_us: 2,
+                sender: "gcs".into(),
+                destination: "robot_1".into(),
+                channel: "joy/0".into(),
+            },
             body,
         );
-        assert_eq!(decode(&encode(&env).unwrap()).unwrap(), env, "datagram {}", env.body.name());
+        assert_eq!(
+            decode(&encode(&env).unwrap()).unwrap(),
+            env,
+            "datagram {}",
+            env.body.name()
+        );
         let mut s = Vec::new();
         write_stream_frame(&env, &mut s).unwrap();
         let mut sd = StreamDecoder::new();
         sd.push(&s);
-        assert_eq!(sd.next_message(), Some(Ok(env.clone())), "stream {}", env.body.name());
+        assert_eq!(
+            sd.next_message(),
+            Some(Ok(env.clone())),
+            "stream {}",
+            env.body.name()
+        );
         let mut r = Vec::new();
         write_serial_frame(&env, &mut r).unwrap();
         let mut rd = SerialDecoder::new();
         rd.push(&r);
-        assert_eq!(rd.next_message(), Some(Ok(env.clone())), "serial {}", env.body.name());
+        assert_eq!(
+            rd.next_message(),
+            Some(Ok(env.clone())),
+            "serial {}",
+            env.body.name()
+        );
     }
 }
