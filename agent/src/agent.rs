@@ -629,3 +629,420 @@ fn truncate(text: &str) -> String {
 pub fn origin() -> Pose {
     Pose::default()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::platform::PlatformSpec;
+    use mech_proto::{EStop, Twist, Waypoint, Welcome};
+
+    const PERIOD: Duration = Duration::from_millis(20);
+
+    fn ms(v: u64) -> Duration {
+        Duration::from_millis(v)
+    }
+
+    fn msg(channel: &str, body: Body) -> Envelope {
+        Envelope::new(
+            Header {
+                sender: "ctl".into(),
+                destination: "r1".into(),
+                channel: channel.into(),
+                ..Header::default()
+            },
+            body,
+        )
+    }
+
+    fn twist(vx: f64) -> Body {
+        Body::Command(Command::Twist(Twist {
+            vx,
+            ..Twist::default()
+        }))
+    }
+
+    fn route(channel: &str, epoch: u32) -> Body {
+        Body::Route(Route {
+            robot: "r1".into(),
+            channel: channel.into(),
+            epoch,
+        })
+    }
+
+    /// A registered agent with a position, routed to `channel`.
+    fn routed(channel: &str) -> Agent {
+        let mut a = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        a.observe_position(PositionSample {
+            pose: Pose::default(),
+            stamp: ms(0),
+            quality: 1.0,
+            has_heading: true,
+        });
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: channel.into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        let out = a.handle(msg("", w), ms(0));
+        assert!(matches!(&out[0].body, Body::RouteAck(r) if r.channel == channel && r.epoch == 1));
+        a
+    }
+
+    fn moving(outputs: &[f64]) -> bool {
+        outputs.iter().any(|u| *u != 0.0)
+    }
+
+    #[test]
+    fn says_hello_every_second_until_welcomed() {
+        let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
+        let hellos = |t: &Tick| {
+            t.outgoing
+                .iter()
+                .filter(|e| matches!(e.body, Body::Hello(_)))
+                .count()
+        };
+        assert_eq!(hellos(&a.tick(ms(0))), 1);
+        assert_eq!(hellos(&a.tick(ms(500))), 0);
+        let t = a.tick(ms(1000));
+        assert_eq!(hellos(&t), 1);
+        let Body::Hello(h) = &t.outgoing[0].body else {
+            panic!()
+        };
+        assert_eq!((h.platform.as_str(), h.motors), ("kiwi", 3));
+        assert!(h.capabilities.contains(&CommandKind::Waypoints));
+        a.handle(msg("", route("", 0)), ms(1010));
+        assert!(!a.registered(), "only Welcome registers");
+        a.handle(
+            msg(
+                "",
+                Body::Welcome(Welcome {
+                    robot_id: 1,
+                    route: Route {
+                        robot: "r1".into(),
+                        channel: "".into(),
+                        epoch: 0,
+                    },
+                    router_version: "t".into(),
+                }),
+            ),
+            ms(1020),
+        );
+        let t = a.tick(ms(2000));
+        assert_eq!(hellos(&t), 0);
+        assert!(
+            t.outgoing
+                .iter()
+                .any(|e| matches!(e.body, Body::Telemetry(_)))
+        );
+    }
+
+    #[test]
+    fn obeys_the_routed_channel_and_rejects_others() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(msg("key/0", twist(-0.3)), ms(30));
+        assert!(matches!(&out[0].body, Body::Notice(n) if n.code == NoticeCode::NotRouted));
+        assert_eq!(out[0].header.destination, "ctl");
+        let t = a.tick(ms(40));
+        assert!(
+            t.outputs.iter().all(|u| *u > 0.0),
+            "still the joy/0 command: {:?}",
+            t.outputs
+        );
+        assert_eq!(a.counters().not_routed, 1);
+        // A second rejection within a second is counted but not answered.
+        assert!(a.handle(msg("key/0", twist(-0.3)), ms(50)).is_empty());
+        assert_eq!(a.counters().not_routed, 2);
+    }
+
+    #[test]
+    fn unrouted_robot_holds_still() {
+        let mut a = routed("");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.counters().not_routed, 1);
+    }
+
+    #[test]
+    fn channel_silence_stops_within_timeout_plus_one_period() {
+        let mut a = routed("joy/0");
+        let last_command = ms(100);
+        a.handle(msg("joy/0", twist(0.2)), last_command);
+        let mut now = ms(100);
+        let mut stopped_at = None;
+        while now < ms(2000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            let t = a.tick(now);
+            if !moving(&t.outputs) {
+                stopped_at = Some(now);
+                break;
+            }
+        }
+        let stopped_at = stopped_at.unwrap();
+        assert!(
+            stopped_at <= last_command + a.settings().failsafe.channel_timeout + PERIOD,
+            "{stopped_at:?}"
+        );
+        assert!(stopped_at > last_command + a.settings().failsafe.channel_timeout);
+        assert_eq!(a.failsafe_state(now), FailsafeState::ChannelSilent);
+        assert_eq!(a.telemetry(now).failsafe, FailsafeState::ChannelSilent);
+        // The next accepted command resumes.
+        a.handle(msg("joy/0", twist(0.2)), now);
+        assert!(moving(&a.tick(now + PERIOD).outputs));
+        assert_eq!(a.counters().failsafe_trips, 1);
+    }
+
+    fn router_heartbeat(a: &mut Agent, now: Duration) {
+        a.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+    }
+
+    #[test]
+    fn router_loss_stops_and_re_registers() {
+        let mut a = routed("joy/0");
+        let mut now = ms(0);
+        let mut stopped = None;
+        while now < ms(3000) {
+            now += PERIOD;
+            // The controller keeps commanding, but nothing else arrives from
+            // the router after 100 ms... which cannot happen on one link, so
+            // commands stop too: the router is gone.
+            if now <= ms(100) {
+                a.handle(msg("joy/0", twist(0.2)), now);
+            }
+            let t = a.tick(now);
+            if stopped.is_none() && !moving(&t.outputs) {
+                stopped = Some(now);
+            }
+            if a.failsafe_state(now) == FailsafeState::RouterLost {
+                assert!(
+                    t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+                    "registers again at once"
+                );
+                break;
+            }
+        }
+        assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
+        assert!(!a.registered());
+        assert!(stopped.unwrap() <= ms(100) + ms(500) + PERIOD);
+    }
+
+    #[test]
+    fn route_change_zeroes_acks_and_switches_channel() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(msg("", route("wp/gcs", 2)), ms(30));
+        assert!(matches!(&out[0].body, Body::RouteAck(r) if r.channel == "wp/gcs" && r.epoch == 2));
+        assert!(!moving(&a.tick(ms(40)).outputs), "zeroed on switch");
+        a.handle(msg("joy/0", twist(0.2)), ms(50));
+        assert!(!moving(&a.tick(ms(60)).outputs), "old channel now rejected");
+        a.handle(msg("wp/gcs", twist(0.1)), ms(70));
+        assert!(moving(&a.tick(ms(80)).outputs));
+        // A repeated Route (router retry) is acked again but changes nothing.
+        let out = a.handle(msg("", route("wp/gcs", 2)), ms(90));
+        assert!(matches!(&out[0].body, Body::RouteAck(_)));
+        assert!(moving(&a.tick(ms(100)).outputs));
+        let t = a.telemetry(ms(100));
+        assert_eq!(t.channel, "wp/gcs");
+        assert_eq!(t.computation, Computation::Onboard);
+        a.handle(msg("", route("offboard/r1", 3)), ms(110));
+        assert_eq!(a.telemetry(ms(110)).computation, Computation::Offboard);
+    }
+
+    #[test]
+    fn estop_latches_until_release_and_pauses_missions() {
+        let mut a = routed("wp/gcs");
+        let mission = Mission {
+            id: 5,
+            waypoints: vec![Waypoint {
+                x: 2.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        };
+        let out = a.handle(msg("wp/gcs", Body::Mission(mission.clone())), ms(10));
+        assert!(matches!(&out[0].body, Body::MissionAck(m) if m.id == 5 && m.accepted));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(
+            msg(
+                "",
+                Body::EStop(EStop {
+                    engage: true,
+                    id: 9,
+                }),
+            ),
+            ms(30),
+        );
+        assert!(matches!(&out[0].body, Body::EStopAck(e) if e.engage && e.id == 9));
+        assert!(!moving(&a.tick(ms(40)).outputs));
+        a.handle(msg("wp/gcs", twist(0.2)), ms(50));
+        assert!(
+            !moving(&a.tick(ms(60)).outputs),
+            "commands ignored while latched"
+        );
+        assert_eq!(a.failsafe_state(ms(60)), FailsafeState::EStopped);
+        a.handle(
+            msg(
+                "",
+                Body::EStop(EStop {
+                    engage: false,
+                    id: 10,
+                }),
+            ),
+            ms(70),
+        );
+        assert!(
+            !moving(&a.tick(ms(80)).outputs),
+            "mission stays paused after release"
+        );
+        a.handle(msg("wp/gcs", twist(0.2)), ms(90));
+        assert!(moving(&a.tick(ms(100)).outputs), "obeys the next command");
+        // Re-sending the mission resumes it with its progress kept.
+        a.handle(msg("wp/gcs", Body::Mission(mission)), ms(110));
+        assert_eq!(*a.mode(), Mode::Waypoints);
+        assert!(moving(&a.tick(ms(120)).outputs));
+    }
+
+    #[test]
+    fn mission_runs_only_while_routed_and_ignores_channel_silence() {
+        let mut a = routed("joy/0");
+        let mission = Mission {
+            id: 1,
+            waypoints: vec![Waypoint {
+                x: 5.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        };
+        let out = a.handle(msg("wp/gcs", Body::Mission(mission)), ms(10));
+        assert!(
+            matches!(&out[0].body, Body::MissionAck(m) if m.accepted),
+            "stored and acked while not routed"
+        );
+        a.tick(ms(20));
+        assert_ne!(*a.mode(), Mode::Waypoints);
+        a.handle(msg("", route("wp/gcs", 2)), ms(30));
+        assert_eq!(*a.mode(), Mode::Waypoints);
+        let mut now = ms(30);
+        while now < ms(3000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(
+                moving(&a.tick(now).outputs),
+                "mission is its own controller"
+            );
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(
+            tel.mission.map(|m| (m.id, m.next, m.total)),
+            Some((1, 0, 1))
+        );
+        assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    #[test]
+    fn mission_on_router_loss_follows_config() {
+        for continues in [false, true] {
+            let mut settings = AgentSettings::new("r1");
+            settings.failsafe.mission_continues_on_link_loss = continues;
+            let mut a = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+            a.observe_position(PositionSample {
+                pose: Pose::default(),
+                stamp: ms(0),
+                quality: 1.0,
+                has_heading: true,
+            });
+            a.handle(
+                msg(
+                    "",
+                    Body::Welcome(Welcome {
+                        robot_id: 1,
+                        route: Route {
+                            robot: "r1".into(),
+                            channel: "wp/gcs".into(),
+                            epoch: 1,
+                        },
+                        router_version: "t".into(),
+                    }),
+                ),
+                ms(0),
+            );
+            let mission = Mission {
+                id: 1,
+                waypoints: vec![Waypoint {
+                    x: 5.0,
+                    y: 0.0,
+                    z: 0.0,
+                    time: None,
+                }],
+                looped: false,
+                arrival_radius: 0.05,
+                start_index: 0,
+            };
+            a.handle(msg("wp/gcs", Body::Mission(mission)), ms(0));
+            let t = a.tick(ms(2000));
+            assert_eq!(a.failsafe_state(ms(2000)), FailsafeState::RouterLost);
+            assert_eq!(moving(&t.outputs), continues, "continues = {continues}");
+        }
+    }
+
+    #[test]
+    fn undecodable_bytes_and_unsupported_commands_are_counted() {
+        let mut a = routed("joy/0");
+        assert!(a.handle_bytes(&[0x93, 0x01, 0xff], ms(5)).is_empty());
+        assert_eq!(a.counters().bad_messages, 1);
+        let out = a.handle(
+            msg(
+                "joy/0",
+                Body::Command(Command::Actuators(mech_proto::Actuators {
+                    outputs: vec![0.5],
+                })),
+            ),
+            ms(10),
+        );
+        assert!(matches!(&out[0].body, Body::Notice(n) if n.code == NoticeCode::Unsupported));
+        assert_eq!(a.counters().refused, 1);
+        let mut other = msg("joy/0", twist(0.2));
+        other.header.destination = "r2".into();
+        a.handle(other, ms(20));
+        assert_eq!(a.counters().not_for_me, 1);
+        assert!(!moving(&a.tick(ms(30)).outputs));
+    }
+
+    #[test]
+    fn external_position_fixes_feed_the_filter_only_when_configured() {
+        for external in [false, true] {
+            let mut s = AgentSettings::new("r1");
+            s.external_position = external;
+            let mut a = Agent::new(s, PlatformSpec::diff_drive().build(), 0);
+            let fix = mech_proto::PositionFix {
+                robot: "r1".into(),
+                pose: Pose {
+                    x: 1.5,
+                    ..Pose::default()
+                },
+                quality: 0.9,
+            };
+            a.handle(msg("", Body::PositionFix(fix)), ms(0));
+            assert_eq!(a.estimate().map(|e| e.pose.x), external.then_some(1.5));
+        }
+    }
+}

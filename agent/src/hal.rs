@@ -46,7 +46,8 @@ impl Error for std::io::Error {
             std::io::ErrorKind::NotFound
             | std::io::ErrorKind::NotConnected
             | std::io::ErrorKind::BrokenPipe
-            | std::io::ErrorKind::ConnectionReset => ErrorKind::NotConnected,
+            | std::io::ErrorKind::ConnectionReset
+            | std::io::ErrorKind::UnexpectedEof => ErrorKind::NotConnected,
             std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
                 ErrorKind::InvalidInput
             }

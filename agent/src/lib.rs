@@ -19,6 +19,7 @@
 pub mod agent;
 pub mod clock;
 pub mod control;
+pub mod drivers;
 pub mod failsafe;
 pub mod filter;
 pub mod hal;
