@@ -90,8 +90,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .context("starting the runtime")?;
     runtime.block_on(async move {
         let (stop, shutdown) = tokio::sync::watch::channel(false);
+        let mut terminate =
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                .context("installing the SIGTERM handler")?;
         tokio::spawn(async move {
-            let _ = tokio::signal::ctrl_c().await;
+            // Either signal stops the robot cleanly: actuators zeroed, Bye sent.
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = terminate.recv() => {}
+            }
             let _ = stop.send(true);
         });
         launch::run(
