@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStopAck, Envelope, FailsafeState, Header,
-    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Pose, Route,
-    RouteAck, Telemetry, Velocity,
+    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
+    Telemetry, Velocity,
 };
 
 use crate::control::{Controller, Gains, MissionRun, Mode};
@@ -408,7 +408,9 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now.
+    /// The robot's telemetry now. `velocity` is the body-frame twist the
+    /// current outputs produce (the platform's forward kinematics), which is
+    /// what a robot without wheel encoders knows of its motion.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
         let twist = self.controller.platform().motion(&self.outputs);
@@ -632,16 +634,11 @@ fn truncate(text: &str) -> String {
     text[..end].to_string()
 }
 
-/// The pose used when nothing better is known.
-pub fn origin() -> Pose {
-    Pose::default()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::platform::PlatformSpec;
-    use mech_proto::{EStop, Twist, Waypoint, Welcome};
+    use mech_proto::{EStop, Pose, Twist, Waypoint, Welcome};
 
     const PERIOD: Duration = Duration::from_millis(20);
 
@@ -820,9 +817,7 @@ mod tests {
         let mut stopped = None;
         while now < ms(3000) {
             now += PERIOD;
-            // The controller keeps commanding, but nothing else arrives from
-            // the router after 100 ms... which cannot happen on one link, so
-            // commands stop too: the router is gone.
+            // Everything arrives through the router: after 100 ms it is gone.
             if now <= ms(100) {
                 a.handle(msg("joy/0", twist(0.2)), now);
             }
