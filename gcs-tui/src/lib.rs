@@ -1,1 +1,2 @@
 //! `mech-gcs`: the MECH ground-control station.
+pub mod control;
