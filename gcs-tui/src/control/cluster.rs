@@ -15,6 +15,12 @@
 //! (`J^-1 K J = K` for `K = kI`), so it is the same controller, without the
 //! Jacobian's singularities.
 //!
+//! Formation feedback (Lawton, Beard & Young, "A decentralized approach to
+//! formation maneuvers", IEEE T-RA 2003): the desired cluster pose slows down,
+//! and stops, while the worst member lags its slot by more than
+//! [`ClusterConfig::lag_free`], so a member that has to turn in place (a
+//! differential drive at a corner) is waited for instead of left behind.
+//!
 //! Slots are formed over the members that are commanded (present in the step
 //! input and with fresh telemetry) and re-assigned with
 //! [`super::assign_slots`] whenever that set or the formation changes, so
@@ -79,6 +85,10 @@ pub struct ClusterConfig {
     /// Fraction of the slowest member's top speed that slot feed-forward may
     /// use; the rest is kept for feedback.
     pub speed_margin: f64,
+    /// Slot error (m) up to which the cluster moves at full speed.
+    pub lag_free: f64,
+    /// Slot error (m) at which the cluster stops to wait for the member.
+    pub lag_stop: f64,
     /// Bounds of the formation scale.
     pub min_scale: f64,
     pub max_scale: f64,
@@ -95,6 +105,8 @@ impl Default for ClusterConfig {
             max_yaw_accel: 0.8,
             arrival_radius: 0.1,
             speed_margin: 0.7,
+            lag_free: 0.05,
+            lag_stop: 0.15,
             min_scale: 0.2,
             max_scale: 5.0,
         }
@@ -371,7 +383,10 @@ impl ClusterController {
             } else {
                 self.config.cruise_speed
             };
-            self.velocity = self.advance(&mut desired, dt, max_offset, speed_limit);
+            let lag = self.worst_lag(&desired, &fresh);
+            let span = (self.config.lag_stop - self.config.lag_free).max(1e-6);
+            let throttle = ((self.config.lag_stop - lag) / span).clamp(0.0, 1.0);
+            self.velocity = self.advance(&mut desired, dt, max_offset, speed_limit * throttle);
             self.desired = Some(desired);
 
             let v = self.velocity;
@@ -532,7 +547,7 @@ impl ClusterController {
         let slot_speed =
             norm(v.vx, v.vy) + (v.wz.abs() * desired.scale + v.scale_rate.abs()) * max_offset;
         if slot_speed > speed_limit && slot_speed > 0.0 {
-            let k = speed_limit / slot_speed;
+            let k = (speed_limit / slot_speed).max(0.0);
             v = ClusterVelocity {
                 vx: v.vx * k,
                 vy: v.vy * k,
@@ -567,6 +582,24 @@ impl ClusterController {
             }
         }
         v
+    }
+
+    /// Largest distance between a commanded member and its slot at the
+    /// current desired pose, m.
+    fn worst_lag(&self, desired: &ClusterPose, fresh: &[&MemberState]) -> f64 {
+        fresh
+            .iter()
+            .filter_map(|s| {
+                let o = self
+                    .assignment
+                    .get(&s.robot)
+                    .and_then(|&i| self.slots.get(i))?;
+                let (ox, oy) = rotate(o.x, o.y, desired.heading);
+                let x = desired.x + desired.scale * ox;
+                let y = desired.y + desired.scale * oy;
+                Some(norm(x - s.pose.x, y - s.pose.y))
+            })
+            .fold(0.0, f64::max)
     }
 
     /// Moves to the next waypoint once the desired pose sits on the current

@@ -62,9 +62,9 @@ pub struct TrackingGains {
 impl Default for TrackingGains {
     fn default() -> Self {
         TrackingGains {
-            k_position: 1.5,
+            k_position: 2.0,
             k_heading: 2.5,
-            offset: 0.12,
+            offset: 0.1,
         }
     }
 }
