@@ -3,6 +3,8 @@
 //! formation change while moving, velocity driving with rotation and scaling,
 //! and the safety rules (lost telemetry, member routed away).
 
+#![allow(clippy::unwrap_used)]
+
 #[path = "control_support/sim.rs"]
 mod sim;
 

@@ -2,6 +2,8 @@
 //! while the leader is driven by another controller (here a scripted twist, as
 //! a gamepad would send), and stop when the leader's telemetry is lost.
 
+#![allow(clippy::unwrap_used)]
+
 #[path = "control_support/sim.rs"]
 mod sim;
 

@@ -3,6 +3,8 @@
 //! hands progress over in both directions, and stops commanding a robot whose
 //! telemetry is lost.
 
+#![allow(clippy::unwrap_used)]
+
 #[path = "control_support/sim.rs"]
 mod sim;
 
@@ -171,7 +173,7 @@ fn lost_telemetry_stops_commanding_and_the_failsafe_stops_the_robot() {
     let lost_at = lost_at.expect("reported lost");
     assert!(lost_at - silent_since <= timeout + PERIOD + 1e-9);
     assert!(world.robot("robot_1").speed() < 1e-3, "failsafe stopped it");
-    assert!(matches!(nav.step(world.now, None).command, None));
+    assert!(nav.step(world.now, None).command.is_none());
     // Telemetry back: the loop resumes from the same waypoint.
     world.robot("robot_1").reporting = true;
     world.advance(PERIOD, SUBSTEPS);

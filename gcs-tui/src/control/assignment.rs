@@ -90,6 +90,7 @@ pub fn total_distance(members: &[(f64, f64)], slots: &[(f64, f64)], assignment: 
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use proptest::prelude::*;

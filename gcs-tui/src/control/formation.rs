@@ -97,6 +97,7 @@ pub fn slot_offsets(formation: &Formation, n: usize) -> Result<Vec<Offset>, Form
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

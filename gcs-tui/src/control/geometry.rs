@@ -29,6 +29,7 @@ pub(crate) fn norm(x: f64, y: f64) -> f64 {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

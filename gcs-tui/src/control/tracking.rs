@@ -147,6 +147,7 @@ fn velocity_heading_toward(member: &MemberState, ux: f64, uy: f64) -> Command {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use crate::control::PlatformLimits;
