@@ -24,6 +24,7 @@ mod follow;
 mod formation;
 mod geometry;
 mod offboard;
+mod spec;
 mod tracking;
 
 pub use assignment::{assign_slots, total_distance};
@@ -35,6 +36,11 @@ pub use follow::{FollowConfig, FollowOutput, FollowTarget, FollowTheLeader, Foll
 pub use formation::{FormationError, slot_offsets};
 pub use geometry::wrap_angle;
 pub use offboard::{NavConfig, NavOutput, OffboardNavigator};
+pub use spec::{
+    ClusterSpec, ClusterStickRates, ClusterSticks, DEFAULT_SPACING, SpecError,
+    cluster_velocity_from_sticks, formation_kind, formation_name, parse_cluster_waypoint,
+    parse_formation, parse_offset,
+};
 pub use tracking::{Reference, TrackingGains, track};
 
 use mech_proto::{CommandKind, Hello, Pose, Velocity};
