@@ -5,28 +5,33 @@
 
 #![allow(clippy::unwrap_used)]
 
-#[path = "control_support/sim.rs"]
-mod sim;
+#[path = "control_support/bench.rs"]
+mod bench;
 
 use std::f64::consts::FRAC_PI_2;
 
+use bench::{Bench, pose};
+use mech_agent::platform::PlatformSpec;
 use mech_gcs::control::{
     ClusterConfig, ClusterController, ClusterOutput, ClusterWaypoint, ControlEvent, assign_slots,
     total_distance,
 };
-use mech_proto::{ClusterVelocity, Formation, FormationKind};
-use sim::{SimBot, World};
+use mech_proto::{ClusterVelocity, FailsafeState, Formation, FormationKind};
+use std::time::Duration;
 
 const PERIOD: f64 = 0.05;
-const SUBSTEPS: usize = 5;
+const CHANNEL: &str = "fleet/c1";
 
-fn mixed_fleet() -> World {
-    World::new(vec![
-        SimBot::new("robot_1", "diff-drive", -0.5, 0.4, 0.3),
-        SimBot::new("robot_2", "kiwi", 0.6, 0.5, -1.0),
-        SimBot::new("robot_3", "diff-drive", -0.4, -0.6, 2.0),
-        SimBot::new("robot_4", "kiwi", 0.5, -0.3, 0.5),
-    ])
+fn mixed_fleet() -> Bench {
+    Bench::new(
+        &[
+            ("robot_1", PlatformSpec::diff_drive(), pose(-0.5, 0.4, 0.3)),
+            ("robot_2", PlatformSpec::kiwi(), pose(0.6, 0.5, -1.0)),
+            ("robot_3", PlatformSpec::diff_drive(), pose(-0.4, -0.6, 2.0)),
+            ("robot_4", PlatformSpec::kiwi(), pose(0.5, -0.3, 0.5)),
+        ],
+        CHANNEL,
+    )
 }
 
 fn names() -> Vec<String> {
@@ -43,12 +48,10 @@ fn formation(kind: FormationKind, spacing: f64) -> Formation {
 
 /// One control period: controller step on the received telemetry, commands
 /// delivered, robots advanced.
-fn tick(world: &mut World, cluster: &mut ClusterController) -> ClusterOutput {
-    let out = cluster.step(world.now, &world.states());
-    for c in &out.commands {
-        world.deliver(&c.robot, &c.command);
-    }
-    world.advance(PERIOD, SUBSTEPS);
+fn tick(world: &mut Bench, cluster: &mut ClusterController) -> ClusterOutput {
+    let out = cluster.step(world.now_s(), &world.states());
+    world.fleet(CHANNEL, &out.commands);
+    world.advance(Duration::from_secs_f64(PERIOD));
     out
 }
 
@@ -142,7 +145,7 @@ fn mixed_cluster_drives_a_square_within_tracking_error() {
         rms_all <= 0.03,
         "RMS slot error {rms_all:.3} m exceeds 0.03 m"
     );
-    let end = cluster.step(world.now, &world.states()).status;
+    let end = cluster.step(world.now_s(), &world.states()).status;
     let measured = end.measured.unwrap();
     assert!((measured.x - start.x).hypot(measured.y - start.y) < 0.1);
 }
@@ -248,7 +251,7 @@ fn velocity_drive_rotates_and_scales_the_cluster() {
     for _ in 0..ticks(3.0) {
         tick(&mut world, &mut cluster);
     }
-    let status = cluster.step(world.now, &world.states()).status;
+    let status = cluster.step(world.now_s(), &world.states()).status;
     let desired = status.desired.unwrap();
     let measured = status.measured.unwrap();
     println!(
@@ -285,16 +288,16 @@ fn member_with_stale_telemetry_is_not_commanded_and_its_failsafe_stops_it() {
         tick(&mut world, &mut cluster);
     }
     assert!(
-        world.robot("robot_3").speed() > 0.1,
+        world.speed("robot_3") > 0.1,
         "robot_3 moving with the cluster"
     );
 
-    world.robot("robot_3").reporting = false;
-    let silent_since = world.now;
+    world.silence("robot_3", true);
+    let silent_since = world.now_s();
     let mut lost_at = None;
     let mut last_command_to_3 = silent_since;
     for _ in 0..ticks(3.0) {
-        let now = world.now;
+        let now = world.now_s();
         let out = tick(&mut world, &mut cluster);
         if out.commands.iter().any(|c| c.robot == "robot_3") {
             last_command_to_3 = now;
@@ -317,16 +320,10 @@ fn member_with_stale_telemetry_is_not_commanded_and_its_failsafe_stops_it() {
         last_command_to_3 < lost_at,
         "no command after it was declared lost"
     );
-    assert!(
-        world.robot("robot_3").speed() < 1e-3,
-        "its failsafe stopped it"
-    );
-    assert!(
-        world.robot("robot_1").speed() > 0.1,
-        "the others keep moving"
-    );
+    assert!(world.speed("robot_3") < 1e-3, "its failsafe stopped it");
+    assert!(world.speed("robot_1") > 0.1, "the others keep moving");
 
-    world.robot("robot_3").reporting = true;
+    world.silence("robot_3", false);
     let out = tick(&mut world, &mut cluster);
     let out = if out.commands.iter().any(|c| c.robot == "robot_3") {
         out
@@ -365,7 +362,7 @@ fn member_routed_away_is_dropped_from_outputs_at_once() {
         .into_iter()
         .filter(|s| s.robot != "robot_2")
         .collect();
-    let out = cluster.step(world.now, &states);
+    let out = cluster.step(world.now_s(), &states);
     assert_eq!(out.commands.len(), 3);
     assert!(out.commands.iter().all(|c| c.robot != "robot_2"));
     assert_eq!(out.status.absent, vec!["robot_2".to_string()]);
@@ -376,7 +373,7 @@ fn member_routed_away_is_dropped_from_outputs_at_once() {
     );
 
     cluster.remove_member("robot_4");
-    let out = cluster.step(world.now + PERIOD, &world.states());
+    let out = cluster.step(world.now_s() + PERIOD, &world.states());
     assert!(out.commands.iter().all(|c| c.robot != "robot_4"));
     assert_eq!(out.commands.len(), 3);
     assert_eq!(out.fleet_command().parts.len(), 3);

@@ -4,15 +4,18 @@
 
 #![allow(clippy::unwrap_used)]
 
-#[path = "control_support/sim.rs"]
-mod sim;
+#[path = "control_support/bench.rs"]
+mod bench;
 
+use bench::{Bench, pose};
+use mech_agent::platform::PlatformSpec;
 use mech_gcs::control::{ControlEvent, FollowConfig, FollowTheLeader, Follower};
 use mech_proto::{Command, Offset, Twist};
-use sim::{SimBot, World};
+use std::time::Duration;
 
 const PERIOD: f64 = 0.05;
-const SUBSTEPS: usize = 5;
+const CHANNEL: &str = "follow/robot_1";
+const JOY: &str = "joy/0";
 
 fn ticks(seconds: f64) -> usize {
     (seconds / PERIOD).round() as usize
@@ -27,12 +30,21 @@ fn leader_twist(t: f64) -> Command {
     })
 }
 
-fn convoy() -> (World, FollowTheLeader) {
-    let world = World::new(vec![
-        SimBot::new("robot_1", "diff-drive", 0.0, 0.0, 0.0),
-        SimBot::new("robot_2", "kiwi", -1.2, 0.9, 1.0),
-        SimBot::new("robot_3", "diff-drive", -1.5, -0.2, -0.5),
-    ]);
+fn convoy() -> (Bench, FollowTheLeader) {
+    let mut world = Bench::new(
+        &[
+            ("robot_1", PlatformSpec::diff_drive(), pose(0.0, 0.0, 0.0)),
+            ("robot_2", PlatformSpec::kiwi(), pose(-1.2, 0.9, 1.0)),
+            (
+                "robot_3",
+                PlatformSpec::diff_drive(),
+                pose(-1.5, -0.2, -0.5),
+            ),
+        ],
+        CHANNEL,
+    );
+    // The leader is driven by someone else: a gamepad on joy/0.
+    world.route("robot_1", JOY);
     let follow = FollowTheLeader::new(
         "robot_1",
         vec![
@@ -55,22 +67,20 @@ fn followers_hold_their_offsets_while_the_leader_is_driven() {
     let (mut world, mut follow) = convoy();
     let mut errors: Vec<(String, f64)> = Vec::new();
     for i in 0..ticks(60.0) {
-        let now = world.now;
-        world.deliver("robot_1", &leader_twist(now));
+        let now = world.now_s();
+        world.command("robot_1", JOY, &leader_twist(now));
         let out = follow.step(now, &world.states());
         assert!(
             out.commands.iter().all(|c| c.robot != "robot_1"),
             "the leader is not ours to drive"
         );
-        for c in &out.commands {
-            world.deliver(&c.robot, &c.command);
-        }
+        world.fleet(CHANNEL, &out.commands);
         if i >= ticks(10.0) {
             errors.extend(out.targets.iter().map(|t| (t.robot.clone(), t.error)));
         }
-        world.advance(PERIOD, SUBSTEPS);
+        world.advance(Duration::from_secs_f64(PERIOD));
     }
-    let leader = world.robot("robot_1").pose;
+    let leader = world.true_pose("robot_1");
     assert!(leader.x.hypot(leader.y) > 5.0, "the leader really moved");
     for robot in ["robot_2", "robot_3"] {
         let e: Vec<f64> = errors
@@ -90,19 +100,17 @@ fn followers_hold_their_offsets_while_the_leader_is_driven() {
 fn followers_stop_when_the_leader_is_lost_and_lost_followers_get_nothing() {
     let (mut world, mut follow) = convoy();
     for _ in 0..ticks(5.0) {
-        let now = world.now;
-        world.deliver("robot_1", &leader_twist(now));
+        let now = world.now_s();
+        world.command("robot_1", JOY, &leader_twist(now));
         let out = follow.step(now, &world.states());
-        for c in &out.commands {
-            world.deliver(&c.robot, &c.command);
-        }
-        world.advance(PERIOD, SUBSTEPS);
+        world.fleet(CHANNEL, &out.commands);
+        world.advance(Duration::from_secs_f64(PERIOD));
     }
-    world.robot("robot_1").reporting = false;
-    world.robot("robot_3").reporting = false;
+    world.silence("robot_1", true);
+    world.silence("robot_3", true);
     let mut saw_leader_lost = false;
     for _ in 0..ticks(2.0) {
-        let now = world.now;
+        let now = world.now_s();
         let out = follow.step(now, &world.states());
         saw_leader_lost |= out.events.contains(&ControlEvent::MemberLost {
             robot: "robot_1".into(),
@@ -123,15 +131,13 @@ fn followers_stop_when_the_leader_is_lost_and_lost_followers_get_nothing() {
                 "no leader: hold still"
             );
         }
-        for c in &out.commands {
-            world.deliver(&c.robot, &c.command);
-        }
-        world.advance(PERIOD, SUBSTEPS);
+        world.fleet(CHANNEL, &out.commands);
+        world.advance(Duration::from_secs_f64(PERIOD));
     }
     assert!(saw_leader_lost);
-    assert!(world.robot("robot_2").speed() < 1e-3);
+    assert!(world.speed("robot_2") < 1e-3);
     assert!(
-        world.robot("robot_3").speed() < 1e-3,
+        world.speed("robot_3") < 1e-3,
         "failsafe stopped the silent follower"
     );
 }

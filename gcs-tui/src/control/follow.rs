@@ -1,8 +1,13 @@
 //! Follow-the-leader: each follower keeps a fixed offset in the leader's body
 //! frame (x forward, y left), whatever drives the leader (gamepad, waypoints,
 //! an external program). The reference is the leader's pose composed with the
-//! offset; its feed-forward velocity is the leader's reported velocity plus
+//! offset; its feed-forward velocity is the leader's velocity plus
 //! `wz x offset`, so followers do not lag behind a moving leader.
+//!
+//! The leader's velocity is estimated from successive telemetry poses (a
+//! finite difference, low-pass filtered) rather than read from the reported
+//! velocity: every agent reports a pose, while what a reported velocity means
+//! (frame, filtering, commanded or measured) varies between platforms.
 //!
 //! Without fresh leader telemetry there is no reference: followers are sent an
 //! explicit stop (they are healthy, only their target is unknown). A follower
@@ -12,7 +17,7 @@ use std::collections::BTreeSet;
 
 use mech_proto::{Command, FleetCommand, Offset, RobotCommand, Stop};
 
-use super::geometry::rotate;
+use super::geometry::{rotate, wrap_angle};
 use super::tracking::{Reference, TrackingGains, track};
 use super::{ControlEvent, MemberState};
 
@@ -29,6 +34,9 @@ pub struct FollowConfig {
     pub gains: TrackingGains,
     /// Telemetry older than this (s) makes a robot lost.
     pub telemetry_timeout: f64,
+    /// Weight of each new finite-difference sample in the leader velocity
+    /// estimate, in `(0, 1]` (1 = no filtering).
+    pub velocity_smoothing: f64,
 }
 
 impl Default for FollowConfig {
@@ -36,6 +44,7 @@ impl Default for FollowConfig {
         FollowConfig {
             gains: TrackingGains::default(),
             telemetry_timeout: 0.5,
+            velocity_smoothing: 0.5,
         }
     }
 }
@@ -77,6 +86,49 @@ pub struct FollowTheLeader {
     followers: Vec<Follower>,
     config: FollowConfig,
     lost: BTreeSet<String>,
+    leader_motion: Option<LeaderMotion>,
+}
+
+/// The leader's last pose and its estimated world-frame velocity.
+#[derive(Debug, Clone, Copy)]
+struct LeaderMotion {
+    stamp: f64,
+    x: f64,
+    y: f64,
+    heading: f64,
+    vx: f64,
+    vy: f64,
+    wz: f64,
+}
+
+impl LeaderMotion {
+    /// Folds in a new report; reports with the same stamp change nothing.
+    fn update(previous: Option<LeaderMotion>, s: &MemberState, smoothing: f64) -> LeaderMotion {
+        let fresh = LeaderMotion {
+            stamp: s.stamp,
+            x: s.pose.x,
+            y: s.pose.y,
+            heading: s.pose.heading,
+            vx: 0.0,
+            vy: 0.0,
+            wz: 0.0,
+        };
+        let Some(p) = previous else { return fresh };
+        let dt = s.stamp - p.stamp;
+        if dt <= 1e-6 {
+            return p;
+        }
+        if dt > 1.0 {
+            return fresh;
+        }
+        let a = smoothing.clamp(0.0, 1.0);
+        LeaderMotion {
+            vx: p.vx + a * ((s.pose.x - p.x) / dt - p.vx),
+            vy: p.vy + a * ((s.pose.y - p.y) / dt - p.vy),
+            wz: p.wz + a * (wrap_angle(s.pose.heading - p.heading) / dt - p.wz),
+            ..fresh
+        }
+    }
 }
 
 impl FollowTheLeader {
@@ -86,6 +138,7 @@ impl FollowTheLeader {
             followers,
             config,
             lost: BTreeSet::new(),
+            leader_motion: None,
         }
     }
 
@@ -137,6 +190,9 @@ impl FollowTheLeader {
             .iter()
             .find(|s| s.robot == self.leader)
             .filter(|_| leader_fresh);
+        self.leader_motion = leader
+            .map(|l| LeaderMotion::update(self.leader_motion, l, self.config.velocity_smoothing));
+        let motion = self.leader_motion;
         let mut commands = Vec::new();
         let mut targets = Vec::new();
         for f in &self.followers {
@@ -146,21 +202,21 @@ impl FollowTheLeader {
             let Some(s) = states.iter().find(|s| s.robot == f.robot) else {
                 continue;
             };
-            let Some(l) = leader else {
+            let Some(l) = motion else {
                 commands.push(RobotCommand {
                     robot: f.robot.clone(),
                     command: Command::Stop(Stop {}),
                 });
                 continue;
             };
-            let (ox, oy) = rotate(f.offset.x, f.offset.y, l.pose.heading);
+            let (ox, oy) = rotate(f.offset.x, f.offset.y, l.heading);
             let reference = Reference {
-                x: l.pose.x + ox,
-                y: l.pose.y + oy,
-                heading: l.pose.heading,
-                vx: l.velocity.vx - l.velocity.wz * oy,
-                vy: l.velocity.vy + l.velocity.wz * ox,
-                wz: l.velocity.wz,
+                x: l.x + ox,
+                y: l.y + oy,
+                heading: l.heading,
+                vx: l.vx - l.wz * oy,
+                vy: l.vy + l.wz * ox,
+                wz: l.wz,
             };
             commands.push(RobotCommand {
                 robot: f.robot.clone(),

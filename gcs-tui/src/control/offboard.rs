@@ -89,6 +89,23 @@ impl OffboardNavigator {
         }
     }
 
+    /// Takes navigation over from the agent: `mission` is the one the agent
+    /// holds and `reported` its last reported progress; navigation resumes at
+    /// the reported next waypoint when the progress is for this mission, else
+    /// at the mission's start index.
+    pub fn take_over(
+        robot: impl Into<String>,
+        mission: Mission,
+        reported: Option<MissionProgress>,
+        config: NavConfig,
+    ) -> Self {
+        let mut nav = OffboardNavigator::new(robot, mission, config);
+        if let Some(p) = reported.filter(|p| p.id == nav.mission.id) {
+            nav.resume_at(p.next as usize);
+        }
+        nav
+    }
+
     pub fn robot(&self) -> &str {
         &self.robot
     }
