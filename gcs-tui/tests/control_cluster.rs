@@ -320,6 +320,7 @@ fn member_with_stale_telemetry_is_not_commanded_and_its_failsafe_stops_it() {
         last_command_to_3 < lost_at,
         "no command after it was declared lost"
     );
+    assert_eq!(world.failsafe("robot_3"), FailsafeState::ChannelSilent);
     assert!(world.speed("robot_3") < 1e-3, "its failsafe stopped it");
     assert!(world.speed("robot_1") > 0.1, "the others keep moving");
 
