@@ -1,6 +1,8 @@
 //! Ground-side closed-loop controllers: cluster-space (fleet) control with
 //! formations and slot assignment, follow-the-leader, and offboard waypoint
-//! navigation.
+//! navigation; [`ControlHub`] runs them against the router on the channels
+//! `fleet/<cluster>`, `follow/<leader>` and `offboard/<robot>`, and
+//! [`ControlCommand`] is their part of the command language.
 //!
 //! Every controller here is a pure state machine over plain inputs: each
 //! member's last [`MemberState`] (pose, velocity and platform limits taken from
@@ -8,8 +10,8 @@
 //! returns the vehicle-level [`mech_proto::Command`] for every member the
 //! controller still commands, together with a status snapshot (slot targets,
 //! tracking errors, lost members) that displays can read. Nothing in this
-//! module does I/O or reads a clock, so every timeout is tested with stepped
-//! time.
+//! controller does I/O or reads a clock, so every timeout is tested with
+//! stepped time.
 //!
 //! Safety rules shared by all controllers:
 //! - a member whose telemetry is older than its controller's `telemetry_timeout`
@@ -20,9 +22,11 @@
 
 mod assignment;
 mod cluster;
+pub(crate) mod command;
 mod follow;
 mod formation;
 mod geometry;
+mod hub;
 mod offboard;
 mod spec;
 mod tracking;
@@ -32,9 +36,14 @@ pub use cluster::{
     ClusterConfig, ClusterController, ClusterMotion, ClusterOutput, ClusterStatus, ClusterWaypoint,
     SlotTarget,
 };
+pub use command::{ControlCommand, ErrorMetric, NavSide};
 pub use follow::{FollowConfig, FollowOutput, FollowTarget, FollowTheLeader, Follower};
 pub use formation::{FormationError, slot_offsets};
 pub use geometry::wrap_angle;
+pub use hub::{
+    ClusterView, ControlError, ControlHub, ControlSnapshot, FollowView, HubConfig, NavView,
+    TrackingStats, cluster_channel, follow_channel, offboard_channel,
+};
 pub use offboard::{NavConfig, NavOutput, OffboardNavigator};
 pub use spec::{
     ClusterSpec, ClusterStickRates, ClusterSticks, DEFAULT_SPACING, SpecError,
@@ -94,14 +103,30 @@ pub struct PlatformLimits {
 }
 
 impl PlatformLimits {
+    /// Limits of a registered platform; a missing or invalid limit falls back
+    /// to a cautious value (0.5 m/s, 2 rad/s).
+    pub fn new(
+        platform: &str,
+        capabilities: &[CommandKind],
+        max_speed: f64,
+        max_yaw_rate: f64,
+    ) -> PlatformLimits {
+        PlatformLimits {
+            kinematics: Kinematics::of_platform(platform, capabilities),
+            capabilities: capabilities.to_vec(),
+            max_speed: positive_or(max_speed, 0.5),
+            max_yaw_rate: positive_or(max_yaw_rate, 2.0),
+        }
+    }
+
     /// Limits announced in a registration.
     pub fn from_hello(hello: &Hello) -> PlatformLimits {
-        PlatformLimits {
-            kinematics: Kinematics::of_platform(&hello.platform, &hello.capabilities),
-            capabilities: hello.capabilities.clone(),
-            max_speed: positive_or(hello.max_speed, 0.5),
-            max_yaw_rate: positive_or(hello.max_yaw_rate, 2.0),
-        }
+        PlatformLimits::new(
+            &hello.platform,
+            &hello.capabilities,
+            hello.max_speed,
+            hello.max_yaw_rate,
+        )
     }
 
     /// Whether the platform obeys `kind`.

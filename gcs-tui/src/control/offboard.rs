@@ -73,6 +73,10 @@ pub struct OffboardNavigator {
     started: Option<f64>,
     config: NavConfig,
     lost: bool,
+    /// While navigation is being handed back to the agent, progress is frozen:
+    /// the robot waits at the next waypoint instead of passing it, so the
+    /// mission the agent receives starts where the robot really is.
+    handover: bool,
 }
 
 impl OffboardNavigator {
@@ -86,6 +90,7 @@ impl OffboardNavigator {
             started: None,
             config,
             lost: false,
+            handover: false,
         }
     }
 
@@ -118,6 +123,12 @@ impl OffboardNavigator {
     /// taking over from onboard navigation).
     pub fn resume_at(&mut self, next: usize) {
         self.next = next.min(self.mission.waypoints.len());
+    }
+
+    /// Freezes (`true`) or releases progress while navigation is handed back
+    /// to the agent; see [`OffboardNavigator::onboard_mission`].
+    pub fn set_handover(&mut self, handover: bool) {
+        self.handover = handover;
     }
 
     /// Sets the mission start time that arrival times count from (e.g. when
@@ -197,6 +208,14 @@ impl OffboardNavigator {
             };
         };
         let mut distance = norm(w.x - s.pose.x, w.y - s.pose.y);
+        if distance <= self.mission.arrival_radius && self.handover {
+            return NavOutput {
+                command: Some(Command::Stop(Stop {})),
+                progress: self.progress(),
+                distance: Some(distance),
+                events,
+            };
+        }
         if distance <= self.mission.arrival_radius {
             events.push(ControlEvent::WaypointReached { index: self.next });
             self.next += 1;
