@@ -141,3 +141,59 @@ fn followers_stop_when_the_leader_is_lost_and_lost_followers_get_nothing() {
         "failsafe stopped the silent follower"
     );
 }
+
+#[test]
+fn formation_frame_turns_no_faster_than_followers_can_drive() {
+    let (mut world, mut follow) = convoy();
+    // Gather behind a still leader.
+    for _ in 0..ticks(15.0) {
+        let out = follow.step(world.now_s(), &world.states());
+        world.fleet(CHANNEL, &out.commands);
+        world.advance(Duration::from_secs_f64(PERIOD));
+    }
+    // The leader spins in place by half a turn as fast as it can.
+    let spin = Command::Twist(Twist {
+        vx: 0.0,
+        vy: 0.0,
+        vz: 0.0,
+        wz: 2.0,
+    });
+    let hold = Command::Twist(Twist::default());
+    let mut worst = 0.0f64;
+    let mut target_speed = 0.0f64;
+    let mut last: Option<(f64, f64)> = None;
+    for i in 0..ticks(12.0) {
+        let now = world.now_s();
+        let heading = world.true_pose("robot_1").heading;
+        if i < ticks(4.0) {
+            let turning = heading.abs() < 3.0;
+            world.command("robot_1", JOY, if turning { &spin } else { &hold });
+        }
+        let out = follow.step(now, &world.states());
+        world.fleet(CHANNEL, &out.commands);
+        let t = out.targets.iter().find(|t| t.robot == "robot_2").unwrap();
+        if let Some((x, y)) = last {
+            target_speed = target_speed.max((t.x - x).hypot(t.y - y) / PERIOD);
+        }
+        last = Some((t.x, t.y));
+        worst = worst.max(out.targets.iter().map(|t| t.error).fold(0.0, f64::max));
+        world.advance(Duration::from_secs_f64(PERIOD));
+    }
+    let heading = world.true_pose("robot_1").heading;
+    let end = follow.step(world.now_s(), &world.states());
+    println!(
+        "leader spun to {heading:.2} rad: fastest target {target_speed:.2} m/s, \
+         worst follower error {worst:.3} m, final {:.3} m",
+        end.targets.iter().map(|t| t.error).fold(0.0, f64::max)
+    );
+    assert!(heading.cos() < -0.95, "the leader turned round");
+    assert!(
+        target_speed <= 0.6 * 0.5 + 0.05,
+        "targets move within the followers' reach"
+    );
+    assert!(worst < 0.15, "followers kept up: {worst:.3} m");
+    assert!(
+        end.targets.iter().all(|t| t.error < 0.05),
+        "settled behind the turned leader"
+    );
+}

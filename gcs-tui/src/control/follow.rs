@@ -9,6 +9,13 @@
 //! velocity: every agent reports a pose, while what a reported velocity means
 //! (frame, filtering, commanded or measured) varies between platforms.
 //!
+//! The offsets are laid out in a *formation frame* that follows the leader's
+//! heading at a limited rate: when a differential-drive leader spins in place,
+//! a rigid offset would swing round faster than any follower can drive, so
+//! the frame turns no faster than lets the farthest follower keep up at
+//! [`FollowConfig::speed_margin`] of the slowest follower's top speed, and
+//! catches up with the leader's heading afterwards.
+//!
 //! Without fresh leader telemetry there is no reference: followers are sent an
 //! explicit stop (they are healthy, only their target is unknown). A follower
 //! whose own telemetry is stale is not commanded at all.
@@ -34,6 +41,9 @@ pub struct FollowConfig {
     pub gains: TrackingGains,
     /// Telemetry older than this (s) makes a robot lost.
     pub telemetry_timeout: f64,
+    /// Fraction of the slowest follower's top speed the formation frame's
+    /// rotation may ask of the farthest follower.
+    pub speed_margin: f64,
     /// Weight of each new finite-difference sample in the leader velocity
     /// estimate, in `(0, 1]` (1 = no filtering).
     pub velocity_smoothing: f64,
@@ -45,6 +55,7 @@ impl Default for FollowConfig {
             gains: TrackingGains::default(),
             telemetry_timeout: 0.5,
             velocity_smoothing: 0.5,
+            speed_margin: 0.6,
         }
     }
 }
@@ -87,6 +98,9 @@ pub struct FollowTheLeader {
     config: FollowConfig,
     lost: BTreeSet<String>,
     leader_motion: Option<LeaderMotion>,
+    /// Heading of the formation frame, rad; `None` until the leader reports.
+    frame: Option<f64>,
+    last_now: Option<f64>,
 }
 
 /// The leader's last pose and its estimated world-frame velocity.
@@ -139,6 +153,8 @@ impl FollowTheLeader {
             config,
             lost: BTreeSet::new(),
             leader_motion: None,
+            frame: None,
+            last_now: None,
         }
     }
 
@@ -193,6 +209,50 @@ impl FollowTheLeader {
         self.leader_motion = leader
             .map(|l| LeaderMotion::update(self.leader_motion, l, self.config.velocity_smoothing));
         let motion = self.leader_motion;
+        let dt = match self.last_now {
+            Some(t) if now > t => (now - t).min(0.5),
+            _ => 0.0,
+        };
+        self.last_now = Some(now);
+        let frame_rate = match motion {
+            Some(l) => {
+                let reach = self
+                    .followers
+                    .iter()
+                    .map(|f| f.offset.x.hypot(f.offset.y))
+                    .fold(0.0, f64::max);
+                let slowest = self
+                    .followers
+                    .iter()
+                    .filter_map(|f| states.iter().find(|s| s.robot == f.robot))
+                    .map(|s| s.platform.max_speed)
+                    .fold(f64::INFINITY, f64::min);
+                let limit = if reach > 1e-9 && slowest.is_finite() {
+                    self.config.speed_margin * slowest / reach
+                } else {
+                    f64::INFINITY
+                };
+                let frame = self.frame.unwrap_or(l.heading);
+                let turn = wrap_angle(l.heading - frame);
+                let step = if limit.is_finite() {
+                    turn.clamp(-limit * dt, limit * dt)
+                } else {
+                    turn
+                };
+                self.frame = Some(wrap_angle(frame + step));
+                // Feed-forward: the leader's rate once caught up, else the
+                // frame's own (limited) rate.
+                if (turn - step).abs() < 1e-9 {
+                    l.wz.clamp(-limit, limit)
+                } else if dt > 0.0 {
+                    step / dt
+                } else {
+                    0.0
+                }
+            }
+            None => 0.0,
+        };
+        let frame = self.frame.unwrap_or_default();
         let mut commands = Vec::new();
         let mut targets = Vec::new();
         for f in &self.followers {
@@ -209,14 +269,14 @@ impl FollowTheLeader {
                 });
                 continue;
             };
-            let (ox, oy) = rotate(f.offset.x, f.offset.y, l.heading);
+            let (ox, oy) = rotate(f.offset.x, f.offset.y, frame);
             let reference = Reference {
                 x: l.x + ox,
                 y: l.y + oy,
-                heading: l.heading,
-                vx: l.vx - l.wz * oy,
-                vy: l.vy + l.wz * ox,
-                wz: l.wz,
+                heading: frame,
+                vx: l.vx - frame_rate * oy,
+                vy: l.vy + frame_rate * ox,
+                wz: frame_rate,
             };
             commands.push(RobotCommand {
                 robot: f.robot.clone(),
