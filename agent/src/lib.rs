@@ -18,11 +18,13 @@
 
 pub mod agent;
 pub mod clock;
+pub mod config;
 pub mod control;
 pub mod drivers;
 pub mod failsafe;
 pub mod filter;
 pub mod hal;
+pub mod launch;
 pub mod platform;
 pub mod runtime;
 pub mod sim;
