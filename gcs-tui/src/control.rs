@@ -36,7 +36,7 @@ pub use cluster::{
     ClusterConfig, ClusterController, ClusterMotion, ClusterOutput, ClusterStatus, ClusterWaypoint,
     SlotTarget,
 };
-pub use command::{ControlCommand, ErrorMetric, NavSide};
+pub use command::{ClusterUntil, ControlCommand, ErrorMetric, NavSide};
 pub use follow::{FollowConfig, FollowOutput, FollowTarget, FollowTheLeader, Follower};
 pub use formation::{FormationError, slot_offsets};
 pub use geometry::wrap_angle;

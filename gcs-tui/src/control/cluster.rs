@@ -21,10 +21,12 @@
 //! [`ClusterConfig::lag_free`], so a member that has to turn in place (a
 //! differential drive at a corner) is waited for instead of left behind.
 //!
-//! Slots are formed over the members that are commanded (present in the step
-//! input and with fresh telemetry) and re-assigned with
+//! Slots are formed over the members present in the step input (routed to
+//! the cluster's channel) and re-assigned with
 //! [`super::assign_slots`] whenever that set or the formation changes, so
-//! members take the nearest free slot and do not cross needlessly. Feed-forward
+//! members take the nearest free slot and do not cross needlessly. A member
+//! whose telemetry goes stale keeps its slot (uncommanded, its failsafe stops
+//! it) so a brief radio drop-out does not reshuffle the formation. Feed-forward
 //! slot speeds are limited to a margin of the slowest member's top speed,
 //! leaving the rest for feedback.
 
@@ -327,9 +329,14 @@ impl ClusterController {
         let mut events = Vec::new();
 
         let mut absent = Vec::new();
+        let mut present: Vec<&MemberState> = Vec::new();
         let mut fresh: Vec<&MemberState> = Vec::new();
         for robot in &self.members {
-            match states.iter().find(|s| &s.robot == robot) {
+            let state = states.iter().find(|s| &s.robot == robot);
+            if let Some(s) = state {
+                present.push(s);
+            }
+            match state {
                 None => {
                     absent.push(robot.clone());
                     self.lost.remove(robot);
@@ -352,7 +359,8 @@ impl ClusterController {
             }
         }
         fresh.sort_by(|a, b| a.robot.cmp(&b.robot));
-        let active: Vec<String> = fresh.iter().map(|s| s.robot.clone()).collect();
+        present.sort_by(|a, b| a.robot.cmp(&b.robot));
+        let active: Vec<String> = present.iter().map(|s| s.robot.clone()).collect();
         if active != self.active {
             self.active = active;
             self.reassign = true;
@@ -366,8 +374,8 @@ impl ClusterController {
         let mut slots = Vec::new();
         let mut measured = None;
         if let Some(mut desired) = self.desired {
-            if self.reassign && !fresh.is_empty() {
-                self.assign(&desired, &fresh);
+            if self.reassign && !present.is_empty() {
+                self.assign(&desired, &present);
             }
             let max_offset = self
                 .slots
@@ -638,36 +646,46 @@ impl ClusterController {
         if fresh.is_empty() {
             return None;
         }
-        let n = fresh.len() as f64;
-        let cx = fresh.iter().map(|s| s.pose.x).sum::<f64>() / n;
-        let cy = fresh.iter().map(|s| s.pose.y).sum::<f64>() / n;
+        // Pairs (slot offset rotated into the world, member position); with
+        // every member present the offsets average to zero and the centre is
+        // the plain centroid.
+        let pairs: Vec<((f64, f64), (f64, f64))> = fresh
+            .iter()
+            .filter_map(|s| {
+                let o = self
+                    .assignment
+                    .get(&s.robot)
+                    .and_then(|&i| self.slots.get(i))?;
+                Some((rotate(o.x, o.y, desired.heading), (s.pose.x, s.pose.y)))
+            })
+            .collect();
+        if pairs.is_empty() {
+            return None;
+        }
+        let n = pairs.len() as f64;
+        let (ax0, ay0) = pairs
+            .iter()
+            .fold((0.0, 0.0), |(x, y), ((ax, ay), _)| (x + ax / n, y + ay / n));
+        let (bx0, by0) = pairs
+            .iter()
+            .fold((0.0, 0.0), |(x, y), (_, (bx, by))| (x + bx / n, y + by / n));
         let (mut dot, mut cross, mut aa) = (0.0, 0.0, 0.0);
-        for s in fresh {
-            let Some(o) = self
-                .assignment
-                .get(&s.robot)
-                .and_then(|&i| self.slots.get(i))
-            else {
-                continue;
-            };
-            let (ax, ay) = rotate(o.x, o.y, desired.heading);
-            let (bx, by) = (s.pose.x - cx, s.pose.y - cy);
+        for ((ax, ay), (bx, by)) in &pairs {
+            let (ax, ay, bx, by) = (ax - ax0, ay - ay0, bx - bx0, by - by0);
             dot += ax * bx + ay * by;
             cross += ax * by - ay * bx;
             aa += ax * ax + ay * ay;
         }
-        let (heading, scale) = if aa > 1e-9 {
-            (
-                wrap_angle(desired.heading + cross.atan2(dot)),
-                norm(dot, cross) / aa,
-            )
+        let (turn, scale) = if aa > 1e-9 {
+            (cross.atan2(dot), norm(dot, cross) / aa)
         } else {
-            (desired.heading, desired.scale)
+            (0.0, desired.scale)
         };
+        let (rx, ry) = rotate(ax0, ay0, turn);
         Some(ClusterPose {
-            x: cx,
-            y: cy,
-            heading,
+            x: bx0 - scale * rx,
+            y: by0 - scale * ry,
+            heading: wrap_angle(desired.heading + turn),
             scale,
         })
     }

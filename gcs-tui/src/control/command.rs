@@ -8,6 +8,7 @@
 //! cluster-hold c1
 //! cluster-waypoint c1 X,Y[,HEADING] ... [loop]   # then `send c1`
 //! cluster-wait c1 [TIMEOUT]                  # until the waypoints are done
+//! cluster-wait c1 settled TOLERANCE [TIMEOUT] # until every slot error <= TOLERANCE
 //! cluster-expect c1 max-error|rms-error METRES
 //! follow robot_2 robot_1 DX,DY               # offset in robot_1's frame
 //! follow robot_2 none
@@ -44,6 +45,15 @@ pub enum ErrorMetric {
     Rms,
 }
 
+/// What `cluster-wait` waits for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ClusterUntil {
+    /// The waypoints sent last are done.
+    Arrived,
+    /// Every commanded member is within this distance (m) of its slot.
+    Settled(f64),
+}
+
 /// Where navigation should run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NavSide {
@@ -72,6 +82,7 @@ pub enum ControlCommand {
     },
     ClusterWait {
         cluster: Target,
+        until: ClusterUntil,
         timeout: Duration,
     },
     ClusterExpect {
@@ -176,9 +187,15 @@ pub fn parse_cluster_waypoint_verb(a: &mut Args<'_>) -> Result<Command, LangErro
     }))
 }
 
-/// `cluster-wait CLUSTER [TIMEOUT]`
+/// `cluster-wait CLUSTER [TIMEOUT]` / `cluster-wait CLUSTER settled TOL [TIMEOUT]`
 pub fn parse_cluster_wait(a: &mut Args<'_>) -> Result<Command, LangError> {
     let cluster = a.target()?;
+    let until = if keyword(a, "settled") {
+        a.next("settled")?;
+        ClusterUntil::Settled(a.number("slot error tolerance (m)")?)
+    } else {
+        ClusterUntil::Arrived
+    };
     let timeout = if a.is_empty() {
         DEFAULT_WAIT
     } else {
@@ -186,6 +203,7 @@ pub fn parse_cluster_wait(a: &mut Args<'_>) -> Result<Command, LangError> {
     };
     Ok(Command::Control(ControlCommand::ClusterWait {
         cluster,
+        until,
         timeout,
     }))
 }
@@ -329,7 +347,44 @@ impl ControlHub {
                     cluster.name
                 )))
             }
-            ControlCommand::ClusterWait { cluster, timeout } => {
+            ControlCommand::ClusterWait {
+                cluster,
+                until: ClusterUntil::Settled(tolerance),
+                timeout,
+            } => {
+                let start = Instant::now();
+                loop {
+                    let view = self.cluster_view(&cluster.name);
+                    let worst = view
+                        .as_ref()
+                        .filter(|v| !v.status.slots.is_empty())
+                        .map(|v| v.status.max_error());
+                    if let Some(w) = worst.filter(|w| w <= tolerance) {
+                        return Ok(outcome(format!(
+                            "{} settled after {:.2} s: every slot error <= {w:.3} m",
+                            cluster.name,
+                            start.elapsed().as_secs_f64()
+                        )));
+                    }
+                    if start.elapsed() >= *timeout {
+                        return Err(LangError::new(
+                            at,
+                            format!(
+                                "timed out after {:.1} s: {} largest slot error {:?} m",
+                                timeout.as_secs_f64(),
+                                cluster.name,
+                                worst
+                            ),
+                        ));
+                    }
+                    tokio::time::sleep(POLL).await;
+                }
+            }
+            ControlCommand::ClusterWait {
+                cluster,
+                until: ClusterUntil::Arrived,
+                timeout,
+            } => {
                 let start = Instant::now();
                 loop {
                     let view = self.cluster_view(&cluster.name);

@@ -352,6 +352,10 @@ impl ControlHub {
             }
         };
         let r = f(entry);
+        if r.is_ok() {
+            // The next period's status is the first to reflect the change.
+            entry.status = None;
+        }
         drop(state);
         self.kick();
         r
@@ -954,8 +958,12 @@ async fn run(shared: Weak<Shared>, mut events: crate::router::Subscription, peri
             }
         }
         if !log.is_empty() {
-            for (_, text) in &log {
-                tracing::info!(target: "control", "{text}");
+            for (severity, text) in &log {
+                if *severity >= Severity::Warn {
+                    tracing::warn!(target: "control", "{text}");
+                } else {
+                    tracing::info!(target: "control", "{text}");
+                }
             }
             hub.shared.gcs.update_fleet(|f| {
                 for (severity, text) in log {

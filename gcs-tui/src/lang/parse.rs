@@ -149,8 +149,8 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "cluster-wait",
-        usage: "cluster-wait CLUSTER [TIMEOUT]",
-        help: "wait until a cluster has done its waypoints (default 60s)",
+        usage: "cluster-wait CLUSTER [TIMEOUT] | cluster-wait CLUSTER settled TOLERANCE [TIMEOUT]",
+        help: "wait until a cluster has done its waypoints, or every member is within TOLERANCE m of its slot (default 60s)",
         parse: control::parse_cluster_wait,
     },
     Verb {
