@@ -379,3 +379,48 @@ fn member_routed_away_is_dropped_from_outputs_at_once() {
     assert_eq!(out.commands.len(), 3);
     assert_eq!(out.fleet_command().parts.len(), 3);
 }
+
+#[test]
+fn members_joining_one_by_one_recentre_a_cluster_that_has_not_moved() {
+    let mut world = mixed_fleet();
+    let mut cluster = ClusterController::new(
+        "c1",
+        names(),
+        formation(FormationKind::Circle, 0.7),
+        ClusterConfig::default(),
+    )
+    .unwrap();
+    let states = world.states();
+    let first = cluster.step(world.now_s(), &states[..1]);
+    let d = first.status.desired.unwrap();
+    assert!(
+        (d.x - states[0].pose.x).abs() < 1e-9,
+        "one member: the cluster is where it is"
+    );
+    world.advance(Duration::from_secs_f64(PERIOD));
+    let states = world.states();
+    let all = cluster.step(world.now_s(), &states);
+    let d = all.status.desired.unwrap();
+    let cx = states.iter().map(|s| s.pose.x).sum::<f64>() / 4.0;
+    let cy = states.iter().map(|s| s.pose.y).sum::<f64>() / 4.0;
+    assert!(
+        (d.x - cx).hypot(d.y - cy) < 1e-9,
+        "re-centred on all four members"
+    );
+    // Once moving, joining members no longer move the cluster pose.
+    cluster.set_velocity(ClusterVelocity {
+        vx: 0.1,
+        vy: 0.0,
+        wz: 0.0,
+        scale_rate: 0.0,
+    });
+    let moving = cluster
+        .step(world.now_s() + PERIOD, &states[..3])
+        .status
+        .desired
+        .unwrap();
+    assert!(
+        (moving.x - d.x).hypot(moving.y - d.y) <= 0.1 * PERIOD + 1e-9,
+        "not re-centred on the three members left"
+    );
+}

@@ -96,11 +96,22 @@ fn cluster_mission_script_passes_headless() {
         .collect();
     let results: Vec<&serde_json::Value> = lines.iter().filter(|v| v["type"] == "result").collect();
     for r in &results {
-        if r["command"].as_str().is_some_and(|c| c.starts_with("cluster-")) {
-            println!("{}: {}", r["command"], r["summary"].as_str().or(r["error"].as_str()).unwrap_or(""));
+        if r["command"]
+            .as_str()
+            .is_some_and(|c| c.starts_with("cluster-"))
+        {
+            println!(
+                "{}: {}",
+                r["command"],
+                r["summary"].as_str().or(r["error"].as_str()).unwrap_or("")
+            );
         }
     }
-    assert_eq!(out.status.code(), Some(0), "script passed; stderr: {stderr}\nstdout: {stdout}");
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "script passed; stderr: {stderr}\nstdout: {stdout}"
+    );
     let summary = lines.last().expect("a summary line");
     assert_eq!(summary["type"], "summary");
     assert_eq!(summary["ok"], true);
@@ -116,7 +127,11 @@ fn cluster_mission_script_passes_headless() {
         .iter()
         .find(|r| r["command"] == "cluster-wait c1 120s")
         .expect("the mission wait ran");
-    assert!(finished["summary"].as_str().is_some_and(|s| s.contains("finished its waypoints")));
+    assert!(
+        finished["summary"]
+            .as_str()
+            .is_some_and(|s| s.contains("finished its waypoints"))
+    );
     // Route changes to and from the cluster channel reached every robot.
     let acked = |channel: &str| {
         lines

@@ -198,6 +198,9 @@ pub struct ClusterController {
     reassign: bool,
     lost: BTreeSet<String>,
     last_now: Option<f64>,
+    /// The desired pose has been set or moved by the operator; from then on
+    /// membership changes no longer re-centre it.
+    anchored: bool,
 }
 
 const ZERO_VELOCITY: ClusterVelocity = ClusterVelocity {
@@ -233,6 +236,7 @@ impl ClusterController {
             reassign: true,
             lost: BTreeSet::new(),
             last_now: None,
+            anchored: false,
         })
     }
 
@@ -289,6 +293,7 @@ impl ClusterController {
             .scale
             .clamp(self.config.min_scale, self.config.max_scale);
         self.desired = Some(ClusterPose { scale, ..pose });
+        self.anchored = true;
         self.motion = ClusterMotion::Hold;
         self.path_speed = 0.0;
         self.turn_rate = 0.0;
@@ -297,6 +302,7 @@ impl ClusterController {
     /// Drive the cluster at a cluster-frame velocity (gamepad, command line).
     pub fn set_velocity(&mut self, velocity: ClusterVelocity) {
         self.motion = ClusterMotion::Velocity(velocity);
+        self.anchored = true;
     }
 
     /// Visit `list` in order, starting with the first.
@@ -306,6 +312,7 @@ impl ClusterController {
             next: 0,
             looped,
         };
+        self.anchored = true;
         self.path_speed = 0.0;
         self.turn_rate = 0.0;
     }
@@ -366,7 +373,10 @@ impl ClusterController {
             self.reassign = true;
         }
 
-        if self.desired.is_none() && !fresh.is_empty() {
+        // Until the cluster is first told to move (or placed), its pose is
+        // wherever its members are: members joining one by one (routed in
+        // turn) re-centre it instead of gathering round the first to report.
+        if (self.desired.is_none() || (!self.anchored && self.reassign)) && !fresh.is_empty() {
             self.desired = Some(initial_pose(&fresh));
         }
 

@@ -8,7 +8,7 @@
 //! cluster-hold c1
 //! cluster-waypoint c1 X,Y[,HEADING] ... [loop]   # then `send c1`
 //! cluster-wait c1 [TIMEOUT]                  # until the waypoints are done
-//! cluster-wait c1 settled TOLERANCE [TIMEOUT] # until every slot error <= TOLERANCE
+//! cluster-wait c1 settled TOLERANCE [TIMEOUT] # every member routed, reporting, within TOLERANCE of its slot
 //! cluster-expect c1 max-error|rms-error METRES
 //! follow robot_2 robot_1 DX,DY               # offset in robot_1's frame
 //! follow robot_2 none
@@ -355,9 +355,14 @@ impl ControlHub {
                 let start = Instant::now();
                 loop {
                     let view = self.cluster_view(&cluster.name);
+                    // Settled means every member routed here and reporting.
                     let worst = view
                         .as_ref()
-                        .filter(|v| !v.status.slots.is_empty())
+                        .filter(|v| {
+                            !v.status.slots.is_empty()
+                                && v.status.absent.is_empty()
+                                && v.status.lost.is_empty()
+                        })
                         .map(|v| v.status.max_error());
                     if let Some(w) = worst.filter(|w| w <= tolerance) {
                         return Ok(outcome(format!(

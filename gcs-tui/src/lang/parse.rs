@@ -150,7 +150,7 @@ pub static VERBS: &[Verb] = &[
     Verb {
         name: "cluster-wait",
         usage: "cluster-wait CLUSTER [TIMEOUT] | cluster-wait CLUSTER settled TOLERANCE [TIMEOUT]",
-        help: "wait until a cluster has done its waypoints, or every member is within TOLERANCE m of its slot (default 60s)",
+        help: "wait until a cluster has done its waypoints, or every member is routed to it, reporting, and within TOLERANCE m of its slot (default 60s)",
         parse: control::parse_cluster_wait,
     },
     Verb {
