@@ -193,3 +193,112 @@ async fn mission_switched_onboard_offboard_onboard_finishes_in_order() {
     fleet.shutdown().await;
     gcs.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn external_program_and_gamepad_drive_a_cluster_from_config() {
+    let mut config = GcsConfig::parse(
+        "[router]\nudp = \"127.0.0.1:0\"\n\
+         [[cluster]]\nname = \"c1\"\nmembers = [\"robot_1\", \"robot_2\"]\nformation = \"column\"\nspacing = 0.5\n",
+    )
+    .unwrap();
+    config.router.tcp = None;
+    config.validate().unwrap();
+    let gcs = Gcs::start(config).await.unwrap();
+    let options = SimFleetOptions {
+        noise: false,
+        platforms: vec![PlatformSpec::kiwi()],
+        ..SimFleetOptions::default()
+    };
+    let fleet = SimFleet::spawn(2, gcs.router().udp_addr(), Arena::default(), options)
+        .await
+        .unwrap();
+    let mut exec = Executor::new(gcs.clone());
+    run(&mut exec, "wait robots 2 10s").await;
+    assert_eq!(
+        gcs.with_fleet(|f| f.clusters["c1"].members.clone()),
+        vec!["robot_1", "robot_2"]
+    );
+    run(&mut exec, "route c1 fleet/c1").await;
+    run(&mut exec, "cluster-wait c1 settled 0.05 15s").await;
+    let view = exec.control().cluster_view("c1").unwrap();
+    assert_eq!(
+        view.status.formation.kind,
+        mech_proto::FormationKind::Column,
+        "formation from the config"
+    );
+
+    // An external program publishes a cluster command on the cluster's channel.
+    let mut matlab = gcs.router().publisher("matlab", "fleet/c1");
+    let command = mech_proto::ClusterCommand {
+        cluster: "c1".into(),
+        members: vec![],
+        goal: mech_proto::ClusterGoal::Velocity(mech_proto::ClusterVelocity {
+            vx: 0.1,
+            vy: 0.0,
+            wz: 0.0,
+            scale_rate: 0.0,
+        }),
+        formation: Some(mech_proto::Formation {
+            kind: mech_proto::FormationKind::Line,
+            spacing: 0.6,
+            offsets: vec![],
+        }),
+    };
+    matlab
+        .send_body("router", mech_proto::Body::Cluster(command))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let view = exec.control().cluster_view("c1").unwrap();
+    assert_eq!(view.status.formation.kind, mech_proto::FormationKind::Line);
+    assert_eq!(
+        view.motion,
+        mech_gcs::control::ClusterMotion::Velocity(mech_proto::ClusterVelocity {
+            vx: 0.1,
+            vy: 0.0,
+            wz: 0.0,
+            scale_rate: 0.0
+        }),
+        "the external velocity goal drives the cluster"
+    );
+
+    // A gamepad velocity lapses unless refreshed: the cluster holds.
+    exec.control()
+        .drive_cluster(
+            "c1",
+            mech_proto::ClusterVelocity {
+                vx: 0.0,
+                vy: 0.1,
+                wz: 0.0,
+                scale_rate: 0.0,
+            },
+        )
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let before = exec
+        .control()
+        .cluster_view("c1")
+        .unwrap()
+        .status
+        .desired
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(900)).await;
+    let held = exec.control().cluster_view("c1").unwrap().status;
+    assert_eq!(held.velocity.vy, 0.0, "the gamepad velocity lapsed");
+    let after = held.desired.unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let later = exec
+        .control()
+        .cluster_view("c1")
+        .unwrap()
+        .status
+        .desired
+        .unwrap();
+    assert_eq!((after.x, after.y), (later.x, later.y), "holding");
+    assert!(
+        (after.y - before.y).abs() < 0.1 * 0.5 + 0.02,
+        "moved at most until the timeout"
+    );
+    fleet.shutdown().await;
+    gcs.shutdown().await;
+}

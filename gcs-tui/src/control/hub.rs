@@ -31,11 +31,13 @@ use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::cluster::{ClusterConfig, ClusterController, ClusterStatus, ClusterWaypoint};
+use super::cluster::{
+    ClusterConfig, ClusterController, ClusterMotion, ClusterStatus, ClusterWaypoint,
+};
 use super::follow::{FollowConfig, FollowTarget, FollowTheLeader, Follower};
 use super::formation::FormationError;
 use super::offboard::{NavConfig, OffboardNavigator};
-use super::spec::DEFAULT_SPACING;
+use super::spec::{ClusterSpec, DEFAULT_SPACING, SpecError};
 use super::{ControlEvent, MemberState, PlatformLimits};
 use crate::Gcs;
 use crate::fleet::{Fleet, Severity};
@@ -107,6 +109,8 @@ pub enum ControlError {
     SelfFollow(String),
     #[error("handing {robot} back to onboard navigation failed: {reason}")]
     Handover { robot: String, reason: String },
+    #[error("cluster {0:?} in the configuration: {1}")]
+    Config(String, SpecError),
     #[error(transparent)]
     Router(#[from] RouterError),
 }
@@ -147,6 +151,8 @@ pub struct ClusterView {
     /// with per-member tracking error, lost and absent members.
     pub status: ClusterStatus,
     pub stats: TrackingStats,
+    /// What the cluster pose is doing: holding, a velocity, or waypoints.
+    pub motion: ClusterMotion,
     /// Cluster waypoints set but not sent yet.
     pub draft: Vec<ClusterWaypoint>,
     /// The last waypoint list sent was completed.
@@ -292,8 +298,26 @@ impl ControlHub {
         &self.shared.gcs
     }
 
-    /// Starts the control task if it is not running (needs a tokio runtime).
+    /// Defines the clusters of the configuration and their formations.
+    pub fn apply_config(&self, clusters: &[ClusterSpec]) -> Result<(), ControlError> {
+        for c in clusters {
+            let formation = c
+                .formation()
+                .map_err(|e| ControlError::Config(c.name.clone(), e))?;
+            self.shared
+                .gcs
+                .update_fleet(|f| f.set_cluster(&c.name, c.members.clone()));
+            self.set_formation(&c.name, formation)?;
+        }
+        Ok(())
+    }
+
+    /// Starts the control task if it is not running. Outside a tokio runtime
+    /// it does nothing; the next request made inside one starts it.
     fn ensure_running(&self) {
+        if tokio::runtime::Handle::try_current().is_err() {
+            return;
+        }
         let mut task = lock(&self.shared.task);
         if task.as_ref().is_some_and(|t| !t.is_finished()) {
             return;
@@ -842,6 +866,7 @@ fn cluster_view(name: &str, e: &ClusterEntry) -> Option<ClusterView> {
         channel: cluster_channel(name),
         status: e.status.clone()?,
         stats: e.stats,
+        motion: e.controller.motion().clone(),
         draft: e.draft.clone(),
         finished: e.finished,
     })

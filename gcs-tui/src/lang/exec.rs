@@ -70,8 +70,12 @@ pub struct Executor {
 
 impl Executor {
     pub fn new(gcs: Gcs) -> Executor {
+        let control = ControlHub::new(gcs.clone());
+        if let Err(e) = control.apply_config(&gcs.config().cluster) {
+            gcs.update_fleet(|f| f.log(Severity::Error, e.to_string()));
+        }
         Executor {
-            control: ControlHub::new(gcs.clone()),
+            control,
             gcs,
             spawner: None,
             publishers: HashMap::new(),
