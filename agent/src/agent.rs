@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStopAck, Envelope, FailsafeState, Header,
-    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Pose, Route,
-    RouteAck, Telemetry, Velocity,
+    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
+    Telemetry, Velocity,
 };
 
 use crate::control::{Controller, Gains, MissionRun, Mode};
@@ -116,6 +116,9 @@ pub struct Agent {
     next_telemetry: Duration,
     last_not_routed_notice: Option<Duration>,
     last_driver_fault: Option<Duration>,
+    /// Actuators are held at zero (state `Fault`) until then after an
+    /// actuator driver error.
+    actuator_fault_until: Option<Duration>,
     last_state: FailsafeState,
     outputs: Vec<f64>,
     counters: Counters,
@@ -152,6 +155,7 @@ impl Agent {
             next_telemetry: Duration::ZERO,
             last_not_routed_notice: None,
             last_driver_fault: None,
+            actuator_fault_until: None,
             last_state: FailsafeState::Ok,
             outputs: vec![0.0; motors],
             counters: Counters::default(),
@@ -206,8 +210,15 @@ impl Agent {
 
     /// The failsafe state now.
     pub fn failsafe_state(&self, now: Duration) -> FailsafeState {
-        self.failsafe
-            .state(now, !self.route.channel.is_empty(), self.mission_running())
+        let state =
+            self.failsafe
+                .state(now, !self.route.channel.is_empty(), self.mission_running());
+        let faulted = self.actuator_fault_until.is_some_and(|t| now < t);
+        if faulted && state != FailsafeState::EStopped {
+            FailsafeState::Fault
+        } else {
+            state
+        }
     }
 
     /// The `Hello` this robot registers with.
@@ -249,6 +260,15 @@ impl Agent {
                 now,
             )
         })
+    }
+
+    /// Writing the actuators failed: outputs are held at zero (state
+    /// `Fault`) for a second, then the robot obeys commands again if the
+    /// driver recovered; the GCS is told.
+    pub fn actuator_fault(&mut self, what: &str, now: Duration) -> Option<Envelope> {
+        self.actuator_fault_until = Some(now + Duration::from_secs(1));
+        self.controller.idle();
+        self.driver_fault(what, now)
     }
 
     /// Decodes and handles one received datagram or frame; undecodable bytes
@@ -344,9 +364,7 @@ impl Agent {
         }
 
         let mission_running = self.mission_running();
-        let state = self
-            .failsafe
-            .state(now, !self.route.channel.is_empty(), mission_running);
+        let state = self.failsafe_state(now);
         let drive = self.failsafe.may_drive(state, mission_running);
         if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
             self.counters.failsafe_trips += 1;
@@ -408,7 +426,9 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now.
+    /// The robot's telemetry now. `velocity` is the body-frame twist the
+    /// current outputs produce (the platform's forward kinematics), which is
+    /// what a robot without wheel encoders knows of its motion.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
         let twist = self.controller.platform().motion(&self.outputs);
@@ -632,16 +652,11 @@ fn truncate(text: &str) -> String {
     text[..end].to_string()
 }
 
-/// The pose used when nothing better is known.
-pub fn origin() -> Pose {
-    Pose::default()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::platform::PlatformSpec;
-    use mech_proto::{EStop, Twist, Waypoint, Welcome};
+    use mech_proto::{EStop, Pose, Twist, Waypoint, Welcome};
 
     const PERIOD: Duration = Duration::from_millis(20);
 
@@ -820,9 +835,7 @@ mod tests {
         let mut stopped = None;
         while now < ms(3000) {
             now += PERIOD;
-            // The controller keeps commanding, but nothing else arrives from
-            // the router after 100 ms... which cannot happen on one link, so
-            // commands stop too: the router is gone.
+            // Everything arrives through the router: after 100 ms it is gone.
             if now <= ms(100) {
                 a.handle(msg("joy/0", twist(0.2)), now);
             }
@@ -1032,6 +1045,30 @@ mod tests {
         a.handle(other, ms(20));
         assert_eq!(a.counters().not_for_me, 1);
         assert!(!moving(&a.tick(ms(30)).outputs));
+    }
+
+    #[test]
+    fn actuator_fault_holds_outputs_at_zero_then_recovers() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        assert!(a.actuator_fault("left motor: I/O error", ms(25)).is_some());
+        assert!(
+            a.actuator_fault("left motor: I/O error", ms(26)).is_none(),
+            "one notice a second"
+        );
+        a.handle(msg("joy/0", twist(0.2)), ms(30));
+        let t = a.tick(ms(40));
+        assert!(!moving(&t.outputs));
+        assert_eq!(a.failsafe_state(ms(40)), FailsafeState::Fault);
+        assert_eq!(a.telemetry(ms(40)).health, Health::Fault);
+        router_heartbeat(&mut a, ms(1100));
+        a.handle(msg("joy/0", twist(0.2)), ms(1100));
+        assert!(
+            moving(&a.tick(ms(1110)).outputs),
+            "recovers once the driver works"
+        );
+        assert_eq!(a.counters().driver_faults, 2);
     }
 
     #[test]

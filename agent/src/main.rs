@@ -60,13 +60,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         None => anyhow::bail!("give --config robot.toml, or --sim for a simulated robot"),
     };
     if let Some(name) = cli.name {
+        mech_agent::config::check_name(&name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
         config.name = toml::Spanned::new(0..0, name);
-        // Re-check the new name with the same rules as the file's.
-        let text = format!(
-            "name = {:?}\n[platform]\nkind = \"kiwi\"\nradius = 0.1\nmax_wheel_speed = 0.5\n",
-            config.name.get_ref()
-        );
-        RobotConfig::parse(&text, "--name")?;
     }
     let router = cli
         .router
