@@ -227,3 +227,42 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     agent.abort();
     gcs.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn offboard_resumes_from_progress_reported_before_the_robot_was_routed_elsewhere() {
+    let mut config = GcsConfig::default();
+    config.router.udp = "127.0.0.1:0".parse().unwrap();
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.unwrap();
+    let mut exec = Executor::new(gcs.clone());
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let agent = tokio::spawn(bare_agent(gcs.router().udp_addr(), tx));
+    exec.execute_line("wait connected robot_1 5s")
+        .await
+        .unwrap();
+    exec.execute_line("waypoint robot_1 1,0 2,0 3,0")
+        .await
+        .unwrap();
+    exec.execute_line("send robot_1").await.unwrap();
+    exec.execute_line("route robot_1 wp/gcs").await.unwrap();
+    // The progress (next = 2) is reported before the robot moves to a
+    // gamepad channel, where it reports no mission progress.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    exec.execute_line("route robot_1 joy/0").await.unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(
+        gcs.with_fleet(|f| f.robot("robot_1").unwrap().mission),
+        None
+    );
+
+    let text = exec.control().toggle_nav("robot_1").await.unwrap();
+    assert_eq!(text, "robot_1 offboard from waypoint 2 of 3");
+    next_matching(&mut rx, "offboard command", |e| {
+        e.header.channel == "offboard/robot_1"
+    })
+    .await;
+    let text = exec.control().toggle_nav("robot_1").await.unwrap();
+    assert_eq!(text, "robot_1 onboard from waypoint 2 of 3");
+    agent.abort();
+    gcs.shutdown().await;
+}

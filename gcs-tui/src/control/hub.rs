@@ -227,6 +227,10 @@ struct HubState {
     clusters: BTreeMap<String, ClusterEntry>,
     follows: BTreeMap<String, FollowEntry>,
     navs: BTreeMap<String, NavEntry>,
+    /// Last mission progress each robot reported: an agent reports progress
+    /// only while routed to the mission's channel, and a switch to offboard
+    /// must still know where it got to.
+    progress: BTreeMap<String, MissionProgress>,
 }
 
 #[derive(Debug)]
@@ -278,8 +282,11 @@ impl ControlHub {
         ControlHub::with_config(gcs, HubConfig::default())
     }
 
+    /// A hub with no controllers yet. Inside a tokio runtime its task starts
+    /// at once (it also keeps each robot's last mission progress); outside
+    /// one, at the first request made inside one.
     pub fn with_config(gcs: Gcs, config: HubConfig) -> ControlHub {
-        ControlHub {
+        let hub = ControlHub {
             shared: Arc::new(Shared {
                 gcs,
                 config,
@@ -287,7 +294,9 @@ impl ControlHub {
                 kick: Notify::new(),
                 task: Mutex::new(None),
             }),
-        }
+        };
+        hub.ensure_running();
+        hub
     }
 
     pub fn config(&self) -> &HubConfig {
@@ -538,6 +547,7 @@ impl ControlHub {
         let Some((mission, reported)) = found else {
             return Err(ControlError::UnknownRobot(robot.to_string()));
         };
+        let reported = reported.or_else(|| self.state().progress.get(robot).copied());
         let channel = offboard_channel(robot);
         {
             let mut state = self.state();
@@ -660,6 +670,24 @@ impl ControlHub {
         Ok(MissionProgress { id, ..progress })
     }
 
+    /// Switches `robot` to the other side: offboard if the GCS loop is not
+    /// running for it, onboard if it is (one key in the TUI).
+    pub async fn toggle_nav(&self, robot: &str) -> Result<String, ControlError> {
+        if self.nav_view(robot).is_some() {
+            let p = self.nav_onboard(robot).await?;
+            Ok(format!(
+                "{robot} onboard from waypoint {} of {}",
+                p.next, p.total
+            ))
+        } else {
+            let v = self.nav_offboard(robot).await?;
+            Ok(format!(
+                "{robot} offboard from waypoint {} of {}",
+                v.progress.next, v.progress.total
+            ))
+        }
+    }
+
     fn release_handover(&self, robot: &str) {
         if let Some(e) = self.state().navs.get_mut(robot) {
             e.nav.set_handover(false);
@@ -713,7 +741,7 @@ impl ControlHub {
     fn period(&self) -> (Vec<Outgoing>, Vec<(Severity, String)>) {
         let gcs = &self.shared.gcs;
         let now = gcs.router().elapsed().as_secs_f64();
-        let (states, routes, clusters) = gcs.with_fleet(|f| {
+        let (states, routes, clusters, progress) = gcs.with_fleet(|f| {
             (
                 member_states(f),
                 f.robots
@@ -721,6 +749,10 @@ impl ControlHub {
                     .map(|(n, r)| (n.clone(), r.route.requested.clone()))
                     .collect::<HashMap<String, Option<String>>>(),
                 f.clusters.clone(),
+                f.robots
+                    .iter()
+                    .filter_map(|(n, r)| Some((n.clone(), r.mission?)))
+                    .collect::<Vec<_>>(),
             )
         });
         let routed_to = |robot: &str, channel: &str| {
@@ -729,6 +761,7 @@ impl ControlHub {
         let mut out = Vec::new();
         let mut log = Vec::new();
         let mut state = self.state();
+        state.progress.extend(progress);
 
         for (name, e) in state.clusters.iter_mut() {
             let channel = cluster_channel(name);
