@@ -13,6 +13,10 @@ use mech_agent::sim::{Arena, SimFleet, SimFleetOptions};
 use mech_gcs::lang::Executor;
 use mech_gcs::{Gcs, GcsConfig};
 
+/// These tests run real-time simulated fleets; run one at a time so their
+/// timing does not depend on how many share the CPU.
+static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 async fn start(n: usize, platforms: Vec<PlatformSpec>) -> (Gcs, Executor, SimFleet) {
     let mut config = GcsConfig::default();
     config.router.udp = "127.0.0.1:0".parse().unwrap();
@@ -40,13 +44,14 @@ async fn run(exec: &mut Executor, line: &str) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cluster_waypoints_through_the_router_and_a_member_routed_away() {
+    let _serial = SERIAL.lock().await;
     let (gcs, mut exec, fleet) =
         start(4, vec![PlatformSpec::diff_drive(), PlatformSpec::kiwi()]).await;
     run(&mut exec, "cluster c1 robot_1 robot_2 robot_3 robot_4").await;
     run(&mut exec, "formation c1 circle 0.6").await;
     run(&mut exec, "route c1 fleet/c1").await;
     run(&mut exec, "wait route c1 fleet/c1 5s").await;
-    tokio::time::sleep(Duration::from_secs(5)).await;
+    run(&mut exec, "cluster-wait c1 settled 0.08 20s").await;
     let gathered = exec.control().cluster_view("c1").unwrap();
     assert_eq!(gathered.status.slots.len(), 4);
     assert!(
@@ -90,6 +95,7 @@ async fn cluster_waypoints_through_the_router_and_a_member_routed_away() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn follower_holds_offset_while_the_leader_runs_a_mission() {
+    let _serial = SERIAL.lock().await;
     let (gcs, mut exec, fleet) =
         start(2, vec![PlatformSpec::diff_drive(), PlatformSpec::kiwi()]).await;
     run(&mut exec, "follow robot_2 robot_1 -0.6,0.4").await;
@@ -153,6 +159,7 @@ async fn follower_holds_offset_while_the_leader_runs_a_mission() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mission_switched_onboard_offboard_onboard_finishes_in_order() {
+    let _serial = SERIAL.lock().await;
     let (gcs, mut exec, fleet) = start(1, vec![PlatformSpec::diff_drive()]).await;
     let p = gcs.with_fleet(|f| f.robot("robot_1").unwrap().pose);
     let pts: Vec<String> = [(0.5, 0.0), (0.5, 0.5), (0.0, 0.5), (0.0, 1.0), (0.5, 1.0)]
@@ -196,6 +203,7 @@ async fn mission_switched_onboard_offboard_onboard_finishes_in_order() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn external_program_and_gamepad_drive_a_cluster_from_config() {
+    let _serial = SERIAL.lock().await;
     let mut config = GcsConfig::parse(
         "[router]\nudp = \"127.0.0.1:0\"\n\
          [[cluster]]\nname = \"c1\"\nmembers = [\"robot_1\", \"robot_2\"]\nformation = \"column\"\nspacing = 0.5\n",
