@@ -540,3 +540,117 @@ impl ControlHub {
         }
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::lang::parse_line;
+    use mech_proto::FormationKind;
+
+    fn control(line: &str) -> ControlCommand {
+        match parse_line(line).unwrap().unwrap().command {
+            Command::Control(c) => c,
+            other => panic!("{line}: not a control command: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn every_control_verb_parses() {
+        let ControlCommand::Formation { formation, .. } =
+            control("formation c1 custom 0,0.5 0,-0.5 -0.7,0")
+        else {
+            panic!()
+        };
+        assert_eq!(formation.kind, FormationKind::Custom);
+        assert_eq!(formation.offsets[2], Offset { x: -0.7, y: 0.0 });
+        let ControlCommand::Formation { formation, .. } = control("formation c1 wedge 0.8") else {
+            panic!()
+        };
+        assert_eq!(
+            (formation.kind, formation.spacing),
+            (FormationKind::Wedge, 0.8)
+        );
+        assert_eq!(
+            control("cluster-move c1 0.2 0 0.1"),
+            ControlCommand::ClusterMove {
+                cluster: Target {
+                    name: "c1".into(),
+                    span: Span {
+                        line: 1,
+                        column: 14
+                    }
+                },
+                velocity: ClusterVelocity {
+                    vx: 0.2,
+                    vy: 0.0,
+                    wz: 0.1,
+                    scale_rate: 0.0
+                },
+            }
+        );
+        let ControlCommand::ClusterWaypoints {
+            waypoints, looped, ..
+        } = control("cluster-waypoint c1 2,1 2,2,90deg loop")
+        else {
+            panic!()
+        };
+        assert_eq!(waypoints.len(), 2);
+        assert!(looped);
+        assert!(matches!(
+            control("cluster-wait c1 settled 0.05 10s"),
+            ControlCommand::ClusterWait { until: ClusterUntil::Settled(t), timeout, .. }
+                if t == 0.05 && timeout == Duration::from_secs(10)
+        ));
+        assert!(matches!(
+            control("cluster-wait c1"),
+            ControlCommand::ClusterWait {
+                until: ClusterUntil::Arrived,
+                ..
+            }
+        ));
+        assert!(matches!(
+            control("cluster-expect c1 rms-error 0.05"),
+            ControlCommand::ClusterExpect {
+                metric: ErrorMetric::Rms,
+                ..
+            }
+        ));
+        assert!(matches!(
+            control("cluster-hold c1"),
+            ControlCommand::ClusterHold { .. }
+        ));
+        assert!(matches!(
+            control("follow robot_2 robot_1 -0.8,0.5"),
+            ControlCommand::Follow { leader: Some(_), offset: Offset { x, y }, .. } if x == -0.8 && y == 0.5
+        ));
+        assert!(matches!(
+            control("follow robot_2 none"),
+            ControlCommand::Follow { leader: None, .. }
+        ));
+        assert!(matches!(
+            control("nav robot_1 offboard"),
+            ControlCommand::Nav {
+                side: NavSide::Offboard,
+                ..
+            }
+        ));
+        assert!(matches!(
+            control("nav-wait robot_1 3 5s"),
+            ControlCommand::NavWait { next: 3, .. }
+        ));
+    }
+
+    #[test]
+    fn bad_arguments_point_at_the_word() {
+        let e = parse_line("formation c1 blob").unwrap_err();
+        assert_eq!(e.span.column, 14);
+        assert!(e.message.contains("unknown formation"));
+        let e = parse_line("nav robot_1 sideways").unwrap_err();
+        assert!(e.message.contains("offboard or onboard"));
+        let e = parse_line("cluster-waypoint c1 1").unwrap_err();
+        assert!(e.message.contains("cluster waypoint"));
+        assert!(parse_line("cluster-move c1 0.1").is_err());
+        assert!(parse_line("follow robot_2 robot_1").is_err());
+    }
+}
