@@ -741,9 +741,13 @@ impl ControlHub {
     fn period(&self) -> (Vec<Outgoing>, Vec<(Severity, String)>) {
         let gcs = &self.shared.gcs;
         let now = gcs.router().elapsed().as_secs_f64();
+        let idle = {
+            let s = self.state();
+            s.clusters.is_empty() && s.follows.is_empty() && s.navs.is_empty()
+        };
         let (states, routes, clusters, progress) = gcs.with_fleet(|f| {
             (
-                member_states(f),
+                if idle { Vec::new() } else { member_states(f) },
                 f.robots
                     .iter()
                     .map(|(n, r)| (n.clone(), r.route.requested.clone()))

@@ -12,6 +12,7 @@ use std::time::Duration;
 use mech_agent::AgentSettings;
 use mech_agent::platform::PlatformSpec;
 use mech_agent::sim::SimAgent;
+use mech_agent::sim::noise::{UwbNoise, UwbNoiseModel};
 use mech_gcs::control::{MemberState, PlatformLimits};
 use mech_proto::{
     Body, Command, Envelope, FailsafeState, FleetCommand, Header, Heartbeat, Hello, Mission, Pose,
@@ -45,8 +46,14 @@ pub struct Bench {
 }
 
 impl Bench {
-    /// Registers each robot and routes it to `channel`.
+    /// Registers each robot and routes it to `channel`; positions are exact.
     pub fn new(robots: &[(&str, PlatformSpec, Pose)], channel: &str) -> Bench {
+        Bench::with_noise(robots, channel, false)
+    }
+
+    /// As [`Bench::new`], with UWB-like position noise (Gaussian jitter and
+    /// outliers, through the agent's median filter) when `noise` is set.
+    pub fn with_noise(robots: &[(&str, PlatformSpec, Pose)], channel: &str, noise: bool) -> Bench {
         let mut bench = Bench {
             agents: Vec::new(),
             hellos: BTreeMap::new(),
@@ -58,7 +65,8 @@ impl Bench {
             seq: 0,
         };
         for (i, (name, spec, start)) in robots.iter().enumerate() {
-            let mut agent = SimAgent::new(AgentSettings::new(*name), spec, *start, None, 0);
+            let uwb = noise.then(|| UwbNoise::new(UwbNoiseModel::default(), 100 + i as u64));
+            let mut agent = SimAgent::new(AgentSettings::new(*name), spec, *start, uwb, 0);
             bench.hellos.insert(name.to_string(), agent.agent.hello());
             let welcome = Body::Welcome(Welcome {
                 robot_id: i as u16 + 1,
