@@ -210,13 +210,13 @@ fn mixed_cluster_drives_a_square_with_uwb_like_position_noise() {
     let r = drive_square(true);
     print_square("UWB-like noise", &r);
     assert!(
-        r.truth.0 <= 0.25,
-        "max true slot error {:.3} m exceeds 0.25 m",
+        r.truth.0 <= 0.2,
+        "max true slot error {:.3} m exceeds 0.2 m",
         r.truth.0
     );
     assert!(
-        r.truth.1 <= 0.08,
-        "RMS true slot error {:.3} m exceeds 0.08 m",
+        r.truth.1 <= 0.05,
+        "RMS true slot error {:.3} m exceeds 0.05 m",
         r.truth.1
     );
 }
