@@ -91,11 +91,18 @@ impl Shared {
         out: &mut Outbox,
         events: &mut Vec<event::Event>,
     ) -> Delivery {
-        let delivery = lock(&self.tables).handle(bytes, from, Instant::now(), out, events);
+        let delivery = {
+            let mut tables = lock(&self.tables);
+            let delivery = tables.handle(bytes, from, Instant::now(), out, events);
+            // Emitted under the table lock, so the fleet model sees events
+            // in the order the tables made them (a mission is "sent" before
+            // its acknowledgement, whichever worker handles the ack).
+            for e in events.drain(..) {
+                self.bus.emit(e);
+            }
+            delivery
+        };
         self.flush(bytes, out).await;
-        for e in events.drain(..) {
-            self.bus.emit(e);
-        }
         delivery
     }
 
@@ -141,16 +148,15 @@ impl Shared {
     ) -> R {
         let mut out = Outbox::default();
         let mut events = Vec::new();
-        let r = f(
-            &mut lock(&self.tables),
-            Instant::now(),
-            &mut out,
-            &mut events,
-        );
+        let r = {
+            let mut tables = lock(&self.tables);
+            let r = f(&mut tables, Instant::now(), &mut out, &mut events);
+            for e in events {
+                self.bus.emit(e);
+            }
+            r
+        };
         self.flush(&[], &mut out).await;
-        for e in events {
-            self.bus.emit(e);
-        }
         r
     }
 }

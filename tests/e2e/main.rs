@@ -2,3 +2,4 @@
 
 mod cli;
 mod cluster_script;
+mod script;
