@@ -3,7 +3,7 @@
 //!
 //! - [`l298`]: L298 dual H-bridge (direction pins + PWM duty with a minimum
 //!   duty dead-band), over any [`crate::hal::OutputPin`]/[`crate::hal::PwmPin`];
-//!   [`rpi`] provides those pins on a Raspberry Pi (feature `rpi`).
+//!   `rpi` provides those pins on a Raspberry Pi (feature `rpi`).
 //! - [`udp`]: the default link to the router.
 //! - [`serial_link`]: serial radios (XBee transparent mode or any UART) with
 //!   the protocol's COBS + CRC framing.

@@ -237,3 +237,50 @@ where
     });
     rx
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hal::{ErrorKind, ErrorType, HalError};
+    use std::time::Duration;
+
+    /// A source yielding two fixes, one error, then nothing (blocking briefly).
+    #[derive(Debug)]
+    struct Script(u32);
+
+    impl ErrorType for Script {
+        type Error = HalError;
+    }
+
+    impl PositionSource for Script {
+        fn read(&mut self, now: Duration) -> Result<Option<PositionSample>, HalError> {
+            self.0 += 1;
+            match self.0 {
+                1 | 2 => Ok(Some(PositionSample {
+                    pose: Pose {
+                        x: f64::from(self.0),
+                        ..Pose::default()
+                    },
+                    stamp: now,
+                    quality: 1.0,
+                    has_heading: true,
+                })),
+                3 => Err(HalError::new(ErrorKind::Timeout, "no reply")),
+                _ => {
+                    std::thread::sleep(Duration::from_millis(5));
+                    Ok(None)
+                }
+            }
+        }
+    }
+
+    #[tokio::test]
+    async fn position_thread_forwards_samples_and_errors() {
+        let rx = spawn_position(Script(0), Instant::now());
+        let next = || rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        assert_eq!(next().unwrap().pose.x, 1.0);
+        assert_eq!(next().unwrap().pose.x, 2.0);
+        assert!(next().unwrap_err().contains("no reply"));
+        drop(rx);
+    }
+}

@@ -11,7 +11,8 @@
 //! - [`platform`]: differential drive, kiwi, quadcopter.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
 //! - [`agent`]: the socket-free core; [`runtime`]: the tokio loop around it.
-//! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML.
+//! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
+//!   [`launch`]: bringing a robot up from its config.
 
 // Tests may unwrap: a panic there is a failed test, not a crashed robot.
 #![cfg_attr(test, allow(clippy::unwrap_used))]

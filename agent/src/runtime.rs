@@ -258,3 +258,128 @@ pub async fn drive<V: Vehicle>(
     let bye = vehicle.stop(origin.elapsed());
     io.send(&bye, &mut buf).await;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::AgentSettings;
+    use crate::hal::{ErrorKind, HalError};
+    use crate::platform::PlatformSpec;
+    use mech_proto::{Body, Command, FailsafeState, Header, Health, Pose, Route, Twist, Welcome};
+
+    /// Actuators that record outputs and fail while `broken`.
+    #[derive(Debug, Default)]
+    struct Bench {
+        written: std::sync::Arc<std::sync::Mutex<Vec<Vec<f64>>>>,
+        broken: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    }
+
+    impl Actuators for Bench {
+        fn set_outputs(&mut self, outputs: &[f64]) -> Result<(), HalError> {
+            self.written.lock().unwrap().push(outputs.to_vec());
+            if self.broken.load(std::sync::atomic::Ordering::SeqCst) {
+                Err(HalError::new(ErrorKind::Io, "bus error"))
+            } else {
+                Ok(())
+            }
+        }
+    }
+
+    fn msg(channel: &str, body: Body) -> Envelope {
+        Envelope::new(
+            Header {
+                destination: "r1".into(),
+                channel: channel.into(),
+                ..Header::default()
+            },
+            body,
+        )
+    }
+
+    #[test]
+    fn hardware_vehicle_writes_outputs_feeds_positions_and_reports_faults() {
+        let bench = Bench::default();
+        let (written, broken) = (bench.written.clone(), bench.broken.clone());
+        let (tx, rx) = std::sync::mpsc::channel();
+        let agent = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        let mut v = HardwareVehicle {
+            agent,
+            actuators: Box::new(bench),
+            positions: Some(rx),
+        };
+        let ms = Duration::from_millis;
+        let route = Route {
+            robot: "r1".into(),
+            channel: "joy/0".into(),
+            epoch: 1,
+        };
+        v.handle(
+            msg(
+                "",
+                Body::Welcome(Welcome {
+                    robot_id: 1,
+                    route,
+                    router_version: "t".into(),
+                }),
+            ),
+            ms(0),
+        );
+        tx.send(Ok(PositionSample {
+            pose: Pose {
+                x: 1.0,
+                ..Pose::default()
+            },
+            stamp: ms(0),
+            quality: 1.0,
+            has_heading: true,
+        }))
+        .unwrap();
+        v.handle(
+            msg(
+                "joy/0",
+                Body::Command(Command::Twist(Twist {
+                    vx: 0.2,
+                    ..Twist::default()
+                })),
+            ),
+            ms(10),
+        );
+        v.tick(ms(20));
+        assert_eq!(v.agent.estimate().map(|e| e.pose.x), Some(1.0));
+        assert!(
+            written
+                .lock()
+                .unwrap()
+                .last()
+                .unwrap()
+                .iter()
+                .all(|u| *u > 0.0)
+        );
+
+        tx.send(Err("tag unplugged".into())).unwrap();
+        let out = v.tick(ms(40));
+        assert!(
+            out.iter()
+                .any(|e| matches!(&e.body, Body::Notice(n) if n.text.contains("tag unplugged")))
+        );
+        assert_eq!(v.agent.telemetry(ms(40)).health, Health::Fault);
+
+        broken.store(true, std::sync::atomic::Ordering::SeqCst);
+        v.tick(ms(60));
+        let last = written.lock().unwrap().last().unwrap().clone();
+        assert_eq!(
+            last,
+            vec![0.0, 0.0],
+            "zeroes what still answers after a write error"
+        );
+        assert_eq!(v.agent.failsafe_state(ms(60)), FailsafeState::Fault);
+
+        let bye = v.stop(ms(80));
+        assert!(matches!(bye.body, Body::Bye(_)));
+        assert_eq!(written.lock().unwrap().last().unwrap(), &vec![0.0, 0.0]);
+    }
+}

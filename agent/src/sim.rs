@@ -24,6 +24,9 @@ use crate::agent::AgentSettings;
 use crate::platform::PlatformSpec;
 use crate::runtime::{self, Ticker};
 
+/// Most phase groups a fleet's shared tick is split into.
+const MAX_TICK_PHASES: usize = 10;
+
 /// The rectangle robots are spread over, m.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Arena {
@@ -131,7 +134,12 @@ impl SimFleet {
         let period = Duration::from_secs_f64(1.0 / options.control_rate_hz.clamp(0.1, 1000.0));
         let telemetry = Duration::from_secs_f64(1.0 / options.telemetry_rate_hz.clamp(0.1, 1000.0));
         let (shutdown, shutdown_rx) = watch::channel(false);
-        let (tick_tx, tick_rx) = watch::channel(Duration::ZERO);
+        // Agents are split into phase groups ticked in turn, so their
+        // telemetry reaches the router spread over the period instead of in
+        // one burst of n datagrams (which would overflow socket buffers).
+        let phases = n.clamp(1, MAX_TICK_PHASES);
+        let (tick_txs, tick_rxs): (Vec<_>, Vec<_>) =
+            (0..phases).map(|_| watch::channel(Duration::ZERO)).unzip();
         let origin = tokio::time::Instant::now();
         let stamp_origin = crate::clock::unix_micros();
         let platforms = if options.platforms.is_empty() {
@@ -154,7 +162,7 @@ impl SimFleet {
             let sim = SimAgent::new(settings, spec, arena.start_pose(i, n), noise, stamp_origin);
             let socket = UdpSocket::bind("127.0.0.1:0").await?;
             addrs.push(socket.local_addr()?);
-            let ticker = Ticker::Shared(tick_rx.clone());
+            let ticker = Ticker::Shared(tick_rxs[i % phases].clone());
             let io = runtime::Io::Udp { socket, router };
             let shutdown_rx = shutdown_rx.clone();
             agents.push(tokio::spawn(async move {
@@ -163,11 +171,14 @@ impl SimFleet {
             names.push(name);
         }
         let ticker = tokio::spawn(async move {
-            let mut interval = tokio::time::interval(period);
+            let mut interval = tokio::time::interval(period / phases as u32);
             interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-            loop {
+            for phase in (0..phases).cycle() {
                 let at = interval.tick().await;
-                if tick_tx.send(at.saturating_duration_since(origin)).is_err() {
+                if tick_txs[phase]
+                    .send(at.saturating_duration_since(origin))
+                    .is_err()
+                {
                     break;
                 }
             }
