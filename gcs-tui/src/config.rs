@@ -32,6 +32,9 @@ pub struct GcsConfig {
     pub router: RouterConfig,
     pub log: LogConfig,
     pub fleet: FleetConfig,
+    /// Clusters defined at start-up (`[[cluster]]` tables: name, members,
+    /// formation, spacing, offsets).
+    pub cluster: Vec<crate::control::ClusterSpec>,
 }
 
 /// Router endpoints and timing. Durations are in seconds in the file.
@@ -220,6 +223,10 @@ impl GcsConfig {
                     "router.{name} must be positive"
                 )));
             }
+        }
+        for c in &self.cluster {
+            c.formation()
+                .map_err(|e| ConfigError::Invalid(format!("cluster {:?}: {e}", c.name)))?;
         }
         if r.subscriber_queue == 0 {
             return Err(ConfigError::Invalid(

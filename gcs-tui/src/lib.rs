@@ -6,6 +6,8 @@
 //! - [`lang`]: the command language shared by the TUI command line and
 //!   `--script`;
 //! - [`script`]: the headless script runner (one JSON line per event);
+//! - [`control`]: fleet (cluster, follow-the-leader) and offboard
+//!   controllers publishing through the router;
 //! - [`config`], [`logging`].
 //!
 //! [`Gcs`] ties them together: start one, then read the fleet with
@@ -15,6 +17,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
 pub mod config;
+pub mod control;
 pub mod fleet;
 pub mod lang;
 pub mod logging;

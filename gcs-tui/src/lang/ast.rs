@@ -113,6 +113,9 @@ pub enum Command {
     Status(Option<Target>),
     /// `help`
     Help,
+    /// Fleet and offboard control: `formation`, `cluster-move`,
+    /// `cluster-waypoint`, `follow`, `nav`... (see [`crate::control`]).
+    Control(crate::control::ControlCommand),
 }
 
 /// A command with where it was written.

@@ -15,6 +15,7 @@ use super::ast::{Command, Expectation, Statement, Target, WaitFor};
 use super::parse::{VERBS, failsafe_name, parse_line};
 use super::{LangError, Span};
 use crate::Gcs;
+use crate::control::ControlHub;
 use crate::fleet::{Delivery as MissionDelivery, Fleet, LinkState, Severity};
 use crate::router::{Delivery, Publisher};
 
@@ -63,11 +64,18 @@ pub struct Executor {
     gcs: Gcs,
     spawner: Option<Box<dyn SimSpawner>>,
     publishers: HashMap<String, Publisher>,
+    /// Fleet and offboard controllers started by this executor's commands.
+    control: ControlHub,
 }
 
 impl Executor {
     pub fn new(gcs: Gcs) -> Executor {
+        let control = ControlHub::new(gcs.clone());
+        if let Err(e) = control.apply_config(&gcs.config().cluster) {
+            gcs.update_fleet(|f| f.log(Severity::Error, e.to_string()));
+        }
         Executor {
+            control,
             gcs,
             spawner: None,
             publishers: HashMap::new(),
@@ -82,6 +90,12 @@ impl Executor {
 
     pub fn gcs(&self) -> &Gcs {
         &self.gcs
+    }
+
+    /// The fleet and offboard controllers (cluster poses, slot targets,
+    /// tracking errors, offboard progress for displays).
+    pub fn control(&self) -> &ControlHub {
+        &self.control
     }
 
     /// Parses and runs one command line (the TUI command line). A blank line
@@ -167,6 +181,19 @@ impl Executor {
                     "{} waypoint{s} for {}{l}",
                     points.len(),
                     robots.join(", ")
+                )))
+            }
+            Command::Send {
+                target,
+                channel: None,
+            } if self.control.has_cluster_draft(&target.name) => {
+                let n = self
+                    .control
+                    .send_cluster(&target.name)
+                    .map_err(|e| LangError::new(target.span, e.to_string()))?;
+                Ok(Outcome::new(format!(
+                    "{}: {n} cluster waypoints started",
+                    target.name
                 )))
             }
             Command::Send { target, channel } => {
@@ -321,6 +348,7 @@ impl Executor {
                     details,
                 })
             }
+            Command::Control(c) => self.control.execute(c, at).await,
             Command::Help => Ok(Outcome {
                 summary: format!("{} commands", VERBS.len()),
                 details: VERBS

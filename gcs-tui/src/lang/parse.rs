@@ -9,6 +9,7 @@ use mech_proto::{CommandKind, FailsafeState, Waypoint};
 use super::ast::{Command, Expectation, Statement, Target, WaitFor};
 use super::lexer::{Line, Word, lex};
 use super::{LangError, Span};
+use crate::control::command as control;
 use crate::fleet::LinkState;
 
 /// Default timeout of `wait` when none is written.
@@ -121,6 +122,60 @@ pub static VERBS: &[Verb] = &[
         usage: "status [TARGET]",
         help: "one line per robot",
         parse: parse_status,
+    },
+    Verb {
+        name: "formation",
+        usage: "formation CLUSTER line|column|wedge|circle [SPACING] | formation CLUSTER custom X,Y...",
+        help: "set a cluster's formation (slots re-assigned to minimise travel)",
+        parse: control::parse_formation_verb,
+    },
+    Verb {
+        name: "cluster-move",
+        usage: "cluster-move CLUSTER VX VY WZ [SCALE_RATE]",
+        help: "move a cluster at a cluster-frame velocity (route its members to fleet/CLUSTER)",
+        parse: control::parse_cluster_move,
+    },
+    Verb {
+        name: "cluster-hold",
+        usage: "cluster-hold CLUSTER",
+        help: "stop a cluster where it is",
+        parse: control::parse_cluster_hold,
+    },
+    Verb {
+        name: "cluster-waypoint",
+        usage: "cluster-waypoint CLUSTER X,Y[,HEADING]... [loop]",
+        help: "set a cluster's waypoints (heading in rad, or deg suffix); start with `send CLUSTER`",
+        parse: control::parse_cluster_waypoint_verb,
+    },
+    Verb {
+        name: "cluster-wait",
+        usage: "cluster-wait CLUSTER [TIMEOUT] | cluster-wait CLUSTER settled TOLERANCE [TIMEOUT]",
+        help: "wait until a cluster has done its waypoints, or every member is routed to it, reporting, and within TOLERANCE m of its slot (default 60s)",
+        parse: control::parse_cluster_wait,
+    },
+    Verb {
+        name: "cluster-expect",
+        usage: "cluster-expect CLUSTER max-error|rms-error METRES",
+        help: "check a cluster's slot tracking error since its waypoints were sent",
+        parse: control::parse_cluster_expect,
+    },
+    Verb {
+        name: "follow",
+        usage: "follow ROBOT LEADER DX,DY | follow ROBOT none",
+        help: "keep an offset in the leader's frame (route ROBOT to follow/LEADER)",
+        parse: control::parse_follow,
+    },
+    Verb {
+        name: "nav",
+        usage: "nav ROBOT offboard|onboard",
+        help: "switch waypoint navigation between the GCS loop and the robot, keeping progress",
+        parse: control::parse_nav,
+    },
+    Verb {
+        name: "nav-wait",
+        usage: "nav-wait ROBOT NEXT [TIMEOUT]",
+        help: "wait until a robot's next waypoint index reaches NEXT (default 60s)",
+        parse: control::parse_nav_wait,
     },
     Verb {
         name: "help",
