@@ -1,1 +1,4 @@
 //! `mech-gcs`: the MECH ground-control station.
+
+pub mod gamepad;
+pub mod ui;
