@@ -1,0 +1,109 @@
+//! The routing table: robots x channels, the active route marked
+//! acknowledged (●) or pending (◌), a cursor to re-route with Enter, and the
+//! live channels with their publisher and rate.
+
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::style::Style;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Block, Paragraph, Widget};
+
+use super::app::{App, Focus};
+use super::theme::Theme;
+
+const NAME_W: usize = 9;
+const COL_W: usize = 7;
+
+/// The routing-table panel.
+#[derive(Debug)]
+pub struct RoutesPanel<'a> {
+    pub app: &'a App,
+    pub theme: Theme,
+}
+
+fn clip(s: &str, w: usize) -> String {
+    if s.chars().count() <= w {
+        format!("{s:<w$}")
+    } else {
+        let mut out: String = s.chars().take(w.saturating_sub(1)).collect();
+        out.push('…');
+        out
+    }
+}
+
+impl Widget for RoutesPanel<'_> {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        let app = self.app;
+        let t = self.theme;
+        let focused = app.focus == Focus::Routes;
+        let border = if focused {
+            t.focused_border()
+        } else {
+            Style::new()
+        };
+        let block = Block::bordered().title(" Routes ").border_style(border);
+        let inner = block.inner(area);
+        block.render(area, buf);
+
+        let cols = app.route_columns();
+        let fit = (usize::from(inner.width).saturating_sub(NAME_W + 1) / COL_W).max(1);
+        let first = app
+            .route_cursor
+            .1
+            .saturating_sub(fit - 1)
+            .min(cols.len().saturating_sub(1));
+        let shown = &cols[first..(first + fit).min(cols.len())];
+
+        let mut lines: Vec<Line> = Vec::new();
+        let mut head = vec![Span::raw(" ".repeat(NAME_W + 1))];
+        for c in shown {
+            let name = if c.is_empty() { "none" } else { c };
+            head.push(Span::styled(clip(name, COL_W), t.title()));
+        }
+        lines.push(Line::from(head));
+        let rows_fit = usize::from(inner.height).saturating_sub(1 + 2).max(1);
+        let first_row = app.route_cursor.0.saturating_sub(rows_fit - 1);
+        for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
+            let mut spans = vec![Span::styled(
+                format!("{} ", clip(&r.name, NAME_W)),
+                Style::new().fg(t.robot(ri)),
+            )];
+            for (k, c) in shown.iter().enumerate() {
+                let ci = first + k;
+                let active = &r.route.channel == c;
+                let mark = match (active, r.route.acknowledged) {
+                    (true, true) => "●ack",
+                    (true, false) => "◌pend",
+                    _ => "·",
+                };
+                let mut style = if active && r.route.acknowledged {
+                    t.ok()
+                } else if active {
+                    t.warn()
+                } else {
+                    t.dim()
+                };
+                if focused && app.route_cursor == (ri, ci) {
+                    style = style.patch(t.selected());
+                }
+                spans.push(Span::styled(clip(mark, COL_W), style));
+            }
+            lines.push(Line::from(spans));
+        }
+        if app.robots.is_empty() {
+            lines.push(Line::styled("no robots", t.dim()));
+        }
+        if !app.channels.is_empty() {
+            lines.push(Line::styled("live channels", t.title()));
+            for c in &app.channels {
+                lines.push(Line::raw(format!(
+                    " {:<12} {:<12} {:5.1} Hz",
+                    c.name, c.publisher, c.rate_hz
+                )));
+            }
+        } else if focused {
+            lines.push(Line::styled("↑↓ robot  ←→ channel  Enter route", t.dim()));
+        }
+        Paragraph::new(lines).render(inner, buf);
+    }
+}

@@ -1,0 +1,71 @@
+//! Screen snapshots of the main screen with a fixed fleet.
+
+use mech_gcs::ui::fixture;
+use mech_gcs::ui::{Action, Select};
+use mech_proto::Waypoint;
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+
+fn screen(app: &mech_gcs::ui::App, w: u16, h: u16) -> String {
+    let mut term = Terminal::new(TestBackend::new(w, h)).expect("test terminal");
+    term.draw(|f| f.render_widget(app, f.area()))
+        .expect("draws");
+    term.backend().to_string()
+}
+
+fn populated(w: u16, h: u16) -> mech_gcs::ui::App {
+    let mut app = fixture::app(6, w, h);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::Select(Select::Toggle("robot_2".into())));
+    app.update(Action::MakeCluster);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: 1.0,
+        y: 1.0,
+        z: 0.0,
+        time: None,
+    }));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: -1.0,
+        y: 0.5,
+        z: 0.0,
+        time: Some(12.0),
+    }));
+    app
+}
+
+#[test]
+fn main_screen_80x24() {
+    let app = populated(80, 24);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+#[test]
+fn main_screen_160x48() {
+    let app = populated(160, 48);
+    insta::assert_snapshot!(screen(&app, 160, 48));
+}
+
+#[test]
+fn routes_panel_80x24() {
+    let mut app = populated(80, 24);
+    app.update(Action::FocusPrev);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+#[test]
+fn estop_banner_and_help_80x24() {
+    let mut app = populated(80, 24);
+    app.update(Action::EStop);
+    insta::assert_snapshot!("estop", screen(&app, 80, 24));
+    app.update(Action::ToggleHelp);
+    insta::assert_snapshot!("help", screen(&app, 80, 24));
+}
+
+#[test]
+fn monochrome_screen_keeps_the_text() {
+    let mut app = populated(80, 24);
+    let colour = screen(&app, 80, 24);
+    app.monochrome = true;
+    assert_eq!(colour, screen(&app, 80, 24), "same glyphs without colour");
+}
