@@ -238,7 +238,13 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
                 every: 2,
             });
         }
-        ctx.print(cx, cy, TextLine::from(format!("✚{}", c.name)).bold());
+        label(
+            ctx,
+            proj,
+            (cx, cy),
+            0,
+            TextLine::from(format!("✚{}", c.name)).bold(),
+        );
     }
 
     // Robots: heading line, selection ring.
@@ -270,9 +276,11 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
 
     // Labels last, so they sit on top.
     for (k, w) in app.waypoints.iter().enumerate() {
-        ctx.print(
-            w.x,
-            w.y,
+        label(
+            ctx,
+            proj,
+            (w.x, w.y),
+            0,
             TextLine::styled(format!("⚑{}", k + 1), Style::new().fg(t.waypoint()).bold()),
         );
     }
@@ -283,13 +291,27 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
             style = style.patch(t.selected());
         }
         let glyph = if selected { "◉" } else { "●" };
-        ctx.print(r.pose.x, r.pose.y, TextLine::styled(glyph, style));
-        let label_x = r.pose.x + 2.0 * m * 2.0;
-        ctx.print(
-            label_x,
-            r.pose.y,
+        let at = (r.pose.x, r.pose.y);
+        label(ctx, proj, at, 0, TextLine::styled(glyph, style));
+        label(
+            ctx,
+            proj,
+            at,
+            2,
             TextLine::styled(r.id.to_string(), Style::new().fg(t.robot(i))),
         );
+    }
+}
+
+/// Prints a label in the cell containing world point `at`, `dx` cells to
+/// the right; nothing if that cell is off the map.
+fn label(ctx: &mut Context, proj: &Projection, at: (f64, f64), dx: u16, line: TextLine<'static>) {
+    if let Some((c, r)) = proj.world_to_cell(at.0, at.1) {
+        let c = c.saturating_add(dx);
+        if c < proj.width {
+            let (x, y) = proj.label_anchor(c, r);
+            ctx.print(x, y, line);
+        }
     }
 }
 

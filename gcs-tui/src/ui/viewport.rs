@@ -172,6 +172,20 @@ impl Projection {
         )
     }
 
+    /// A world point that ratatui's canvas places a text label at in cell
+    /// (column, row). Labels use a coarser mapping than dots
+    /// (`floor((x - left) * (cells - 1) / width)`), so a label is placed
+    /// through this to land exactly in the cell its dot is in.
+    pub fn label_anchor(&self, col: u16, row: u16) -> (f64, f64) {
+        let [l, r] = self.x_bounds();
+        let [b, t] = self.y_bounds();
+        let res_x = f64::from(self.width.saturating_sub(1)).max(1.0);
+        let res_y = f64::from(self.height.saturating_sub(1)).max(1.0);
+        let x = l + (f64::from(col) + 0.5) * (r - l) / res_x;
+        let y = t - (f64::from(row) + 0.5) * (t - b) / res_y;
+        (x.min(r), y.max(b))
+    }
+
     /// World rectangle shown: `(xmin, ymin, xmax, ymax)`.
     pub fn world_rect(&self) -> (f64, f64, f64, f64) {
         let (w, h) = self.dots();
@@ -252,6 +266,19 @@ mod tests {
             let rx = ((x - l) * (w as f64 - 1.0) / (r - l)) as usize;
             let ry = ((t - y) * (h as f64 - 1.0) / (t - b)) as usize;
             assert_eq!(p.world_to_dot(x, y), Some((rx, ry)));
+        }
+    }
+
+    #[test]
+    fn label_anchor_lands_in_its_cell() {
+        let p = Viewport::new(0.3, -0.2, 0.04).project(57, 21);
+        let [l, r] = p.x_bounds();
+        let [b, t] = p.y_bounds();
+        for (c, row) in [(0u16, 0u16), (10, 3), (55, 19), (28, 10)] {
+            let (x, y) = p.label_anchor(c, row);
+            let lc = ((x - l) * 56.0 / (r - l)) as u16;
+            let lr = ((t - y) * 20.0 / (t - b)) as u16;
+            assert_eq!((lc, lr), (c, row));
         }
     }
 
