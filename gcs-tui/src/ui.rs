@@ -22,6 +22,9 @@ pub mod keys;
 pub mod map;
 pub mod render;
 pub mod routes;
+pub mod station;
 pub mod status;
 pub mod theme;
 pub mod waypoints;
+
+pub use station::{RunOptions, demo_arena, run};

@@ -513,6 +513,9 @@ impl App {
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;
+        if let Some(c) = s.clusters {
+            self.clusters = c;
+        }
         self.selection
             .retain(|n| self.robots.iter().any(|r| &r.name == n));
         if first && !self.fitted_once {

@@ -83,6 +83,7 @@ pub fn fleet(n: usize) -> FleetSnapshot {
             },
         ],
         estop: false,
+        clusters: None,
     }
 }
 

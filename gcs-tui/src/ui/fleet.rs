@@ -127,6 +127,8 @@ pub struct FleetSnapshot {
     pub channels: Vec<ChannelView>,
     /// E-stop engaged (latched) fleet-wide.
     pub estop: bool,
+    /// Clusters, when the source keeps them (`None` leaves the UI's own).
+    pub clusters: Option<Vec<ClusterView>>,
 }
 
 /// Human-readable names for protocol enums.
