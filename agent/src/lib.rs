@@ -1,1 +1,34 @@
 //! `mech-agent`: the robot side of MECH.
+//!
+//! A thin agent any Linux robot can run: it registers with the GCS router,
+//! obeys the one channel it is routed to, runs onboard control through its
+//! platform's kinematics, reports telemetry, and zeroes its actuators when
+//! its controller, the router or an e-stop says so.
+//!
+//! - [`hal`]: hardware traits (motor, digital and PWM pins, position source,
+//!   datagram link); [`drivers`]: L298, UDP and serial links, Pozyx, NMEA
+//!   GPS, external positions.
+//! - [`platform`]: differential drive, kiwi, quadcopter.
+//! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
+//! - [`agent`]: the socket-free core; [`runtime`]: the tokio loop around it.
+//! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML.
+
+// Tests may unwrap: a panic there is a failed test, not a crashed robot.
+#![cfg_attr(test, allow(clippy::unwrap_used))]
+
+pub mod agent;
+pub mod clock;
+pub mod config;
+pub mod control;
+pub mod drivers;
+pub mod failsafe;
+pub mod filter;
+pub mod hal;
+pub mod launch;
+pub mod platform;
+pub mod runtime;
+pub mod sim;
+
+pub use agent::{Agent, AgentSettings, Counters, Tick};
+pub use clock::{Clock, ManualClock, MonotonicClock};
+pub use platform::{Platform, PlatformSpec};

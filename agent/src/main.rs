@@ -1,20 +1,108 @@
 //! `mech-agent`: runs on each robot.
 
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
 use clap::Parser;
+use mech_agent::config::RobotConfig;
+use mech_agent::launch::{self, Overrides};
 
 /// MECH robot agent: obeys the routed controller, reports telemetry, stops
 /// when the link or the controller goes quiet.
 #[derive(Debug, Parser)]
 #[command(name = "mech-agent", version)]
 struct Cli {
-    /// Robot configuration file (TOML).
+    /// Robot configuration file (TOML); see config/agents/ for examples.
     #[arg(long)]
-    config: Option<std::path::PathBuf>,
-    /// Run a simulated robot instead of real hardware.
+    config: Option<PathBuf>,
+    /// Simulate the vehicle (kinematics, actuator limits, UWB-like noise)
+    /// instead of driving hardware.
     #[arg(long)]
     sim: bool,
+    /// Router address, overriding the config (default 127.0.0.1:7400).
+    #[arg(long, value_name = "HOST:PORT")]
+    router: Option<String>,
+    /// Robot name, overriding the config.
+    #[arg(long)]
+    name: Option<String>,
+    /// Only check the config and exit.
+    #[arg(long)]
+    check: bool,
 }
 
-fn main() {
-    let _cli = Cli::parse();
+/// Config used by `--sim` without `--config`: a simulated diff-drive robot.
+const DEFAULT_SIM: &str = "name = \"sim_robot\"\n[platform]\nkind = \"diff-drive\"\ntrack_width = 0.15\nmax_wheel_speed = 0.5\n[position]\nkind = \"sim\"\n[sim]\nx = 1.0\ny = 1.0\n";
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("mech-agent: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let mut config = match &cli.config {
+        Some(path) => RobotConfig::load(path)?,
+        None if cli.sim => RobotConfig::parse(DEFAULT_SIM, "<built-in sim config>")?,
+        None => anyhow::bail!("give --config robot.toml, or --sim for a simulated robot"),
+    };
+    if let Some(name) = cli.name {
+        config.name = toml::Spanned::new(0..0, name);
+        // Re-check the new name with the same rules as the file's.
+        let text = format!(
+            "name = {:?}\n[platform]\nkind = \"kiwi\"\nradius = 0.1\nmax_wheel_speed = 0.5\n",
+            config.name.get_ref()
+        );
+        RobotConfig::parse(&text, "--name")?;
+    }
+    let router = cli
+        .router
+        .as_deref()
+        .map(|r| {
+            r.parse::<SocketAddr>()
+                .with_context(|| format!("--router {r}: expected HOST:PORT, e.g. 127.0.0.1:7400"))
+        })
+        .transpose()?;
+    if cli.check {
+        println!(
+            "{}: ok",
+            cli.config
+                .map_or("built-in sim config".into(), |p| p.display().to_string())
+        );
+        return Ok(());
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    runtime.block_on(async move {
+        let (stop, shutdown) = tokio::sync::watch::channel(false);
+        tokio::spawn(async move {
+            let _ = tokio::signal::ctrl_c().await;
+            let _ = stop.send(true);
+        });
+        launch::run(
+            config,
+            Overrides {
+                sim: cli.sim,
+                router,
+            },
+            shutdown,
+        )
+        .await
+        .context("running the agent")
+    })
 }

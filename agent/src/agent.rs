@@ -1,0 +1,1048 @@
+//! The agent core: protocol state machine, routing, failsafe, onboard
+//! control and telemetry of one robot, with no sockets, threads or clocks.
+//!
+//! Drive it with [`Agent::handle`] for each received message and
+//! [`Agent::tick`] once per control period, both given the current time.
+//! The same core runs on a real robot ([`crate::runtime`]), in the simulated
+//! fleet ([`crate::sim`]) and in deterministic lock-step tests.
+
+use std::collections::HashMap;
+use std::time::Duration;
+
+use mech_proto::{
+    Body, Bye, Command, CommandKind, Computation, EStopAck, Envelope, FailsafeState, Header,
+    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Pose, Route,
+    RouteAck, Telemetry, Velocity,
+};
+
+use crate::control::{Controller, Gains, MissionRun, Mode};
+use crate::failsafe::{Failsafe, FailsafeConfig};
+use crate::filter::MedianFilter;
+use crate::hal::PositionSample;
+use crate::platform::Platform;
+
+/// Settings of the agent core (the parts of the robot config it uses).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentSettings {
+    /// Robot name: `robot_1`, `rover-a`...
+    pub name: String,
+    pub failsafe: FailsafeConfig,
+    /// Telemetry period (default 50 ms = 20 Hz).
+    pub telemetry_period: Duration,
+    /// Period of `Hello` while unregistered and of the agent's `Heartbeat`.
+    pub hello_period: Duration,
+    /// Answer a rejected command with `Notice{NotRouted}` (at most one a
+    /// second), so a controller learns why it is ignored.
+    pub notify_not_routed: bool,
+    /// Moving-median window for position samples.
+    pub filter_window: usize,
+    /// Whether `PositionFix` messages (external positioning relayed by the
+    /// GCS) are the position source.
+    pub external_position: bool,
+    /// Whether the robot has any position source; without one, modes that
+    /// need a position are not offered.
+    pub has_position: bool,
+    /// A position older than this marks health `Degraded`.
+    pub position_stale_after: Duration,
+    pub gains: Gains,
+}
+
+impl AgentSettings {
+    pub fn new(name: impl Into<String>) -> AgentSettings {
+        AgentSettings {
+            name: name.into(),
+            failsafe: FailsafeConfig::default(),
+            telemetry_period: Duration::from_millis(50),
+            hello_period: Duration::from_secs(1),
+            notify_not_routed: true,
+            filter_window: 9,
+            external_position: false,
+            has_position: true,
+            position_stale_after: Duration::from_secs(1),
+            gains: Gains::default(),
+        }
+    }
+}
+
+/// Counters of everything the agent refused or could not use.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Commands on a channel other than the acknowledged route.
+    pub not_routed: u64,
+    /// Commands this robot cannot obey (capability or motor count).
+    pub refused: u64,
+    /// Commands ignored while e-stopped.
+    pub ignored_estopped: u64,
+    /// Messages addressed to another robot.
+    pub not_for_me: u64,
+    /// Bytes that did not decode as a message.
+    pub bad_messages: u64,
+    /// Times the failsafe stopped the robot.
+    pub failsafe_trips: u64,
+    /// Actuator or position driver errors.
+    pub driver_faults: u64,
+    /// Position fixes used.
+    pub position_samples: u64,
+}
+
+/// The result of one control period.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tick {
+    /// Actuator outputs to write now, one per motor, each in `[-1, 1]`.
+    pub outputs: Vec<f64>,
+    /// Messages to send to the router.
+    pub outgoing: Vec<Envelope>,
+}
+
+/// One robot's agent core.
+#[derive(Debug)]
+pub struct Agent {
+    settings: AgentSettings,
+    controller: Controller,
+    failsafe: Failsafe,
+    filter: MedianFilter,
+    estimate: Option<PositionSample>,
+    registered: bool,
+    route: Route,
+    /// Whether a route has been applied at all (epoch 0 is a valid epoch).
+    routed_once: bool,
+    /// Stored missions, by the channel that sent them.
+    missions: HashMap<String, MissionRun>,
+    seq: u32,
+    /// Unix time (µs) at agent time zero, for message stamps.
+    stamp_origin_us: u64,
+    next_hello: Duration,
+    next_heartbeat: Duration,
+    next_telemetry: Duration,
+    last_not_routed_notice: Option<Duration>,
+    last_driver_fault: Option<Duration>,
+    last_state: FailsafeState,
+    outputs: Vec<f64>,
+    counters: Counters,
+    version: String,
+}
+
+impl Agent {
+    /// An agent for a robot with `platform`. `stamp_origin_us` is the Unix
+    /// time in µs at agent time zero (0 in tests).
+    pub fn new(
+        settings: AgentSettings,
+        platform: Box<dyn Platform>,
+        stamp_origin_us: u64,
+    ) -> Agent {
+        let controller = Controller::new(platform, settings.gains, settings.has_position);
+        let motors = controller.platform().motors();
+        Agent {
+            filter: MedianFilter::new(settings.filter_window),
+            failsafe: Failsafe::new(settings.failsafe),
+            controller,
+            estimate: None,
+            registered: false,
+            route: Route {
+                robot: settings.name.clone(),
+                channel: String::new(),
+                epoch: 0,
+            },
+            routed_once: false,
+            missions: HashMap::new(),
+            seq: 0,
+            stamp_origin_us,
+            next_hello: Duration::ZERO,
+            next_heartbeat: Duration::ZERO,
+            next_telemetry: Duration::ZERO,
+            last_not_routed_notice: None,
+            last_driver_fault: None,
+            last_state: FailsafeState::Ok,
+            outputs: vec![0.0; motors],
+            counters: Counters::default(),
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            settings,
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.settings.name
+    }
+
+    pub fn settings(&self) -> &AgentSettings {
+        &self.settings
+    }
+
+    pub fn platform(&self) -> &dyn Platform {
+        self.controller.platform()
+    }
+
+    /// The channel this robot obeys ("" = none).
+    pub fn route(&self) -> &Route {
+        &self.route
+    }
+
+    pub fn registered(&self) -> bool {
+        self.registered
+    }
+
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    pub fn mode(&self) -> &Mode {
+        self.controller.mode()
+    }
+
+    /// The filtered position estimate.
+    pub fn estimate(&self) -> Option<PositionSample> {
+        self.estimate
+    }
+
+    /// The outputs of the last tick.
+    pub fn outputs(&self) -> &[f64] {
+        &self.outputs
+    }
+
+    /// The stored mission for `channel`, if any.
+    pub fn mission(&self, channel: &str) -> Option<&MissionRun> {
+        self.missions.get(channel)
+    }
+
+    /// The failsafe state now.
+    pub fn failsafe_state(&self, now: Duration) -> FailsafeState {
+        self.failsafe
+            .state(now, !self.route.channel.is_empty(), self.mission_running())
+    }
+
+    /// The `Hello` this robot registers with.
+    pub fn hello(&self) -> Hello {
+        let p = self.controller.platform();
+        Hello {
+            name: self.settings.name.clone(),
+            platform: p.name().to_string(),
+            capabilities: self.controller.capabilities().to_vec(),
+            motors: p.motors() as u8,
+            max_speed: p.limits().max_speed,
+            max_yaw_rate: p.limits().max_yaw_rate,
+            agent_version: self.version.clone(),
+        }
+    }
+
+    /// A position measurement from the robot's own source.
+    pub fn observe_position(&mut self, sample: PositionSample) {
+        self.counters.position_samples += 1;
+        self.estimate = Some(self.filter.push(sample));
+    }
+
+    /// An actuator or position driver failed; health becomes `Fault` for a
+    /// second and the GCS is told (at most once a second).
+    pub fn driver_fault(&mut self, what: &str, now: Duration) -> Option<Envelope> {
+        self.counters.driver_faults += 1;
+        let recent = self
+            .last_driver_fault
+            .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+        self.last_driver_fault = Some(now);
+        (!recent).then(|| {
+            self.envelope(
+                mech_proto::ROUTER,
+                Body::Notice(Notice {
+                    level: Level::Error,
+                    code: NoticeCode::DriverFault,
+                    text: truncate(what),
+                }),
+                now,
+            )
+        })
+    }
+
+    /// Decodes and handles one received datagram or frame; undecodable bytes
+    /// are counted and dropped.
+    pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        match mech_proto::decode(bytes) {
+            Ok(env) => self.handle(env, now),
+            Err(_) => {
+                self.counters.bad_messages += 1;
+                Vec::new()
+            }
+        }
+    }
+
+    /// Handles one message from the router; returns the replies.
+    pub fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        let mut out = Vec::new();
+        // Everything reaches the agent through the router, so any message is
+        // proof the router is alive.
+        self.failsafe.router_heard(now);
+        let dest = env.header.destination.as_str();
+        if !(dest.is_empty() || dest == mech_proto::BROADCAST || dest == self.settings.name) {
+            self.counters.not_for_me += 1;
+            return out;
+        }
+        let channel = env.header.channel;
+        let sender = env.header.sender;
+        match env.body {
+            Body::Welcome(w) => {
+                self.registered = true;
+                self.next_heartbeat = now;
+                self.apply_route(w.route, now, &mut out);
+            }
+            Body::Route(r) => {
+                if r.robot == self.settings.name {
+                    self.apply_route(r, now, &mut out);
+                } else {
+                    self.counters.not_for_me += 1;
+                }
+            }
+            Body::Command(cmd) => self.command(&channel, &sender, &cmd, now, &mut out),
+            Body::FleetCommand(f) => {
+                if let Some(part) = f.parts.into_iter().find(|p| p.robot == self.settings.name) {
+                    self.command(&channel, &sender, &part.command, now, &mut out);
+                }
+            }
+            Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
+            Body::EStop(e) => {
+                if e.engage {
+                    self.failsafe.engage_estop(e.id);
+                    self.controller.idle();
+                    self.missions.values_mut().for_each(|m| m.paused = true);
+                } else if self.failsafe.estopped() {
+                    self.failsafe.release_estop();
+                }
+                let ack = Body::EStopAck(EStopAck {
+                    engage: e.engage,
+                    id: e.id,
+                });
+                out.push(self.envelope(mech_proto::ROUTER, ack, now));
+            }
+            Body::PositionFix(fix)
+                if self.settings.external_position && fix.robot == self.settings.name =>
+            {
+                self.observe_position(PositionSample {
+                    pose: fix.pose,
+                    stamp: now,
+                    quality: fix.quality.clamp(0.0, 1.0),
+                    has_heading: true,
+                });
+            }
+            _ => {}
+        }
+        out
+    }
+
+    /// One control period: failsafe, controller, actuator outputs, and the
+    /// periodic messages that are due (Hello, Heartbeat, Telemetry).
+    pub fn tick(&mut self, now: Duration) -> Tick {
+        let mut outgoing = Vec::new();
+        if self.registered && self.failsafe.router_lost(now) {
+            // Register again: the router may have restarted, or we moved.
+            self.registered = false;
+            self.next_hello = now;
+        }
+        if !self.registered && now >= self.next_hello {
+            self.next_hello = now + self.settings.hello_period;
+            let hello = Body::Hello(self.hello());
+            outgoing.push(self.envelope(mech_proto::ROUTER, hello, now));
+        }
+
+        let mission_running = self.mission_running();
+        let state = self
+            .failsafe
+            .state(now, !self.route.channel.is_empty(), mission_running);
+        let drive = self.failsafe.may_drive(state, mission_running);
+        if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
+            self.counters.failsafe_trips += 1;
+        }
+        if !drive && !matches!(self.controller.mode(), Mode::Idle) {
+            // The next accepted command (or a re-registration that finds a
+            // mission to resume) starts motion again.
+            self.controller.idle();
+        }
+        self.last_state = state;
+
+        self.outputs.clear();
+        if drive {
+            let needs_position = matches!(
+                self.controller.mode(),
+                Mode::VelocityHeading(_) | Mode::Waypoints
+            );
+            match (self.estimate, needs_position) {
+                (None, true) => self
+                    .outputs
+                    .resize(self.controller.platform().motors(), 0.0),
+                (estimate, _) => {
+                    let pose = estimate.map(|e| e.pose).unwrap_or_default();
+                    let mission = self
+                        .missions
+                        .get_mut(&self.route.channel)
+                        .filter(|m| !m.paused);
+                    let out = self.controller.update(&pose, now, mission);
+                    self.outputs.extend_from_slice(out);
+                }
+            }
+        } else {
+            self.outputs
+                .resize(self.controller.platform().motors(), 0.0);
+        }
+
+        if self.registered {
+            if now >= self.next_heartbeat {
+                self.next_heartbeat = now + self.settings.hello_period;
+                let hb = Body::Heartbeat(Heartbeat {
+                    uptime_ms: now.as_millis() as u64,
+                });
+                outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
+            }
+            if now >= self.next_telemetry {
+                // Stay on the grid so the rate does not drift with jitter.
+                self.next_telemetry =
+                    (self.next_telemetry + self.settings.telemetry_period).max(now);
+                let t = Body::Telemetry(self.telemetry(now));
+                outgoing.push(self.envelope(mech_proto::ROUTER, t, now));
+            }
+        }
+        Tick {
+            outputs: self.outputs.clone(),
+            outgoing,
+        }
+    }
+
+    /// The robot's telemetry now.
+    pub fn telemetry(&self, now: Duration) -> Telemetry {
+        let state = self.failsafe_state(now);
+        let twist = self.controller.platform().motion(&self.outputs);
+        let stale = self.settings.has_position
+            && self
+                .estimate
+                .is_none_or(|e| now.saturating_sub(e.stamp) > self.settings.position_stale_after);
+        let faulted = self
+            .last_driver_fault
+            .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+        Telemetry {
+            pose: self.estimate.map(|e| e.pose).unwrap_or_default(),
+            velocity: Velocity {
+                vx: twist.vx,
+                vy: twist.vy,
+                vz: twist.vz,
+                wz: twist.wz,
+            },
+            mode: self.controller.mode().control_mode(),
+            channel: self.route.channel.clone(),
+            computation: if self.route.channel.starts_with("offboard/") {
+                Computation::Offboard
+            } else {
+                Computation::Onboard
+            },
+            failsafe: state,
+            health: if faulted {
+                Health::Fault
+            } else if stale {
+                Health::Degraded
+            } else {
+                Health::Ok
+            },
+            battery: None,
+            position_quality: self.estimate.map_or(0.0, |e| e.quality.clamp(0.0, 1.0)),
+            actuators: self.outputs.clone(),
+            mission: self
+                .missions
+                .get(&self.route.channel)
+                .map(MissionRun::progress),
+        }
+    }
+
+    /// The `Bye` sent when the agent shuts down.
+    pub fn bye(&mut self, reason: &str, now: Duration) -> Envelope {
+        self.envelope(
+            mech_proto::ROUTER,
+            Body::Bye(Bye {
+                reason: truncate(reason),
+            }),
+            now,
+        )
+    }
+
+    fn mission_running(&self) -> bool {
+        matches!(self.controller.mode(), Mode::Waypoints)
+            && self
+                .missions
+                .get(&self.route.channel)
+                .is_some_and(|m| !m.paused && !m.finished())
+    }
+
+    fn apply_route(&mut self, route: Route, now: Duration, out: &mut Vec<Envelope>) {
+        let changed = !self.routed_once
+            || route.channel != self.route.channel
+            || route.epoch != self.route.epoch;
+        if changed {
+            self.routed_once = true;
+            self.controller.idle();
+            self.failsafe.channel_heard(now);
+            self.route.channel = route.channel;
+            self.route.epoch = route.epoch;
+            // Re-routing to a channel resumes its paused mission.
+            if let Some(m) = self.missions.get_mut(&self.route.channel) {
+                m.paused = false;
+            }
+        }
+        self.resume_mission(now);
+        let ack = Body::RouteAck(RouteAck {
+            robot: self.settings.name.clone(),
+            channel: self.route.channel.clone(),
+            epoch: self.route.epoch,
+        });
+        out.push(self.envelope(mech_proto::ROUTER, ack, now));
+    }
+
+    /// Follows the routed channel's mission if one is waiting and the robot
+    /// is otherwise idle.
+    fn resume_mission(&mut self, now: Duration) {
+        let runnable = self
+            .missions
+            .get(&self.route.channel)
+            .is_some_and(|m| !m.paused && !m.finished());
+        if runnable
+            && !self.failsafe.estopped()
+            && matches!(self.controller.mode(), Mode::Idle)
+            && self.controller.follow_mission().is_ok()
+        {
+            self.failsafe.channel_heard(now);
+        }
+    }
+
+    fn command(
+        &mut self,
+        channel: &str,
+        sender: &str,
+        cmd: &Command,
+        now: Duration,
+        out: &mut Vec<Envelope>,
+    ) {
+        if self.failsafe.estopped() {
+            self.counters.ignored_estopped += 1;
+            return;
+        }
+        if self.route.channel.is_empty() || channel != self.route.channel {
+            self.counters.not_routed += 1;
+            let quiet = self
+                .last_not_routed_notice
+                .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+            if self.settings.notify_not_routed && !quiet {
+                self.last_not_routed_notice = Some(now);
+                let text = format!(
+                    "{} obeys channel {:?}; command on {channel:?} rejected",
+                    self.settings.name, self.route.channel
+                );
+                let notice = Body::Notice(Notice {
+                    level: Level::Warn,
+                    code: NoticeCode::NotRouted,
+                    text: truncate(&text),
+                });
+                out.push(self.envelope(sender, notice, now));
+            }
+            return;
+        }
+        match self.controller.command(cmd) {
+            Ok(()) => self.failsafe.channel_heard(now),
+            Err(e) => {
+                self.counters.refused += 1;
+                let notice = Body::Notice(Notice {
+                    level: Level::Warn,
+                    code: NoticeCode::Unsupported,
+                    text: truncate(&e.to_string()),
+                });
+                out.push(self.envelope(sender, notice, now));
+            }
+        }
+    }
+
+    fn mission_received(
+        &mut self,
+        channel: &str,
+        mission: Mission,
+        now: Duration,
+        out: &mut Vec<Envelope>,
+    ) {
+        let id = mission.id;
+        if !self
+            .controller
+            .capabilities()
+            .contains(&CommandKind::Waypoints)
+        {
+            let reason = if self.settings.has_position {
+                "this platform does not follow waypoints"
+            } else {
+                "this robot has no position source"
+            };
+            let ack = Body::MissionAck(MissionAck {
+                id,
+                accepted: false,
+                reason: reason.to_string(),
+            });
+            out.push(self.envelope(mech_proto::ROUTER, ack, now));
+            return;
+        }
+        match self.missions.get_mut(channel) {
+            // A repeated upload (a retry, or a re-send after an e-stop):
+            // progress is kept.
+            Some(run) if run.mission.id == id => run.paused = self.failsafe.estopped(),
+            _ => {
+                let mut run = MissionRun::new(mission);
+                run.paused = self.failsafe.estopped();
+                self.missions.insert(channel.to_string(), run);
+            }
+        }
+        if channel == self.route.channel
+            && !self.failsafe.estopped()
+            && self.controller.follow_mission().is_ok()
+        {
+            self.failsafe.channel_heard(now);
+        }
+        let ack = Body::MissionAck(MissionAck {
+            id,
+            accepted: true,
+            reason: String::new(),
+        });
+        out.push(self.envelope(mech_proto::ROUTER, ack, now));
+    }
+
+    fn envelope(&mut self, destination: &str, body: Body, now: Duration) -> Envelope {
+        self.seq = self.seq.wrapping_add(1);
+        Envelope::new(
+            Header {
+                seq: self.seq,
+                stamp_us: self.stamp_origin_us + now.as_micros() as u64,
+                sender: self.settings.name.clone(),
+                destination: destination.to_string(),
+                channel: String::new(),
+            },
+            body,
+        )
+    }
+}
+
+/// Cuts free text to the protocol's limit on a character boundary.
+fn truncate(text: &str) -> String {
+    let mut end = text.len().min(mech_proto::MAX_TEXT_LEN);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    text[..end].to_string()
+}
+
+/// The pose used when nothing better is known.
+pub fn origin() -> Pose {
+    Pose::default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::platform::PlatformSpec;
+    use mech_proto::{EStop, Twist, Waypoint, Welcome};
+
+    const PERIOD: Duration = Duration::from_millis(20);
+
+    fn ms(v: u64) -> Duration {
+        Duration::from_millis(v)
+    }
+
+    fn msg(channel: &str, body: Body) -> Envelope {
+        Envelope::new(
+            Header {
+                sender: "ctl".into(),
+                destination: "r1".into(),
+                channel: channel.into(),
+                ..Header::default()
+            },
+            body,
+        )
+    }
+
+    fn twist(vx: f64) -> Body {
+        Body::Command(Command::Twist(Twist {
+            vx,
+            ..Twist::default()
+        }))
+    }
+
+    fn route(channel: &str, epoch: u32) -> Body {
+        Body::Route(Route {
+            robot: "r1".into(),
+            channel: channel.into(),
+            epoch,
+        })
+    }
+
+    /// A registered agent with a position, routed to `channel`.
+    fn routed(channel: &str) -> Agent {
+        let mut a = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        a.observe_position(PositionSample {
+            pose: Pose::default(),
+            stamp: ms(0),
+            quality: 1.0,
+            has_heading: true,
+        });
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: channel.into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        let out = a.handle(msg("", w), ms(0));
+        assert!(matches!(&out[0].body, Body::RouteAck(r) if r.channel == channel && r.epoch == 1));
+        a
+    }
+
+    fn moving(outputs: &[f64]) -> bool {
+        outputs.iter().any(|u| *u != 0.0)
+    }
+
+    #[test]
+    fn says_hello_every_second_until_welcomed() {
+        let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
+        let hellos = |t: &Tick| {
+            t.outgoing
+                .iter()
+                .filter(|e| matches!(e.body, Body::Hello(_)))
+                .count()
+        };
+        assert_eq!(hellos(&a.tick(ms(0))), 1);
+        assert_eq!(hellos(&a.tick(ms(500))), 0);
+        let t = a.tick(ms(1000));
+        assert_eq!(hellos(&t), 1);
+        let Body::Hello(h) = &t.outgoing[0].body else {
+            panic!()
+        };
+        assert_eq!((h.platform.as_str(), h.motors), ("kiwi", 3));
+        assert!(h.capabilities.contains(&CommandKind::Waypoints));
+        a.handle(msg("", route("", 0)), ms(1010));
+        assert!(!a.registered(), "only Welcome registers");
+        a.handle(
+            msg(
+                "",
+                Body::Welcome(Welcome {
+                    robot_id: 1,
+                    route: Route {
+                        robot: "r1".into(),
+                        channel: "".into(),
+                        epoch: 0,
+                    },
+                    router_version: "t".into(),
+                }),
+            ),
+            ms(1020),
+        );
+        let t = a.tick(ms(2000));
+        assert_eq!(hellos(&t), 0);
+        assert!(
+            t.outgoing
+                .iter()
+                .any(|e| matches!(e.body, Body::Telemetry(_)))
+        );
+    }
+
+    #[test]
+    fn obeys_the_routed_channel_and_rejects_others() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(msg("key/0", twist(-0.3)), ms(30));
+        assert!(matches!(&out[0].body, Body::Notice(n) if n.code == NoticeCode::NotRouted));
+        assert_eq!(out[0].header.destination, "ctl");
+        let t = a.tick(ms(40));
+        assert!(
+            t.outputs.iter().all(|u| *u > 0.0),
+            "still the joy/0 command: {:?}",
+            t.outputs
+        );
+        assert_eq!(a.counters().not_routed, 1);
+        // A second rejection within a second is counted but not answered.
+        assert!(a.handle(msg("key/0", twist(-0.3)), ms(50)).is_empty());
+        assert_eq!(a.counters().not_routed, 2);
+    }
+
+    #[test]
+    fn unrouted_robot_holds_still() {
+        let mut a = routed("");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.counters().not_routed, 1);
+    }
+
+    #[test]
+    fn channel_silence_stops_within_timeout_plus_one_period() {
+        let mut a = routed("joy/0");
+        let last_command = ms(100);
+        a.handle(msg("joy/0", twist(0.2)), last_command);
+        let mut now = ms(100);
+        let mut stopped_at = None;
+        while now < ms(2000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            let t = a.tick(now);
+            if !moving(&t.outputs) {
+                stopped_at = Some(now);
+                break;
+            }
+        }
+        let stopped_at = stopped_at.unwrap();
+        assert!(
+            stopped_at <= last_command + a.settings().failsafe.channel_timeout + PERIOD,
+            "{stopped_at:?}"
+        );
+        assert!(stopped_at > last_command + a.settings().failsafe.channel_timeout);
+        assert_eq!(a.failsafe_state(now), FailsafeState::ChannelSilent);
+        assert_eq!(a.telemetry(now).failsafe, FailsafeState::ChannelSilent);
+        // The next accepted command resumes.
+        a.handle(msg("joy/0", twist(0.2)), now);
+        assert!(moving(&a.tick(now + PERIOD).outputs));
+        assert_eq!(a.counters().failsafe_trips, 1);
+    }
+
+    fn router_heartbeat(a: &mut Agent, now: Duration) {
+        a.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+    }
+
+    #[test]
+    fn router_loss_stops_and_re_registers() {
+        let mut a = routed("joy/0");
+        let mut now = ms(0);
+        let mut stopped = None;
+        while now < ms(3000) {
+            now += PERIOD;
+            // The controller keeps commanding, but nothing else arrives from
+            // the router after 100 ms... which cannot happen on one link, so
+            // commands stop too: the router is gone.
+            if now <= ms(100) {
+                a.handle(msg("joy/0", twist(0.2)), now);
+            }
+            let t = a.tick(now);
+            if stopped.is_none() && !moving(&t.outputs) {
+                stopped = Some(now);
+            }
+            if a.failsafe_state(now) == FailsafeState::RouterLost {
+                assert!(
+                    t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+                    "registers again at once"
+                );
+                break;
+            }
+        }
+        assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
+        assert!(!a.registered());
+        assert!(stopped.unwrap() <= ms(100) + ms(500) + PERIOD);
+    }
+
+    #[test]
+    fn route_change_zeroes_acks_and_switches_channel() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(msg("", route("wp/gcs", 2)), ms(30));
+        assert!(matches!(&out[0].body, Body::RouteAck(r) if r.channel == "wp/gcs" && r.epoch == 2));
+        assert!(!moving(&a.tick(ms(40)).outputs), "zeroed on switch");
+        a.handle(msg("joy/0", twist(0.2)), ms(50));
+        assert!(!moving(&a.tick(ms(60)).outputs), "old channel now rejected");
+        a.handle(msg("wp/gcs", twist(0.1)), ms(70));
+        assert!(moving(&a.tick(ms(80)).outputs));
+        // A repeated Route (router retry) is acked again but changes nothing.
+        let out = a.handle(msg("", route("wp/gcs", 2)), ms(90));
+        assert!(matches!(&out[0].body, Body::RouteAck(_)));
+        assert!(moving(&a.tick(ms(100)).outputs));
+        let t = a.telemetry(ms(100));
+        assert_eq!(t.channel, "wp/gcs");
+        assert_eq!(t.computation, Computation::Onboard);
+        a.handle(msg("", route("offboard/r1", 3)), ms(110));
+        assert_eq!(a.telemetry(ms(110)).computation, Computation::Offboard);
+    }
+
+    #[test]
+    fn estop_latches_until_release_and_pauses_missions() {
+        let mut a = routed("wp/gcs");
+        let mission = Mission {
+            id: 5,
+            waypoints: vec![Waypoint {
+                x: 2.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        };
+        let out = a.handle(msg("wp/gcs", Body::Mission(mission.clone())), ms(10));
+        assert!(matches!(&out[0].body, Body::MissionAck(m) if m.id == 5 && m.accepted));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        let out = a.handle(
+            msg(
+                "",
+                Body::EStop(EStop {
+                    engage: true,
+                    id: 9,
+                }),
+            ),
+            ms(30),
+        );
+        assert!(matches!(&out[0].body, Body::EStopAck(e) if e.engage && e.id == 9));
+        assert!(!moving(&a.tick(ms(40)).outputs));
+        a.handle(msg("wp/gcs", twist(0.2)), ms(50));
+        assert!(
+            !moving(&a.tick(ms(60)).outputs),
+            "commands ignored while latched"
+        );
+        assert_eq!(a.failsafe_state(ms(60)), FailsafeState::EStopped);
+        a.handle(
+            msg(
+                "",
+                Body::EStop(EStop {
+                    engage: false,
+                    id: 10,
+                }),
+            ),
+            ms(70),
+        );
+        assert!(
+            !moving(&a.tick(ms(80)).outputs),
+            "mission stays paused after release"
+        );
+        a.handle(msg("wp/gcs", twist(0.2)), ms(90));
+        assert!(moving(&a.tick(ms(100)).outputs), "obeys the next command");
+        // Re-sending the mission resumes it with its progress kept.
+        a.handle(msg("wp/gcs", Body::Mission(mission)), ms(110));
+        assert_eq!(*a.mode(), Mode::Waypoints);
+        assert!(moving(&a.tick(ms(120)).outputs));
+    }
+
+    #[test]
+    fn mission_runs_only_while_routed_and_ignores_channel_silence() {
+        let mut a = routed("joy/0");
+        let mission = Mission {
+            id: 1,
+            waypoints: vec![Waypoint {
+                x: 5.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        };
+        let out = a.handle(msg("wp/gcs", Body::Mission(mission)), ms(10));
+        assert!(
+            matches!(&out[0].body, Body::MissionAck(m) if m.accepted),
+            "stored and acked while not routed"
+        );
+        a.tick(ms(20));
+        assert_ne!(*a.mode(), Mode::Waypoints);
+        a.handle(msg("", route("wp/gcs", 2)), ms(30));
+        assert_eq!(*a.mode(), Mode::Waypoints);
+        let mut now = ms(30);
+        while now < ms(3000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(
+                moving(&a.tick(now).outputs),
+                "mission is its own controller"
+            );
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(
+            tel.mission.map(|m| (m.id, m.next, m.total)),
+            Some((1, 0, 1))
+        );
+        assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    #[test]
+    fn mission_on_router_loss_follows_config() {
+        for continues in [false, true] {
+            let mut settings = AgentSettings::new("r1");
+            settings.failsafe.mission_continues_on_link_loss = continues;
+            let mut a = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+            a.observe_position(PositionSample {
+                pose: Pose::default(),
+                stamp: ms(0),
+                quality: 1.0,
+                has_heading: true,
+            });
+            a.handle(
+                msg(
+                    "",
+                    Body::Welcome(Welcome {
+                        robot_id: 1,
+                        route: Route {
+                            robot: "r1".into(),
+                            channel: "wp/gcs".into(),
+                            epoch: 1,
+                        },
+                        router_version: "t".into(),
+                    }),
+                ),
+                ms(0),
+            );
+            let mission = Mission {
+                id: 1,
+                waypoints: vec![Waypoint {
+                    x: 5.0,
+                    y: 0.0,
+                    z: 0.0,
+                    time: None,
+                }],
+                looped: false,
+                arrival_radius: 0.05,
+                start_index: 0,
+            };
+            a.handle(msg("wp/gcs", Body::Mission(mission)), ms(0));
+            let t = a.tick(ms(2000));
+            assert_eq!(a.failsafe_state(ms(2000)), FailsafeState::RouterLost);
+            assert_eq!(moving(&t.outputs), continues, "continues = {continues}");
+        }
+    }
+
+    #[test]
+    fn undecodable_bytes_and_unsupported_commands_are_counted() {
+        let mut a = routed("joy/0");
+        assert!(a.handle_bytes(&[0x93, 0x01, 0xff], ms(5)).is_empty());
+        assert_eq!(a.counters().bad_messages, 1);
+        let out = a.handle(
+            msg(
+                "joy/0",
+                Body::Command(Command::Actuators(mech_proto::Actuators {
+                    outputs: vec![0.5],
+                })),
+            ),
+            ms(10),
+        );
+        assert!(matches!(&out[0].body, Body::Notice(n) if n.code == NoticeCode::Unsupported));
+        assert_eq!(a.counters().refused, 1);
+        let mut other = msg("joy/0", twist(0.2));
+        other.header.destination = "r2".into();
+        a.handle(other, ms(20));
+        assert_eq!(a.counters().not_for_me, 1);
+        assert!(!moving(&a.tick(ms(30)).outputs));
+    }
+
+    #[test]
+    fn external_position_fixes_feed_the_filter_only_when_configured() {
+        for external in [false, true] {
+            let mut s = AgentSettings::new("r1");
+            s.external_position = external;
+            let mut a = Agent::new(s, PlatformSpec::diff_drive().build(), 0);
+            let fix = mech_proto::PositionFix {
+                robot: "r1".into(),
+                pose: Pose {
+                    x: 1.5,
+                    ..Pose::default()
+                },
+                quality: 0.9,
+            };
+            a.handle(msg("", Body::PositionFix(fix)), ms(0));
+            assert_eq!(a.estimate().map(|e| e.pose.x), external.then_some(1.5));
+        }
+    }
+}

@@ -1,0 +1,474 @@
+//! The robot's TOML configuration: name, platform and geometry, drivers and
+//! pins, link, failsafe, filter, control gains and the simulated start pose.
+//!
+//! Errors name the file, line and column and say what was expected, using
+//! the `toml` crate's spans.
+
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::agent::AgentSettings;
+use crate::control::Gains;
+use crate::drivers::l298::{DutyRange, L298Pins};
+use crate::failsafe::{FailsafeConfig, FailsafeToml};
+use crate::platform::PlatformSpec;
+
+/// A whole robot config file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// Robot name, unique in the fleet (no spaces).
+    pub name: Spanned<String>,
+    #[serde(default = "default_control_rate")]
+    pub control_rate_hz: Spanned<f64>,
+    #[serde(default = "default_telemetry_rate")]
+    pub telemetry_rate_hz: Spanned<f64>,
+    /// Answer commands from unrouted channels with a `NotRouted` notice.
+    #[serde(default = "yes")]
+    pub notify_not_routed: bool,
+    pub platform: Spanned<PlatformSpec>,
+    #[serde(default = "spanned_default")]
+    pub link: Spanned<LinkConfig>,
+    #[serde(default = "spanned_default")]
+    pub failsafe: Spanned<FailsafeToml>,
+    #[serde(default = "spanned_default")]
+    pub actuators: Spanned<ActuatorConfig>,
+    #[serde(default = "spanned_default")]
+    pub position: Spanned<PositionConfig>,
+    #[serde(default = "spanned_default")]
+    pub filter: Spanned<FilterConfig>,
+    #[serde(default)]
+    pub control: Gains,
+    #[serde(default)]
+    pub sim: SimConfig,
+}
+
+fn default_control_rate() -> Spanned<f64> {
+    Spanned::new(0..0, 50.0)
+}
+
+fn default_telemetry_rate() -> Spanned<f64> {
+    Spanned::new(0..0, 20.0)
+}
+
+/// A defaulted section has an empty span (no place in the file).
+fn spanned_default<T: Default>() -> Spanned<T> {
+    Spanned::new(0..0, T::default())
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// `[link]`: how the agent reaches the router.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum LinkConfig {
+    /// UDP datagrams to the router (default `127.0.0.1:7400`).
+    Udp {
+        #[serde(default = "default_router")]
+        router: SocketAddr,
+    },
+    /// A serial radio (XBee transparent mode) or any UART.
+    Serial {
+        port: String,
+        #[serde(default = "default_radio_baud")]
+        baud: u32,
+    },
+}
+
+fn default_router() -> SocketAddr {
+    SocketAddr::from(([127, 0, 0, 1], 7400))
+}
+
+fn default_radio_baud() -> u32 {
+    57_600
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        LinkConfig::Udp {
+            router: default_router(),
+        }
+    }
+}
+
+/// `[actuators]`: the motor driver.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ActuatorConfig {
+    /// No motor driver (simulation, or a robot only reporting).
+    #[default]
+    None,
+    /// L298 dual H-bridge on Raspberry Pi GPIO (feature `rpi`).
+    L298 {
+        /// One entry per motor, in the platform's motor order.
+        channels: Vec<L298Pins>,
+        #[serde(default = "default_pwm_frequency")]
+        pwm_frequency: f64,
+        #[serde(default = "default_min_duty")]
+        min_duty: f64,
+        #[serde(default = "default_max_duty")]
+        max_duty: f64,
+        #[serde(default = "default_deadband")]
+        deadband: f64,
+    },
+}
+
+fn default_pwm_frequency() -> f64 {
+    100.0
+}
+fn default_min_duty() -> f64 {
+    DutyRange::default().min_duty
+}
+fn default_max_duty() -> f64 {
+    DutyRange::default().max_duty
+}
+fn default_deadband() -> f64 {
+    DutyRange::default().deadband
+}
+
+/// `[position]`: where the robot's position comes from.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum PositionConfig {
+    /// No position: velocity-heading and waypoints are not offered.
+    #[default]
+    None,
+    /// The simulator: the agent runs a simulated vehicle (as with `--sim`).
+    Sim,
+    /// `PositionFix` messages relayed by the GCS (motion capture, an
+    /// external tracker).
+    External,
+    /// A Pozyx UWB tag on a serial/USB port.
+    Pozyx {
+        port: String,
+        #[serde(default = "default_pozyx_baud")]
+        baud: u32,
+        /// Added to the tag's heading so that 0 = arena +x, rad.
+        #[serde(default)]
+        heading_offset: f64,
+    },
+    /// An NMEA GPS receiver; positions in metres east/north of `origin`.
+    Nmea {
+        port: String,
+        #[serde(default = "default_gps_baud")]
+        baud: u32,
+        origin: GeoOriginConfig,
+    },
+}
+
+fn default_pozyx_baud() -> u32 {
+    115_200
+}
+fn default_gps_baud() -> u32 {
+    9_600
+}
+
+/// Geodetic origin of the local frame.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeoOriginConfig {
+    pub latitude: f64,
+    pub longitude: f64,
+    #[serde(default)]
+    pub altitude: f64,
+}
+
+/// `[filter]`: the moving-median position filter.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterConfig {
+    /// Samples in the median window (1 = no filtering).
+    pub window: usize,
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        FilterConfig { window: 9 }
+    }
+}
+
+/// `[sim]`: the simulated robot.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub heading: f64,
+    /// UWB-like position noise.
+    pub noise: bool,
+    pub seed: u64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            heading: 0.0,
+            noise: true,
+            seed: 1,
+        }
+    }
+}
+
+/// A config that could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        file: String,
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}:{column}: {message}")]
+    Invalid {
+        file: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+}
+
+impl RobotConfig {
+    /// Reads and checks a config file.
+    pub fn load(path: &Path) -> Result<RobotConfig, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        RobotConfig::parse(&text, &file)
+    }
+
+    /// Parses and checks config text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<RobotConfig, ConfigError> {
+        let invalid = |span: Option<std::ops::Range<usize>>, message: String| {
+            let (line, column) = span.map_or((1, 1), |s| line_column(text, s.start));
+            ConfigError::Invalid {
+                file: file.to_string(),
+                line,
+                column,
+                message,
+            }
+        };
+        let config: RobotConfig =
+            toml::from_str(text).map_err(|e| invalid(e.span(), e.message().trim().to_string()))?;
+        config
+            .validate()
+            .map_err(|(span, message)| invalid(span, message))?;
+        Ok(config)
+    }
+
+    /// Semantic checks serde cannot express; errors carry the span of the
+    /// offending value (or its table).
+    fn validate(&self) -> Result<(), (Option<std::ops::Range<usize>>, String)> {
+        let at = |s: std::ops::Range<usize>| (!s.is_empty()).then_some(s);
+        let name = self.name.get_ref();
+        if name.is_empty()
+            || name.len() > mech_proto::MAX_NAME_LEN
+            || name.chars().any(|c| c.is_whitespace() || c.is_control())
+        {
+            return Err((
+                at(self.name.span()),
+                format!(
+                    "name {name:?}: expected 1 to {} characters without spaces",
+                    mech_proto::MAX_NAME_LEN
+                ),
+            ));
+        }
+        for (rate, what) in [
+            (&self.control_rate_hz, "control_rate_hz"),
+            (&self.telemetry_rate_hz, "telemetry_rate_hz"),
+        ] {
+            let v = *rate.get_ref();
+            if !(v.is_finite() && v > 0.0 && v <= 1000.0) {
+                return Err((
+                    at(rate.span()),
+                    format!("{what} = {v}: expected a rate in (0, 1000] Hz"),
+                ));
+            }
+        }
+        self.platform
+            .get_ref()
+            .validate()
+            .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
+        let f = self.failsafe.get_ref();
+        for (v, what) in [
+            (f.channel_timeout, "channel_timeout"),
+            (f.router_timeout, "router_timeout"),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 3600.0) {
+                return Err((
+                    at(self.failsafe.span()),
+                    format!("[failsafe] {what} = {v}: expected seconds in (0, 3600]"),
+                ));
+            }
+        }
+        let window = self.filter.get_ref().window;
+        if !(1..=255).contains(&window) {
+            return Err((
+                at(self.filter.span()),
+                format!("[filter] window = {window}: expected 1 to 255 samples"),
+            ));
+        }
+        if let ActuatorConfig::L298 {
+            channels,
+            pwm_frequency,
+            min_duty,
+            max_duty,
+            deadband,
+        } = self.actuators.get_ref()
+        {
+            let motors = self.platform.get_ref().build().motors();
+            if channels.len() != motors {
+                return Err((
+                    at(self.actuators.span()),
+                    format!(
+                        "[actuators] {} L298 channels for a platform with {motors} motors",
+                        channels.len()
+                    ),
+                ));
+            }
+            let ok = |v: f64| v.is_finite() && (0.0..=1.0).contains(&v);
+            if !(ok(*min_duty) && ok(*max_duty) && ok(*deadband) && min_duty <= max_duty) {
+                return Err((
+                    at(self.actuators.span()),
+                    "[actuators] expected 0 <= min_duty <= max_duty <= 1 and 0 <= deadband <= 1"
+                        .to_string(),
+                ));
+            }
+            if !(pwm_frequency.is_finite() && *pwm_frequency > 0.0) {
+                return Err((
+                    at(self.actuators.span()),
+                    "[actuators] pwm_frequency: expected a positive frequency in Hz".to_string(),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn control_period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / *self.control_rate_hz.get_ref())
+    }
+
+    /// Settings of the agent core.
+    pub fn agent_settings(&self, simulated: bool) -> AgentSettings {
+        let f = self.failsafe.get_ref();
+        let mut s = AgentSettings::new(self.name.get_ref().clone());
+        s.failsafe = FailsafeConfig {
+            channel_timeout: Duration::from_secs_f64(f.channel_timeout),
+            router_timeout: Duration::from_secs_f64(f.router_timeout),
+            mission_continues_on_link_loss: f.mission_continues_on_link_loss,
+        };
+        s.telemetry_period = Duration::from_secs_f64(1.0 / *self.telemetry_rate_hz.get_ref());
+        s.notify_not_routed = self.notify_not_routed;
+        s.filter_window = self.filter.get_ref().window;
+        let position = self.position.get_ref();
+        s.external_position = !simulated && matches!(position, PositionConfig::External);
+        s.has_position = simulated || !matches!(position, PositionConfig::None);
+        s.gains = self.control;
+        s
+    }
+}
+
+/// 1-based line and column of a byte offset.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str =
+        "name = \"r1\"\n[platform]\nkind = \"kiwi\"\nradius = 0.1\nmax_wheel_speed = 0.5\n";
+
+    #[test]
+    fn minimal_config_gets_defaults() {
+        let c = RobotConfig::parse(MINIMAL, "r1.toml").unwrap();
+        assert_eq!(c.name.get_ref(), "r1");
+        assert_eq!(
+            *c.link.get_ref(),
+            LinkConfig::Udp {
+                router: "127.0.0.1:7400".parse().unwrap()
+            }
+        );
+        let s = c.agent_settings(false);
+        assert_eq!(s.failsafe, FailsafeConfig::default());
+        assert_eq!(s.telemetry_period, Duration::from_millis(50));
+        assert_eq!(s.filter_window, 9);
+        assert_eq!(c.control_period(), Duration::from_millis(20));
+    }
+
+    fn error(text: &str) -> String {
+        RobotConfig::parse(text, "bad.toml")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn errors_name_file_line_and_expectation() {
+        let e = error(&format!("{MINIMAL}telemetry_rate_hz = \"fast\"\n"));
+        assert!(e.starts_with("bad.toml:"), "{e}");
+        let e = error("name = \"r1\"\n\n[platform]\nkind = \"hexapod\"\n");
+        assert!(
+            e.starts_with("bad.toml:4:8:") && e.contains("hexapod") && e.contains("diff-drive"),
+            "{e}"
+        );
+        let e = error(&format!("{MINIMAL}[failsafe]\nchannel_timout = 0.5\n"));
+        assert!(
+            e.starts_with("bad.toml:7:1:") && e.contains("channel_timout"),
+            "{e}"
+        );
+        let e = error(&format!("{MINIMAL}[filter]\nwindow = 0\n"));
+        assert!(
+            e.starts_with("bad.toml:") && e.contains("window = 0"),
+            "{e}"
+        );
+        let e = error(
+            "name = \"r 1\"\n[platform]\nkind = \"kiwi\"\nradius = 0.1\nmax_wheel_speed = 0.5\n",
+        );
+        assert!(
+            e.starts_with("bad.toml:1:8:") && e.contains("without spaces"),
+            "{e}"
+        );
+        let e = error(
+            "name = \"r1\"\n[platform]\nkind = \"kiwi\"\nradius = -0.1\nmax_wheel_speed = 0.5\n",
+        );
+        assert!(e.contains("radius must be a positive number"), "{e}");
+        let e = error(&format!(
+            "{MINIMAL}[actuators]\nkind = \"l298\"\nchannels = [{{ in1 = 5, in2 = 6, enable = 12 }}]\n"
+        ));
+        assert!(
+            e.contains("1 L298 channels for a platform with 3 motors"),
+            "{e}"
+        );
+        let e = error("name = \"r1\"\n");
+        assert!(e.contains("platform"), "{e}");
+    }
+
+    #[test]
+    fn example_configs_parse() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/agents");
+        let mut seen = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let c = RobotConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+                assert!(!c.name.get_ref().is_empty());
+                seen += 1;
+            }
+        }
+        assert!(seen >= 4, "{seen} example configs");
+    }
+}

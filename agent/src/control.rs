@@ -1,0 +1,317 @@
+//! Onboard control: turns the current command (or mission) and the position
+//! estimate into actuator outputs through the robot's [`Platform`].
+//!
+//! The control mode changes with each command received, as the 2017 control
+//! field did: raw actuators, steering-throttle, velocity-heading (heading
+//! held by a proportional controller, turning on the spot first when the
+//! error is large), body twist, waypoint missions (arrival radius, optional
+//! arrival times, looping), stop.
+
+pub mod mission;
+
+use std::time::Duration;
+
+use mech_proto::{Command, CommandKind, ControlMode, Pose, Twist, VelocityHeading};
+use serde::Deserialize;
+
+use crate::filter::wrap_angle;
+use crate::platform::Platform;
+
+pub use mission::MissionRun;
+
+/// Controller gains and limits, from the config's `[control]` table.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Gains {
+    /// Yaw rate per radian of heading error, 1/s.
+    pub heading: f64,
+    /// Approach speed per metre of distance to the waypoint, 1/s.
+    pub position: f64,
+    /// Fraction of the platform's top speed used for waypoints without a time.
+    pub cruise_fraction: f64,
+    /// Heading error (rad) above which a non-holonomic robot turns on the
+    /// spot before driving.
+    pub turn_in_place: f64,
+}
+
+impl Default for Gains {
+    fn default() -> Self {
+        Gains {
+            heading: 3.0,
+            position: 1.2,
+            cruise_fraction: 0.6,
+            turn_in_place: 0.6,
+        }
+    }
+}
+
+/// What the controller is doing now.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Mode {
+    /// Nothing commanded yet (or after a route change): outputs zero.
+    Idle,
+    Actuators(Vec<f64>),
+    SteeringThrottle(mech_proto::SteeringThrottle),
+    VelocityHeading(VelocityHeading),
+    Twist(Twist),
+    /// Following the mission passed to [`Controller::update`].
+    Waypoints,
+    /// A `Stop` command: outputs zero until the next command.
+    Stopped,
+}
+
+impl Mode {
+    pub fn control_mode(&self) -> ControlMode {
+        match self {
+            Mode::Idle => ControlMode::Idle,
+            Mode::Actuators(_) => ControlMode::Actuators,
+            Mode::SteeringThrottle(_) => ControlMode::SteeringThrottle,
+            Mode::VelocityHeading(_) => ControlMode::VelocityHeading,
+            Mode::Twist(_) => ControlMode::Twist,
+            Mode::Waypoints => ControlMode::Waypoints,
+            Mode::Stopped => ControlMode::Stopped,
+        }
+    }
+}
+
+/// Why a command was not taken.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refused {
+    #[error("this robot does not accept {0} commands")]
+    Unsupported(CommandKind),
+    #[error("{given} actuator outputs for a robot with {motors} motors")]
+    MotorCount { given: usize, motors: usize },
+}
+
+/// The onboard controller of one robot.
+#[derive(Debug)]
+pub struct Controller {
+    platform: Box<dyn Platform>,
+    gains: Gains,
+    capabilities: Vec<CommandKind>,
+    mode: Mode,
+    outputs: Vec<f64>,
+}
+
+impl Controller {
+    /// A controller for `platform`. `has_position` says whether a position
+    /// estimate exists; without one, modes that need it (velocity-heading,
+    /// waypoints) are not offered.
+    pub fn new(platform: Box<dyn Platform>, gains: Gains, has_position: bool) -> Controller {
+        let capabilities = platform
+            .capabilities()
+            .into_iter()
+            .filter(|k| {
+                has_position || !matches!(k, CommandKind::VelocityHeading | CommandKind::Waypoints)
+            })
+            .collect();
+        let outputs = vec![0.0; platform.motors()];
+        Controller {
+            platform,
+            gains,
+            capabilities,
+            mode: Mode::Idle,
+            outputs,
+        }
+    }
+
+    pub fn platform(&self) -> &dyn Platform {
+        self.platform.as_ref()
+    }
+
+    pub fn capabilities(&self) -> &[CommandKind] {
+        &self.capabilities
+    }
+
+    pub fn mode(&self) -> &Mode {
+        &self.mode
+    }
+
+    /// Last outputs computed by [`Controller::update`].
+    pub fn outputs(&self) -> &[f64] {
+        &self.outputs
+    }
+
+    /// Takes a command: the mode changes to the command's.
+    pub fn command(&mut self, cmd: &Command) -> Result<(), Refused> {
+        let kind = cmd.command_kind();
+        if !self.capabilities.contains(&kind) {
+            return Err(Refused::Unsupported(kind));
+        }
+        self.mode = match cmd {
+            Command::Actuators(a) => {
+                if a.outputs.len() != self.platform.motors() {
+                    return Err(Refused::MotorCount {
+                        given: a.outputs.len(),
+                        motors: self.platform.motors(),
+                    });
+                }
+                Mode::Actuators(a.outputs.clone())
+            }
+            Command::SteeringThrottle(s) => Mode::SteeringThrottle(*s),
+            Command::VelocityHeading(v) => Mode::VelocityHeading(*v),
+            Command::Twist(t) => Mode::Twist(*t),
+            Command::Stop(_) => Mode::Stopped,
+        };
+        Ok(())
+    }
+
+    /// Switches to following a mission (the run itself is passed to
+    /// [`Controller::update`] each period).
+    pub fn follow_mission(&mut self) -> Result<(), Refused> {
+        if !self.capabilities.contains(&CommandKind::Waypoints) {
+            return Err(Refused::Unsupported(CommandKind::Waypoints));
+        }
+        self.mode = Mode::Waypoints;
+        Ok(())
+    }
+
+    /// Back to idle (route change, e-stop): outputs zero.
+    pub fn idle(&mut self) {
+        self.mode = Mode::Idle;
+        self.outputs.iter_mut().for_each(|u| *u = 0.0);
+    }
+
+    /// One control period: computes the outputs for the current mode from
+    /// the pose estimate. `mission` is the run followed in
+    /// [`Mode::Waypoints`] (none = hold still).
+    pub fn update(
+        &mut self,
+        pose: &Pose,
+        now: Duration,
+        mission: Option<&mut MissionRun>,
+    ) -> &[f64] {
+        let outputs = match &self.mode {
+            Mode::Idle | Mode::Stopped => vec![0.0; self.platform.motors()],
+            Mode::Actuators(a) => a.clone(),
+            Mode::SteeringThrottle(s) => self.platform.steering_throttle(s),
+            Mode::VelocityHeading(v) => {
+                let twist = self.velocity_heading(pose, v);
+                self.platform.mix(&twist)
+            }
+            Mode::Twist(t) => self.platform.mix(t),
+            Mode::Waypoints => match mission {
+                Some(run) => {
+                    let twist = run.step(pose, now, self.platform.as_ref(), &self.gains);
+                    self.platform.mix(&twist)
+                }
+                None => vec![0.0; self.platform.motors()],
+            },
+        };
+        self.outputs.clear();
+        self.outputs
+            .extend(outputs.into_iter().map(crate::hal::clamp_output));
+        &self.outputs
+    }
+
+    fn velocity_heading(&self, pose: &Pose, v: &VelocityHeading) -> Twist {
+        let err = wrap_angle(v.heading - pose.heading);
+        let limits = self.platform.limits();
+        let wz = (self.gains.heading * err).clamp(-limits.max_yaw_rate, limits.max_yaw_rate);
+        let speed = v.speed.clamp(-limits.max_speed, limits.max_speed);
+        if self.platform.holonomic() {
+            // Move along the commanded world heading at once while turning
+            // to face it.
+            let (s, c) = (v.heading - pose.heading).sin_cos();
+            Twist {
+                vx: speed * c,
+                vy: speed * s,
+                vz: 0.0,
+                wz,
+            }
+        } else {
+            Twist {
+                vx: speed * drive_factor(err, self.gains.turn_in_place),
+                vy: 0.0,
+                vz: 0.0,
+                wz,
+            }
+        }
+    }
+}
+
+/// Fraction of the commanded speed a non-holonomic robot uses with heading
+/// error `err`: full when aligned, falling with cos(err), zero (turn on the
+/// spot) beyond `turn_in_place`.
+pub(crate) fn drive_factor(err: f64, turn_in_place: f64) -> f64 {
+    if err.abs() > turn_in_place {
+        0.0
+    } else {
+        err.cos().max(0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::platform::PlatformSpec;
+    use mech_proto::{Actuators, Stop};
+
+    fn dd() -> Controller {
+        Controller::new(PlatformSpec::diff_drive().build(), Gains::default(), true)
+    }
+
+    #[test]
+    fn mode_follows_each_command() {
+        let mut c = dd();
+        let p = Pose::default();
+        c.command(&Command::Twist(Twist {
+            vx: 0.2,
+            ..Twist::default()
+        }))
+        .unwrap();
+        assert_eq!(c.mode().control_mode(), ControlMode::Twist);
+        assert!(c.update(&p, Duration::ZERO, None).iter().all(|u| *u > 0.0));
+        c.command(&Command::Actuators(Actuators {
+            outputs: vec![0.3, -0.3],
+        }))
+        .unwrap();
+        assert_eq!(c.update(&p, Duration::ZERO, None), &[0.3, -0.3]);
+        c.command(&Command::Stop(Stop {})).unwrap();
+        assert_eq!(c.update(&p, Duration::ZERO, None), &[0.0, 0.0]);
+        assert_eq!(c.mode().control_mode(), ControlMode::Stopped);
+    }
+
+    #[test]
+    fn wrong_motor_count_and_missing_capability_are_refused() {
+        let mut c = dd();
+        assert_eq!(
+            c.command(&Command::Actuators(Actuators { outputs: vec![0.1] })),
+            Err(Refused::MotorCount {
+                given: 1,
+                motors: 2
+            })
+        );
+        let mut blind =
+            Controller::new(PlatformSpec::diff_drive().build(), Gains::default(), false);
+        let vh = Command::VelocityHeading(VelocityHeading {
+            speed: 0.1,
+            heading: 0.0,
+        });
+        assert_eq!(
+            blind.command(&vh),
+            Err(Refused::Unsupported(CommandKind::VelocityHeading))
+        );
+        assert!(blind.follow_mission().is_err());
+    }
+
+    #[test]
+    fn velocity_heading_turns_on_the_spot_when_far_off() {
+        let mut c = dd();
+        c.command(&Command::VelocityHeading(VelocityHeading {
+            speed: 0.3,
+            heading: 2.0,
+        }))
+        .unwrap();
+        let out = c.update(&Pose::default(), Duration::ZERO, None).to_vec();
+        let twist = c.platform().motion(&out);
+        assert!(twist.vx.abs() < 1e-9 && twist.wz > 0.0);
+        let aligned = Pose {
+            heading: 2.0,
+            ..Pose::default()
+        };
+        let out = c.update(&aligned, Duration::ZERO, None).to_vec();
+        let twist = c.platform().motion(&out);
+        assert!((twist.vx - 0.3).abs() < 1e-9 && twist.wz.abs() < 1e-9);
+    }
+}

@@ -1,0 +1,245 @@
+//! Brings a robot up from its [`RobotConfig`]: builds the agent core, the
+//! link, the actuators and the position source, then runs the loop until
+//! shutdown. The binary is a thin wrapper around [`run`].
+
+use std::net::SocketAddr;
+
+use mech_proto::Pose;
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+use tokio::time::Instant;
+
+use crate::agent::Agent;
+use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
+use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
+use crate::runtime::{self, HardwareVehicle, Io, SimVehicle, Ticker};
+use crate::sim::{SimAgent, UwbNoise, UwbNoiseModel};
+
+/// Why a robot could not be brought up.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchError {
+    #[error("cannot open the UDP socket: {0}")]
+    Udp(std::io::Error),
+    #[error("cannot open serial port {port}: {message}")]
+    Serial { port: String, message: String },
+    #[error("actuators: {0}")]
+    Actuators(String),
+    #[error("this build has no {feature} support; rebuild with `--features {feature}`")]
+    Feature { feature: &'static str },
+}
+
+/// Command-line overrides of the config.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// Simulate the vehicle whatever the config's drivers say.
+    pub sim: bool,
+    /// Router address instead of the config's.
+    pub router: Option<SocketAddr>,
+}
+
+/// Runs the robot until `shutdown` turns true, then zeroes the actuators and
+/// says `Bye`.
+pub async fn run(
+    config: RobotConfig,
+    overrides: Overrides,
+    shutdown: watch::Receiver<bool>,
+) -> Result<(), LaunchError> {
+    let origin = Instant::now();
+    let stamp_origin = crate::clock::unix_micros();
+    let simulated = overrides.sim || matches!(config.position.get_ref(), PositionConfig::Sim);
+    let io = open_link(&config, &overrides).await?;
+    let ticker = Ticker::Own(config.control_period());
+    let settings = config.agent_settings(simulated);
+    tracing::info!(
+        name = %settings.name,
+        platform = config.platform.get_ref().build().name(),
+        simulated,
+        "agent starting"
+    );
+    if simulated {
+        let s = config.sim;
+        let noise = s
+            .noise
+            .then(|| UwbNoise::new(UwbNoiseModel::default(), s.seed));
+        let pose = Pose {
+            x: s.x,
+            y: s.y,
+            z: s.z,
+            heading: s.heading,
+        };
+        let sim = SimAgent::new(
+            settings,
+            config.platform.get_ref(),
+            pose,
+            noise,
+            stamp_origin,
+        );
+        runtime::drive(SimVehicle(sim), io, ticker, origin, shutdown).await;
+    } else {
+        let agent = Agent::new(settings, config.platform.get_ref().build(), stamp_origin);
+        let actuators = open_actuators(&config)?;
+        let positions = open_position(&config, origin)?;
+        runtime::drive(
+            HardwareVehicle {
+                agent,
+                actuators,
+                positions,
+            },
+            io,
+            ticker,
+            origin,
+            shutdown,
+        )
+        .await;
+    }
+    tracing::info!("agent stopped");
+    Ok(())
+}
+
+async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {
+    // `--router` turns any robot into a UDP one (bench testing a radio robot).
+    let router = match config.link.get_ref() {
+        LinkConfig::Udp { router } => Some(overrides.router.unwrap_or(*router)),
+        LinkConfig::Serial { .. } => overrides.router,
+    };
+    match (router, config.link.get_ref()) {
+        (Some(router), _) => {
+            let local = if router.ip().is_loopback() {
+                SocketAddr::from(([127, 0, 0, 1], 0))
+            } else {
+                SocketAddr::from(([0, 0, 0, 0], 0))
+            };
+            let socket = UdpSocket::bind(local).await.map_err(LaunchError::Udp)?;
+            tracing::info!(%router, local = ?socket.local_addr().ok(), "UDP link");
+            Ok(Io::Udp { socket, router })
+        }
+        (None, LinkConfig::Serial { port, baud }) => open_serial(port, *baud),
+        (None, LinkConfig::Udp { .. }) => {
+            Err(LaunchError::Udp(std::io::ErrorKind::InvalidInput.into()))
+        }
+    }
+}
+
+#[cfg(feature = "serial")]
+fn open_serial(port: &str, baud: u32) -> Result<Io, LaunchError> {
+    tracing::info!(port, baud, "serial link");
+    crate::drivers::serial_link::open(port, baud).map_err(|e| LaunchError::Serial {
+        port: port.to_string(),
+        message: e.to_string(),
+    })
+}
+
+#[cfg(not(feature = "serial"))]
+fn open_serial(_port: &str, _baud: u32) -> Result<Io, LaunchError> {
+    Err(LaunchError::Feature { feature: "serial" })
+}
+
+fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, LaunchError> {
+    match config.actuators.get_ref() {
+        ActuatorConfig::None => Ok(Box::new(NoActuators::default())),
+        #[cfg(feature = "rpi")]
+        ActuatorConfig::L298 {
+            channels,
+            pwm_frequency,
+            min_duty,
+            max_duty,
+            deadband,
+        } => {
+            let range = crate::drivers::l298::DutyRange {
+                min_duty: *min_duty,
+                max_duty: *max_duty,
+                deadband: *deadband,
+            };
+            let l298 = crate::drivers::rpi::open_l298(channels, range, *pwm_frequency)
+                .map_err(|e| LaunchError::Actuators(e.to_string()))?;
+            Ok(Box::new(l298))
+        }
+        #[cfg(not(feature = "rpi"))]
+        ActuatorConfig::L298 { .. } => Err(LaunchError::Feature { feature: "rpi" }),
+    }
+}
+
+type PositionRx = std::sync::mpsc::Receiver<Result<PositionSample, String>>;
+
+#[cfg_attr(not(feature = "serial"), allow(unused_variables))]
+fn open_position(config: &RobotConfig, origin: Instant) -> Result<Option<PositionRx>, LaunchError> {
+    match config.position.get_ref() {
+        PositionConfig::None | PositionConfig::External | PositionConfig::Sim => Ok(None),
+        #[cfg(feature = "serial")]
+        PositionConfig::Pozyx {
+            port,
+            baud,
+            heading_offset,
+        } => {
+            let stream = open_port(port, *baud)?;
+            let settings = crate::drivers::pozyx::PozyxSettings {
+                heading_offset: *heading_offset,
+                ..Default::default()
+            };
+            Ok(Some(spawn_position(
+                crate::drivers::pozyx::Pozyx::new(stream, settings),
+                origin,
+            )))
+        }
+        #[cfg(feature = "serial")]
+        PositionConfig::Nmea {
+            port,
+            baud,
+            origin: geo,
+        } => {
+            let stream = std::io::BufReader::new(open_port(port, *baud)?);
+            let geo = crate::drivers::nmea_gps::GeoOrigin {
+                latitude: geo.latitude,
+                longitude: geo.longitude,
+                altitude: geo.altitude,
+            };
+            Ok(Some(spawn_position(
+                crate::drivers::nmea_gps::NmeaGps::new(stream, geo),
+                origin,
+            )))
+        }
+        #[cfg(not(feature = "serial"))]
+        PositionConfig::Pozyx { .. } | PositionConfig::Nmea { .. } => {
+            Err(LaunchError::Feature { feature: "serial" })
+        }
+    }
+}
+
+#[cfg(feature = "serial")]
+fn open_port(port: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>, LaunchError> {
+    serialport::new(port, baud)
+        .timeout(std::time::Duration::from_secs(1))
+        .open()
+        .map_err(|e| LaunchError::Serial {
+            port: port.to_string(),
+            message: e.to_string(),
+        })
+}
+
+/// Reads a blocking position source on its own thread; samples are stamped
+/// with the agent's clock.
+pub fn spawn_position<P>(mut source: P, origin: Instant) -> PositionRx
+where
+    P: PositionSource + Send + 'static,
+{
+    let (tx, rx) = std::sync::mpsc::channel();
+    let origin = origin.into_std();
+    std::thread::spawn(move || {
+        loop {
+            let sent = match source.read(origin.elapsed()) {
+                Ok(Some(sample)) => tx.send(Ok(sample)),
+                Ok(None) => Ok(()),
+                Err(e) => {
+                    let sent = tx.send(Err(format!("{e:?}")));
+                    // Do not spin on a dead device.
+                    std::thread::sleep(std::time::Duration::from_millis(500));
+                    sent
+                }
+            };
+            if sent.is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}

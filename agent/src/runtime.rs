@@ -1,0 +1,258 @@
+//! The tokio loop around an agent core: receives messages from the link,
+//! runs a control period on every tick, writes actuators and sends what the
+//! core returns. One task per agent; a simulated fleet shares one tick.
+
+use std::cell::RefCell;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use mech_proto::Envelope;
+use tokio::net::UdpSocket;
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use crate::agent::Agent;
+use crate::hal::{Actuators, PositionSample};
+use crate::sim::SimAgent;
+
+/// What the loop drives: an agent core with its vehicle (hardware or
+/// simulated).
+pub trait Vehicle: Send {
+    /// Handles one received datagram.
+    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope>;
+    /// Handles one received message.
+    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope>;
+    /// One control period; returns messages to send.
+    fn tick(&mut self, now: Duration) -> Vec<Envelope>;
+    /// Zeroes the actuators and returns the `Bye` to send.
+    fn stop(&mut self, now: Duration) -> Envelope;
+}
+
+/// A simulated agent as a [`Vehicle`].
+#[derive(Debug)]
+pub struct SimVehicle(pub SimAgent);
+
+impl Vehicle for SimVehicle {
+    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        self.0.handle_bytes(bytes, now)
+    }
+    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        self.0.handle(env, now)
+    }
+    fn tick(&mut self, now: Duration) -> Vec<Envelope> {
+        self.0.tick(now)
+    }
+    fn stop(&mut self, now: Duration) -> Envelope {
+        let motors = self.0.robot.platform().motors();
+        self.0.robot.step_outputs(&vec![0.0; motors], 1e-6);
+        self.0.bye(now)
+    }
+}
+
+/// A robot with real actuators and (optionally) a position source read by
+/// its own thread.
+pub struct HardwareVehicle {
+    pub agent: Agent,
+    pub actuators: Box<dyn Actuators + Send>,
+    /// Samples (or driver error texts) from the position thread.
+    pub positions: Option<std::sync::mpsc::Receiver<Result<PositionSample, String>>>,
+}
+
+impl std::fmt::Debug for HardwareVehicle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HardwareVehicle")
+            .field("agent", &self.agent)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Vehicle for HardwareVehicle {
+    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        self.agent.handle_bytes(bytes, now)
+    }
+    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        self.agent.handle(env, now)
+    }
+    fn tick(&mut self, now: Duration) -> Vec<Envelope> {
+        let mut extra = Vec::new();
+        if let Some(rx) = &self.positions {
+            while let Ok(sample) = rx.try_recv() {
+                match sample {
+                    Ok(s) => self.agent.observe_position(s),
+                    Err(e) => {
+                        tracing::warn!(error = %e, "position source");
+                        extra.extend(
+                            self.agent
+                                .driver_fault(&format!("position source: {e}"), now),
+                        );
+                    }
+                }
+            }
+        }
+        let tick = self.agent.tick(now);
+        if let Err(e) = self.actuators.set_outputs(&tick.outputs) {
+            tracing::error!(error = %e, "actuators");
+            extra.extend(self.agent.driver_fault(&format!("actuators: {e}"), now));
+        }
+        let mut out = tick.outgoing;
+        out.extend(extra);
+        out
+    }
+    fn stop(&mut self, now: Duration) -> Envelope {
+        let motors = self.agent.platform().motors();
+        if let Err(e) = self.actuators.stop_all(motors) {
+            tracing::error!(error = %e, "could not zero actuators on shutdown");
+        }
+        self.agent.bye("shutdown", now)
+    }
+}
+
+/// The link to the router.
+#[derive(Debug)]
+pub enum Io {
+    /// One message per datagram; datagrams from other addresses are ignored.
+    Udp {
+        socket: UdpSocket,
+        router: SocketAddr,
+    },
+    /// Messages decoded elsewhere (a serial link's thread).
+    Frames {
+        incoming: mpsc::Receiver<Envelope>,
+        outgoing: std::sync::mpsc::Sender<Envelope>,
+    },
+}
+
+/// What paces the control periods.
+#[derive(Debug)]
+pub enum Ticker {
+    /// The agent's own interval.
+    Own(Duration),
+    /// A tick shared by many agents (a simulated fleet): the value is the
+    /// tick's time since the common origin.
+    Shared(watch::Receiver<Duration>),
+}
+
+enum Incoming {
+    Bytes(Vec<u8>),
+    Message(Box<Envelope>),
+    Ignored,
+    Closed,
+}
+
+thread_local! {
+    /// One receive buffer per runtime thread instead of one per agent: a
+    /// fleet of hundreds of agents would otherwise hold 60 kB each.
+    static RECV_BUF: RefCell<Vec<u8>> = RefCell::new(vec![0; mech_proto::MAX_MESSAGE_LEN + 1]);
+}
+
+impl Io {
+    async fn recv(&mut self) -> Incoming {
+        match self {
+            Io::Udp { socket, router } => loop {
+                if socket.readable().await.is_err() {
+                    return Incoming::Closed;
+                }
+                let got = RECV_BUF.with(|b| {
+                    let mut b = b.borrow_mut();
+                    match socket.try_recv_from(&mut b) {
+                        Ok((n, from)) if from == *router => Some(Incoming::Bytes(b[..n].to_vec())),
+                        Ok(_) => Some(Incoming::Ignored),
+                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => None,
+                        // ICMP port unreachable while the router is down.
+                        Err(_) => Some(Incoming::Ignored),
+                    }
+                });
+                if let Some(got) = got {
+                    return got;
+                }
+            },
+            Io::Frames { incoming, .. } => match incoming.recv().await {
+                Some(env) => Incoming::Message(Box::new(env)),
+                None => Incoming::Closed,
+            },
+        }
+    }
+
+    async fn send(&mut self, env: &Envelope, buf: &mut Vec<u8>) {
+        match self {
+            Io::Udp { socket, router } => {
+                buf.clear();
+                match mech_proto::encode_into(env, buf) {
+                    Ok(()) => {
+                        if let Err(e) = socket.send_to(buf, *router).await {
+                            tracing::debug!(error = %e, "send to router");
+                        }
+                    }
+                    Err(e) => tracing::warn!(error = %e, "cannot encode"),
+                }
+            }
+            Io::Frames { outgoing, .. } => {
+                let _ = outgoing.send(env.clone());
+            }
+        }
+    }
+}
+
+async fn next_tick(
+    own: &mut Option<tokio::time::Interval>,
+    shared: &mut Option<watch::Receiver<Duration>>,
+    origin: Instant,
+) -> Option<Duration> {
+    if let Some(i) = own {
+        let at = i.tick().await;
+        return Some(at.saturating_duration_since(origin));
+    }
+    if let Some(rx) = shared {
+        return match rx.changed().await {
+            Ok(()) => Some(*rx.borrow_and_update()),
+            Err(_) => None,
+        };
+    }
+    std::future::pending().await
+}
+
+/// Runs `vehicle` until `shutdown` turns true (or its sender is dropped),
+/// then zeroes its actuators and sends `Bye`. `origin` is agent time zero.
+pub async fn drive<V: Vehicle>(
+    mut vehicle: V,
+    mut io: Io,
+    ticker: Ticker,
+    origin: Instant,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let (mut own, mut shared) = match ticker {
+        Ticker::Own(period) => {
+            let mut i = tokio::time::interval_at(origin, period);
+            i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            (Some(i), None)
+        }
+        Ticker::Shared(rx) => (None, Some(rx)),
+    };
+    let mut buf = Vec::with_capacity(512);
+    loop {
+        let out = tokio::select! {
+            changed = shutdown.changed() => {
+                if changed.is_err() || *shutdown.borrow() { break; }
+                continue;
+            }
+            now = next_tick(&mut own, &mut shared, origin) => match now {
+                Some(now) => vehicle.tick(now),
+                None => break,
+            },
+            incoming = io.recv() => {
+                let now = origin.elapsed();
+                match incoming {
+                    Incoming::Bytes(b) => vehicle.handle_bytes(&b, now),
+                    Incoming::Message(env) => vehicle.handle(*env, now),
+                    Incoming::Ignored => continue,
+                    Incoming::Closed => break,
+                }
+            }
+        };
+        for env in &out {
+            io.send(env, &mut buf).await;
+        }
+    }
+    let bye = vehicle.stop(origin.elapsed());
+    io.send(&bye, &mut buf).await;
+}

@@ -1,0 +1,80 @@
+//! A simulated agent: the real [`Agent`] core driving a [`SimRobot`]
+//! instead of motors, fed with noisy positions of the simulated vehicle
+//! through the same median filter. Steppable without sockets or tokio:
+//! call [`SimAgent::handle`] for each message and [`SimAgent::tick`] each
+//! control period with the simulated time.
+
+use std::time::Duration;
+
+use mech_proto::{Envelope, Pose};
+
+use super::noise::UwbNoise;
+use super::robot::SimRobot;
+use crate::agent::{Agent, AgentSettings};
+use crate::hal::PositionSample;
+use crate::platform::PlatformSpec;
+
+/// Agent core + simulated vehicle + position noise.
+#[derive(Debug)]
+pub struct SimAgent {
+    pub agent: Agent,
+    pub robot: SimRobot,
+    /// `None`: perfect positions.
+    noise: Option<UwbNoise>,
+    last_tick: Option<Duration>,
+}
+
+impl SimAgent {
+    pub fn new(
+        settings: AgentSettings,
+        platform: &PlatformSpec,
+        pose: Pose,
+        noise: Option<UwbNoise>,
+        stamp_origin_us: u64,
+    ) -> SimAgent {
+        SimAgent {
+            agent: Agent::new(settings, platform.build(), stamp_origin_us),
+            robot: SimRobot::new(platform, pose),
+            noise,
+            last_tick: None,
+        }
+    }
+
+    /// Handles one message from the router.
+    pub fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        self.agent.handle(env, now)
+    }
+
+    /// Handles one received datagram.
+    pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        self.agent.handle_bytes(bytes, now)
+    }
+
+    /// Advances the vehicle to `now` with the agent's last outputs, measures
+    /// its position, and runs one agent control period.
+    pub fn tick(&mut self, now: Duration) -> Vec<Envelope> {
+        let dt = self
+            .last_tick
+            .map_or(0.0, |t| now.saturating_sub(t).as_secs_f64());
+        self.last_tick = Some(now);
+        let outputs = self.agent.outputs().to_vec();
+        self.robot.step_outputs(&outputs, dt);
+        let truth = self.robot.pose();
+        let pose = match &mut self.noise {
+            Some(n) => n.measure(&truth),
+            None => truth,
+        };
+        self.agent.observe_position(PositionSample {
+            pose,
+            stamp: now,
+            quality: 1.0,
+            has_heading: true,
+        });
+        self.agent.tick(now).outgoing
+    }
+
+    /// The `Bye` sent on shutdown.
+    pub fn bye(&mut self, now: Duration) -> Envelope {
+        self.agent.bye("shutdown", now)
+    }
+}
