@@ -99,10 +99,9 @@ async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyh
     let gcs = Gcs::start(config)
         .await
         .context("cannot start the router")?;
-    let mut executor = Executor::new(gcs.clone());
-    if let Some(spawner) = mech_gcs::script::simulator() {
-        executor = executor.with_spawner(spawner);
-    }
+    let spawner =
+        mech_gcs::script::simulator().unwrap_or_else(mech_gcs::ui::demo::DemoSpawner::boxed);
+    let executor = Executor::new(gcs.clone()).with_spawner(spawner);
     let mut options = mech_gcs::ui::RunOptions {
         mouse: !no_mouse,
         ..mech_gcs::ui::RunOptions::default()

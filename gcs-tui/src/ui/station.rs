@@ -143,6 +143,7 @@ async fn event_loop(
     app.arena = options.arena;
     let size = terminal.size()?;
     app.update(Action::Resize(size.width, size.height));
+    app.update(Action::FitFleet);
 
     // Gamepads: a thread polls gilrs and forwards events.
     let (pad_tx, mut pad_rx) = mpsc::unbounded_channel();
