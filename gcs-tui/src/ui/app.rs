@@ -198,7 +198,8 @@ pub enum Request {
         robots: Vec<String>,
         command: Command,
     },
-    /// A cluster velocity from a pad in cluster mode.
+    /// A cluster velocity from a pad in cluster mode (`channel` is the
+    /// pad's); it goes to the cluster controller on `fleet/<cluster>`.
     ClusterVelocity {
         channel: String,
         cluster: String,

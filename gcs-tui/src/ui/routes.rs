@@ -101,7 +101,19 @@ impl Widget for RoutesPanel<'_> {
                     c.name, c.publisher, c.rate_hz
                 )));
             }
-        } else if focused {
+        }
+        if !app.clusters.is_empty() {
+            lines.push(Line::styled("clusters", t.title()));
+            for (k, c) in app.clusters.iter().enumerate() {
+                let active = app.active_cluster.as_deref() == Some(c.name.as_str());
+                let style = if active { t.title() } else { Style::new() };
+                lines.push(Line::from(vec![
+                    Span::styled(format!(" {} {:<4}", k + 1, c.name), style),
+                    Span::raw(c.members.join(" ")),
+                ]));
+            }
+        }
+        if focused {
             lines.push(Line::styled("↑↓ robot  ←→ channel  Enter route", t.dim()));
         }
         Paragraph::new(lines).render(inner, buf);

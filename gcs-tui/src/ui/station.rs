@@ -167,14 +167,13 @@ async fn event_loop(
     let mut tick = tokio::time::interval(Duration::from_millis(1000 / FPS));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut publishers: HashMap<String, Publisher> = HashMap::new();
-    let mut log_seen = 0usize;
     let mut log_last: Option<(Duration, String)> = None;
 
     while app.running {
         tokio::select! {
             _ = tick.tick() => {
                 let (snap, new_log) = gcs.with_fleet(|f| {
-                    let lines = new_log_lines(f, &mut log_last, &mut log_seen);
+                    let lines = new_log_lines(f, &mut log_last);
                     (snapshot(f, Vec::new()), lines)
                 });
                 let mut snap = snap;
@@ -220,11 +219,7 @@ fn snapshot_channels(router: &crate::RouterHandle) -> Vec<ChannelView> {
 }
 
 /// Core log lines not shown yet, oldest first.
-fn new_log_lines(
-    f: &Fleet,
-    last: &mut Option<(Duration, String)>,
-    seen: &mut usize,
-) -> Vec<(LogLevel, String)> {
+fn new_log_lines(f: &Fleet, last: &mut Option<(Duration, String)>) -> Vec<(LogLevel, String)> {
     let start = match last {
         None => 0,
         Some((at, text)) => f
@@ -250,7 +245,6 @@ fn new_log_lines(
     if let Some(e) = f.log.back() {
         *last = Some((e.at, e.text.clone()));
     }
-    *seen += out.len();
     out
 }
 
@@ -340,11 +334,13 @@ async fn carry(
             }
         }
         Request::ClusterVelocity {
-            channel,
+            channel: _,
             cluster,
             members,
             velocity,
         } => {
+            // The cluster controller listens on the cluster's own channel.
+            let channel = format!("fleet/{cluster}");
             let p = publishers
                 .entry(channel.clone())
                 .or_insert_with(|| router.publisher(SENDER, &channel));
