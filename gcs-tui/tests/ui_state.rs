@@ -20,11 +20,14 @@ fn drawn_robot_cell(app: &App, name: &str) -> (u16, u16) {
     let buf = render(app);
     let inner = app.areas().map_inner();
     let r = app.robot(name).expect("robot exists");
-    let label = r.id.to_string();
+    let right = inner.x + inner.width;
     for row in inner.y..inner.y + inner.height {
-        for col in inner.x..inner.x + inner.width.saturating_sub(2) {
+        for col in inner.x..right.saturating_sub(2) {
             let g = buf[(col, row)].symbol();
-            if (g == "●" || g == "◉") && buf[(col + 2, row)].symbol() == label {
+            let label: String = (col + 2..(col + 2 + r.name.len() as u16).min(right))
+                .map(|c| buf[(c, row)].symbol())
+                .collect();
+            if (g == "●" || g == "◉") && label == r.name {
                 return (col, row);
             }
         }

@@ -298,7 +298,7 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
             proj,
             at,
             2,
-            TextLine::styled(r.id.to_string(), Style::new().fg(t.robot(i))),
+            TextLine::styled(r.name.clone(), Style::new().fg(t.robot(i))),
         );
     }
 }
