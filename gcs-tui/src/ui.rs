@@ -28,4 +28,4 @@ pub mod status;
 pub mod theme;
 pub mod waypoints;
 
-pub use station::{RunOptions, demo_arena, run};
+pub use station::{CoreLink, RunOptions, demo_arena, run, snapshot};

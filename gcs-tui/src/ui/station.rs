@@ -166,7 +166,7 @@ async fn event_loop(
     let mut events = EventStream::new();
     let mut tick = tokio::time::interval(Duration::from_millis(1000 / FPS));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut publishers: HashMap<String, Publisher> = HashMap::new();
+    let mut link = CoreLink::new(gcs.clone(), line_tx.clone());
     let mut log_last: Option<(Duration, String)> = None;
 
     while app.running {
@@ -198,10 +198,11 @@ async fn event_loop(
             Some(result) = result_rx.recv() => app.update(Action::CommandResult(result)),
         }
         for req in app.take_requests() {
-            carry(&gcs, &mut publishers, &line_tx, req, &mut app).await;
+            link.carry(req, &mut app).await;
         }
     }
     drop(line_tx);
+    drop(link);
     let _ = exec_task.await;
     Ok(())
 }
@@ -274,7 +275,33 @@ fn char_to_byte(s: &str, chars: usize) -> usize {
     s.char_indices().nth(chars).map_or(s.len(), |(i, _)| i)
 }
 
-/// Carries one request to the core.
+/// Carries the App's [`Request`]s to the GCS core: routes, missions,
+/// e-stop, teleop publishing, clusters and command-language lines.
+#[derive(Debug)]
+pub struct CoreLink {
+    gcs: Gcs,
+    /// One in-process publisher per channel, so sequence numbers and the
+    /// router's per-channel rate are those of one steady publisher.
+    publishers: HashMap<String, Publisher>,
+    lines: mpsc::UnboundedSender<String>,
+}
+
+impl CoreLink {
+    /// `lines` receives command-language lines for the executor task.
+    pub fn new(gcs: Gcs, lines: mpsc::UnboundedSender<String>) -> CoreLink {
+        CoreLink {
+            gcs,
+            publishers: HashMap::new(),
+            lines,
+        }
+    }
+
+    /// Carries one request; failures are logged on the App.
+    pub async fn carry(&mut self, req: Request, app: &mut App) {
+        carry(&self.gcs, &mut self.publishers, &self.lines, req, app).await;
+    }
+}
+
 async fn carry(
     gcs: &Gcs,
     publishers: &mut HashMap<String, Publisher>,
