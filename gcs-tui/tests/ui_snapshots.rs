@@ -69,3 +69,27 @@ fn monochrome_screen_keeps_the_text() {
     app.monochrome = true;
     assert_eq!(colour, screen(&app, 80, 24), "same glyphs without colour");
 }
+
+#[test]
+fn tiny_and_odd_terminal_sizes_render_without_panicking() {
+    for (w, h) in [
+        (1, 1),
+        (5, 3),
+        (20, 6),
+        (40, 10),
+        (79, 23),
+        (119, 35),
+        (300, 90),
+    ] {
+        let mut app = populated(w, h);
+        app.update(Action::EStop);
+        app.update(Action::ToggleHelp);
+        app.update(Action::CommandResult(Err(mech_gcs::ui::PromptError {
+            line: "route x".into(),
+            message: "bad".into(),
+            column: Some(99),
+        })));
+        let s = screen(&app, w, h);
+        assert_eq!(s.lines().count(), usize::from(h), "{w}x{h}");
+    }
+}

@@ -130,3 +130,83 @@ async fn app_requests_reach_simulated_robots() {
     spawner.shutdown().await;
     gcs.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
+    use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
+
+    let mut config = GcsConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.expect("router starts");
+    let mut spawner = DemoSpawner::default();
+    spawner
+        .spawn(1, gcs.router().udp_addr())
+        .await
+        .expect("simulated agent starts");
+    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
+    let mut link = CoreLink::new(gcs.clone(), lines);
+    let mut app = App::new("router", Instant::now());
+    wait_for(&mut app, &gcs, "robot_1", Duration::from_secs(10), |a| {
+        a.robot("robot_1").is_some_and(|r| r.pose.x != 0.0)
+    })
+    .await;
+
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: "joy/0".into(),
+    });
+    for ev in [
+        PadEventKind::Connected("synthetic".into()),
+        PadEventKind::ButtonPressed(PadButton::LeftBumper),
+        PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0),
+    ] {
+        app.update(Action::Pad(PadEvent::new(0, ev)));
+    }
+    // Keep the pad publishing at its rate while the robot drives.
+    let start = Instant::now();
+    loop {
+        for req in app.take_requests() {
+            link.carry(req, &mut app).await;
+        }
+        refresh(&mut app, &gcs).await;
+        let r = app.robot("robot_1").expect("robot_1");
+        if r.route.acknowledged && r.speed() > 0.05 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "pad drives robot_1"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+
+    // Re-route away while the dead-man is still held: the pad keeps
+    // publishing on joy/0, but robot_1 must come to rest.
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: String::new(),
+    });
+    let start = Instant::now();
+    loop {
+        for req in app.take_requests() {
+            link.carry(req, &mut app).await;
+        }
+        refresh(&mut app, &gcs).await;
+        let r = app.robot("robot_1").expect("robot_1");
+        if r.route.acknowledged && r.route.channel.is_empty() && r.speed() < 0.01 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "robot_1 stops: {r:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(
+        app.pads()[0].enabled,
+        "the pad was still driving its channel"
+    );
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}
