@@ -66,6 +66,23 @@ impl Shape for Dots<'_> {
     }
 }
 
+/// A robot's recent path, straight from the App's trail buffer.
+struct Trail<'a> {
+    proj: &'a Projection,
+    trail: &'a std::collections::VecDeque<(std::time::Instant, f64, f64)>,
+    color: Color,
+}
+
+impl Shape for Trail<'_> {
+    fn draw(&self, painter: &mut Painter) {
+        for &(_, x, y) in self.trail {
+            if let Some((i, j)) = self.proj.world_to_dot(x, y) {
+                painter.paint(i, j, self.color);
+            }
+        }
+    }
+}
+
 /// A straight segment rasterised on the dot grid (clipped to the view).
 struct Segment<'a> {
     proj: &'a Projection,
@@ -195,15 +212,13 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
     // Paths of the last seconds.
     for (i, r) in app.robots.iter().enumerate() {
         if let Some(trail) = app.trails.get(&r.name) {
-            let pts: Vec<(f64, f64)> = trail.iter().map(|&(_, x, y)| (x, y)).collect();
-            ctx.draw(&Dots {
+            ctx.draw(&Trail {
                 proj,
-                points: &pts,
+                trail,
                 color: t.robot(i),
             });
         }
     }
-    ctx.layer();
 
     // Waypoint legs, in mission order.
     for w in app.waypoints.windows(2) {
