@@ -93,3 +93,20 @@ fn tiny_and_odd_terminal_sizes_render_without_panicking() {
         assert_eq!(s.lines().count(), usize::from(h), "{w}x{h}");
     }
 }
+
+#[test]
+fn routes_panel_lists_pads_and_keyboard_teleop() {
+    use mech_gcs::gamepad::{PadButton, PadEvent, PadEventKind};
+    let mut app = populated(80, 24);
+    app.update(Action::Pad(PadEvent::new(
+        1,
+        PadEventKind::Connected("Synthetic Pad".into()),
+    )));
+    app.update(Action::Pad(PadEvent::new(
+        1,
+        PadEventKind::ButtonPressed(PadButton::LeftBumper),
+    )));
+    app.update(Action::ToggleKeyTeleop);
+    app.update(Action::FocusPrev);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}

@@ -97,9 +97,35 @@ impl Widget for RoutesPanel<'_> {
             lines.push(Line::styled("live channels", t.title()));
             for c in &app.channels {
                 lines.push(Line::raw(format!(
-                    " {:<12} {:<12} {:5.1} Hz",
+                    " {:<10} {:<8}{:>6.1}Hz",
                     c.name, c.publisher, c.rate_hz
                 )));
+            }
+        }
+        let pads = app.pads();
+        if !pads.is_empty() || app.key_teleop_on {
+            lines.push(Line::styled("controllers", t.title()));
+            for p in pads {
+                let state = if p.enabled {
+                    Span::styled("driving", t.warn())
+                } else {
+                    Span::styled("hold LB", t.dim())
+                };
+                lines.push(Line::from(vec![
+                    Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.as_str())),
+                    state,
+                    Span::styled(format!(" {}", p.name), t.dim()),
+                ]));
+            }
+            if app.key_teleop_on {
+                lines.push(Line::from(vec![
+                    Span::raw(format!(
+                        " {:<6} {:<8} ",
+                        crate::gamepad::KEY_CHANNEL,
+                        "twist"
+                    )),
+                    Span::styled("keys", t.warn()),
+                ]));
             }
         }
         if !app.clusters.is_empty() {
