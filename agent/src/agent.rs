@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStopAck, Envelope, FailsafeState, Header,
-    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Pose, Route,
-    RouteAck, Telemetry, Velocity,
+    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
+    Telemetry, Velocity,
 };
 
 use crate::control::{Controller, Gains, MissionRun, Mode};
@@ -116,6 +116,9 @@ pub struct Agent {
     next_telemetry: Duration,
     last_not_routed_notice: Option<Duration>,
     last_driver_fault: Option<Duration>,
+    /// Actuators are held at zero (state `Fault`) until then after an
+    /// actuator driver error.
+    actuator_fault_until: Option<Duration>,
     last_state: FailsafeState,
     outputs: Vec<f64>,
     counters: Counters,
@@ -152,6 +155,7 @@ impl Agent {
             next_telemetry: Duration::ZERO,
             last_not_routed_notice: None,
             last_driver_fault: None,
+            actuator_fault_until: None,
             last_state: FailsafeState::Ok,
             outputs: vec![0.0; motors],
             counters: Counters::default(),
@@ -206,8 +210,15 @@ impl Agent {
 
     /// The failsafe state now.
     pub fn failsafe_state(&self, now: Duration) -> FailsafeState {
-        self.failsafe
-            .state(now, !self.route.channel.is_empty(), self.mission_running())
+        let state =
+            self.failsafe
+                .state(now, !self.route.channel.is_empty(), self.mission_running());
+        let faulted = self.actuator_fault_until.is_some_and(|t| now < t);
+        if faulted && state != FailsafeState::EStopped {
+            FailsafeState::Fault
+        } else {
+            state
+        }
     }
 
     /// The `Hello` this robot registers with.
@@ -251,6 +262,15 @@ impl Agent {
         })
     }
 
+    /// Writing the actuators failed: outputs are held at zero (state
+    /// `Fault`) for a second, then the robot obeys commands again if the
+    /// driver recovered; the GCS is told.
+    pub fn actuator_fault(&mut self, what: &str, now: Duration) -> Option<Envelope> {
+        self.actuator_fault_until = Some(now + Duration::from_secs(1));
+        self.controller.idle();
+        self.driver_fault(what, now)
+    }
+
     /// Decodes and handles one received datagram or frame; undecodable bytes
     /// are counted and dropped.
     pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
@@ -278,6 +298,9 @@ impl Agent {
         let sender = env.header.sender;
         match env.body {
             Body::Welcome(w) => {
+                if !self.registered {
+                    tracing::info!(robot = %self.settings.name, route = %w.route.channel, "registered with the router");
+                }
                 self.registered = true;
                 self.next_heartbeat = now;
                 self.apply_route(w.route, now, &mut out);
@@ -341,12 +364,13 @@ impl Agent {
         }
 
         let mission_running = self.mission_running();
-        let state = self
-            .failsafe
-            .state(now, !self.route.channel.is_empty(), mission_running);
+        let state = self.failsafe_state(now);
         let drive = self.failsafe.may_drive(state, mission_running);
         if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
             self.counters.failsafe_trips += 1;
+        }
+        if state != self.last_state {
+            tracing::info!(robot = %self.settings.name, from = ?self.last_state, to = ?state, "failsafe");
         }
         if !drive && !matches!(self.controller.mode(), Mode::Idle) {
             // The next accepted command (or a re-registration that finds a
@@ -402,7 +426,9 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now.
+    /// The robot's telemetry now. `velocity` is the body-frame twist the
+    /// current outputs produce (the platform's forward kinematics), which is
+    /// what a robot without wheel encoders knows of its motion.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
         let twist = self.controller.platform().motion(&self.outputs);
@@ -470,6 +496,7 @@ impl Agent {
             || route.channel != self.route.channel
             || route.epoch != self.route.epoch;
         if changed {
+            tracing::info!(robot = %self.settings.name, channel = %route.channel, epoch = route.epoch, "route");
             self.routed_once = true;
             self.controller.idle();
             self.failsafe.channel_heard(now);
@@ -625,16 +652,11 @@ fn truncate(text: &str) -> String {
     text[..end].to_string()
 }
 
-/// The pose used when nothing better is known.
-pub fn origin() -> Pose {
-    Pose::default()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::platform::PlatformSpec;
-    use mech_proto::{EStop, Twist, Waypoint, Welcome};
+    use mech_proto::{EStop, Pose, Twist, Waypoint, Welcome};
 
     const PERIOD: Duration = Duration::from_millis(20);
 
@@ -813,9 +835,7 @@ mod tests {
         let mut stopped = None;
         while now < ms(3000) {
             now += PERIOD;
-            // The controller keeps commanding, but nothing else arrives from
-            // the router after 100 ms... which cannot happen on one link, so
-            // commands stop too: the router is gone.
+            // Everything arrives through the router: after 100 ms it is gone.
             if now <= ms(100) {
                 a.handle(msg("joy/0", twist(0.2)), now);
             }
@@ -1028,6 +1048,30 @@ mod tests {
     }
 
     #[test]
+    fn actuator_fault_holds_outputs_at_zero_then_recovers() {
+        let mut a = routed("joy/0");
+        a.handle(msg("joy/0", twist(0.2)), ms(10));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        assert!(a.actuator_fault("left motor: I/O error", ms(25)).is_some());
+        assert!(
+            a.actuator_fault("left motor: I/O error", ms(26)).is_none(),
+            "one notice a second"
+        );
+        a.handle(msg("joy/0", twist(0.2)), ms(30));
+        let t = a.tick(ms(40));
+        assert!(!moving(&t.outputs));
+        assert_eq!(a.failsafe_state(ms(40)), FailsafeState::Fault);
+        assert_eq!(a.telemetry(ms(40)).health, Health::Fault);
+        router_heartbeat(&mut a, ms(1100));
+        a.handle(msg("joy/0", twist(0.2)), ms(1100));
+        assert!(
+            moving(&a.tick(ms(1110)).outputs),
+            "recovers once the driver works"
+        );
+        assert_eq!(a.counters().driver_faults, 2);
+    }
+
+    #[test]
     fn external_position_fixes_feed_the_filter_only_when_configured() {
         for external in [false, true] {
             let mut s = AgentSettings::new("r1");
@@ -1043,6 +1087,91 @@ mod tests {
             };
             a.handle(msg("", Body::PositionFix(fix)), ms(0));
             assert_eq!(a.estimate().map(|e| e.pose.x), external.then_some(1.5));
+        }
+    }
+}
+
+#[cfg(test)]
+mod loss_tests {
+    //! The failsafe under packet loss: a controller publishing at 25 Hz over
+    //! a link losing 30% of its messages never trips the 0.5 s timeout, and
+    //! when the controller stops, the robot stops within timeout + one
+    //! control period.
+    use super::*;
+    use crate::platform::PlatformSpec;
+    use mech_proto::{Twist, Welcome};
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn no_false_trips_at_30_percent_loss_and_timely_stop() {
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(30);
+        let period = Duration::from_millis(20);
+        for run in 0..20u64 {
+            let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
+            let env = |channel: &str, body: Body| {
+                Envelope::new(
+                    Header {
+                        destination: "r1".into(),
+                        channel: channel.into(),
+                        ..Header::default()
+                    },
+                    body,
+                )
+            };
+            let route = Route {
+                robot: "r1".into(),
+                channel: "joy/0".into(),
+                epoch: 1,
+            };
+            a.handle(
+                env(
+                    "",
+                    Body::Welcome(Welcome {
+                        robot_id: 1,
+                        route,
+                        router_version: "t".into(),
+                    }),
+                ),
+                Duration::ZERO,
+            );
+            let stop_publishing = Duration::from_secs(10);
+            let mut last_delivered = Duration::ZERO;
+            let mut now = Duration::ZERO;
+            let mut stopped_at = None;
+            while now < Duration::from_secs(12) {
+                now += period;
+                // Router heartbeats every 240 ms and controller commands every
+                // 40 ms (on the 20 ms control grid), each lost with
+                // probability 0.3.
+                if now.as_millis() % 240 == 0 && !rng.random_bool(0.3) {
+                    a.handle(env("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+                }
+                if now < stop_publishing && now.as_millis() % 40 == 0 && !rng.random_bool(0.3) {
+                    a.handle(
+                        env(
+                            "joy/0",
+                            Body::Command(Command::Twist(Twist {
+                                vx: 0.1,
+                                ..Twist::default()
+                            })),
+                        ),
+                        now,
+                    );
+                    last_delivered = now;
+                }
+                let moving = a.tick(now).outputs.iter().any(|u| *u != 0.0);
+                if now < stop_publishing && last_delivered > Duration::ZERO {
+                    assert!(moving, "run {run}: false trip at {now:?}");
+                }
+                if now >= stop_publishing && !moving && stopped_at.is_none() {
+                    stopped_at = Some(now);
+                }
+            }
+            let stopped_at = stopped_at.unwrap();
+            assert!(
+                stopped_at <= last_delivered + a.settings().failsafe.channel_timeout + period,
+                "run {run}"
+            );
         }
     }
 }

@@ -30,15 +30,15 @@ pub struct RobotConfig {
     /// Answer commands from unrouted channels with a `NotRouted` notice.
     #[serde(default = "yes")]
     pub notify_not_routed: bool,
-    pub platform: Spanned<PlatformSpec>,
+    pub platform: Spanned<Kind<PlatformSpec>>,
     #[serde(default = "spanned_default")]
-    pub link: Spanned<LinkConfig>,
+    pub link: Spanned<Kind<LinkConfig>>,
     #[serde(default = "spanned_default")]
     pub failsafe: Spanned<FailsafeToml>,
     #[serde(default = "spanned_default")]
-    pub actuators: Spanned<ActuatorConfig>,
+    pub actuators: Spanned<Kind<ActuatorConfig>>,
     #[serde(default = "spanned_default")]
-    pub position: Spanned<PositionConfig>,
+    pub position: Spanned<Kind<PositionConfig>>,
     #[serde(default = "spanned_default")]
     pub filter: Spanned<FilterConfig>,
     #[serde(default)]
@@ -66,7 +66,7 @@ fn yes() -> bool {
 
 /// `[link]`: how the agent reaches the router.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum LinkConfig {
     /// UDP datagrams to the router (default `127.0.0.1:7400`).
     Udp {
@@ -99,7 +99,7 @@ impl Default for LinkConfig {
 
 /// `[actuators]`: the motor driver.
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ActuatorConfig {
     /// No motor driver (simulation, or a robot only reporting).
     #[default]
@@ -134,7 +134,7 @@ fn default_deadband() -> f64 {
 
 /// `[position]`: where the robot's position comes from.
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum PositionConfig {
     /// No position: velocity-heading and waypoints are not offered.
     #[default]
@@ -250,7 +250,9 @@ impl RobotConfig {
     /// Parses and checks config text; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<RobotConfig, ConfigError> {
         let invalid = |span: Option<std::ops::Range<usize>>, message: String| {
-            let (line, column) = span.map_or((1, 1), |s| line_column(text, s.start));
+            let (line, column) = span.map_or((1, 1), |s| {
+                line_column(text, refine(text, s.start, &message))
+            });
             ConfigError::Invalid {
                 file: file.to_string(),
                 line,
@@ -295,8 +297,7 @@ impl RobotConfig {
                 ));
             }
         }
-        self.platform
-            .get_ref()
+        self.platform()
             .validate()
             .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
         let f = self.failsafe.get_ref();
@@ -307,7 +308,7 @@ impl RobotConfig {
             if !(v.is_finite() && v > 0.0 && v <= 3600.0) {
                 return Err((
                     at(self.failsafe.span()),
-                    format!("[failsafe] {what} = {v}: expected seconds in (0, 3600]"),
+                    format!("[failsafe] `{what}` = {v}: expected seconds in (0, 3600]"),
                 ));
             }
         }
@@ -315,7 +316,7 @@ impl RobotConfig {
         if !(1..=255).contains(&window) {
             return Err((
                 at(self.filter.span()),
-                format!("[filter] window = {window}: expected 1 to 255 samples"),
+                format!("[filter] `window` = {window}: expected 1 to 255 samples"),
             ));
         }
         if let ActuatorConfig::L298 {
@@ -324,9 +325,9 @@ impl RobotConfig {
             min_duty,
             max_duty,
             deadband,
-        } = self.actuators.get_ref()
+        } = self.actuators()
         {
-            let motors = self.platform.get_ref().build().motors();
+            let motors = self.platform().build().motors();
             if channels.len() != motors {
                 return Err((
                     at(self.actuators.span()),
@@ -354,6 +355,22 @@ impl RobotConfig {
         Ok(())
     }
 
+    pub fn platform(&self) -> &PlatformSpec {
+        &self.platform.get_ref().0
+    }
+
+    pub fn link(&self) -> &LinkConfig {
+        &self.link.get_ref().0
+    }
+
+    pub fn actuators(&self) -> &ActuatorConfig {
+        &self.actuators.get_ref().0
+    }
+
+    pub fn position(&self) -> &PositionConfig {
+        &self.position.get_ref().0
+    }
+
     pub fn control_period(&self) -> Duration {
         Duration::from_secs_f64(1.0 / *self.control_rate_hz.get_ref())
     }
@@ -370,12 +387,100 @@ impl RobotConfig {
         s.telemetry_period = Duration::from_secs_f64(1.0 / *self.telemetry_rate_hz.get_ref());
         s.notify_not_routed = self.notify_not_routed;
         s.filter_window = self.filter.get_ref().window;
-        let position = self.position.get_ref();
+        let position = self.position();
         s.external_position = !simulated && matches!(position, PositionConfig::External);
         s.has_position = simulated || !matches!(position, PositionConfig::None);
         s.gains = self.control;
         s
     }
+}
+
+/// A table whose `kind` key picks the variant of `T` and whose other keys
+/// are that variant's fields (`[platform] kind = "kiwi"  radius = 0.1`).
+///
+/// Deserialized in two steps (kind, then the variant from the rest) rather
+/// than as a serde internally tagged enum, whose buffering would drop the
+/// name of a mistyped key from error messages.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Kind<T>(pub T);
+
+impl<'de, T: serde::de::DeserializeOwned> Deserialize<'de> for Kind<T> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut table = toml::Table::deserialize(d)?;
+        let kind = match table.remove("kind") {
+            Some(toml::Value::String(k)) => k,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "`kind` must be a string, not {}",
+                    other.type_str()
+                )));
+            }
+            None => return Err(D::Error::custom("missing `kind`")),
+        };
+        let as_table = |table: toml::Table| {
+            let mut outer = toml::Table::new();
+            outer.insert(kind.clone(), toml::Value::Table(table));
+            toml::Value::Table(outer).try_into::<T>()
+        };
+        let result = if table.is_empty() {
+            // A variant without fields (`kind = "none"`), or one whose
+            // fields all have defaults.
+            toml::Value::String(kind.clone())
+                .try_into::<T>()
+                .or_else(|_| as_table(table))
+        } else {
+            as_table(table)
+        };
+        // Display (not message()) keeps the "in `key`" context.
+        result
+            .map(Kind)
+            .map_err(|e| D::Error::custom(e.to_string().trim().replace('\n', " ")))
+    }
+}
+
+/// Checks a robot name (from the file or `--name`).
+pub fn check_name(name: &str) -> Result<(), String> {
+    if name.is_empty()
+        || name.len() > mech_proto::MAX_NAME_LEN
+        || name.chars().any(|c| c.is_whitespace() || c.is_control())
+    {
+        Err(format!(
+            "name {name:?}: expected 1 to {} characters without spaces",
+            mech_proto::MAX_NAME_LEN
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// When an error is reported against a whole `[section]` but names one of
+/// its keys in backticks, the offset of that key's line instead.
+fn refine(text: &str, section_start: usize, message: &str) -> usize {
+    let Some(section) = text.get(section_start..).filter(|s| s.starts_with('[')) else {
+        return section_start;
+    };
+    let mut keys: Vec<&str> = message.split('`').skip(1).step_by(2).collect();
+    if message.contains("unknown variant") {
+        keys.insert(0, "kind");
+    }
+    for key in keys {
+        let mut offset = section_start;
+        for (i, line) in section.split_inclusive('\n').enumerate() {
+            let trimmed = line.trim_start();
+            if i > 0 && trimmed.starts_with('[') {
+                break;
+            }
+            let is_key = trimmed
+                .strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='));
+            if i > 0 && !key.is_empty() && is_key {
+                return offset + (line.len() - trimmed.len());
+            }
+            offset += line.len();
+        }
+    }
+    section_start
 }
 
 /// 1-based line and column of a byte offset.
@@ -398,7 +503,7 @@ mod tests {
         let c = RobotConfig::parse(MINIMAL, "r1.toml").unwrap();
         assert_eq!(c.name.get_ref(), "r1");
         assert_eq!(
-            *c.link.get_ref(),
+            *c.link(),
             LinkConfig::Udp {
                 router: "127.0.0.1:7400".parse().unwrap()
             }
@@ -420,9 +525,25 @@ mod tests {
     fn errors_name_file_line_and_expectation() {
         let e = error(&format!("{MINIMAL}telemetry_rate_hz = \"fast\"\n"));
         assert!(e.starts_with("bad.toml:"), "{e}");
+        let e = error(
+            "name = \"r1\"\n[platform]\nkind = \"diff-drive\"\ntrack_width = \"wide\"\nmax_wheel_speed = 0.5\n",
+        );
+        assert!(
+            e.starts_with("bad.toml:4:1:")
+                && e.contains("expected f64")
+                && e.contains("track_width"),
+            "{e}"
+        );
+        let e = error(
+            "name = \"r1\"\n[platform]\nkind = \"diff-drive\"\nmax_wheel_speed = 0.5\ntrak_width = 0.1\n",
+        );
+        assert!(
+            e.starts_with("bad.toml:5:1:") && e.contains("unknown field `trak_width`"),
+            "{e}"
+        );
         let e = error("name = \"r1\"\n\n[platform]\nkind = \"hexapod\"\n");
         assert!(
-            e.starts_with("bad.toml:4:8:") && e.contains("hexapod") && e.contains("diff-drive"),
+            e.starts_with("bad.toml:4:1:") && e.contains("hexapod") && e.contains("diff-drive"),
             "{e}"
         );
         let e = error(&format!("{MINIMAL}[failsafe]\nchannel_timout = 0.5\n"));
@@ -432,7 +553,7 @@ mod tests {
         );
         let e = error(&format!("{MINIMAL}[filter]\nwindow = 0\n"));
         assert!(
-            e.starts_with("bad.toml:") && e.contains("window = 0"),
+            e.starts_with("bad.toml:7:1:") && e.contains("`window` = 0"),
             "{e}"
         );
         let e = error(
@@ -445,7 +566,10 @@ mod tests {
         let e = error(
             "name = \"r1\"\n[platform]\nkind = \"kiwi\"\nradius = -0.1\nmax_wheel_speed = 0.5\n",
         );
-        assert!(e.contains("radius must be a positive number"), "{e}");
+        assert!(
+            e.starts_with("bad.toml:4:1:") && e.contains("`radius` must be a positive number"),
+            "{e}"
+        );
         let e = error(&format!(
             "{MINIMAL}[actuators]\nkind = \"l298\"\nchannels = [{{ in1 = 5, in2 = 6, enable = 12 }}]\n"
         ));

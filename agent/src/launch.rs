@@ -46,13 +46,13 @@ pub async fn run(
 ) -> Result<(), LaunchError> {
     let origin = Instant::now();
     let stamp_origin = crate::clock::unix_micros();
-    let simulated = overrides.sim || matches!(config.position.get_ref(), PositionConfig::Sim);
+    let simulated = overrides.sim || matches!(config.position(), PositionConfig::Sim);
     let io = open_link(&config, &overrides).await?;
     let ticker = Ticker::Own(config.control_period());
     let settings = config.agent_settings(simulated);
     tracing::info!(
         name = %settings.name,
-        platform = config.platform.get_ref().build().name(),
+        platform = config.platform().build().name(),
         simulated,
         "agent starting"
     );
@@ -67,16 +67,10 @@ pub async fn run(
             z: s.z,
             heading: s.heading,
         };
-        let sim = SimAgent::new(
-            settings,
-            config.platform.get_ref(),
-            pose,
-            noise,
-            stamp_origin,
-        );
+        let sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
         runtime::drive(SimVehicle(sim), io, ticker, origin, shutdown).await;
     } else {
-        let agent = Agent::new(settings, config.platform.get_ref().build(), stamp_origin);
+        let agent = Agent::new(settings, config.platform().build(), stamp_origin);
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
         runtime::drive(
@@ -98,11 +92,11 @@ pub async fn run(
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {
     // `--router` turns any robot into a UDP one (bench testing a radio robot).
-    let router = match config.link.get_ref() {
+    let router = match config.link() {
         LinkConfig::Udp { router } => Some(overrides.router.unwrap_or(*router)),
         LinkConfig::Serial { .. } => overrides.router,
     };
-    match (router, config.link.get_ref()) {
+    match (router, config.link()) {
         (Some(router), _) => {
             let local = if router.ip().is_loopback() {
                 SocketAddr::from(([127, 0, 0, 1], 0))
@@ -135,7 +129,7 @@ fn open_serial(_port: &str, _baud: u32) -> Result<Io, LaunchError> {
 }
 
 fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, LaunchError> {
-    match config.actuators.get_ref() {
+    match config.actuators() {
         ActuatorConfig::None => Ok(Box::new(NoActuators::default())),
         #[cfg(feature = "rpi")]
         ActuatorConfig::L298 {
@@ -163,7 +157,7 @@ type PositionRx = std::sync::mpsc::Receiver<Result<PositionSample, String>>;
 
 #[cfg_attr(not(feature = "serial"), allow(unused_variables))]
 fn open_position(config: &RobotConfig, origin: Instant) -> Result<Option<PositionRx>, LaunchError> {
-    match config.position.get_ref() {
+    match config.position() {
         PositionConfig::None | PositionConfig::External | PositionConfig::Sim => Ok(None),
         #[cfg(feature = "serial")]
         PositionConfig::Pozyx {

@@ -60,13 +60,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         None => anyhow::bail!("give --config robot.toml, or --sim for a simulated robot"),
     };
     if let Some(name) = cli.name {
+        mech_agent::config::check_name(&name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
         config.name = toml::Spanned::new(0..0, name);
-        // Re-check the new name with the same rules as the file's.
-        let text = format!(
-            "name = {:?}\n[platform]\nkind = \"kiwi\"\nradius = 0.1\nmax_wheel_speed = 0.5\n",
-            config.name.get_ref()
-        );
-        RobotConfig::parse(&text, "--name")?;
     }
     let router = cli
         .router
@@ -90,8 +85,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .context("starting the runtime")?;
     runtime.block_on(async move {
         let (stop, shutdown) = tokio::sync::watch::channel(false);
+        let mut terminate =
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                .context("installing the SIGTERM handler")?;
         tokio::spawn(async move {
-            let _ = tokio::signal::ctrl_c().await;
+            // Either signal stops the robot cleanly: actuators zeroed, Bye sent.
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = terminate.recv() => {}
+            }
             let _ = stop.send(true);
         });
         launch::run(

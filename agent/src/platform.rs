@@ -75,9 +75,9 @@ pub trait Platform: Debug + Send {
 }
 
 /// A platform and its geometry, as written in a robot's config
-/// (`[platform] kind = "diff-drive"`).
+/// (`[platform] kind = "diff-drive"`, read through [`crate::config::Kind`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum PlatformSpec {
     DiffDrive {
         /// Distance between the wheel contact points, m.
@@ -130,7 +130,7 @@ impl PlatformSpec {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{what} must be a positive number, got {v}"))
+                Err(format!("`{what}` must be a positive number, got {v}"))
             }
         };
         match *self {

@@ -92,7 +92,9 @@ impl Vehicle for HardwareVehicle {
         let tick = self.agent.tick(now);
         if let Err(e) = self.actuators.set_outputs(&tick.outputs) {
             tracing::error!(error = %e, "actuators");
-            extra.extend(self.agent.driver_fault(&format!("actuators: {e}"), now));
+            extra.extend(self.agent.actuator_fault(&format!("actuators: {e}"), now));
+            // Zero what still answers.
+            let _ = self.actuators.stop_all(tick.outputs.len());
         }
         let mut out = tick.outgoing;
         out.extend(extra);

@@ -6,6 +6,7 @@
 pub mod agent;
 pub mod noise;
 pub mod robot;
+pub mod trial;
 
 use std::net::SocketAddr;
 use std::time::Duration;

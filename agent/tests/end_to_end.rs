@@ -9,7 +9,10 @@ use std::time::Duration;
 
 use mech_agent::config::RobotConfig;
 use mech_agent::launch::{self, Overrides};
-use mech_proto::{Body, Command, ControlMode, Envelope, FailsafeState, Header, Heartbeat, NoticeCode, Route, Telemetry, Twist, Welcome};
+use mech_proto::{
+    Body, Command, ControlMode, Envelope, FailsafeState, Header, Heartbeat, NoticeCode, Route,
+    Telemetry, Twist, Welcome,
+};
 use tokio::sync::watch;
 
 const NAME: &str = "e2e_bot";
@@ -26,13 +29,21 @@ fn config(link: &str) -> RobotConfig {
 
 fn from_router(destination: &str, channel: &str, body: Body) -> Envelope {
     Envelope::new(
-        Header { sender: "ctl".into(), destination: destination.into(), channel: channel.into(), ..Header::default() },
+        Header {
+            sender: "ctl".into(),
+            destination: destination.into(),
+            channel: channel.into(),
+            ..Header::default()
+        },
         body,
     )
 }
 
 fn twist(vx: f64) -> Body {
-    Body::Command(Command::Twist(Twist { vx, ..Twist::default() }))
+    Body::Command(Command::Twist(Twist {
+        vx,
+        ..Twist::default()
+    }))
 }
 
 /// The fake router's side of a link.
@@ -43,9 +54,18 @@ trait RouterSide {
 }
 
 /// Receives (sending router heartbeats meanwhile) until `want` matches.
-async fn wait_for<R: RouterSide, T>(r: &mut R, what: &str, mut want: impl FnMut(&Envelope) -> Option<T>) -> T {
+async fn wait_for<R: RouterSide, T>(
+    r: &mut R,
+    what: &str,
+    mut want: impl FnMut(&Envelope) -> Option<T>,
+) -> T {
     for _ in 0..100 {
-        r.send(&from_router(NAME, "", Body::Heartbeat(Heartbeat { uptime_ms: 0 }))).await;
+        r.send(&from_router(
+            NAME,
+            "",
+            Body::Heartbeat(Heartbeat { uptime_ms: 0 }),
+        ))
+        .await;
         while let Some(env) = r.recv().await {
             if let Some(t) = want(&env) {
                 return t;
@@ -69,37 +89,80 @@ async fn scenario<R: RouterSide>(r: &mut R) {
         _ => None,
     })
     .await;
-    assert_eq!((hello.name.as_str(), hello.platform.as_str(), hello.motors), (NAME, "diff-drive", 2));
+    assert_eq!(
+        (hello.name.as_str(), hello.platform.as_str(), hello.motors),
+        (NAME, "diff-drive", 2)
+    );
 
-    let welcome = Welcome { robot_id: 1, route: Route { robot: NAME.into(), channel: String::new(), epoch: 0 }, router_version: "fake".into() };
+    let welcome = Welcome {
+        robot_id: 1,
+        route: Route {
+            robot: NAME.into(),
+            channel: String::new(),
+            epoch: 0,
+        },
+        router_version: "fake".into(),
+    };
     r.send(&from_router(NAME, "", Body::Welcome(welcome))).await;
-    wait_for(r, "RouteAck 0", |e| matches!(&e.body, Body::RouteAck(a) if a.epoch == 0).then_some(())).await;
+    wait_for(r, "RouteAck 0", |e| {
+        matches!(&e.body, Body::RouteAck(a) if a.epoch == 0).then_some(())
+    })
+    .await;
 
-    r.send(&from_router(NAME, "", Body::Route(Route { robot: NAME.into(), channel: "joy/0".into(), epoch: 1 }))).await;
-    wait_for(r, "RouteAck 1", |e| matches!(&e.body, Body::RouteAck(a) if a.epoch == 1 && a.channel == "joy/0").then_some(())).await;
+    r.send(&from_router(
+        NAME,
+        "",
+        Body::Route(Route {
+            robot: NAME.into(),
+            channel: "joy/0".into(),
+            epoch: 1,
+        }),
+    ))
+    .await;
+    wait_for(r, "RouteAck 1", |e| {
+        matches!(&e.body, Body::RouteAck(a) if a.epoch == 1 && a.channel == "joy/0").then_some(())
+    })
+    .await;
 
     // Obeys the routed channel.
     r.send(&from_router(NAME, "joy/0", twist(0.2))).await;
-    let t = wait_for(r, "driving telemetry", |e| telemetry(e).filter(|t| t.mode == ControlMode::Twist && t.actuators.iter().all(|u| *u > 0.0))).await;
+    let t = wait_for(r, "driving telemetry", |e| {
+        telemetry(e)
+            .filter(|t| t.mode == ControlMode::Twist && t.actuators.iter().all(|u| *u > 0.0))
+    })
+    .await;
     assert_eq!(t.channel, "joy/0");
     assert_eq!(t.failsafe, FailsafeState::Ok);
 
     // Rejects another channel: a notice, and the outputs keep their sign.
     r.send(&from_router(NAME, "joy/0", twist(0.2))).await;
     r.send(&from_router(NAME, "key/0", twist(-0.4))).await;
-    wait_for(r, "NotRouted notice", |e| matches!(&e.body, Body::Notice(n) if n.code == NoticeCode::NotRouted).then_some(())).await;
+    wait_for(r, "NotRouted notice", |e| {
+        matches!(&e.body, Body::Notice(n) if n.code == NoticeCode::NotRouted).then_some(())
+    })
+    .await;
     r.send(&from_router(NAME, "joy/0", twist(0.2))).await;
     let t = wait_for(r, "telemetry", telemetry).await;
-    assert!(t.actuators.iter().all(|u| *u >= 0.0), "wrong-channel command had an effect: {t:?}");
+    assert!(
+        t.actuators.iter().all(|u| *u >= 0.0),
+        "wrong-channel command had an effect: {t:?}"
+    );
 
     // Channel silence (router still alive): stops.
-    let t = wait_for(r, "ChannelSilent", |e| telemetry(e).filter(|t| t.failsafe == FailsafeState::ChannelSilent)).await;
+    let t = wait_for(r, "ChannelSilent", |e| {
+        telemetry(e).filter(|t| t.failsafe == FailsafeState::ChannelSilent)
+    })
+    .await;
     assert!(t.actuators.iter().all(|u| *u == 0.0), "{t:?}");
     assert_eq!(t.mode, ControlMode::Idle);
 
     // The next accepted command resumes.
     r.send(&from_router(NAME, "joy/0", twist(0.2))).await;
-    wait_for(r, "resumed", |e| telemetry(e).filter(|t| t.failsafe == FailsafeState::Ok && t.actuators.iter().all(|u| *u > 0.0))).await;
+    wait_for(r, "resumed", |e| {
+        telemetry(e)
+            .filter(|t| t.failsafe == FailsafeState::Ok && t.actuators.iter().all(|u| *u > 0.0))
+    })
+    .await;
 }
 
 mod udp {
@@ -114,12 +177,19 @@ mod udp {
     impl RouterSide for Udp {
         async fn send(&mut self, env: &Envelope) {
             if let Some(a) = self.agent {
-                self.socket.send_to(&mech_proto::encode(env).unwrap(), a).await.unwrap();
+                self.socket
+                    .send_to(&mech_proto::encode(env).unwrap(), a)
+                    .await
+                    .unwrap();
             }
         }
         async fn recv(&mut self) -> Option<Envelope> {
             let mut buf = vec![0; 65536];
-            let (n, from) = tokio::time::timeout(Duration::from_millis(100), self.socket.recv_from(&mut buf)).await.ok()?.unwrap();
+            let (n, from) =
+                tokio::time::timeout(Duration::from_millis(100), self.socket.recv_from(&mut buf))
+                    .await
+                    .ok()?
+                    .unwrap();
             self.agent = Some(from);
             Some(mech_proto::decode(&buf[..n]).unwrap())
         }
@@ -130,12 +200,25 @@ mod udp {
         let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
         let router = socket.local_addr().unwrap();
         let (stop, shutdown) = watch::channel(false);
-        let agent = tokio::spawn(launch::run(config(""), Overrides { sim: true, router: Some(router) }, shutdown));
-        let mut r = Udp { socket, agent: None };
+        let agent = tokio::spawn(launch::run(
+            config(""),
+            Overrides {
+                sim: true,
+                router: Some(router),
+            },
+            shutdown,
+        ));
+        let mut r = Udp {
+            socket,
+            agent: None,
+        };
         scenario(&mut r).await;
         stop.send(true).unwrap();
         agent.await.unwrap().unwrap();
-        wait_for(&mut r, "Bye", |e| matches!(e.body, Body::Bye(_)).then_some(())).await;
+        wait_for(&mut r, "Bye", |e| {
+            matches!(e.body, Body::Bye(_)).then_some(())
+        })
+        .await;
     }
 }
 
@@ -162,7 +245,9 @@ mod serial {
             if self.sent % 2 == 0 {
                 let mut corrupt = frame.clone();
                 corrupt[frame.len() / 2] ^= 0x5a;
-                self.writer.write_all(&[0x13, 0x37, 0x00, 0xde, 0xad]).unwrap();
+                self.writer
+                    .write_all(&[0x13, 0x37, 0x00, 0xde, 0xad])
+                    .unwrap();
                 self.writer.write_all(&[0]).unwrap();
                 self.writer.write_all(&corrupt).unwrap();
             }
@@ -170,7 +255,9 @@ mod serial {
             self.writer.flush().unwrap();
         }
         async fn recv(&mut self) -> Option<Envelope> {
-            tokio::time::timeout(Duration::from_millis(100), self.rx.recv()).await.ok()?
+            tokio::time::timeout(Duration::from_millis(100), self.rx.recv())
+                .await
+                .ok()?
         }
     }
 
@@ -204,9 +291,16 @@ mod serial {
             }
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
-        assert!(a.exists() && b.exists(), "socat did not create the pty pair");
+        assert!(
+            a.exists() && b.exists(),
+            "socat did not create the pty pair"
+        );
 
-        let port = std::fs::OpenOptions::new().read(true).write(true).open(&b).unwrap();
+        let port = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&b)
+            .unwrap();
         let mut reader = port.try_clone().unwrap();
         let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
         std::thread::spawn(move || {
@@ -227,13 +321,30 @@ mod serial {
             }
         });
 
-        let link = format!("[link]\nkind = \"serial\"\nport = \"{}\"\nbaud = 115200\n", a.display());
+        let link = format!(
+            "[link]\nkind = \"serial\"\nport = \"{}\"\nbaud = 115200\n",
+            a.display()
+        );
         let (stop, shutdown) = watch::channel(false);
-        let agent = tokio::spawn(launch::run(config(&link), Overrides { sim: true, router: None }, shutdown));
-        let mut r = Pty { writer: port, rx, sent: 0 };
+        let agent = tokio::spawn(launch::run(
+            config(&link),
+            Overrides {
+                sim: true,
+                router: None,
+            },
+            shutdown,
+        ));
+        let mut r = Pty {
+            writer: port,
+            rx,
+            sent: 0,
+        };
         scenario(&mut r).await;
         stop.send(true).unwrap();
         agent.await.unwrap().unwrap();
-        wait_for(&mut r, "Bye", |e| matches!(e.body, Body::Bye(_)).then_some(())).await;
+        wait_for(&mut r, "Bye", |e| {
+            matches!(e.body, Body::Bye(_)).then_some(())
+        })
+        .await;
     }
 }

@@ -66,6 +66,7 @@ pub fn init(config: &LogConfig, stderr_level: Option<&str>) -> Result<LogGuard, 
         Some(level) => Some(
             fmt::layer()
                 .with_writer(std::io::stderr)
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
                 .with_target(false)
                 .with_filter(filter(level)?),
         ),

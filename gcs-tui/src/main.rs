@@ -124,10 +124,7 @@ async fn run_script(config: GcsConfig, demo: Option<usize>, source: &str) -> any
     let gcs = Gcs::start(config)
         .await
         .context("cannot start the router")?;
-    let mut executor = Executor::new(gcs.clone());
-    if let Some(spawner) = mech_gcs::script::simulator() {
-        executor = executor.with_spawner(spawner);
-    }
+    let mut executor = Executor::new(gcs.clone()).with_spawner(script::simulator());
     let sink: Sink = Arc::new(Mutex::new(Box::new(std::io::stdout())));
     let code = async {
         if let Some(n) = demo {

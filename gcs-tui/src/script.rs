@@ -192,40 +192,33 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
             emit(&sink, &event_json(&s));
         }
     });
-    let printer_sink = sink.clone();
-    let (stop_tx, mut stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let printer = tokio::spawn(async move {
-        loop {
-            tokio::select! {
-                ev = events.recv() => match ev {
-                    Some(ev) => emit(&printer_sink, &event_json(&ev)),
-                    None => return,
-                },
-                _ = &mut stop_rx => break,
-            }
-        }
-        while let Some(ev) = events.try_recv() {
-            emit(&printer_sink, &event_json(&ev));
-        }
-    });
-    let mut outcome = ScriptOutcome::Passed {
-        commands: statements.len(),
-    };
+    let mut outcome = ScriptOutcome::Passed { commands: statements.len() };
     for (i, stmt) in statements.iter().enumerate() {
-        let result = executor.execute(stmt).await;
-        // Let events caused by this command print before its result.
-        tokio::task::yield_now().await;
+        // Events are printed while the command runs, and those it caused
+        // synchronously (route changes, e-stops) before its result.
+        let result = {
+            let run = executor.execute(stmt);
+            tokio::pin!(run);
+            loop {
+                tokio::select! {
+                    biased;
+                    r = &mut run => break r,
+                    Some(ev) = events.recv() => emit(&sink, &event_json(&ev)),
+                }
+            }
+        };
+        while let Some(ev) = events.try_recv() {
+            emit(&sink, &event_json(&ev));
+        }
         emit(&sink, &result_json(gcs, stmt, result.as_ref()));
         if let Err(error) = result {
-            outcome = ScriptOutcome::Failed {
-                error,
-                commands: i + 1,
-            };
+            outcome = ScriptOutcome::Failed { error, commands: i + 1 };
             break;
         }
     }
-    let _ = stop_tx.send(());
-    let _ = printer.await;
+    while let Some(ev) = events.try_recv() {
+        emit(&sink, &event_json(&ev));
+    }
     let (ok, ran, error) = match &outcome {
         ScriptOutcome::Passed { commands } => (true, *commands, None),
         ScriptOutcome::Failed { error, commands } => (false, *commands, Some(error.to_string())),
@@ -250,7 +243,54 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
     outcome
 }
 
-/// The simulated fleet `spawn` and `--demo` start, if this build has one.
-pub fn simulator() -> Option<Box<dyn crate::lang::SimSpawner>> {
-    None
+/// Simulated agents (`mech_agent::sim`) for `spawn` and `--demo`: the same
+/// agent core as on a robot, with simulated platforms and UWB-like position
+/// noise, over real loopback UDP. One fleet per run (its robots are named
+/// `robot_1..robot_N`, so a second fleet would reuse the names).
+#[derive(Debug)]
+pub struct SimulatedFleet {
+    pub arena: mech_agent::sim::Arena,
+    pub options: mech_agent::sim::SimFleetOptions,
+    fleet: Option<mech_agent::sim::SimFleet>,
+}
+
+impl SimulatedFleet {
+    pub fn new(arena: mech_agent::sim::Arena, options: mech_agent::sim::SimFleetOptions) -> SimulatedFleet {
+        SimulatedFleet { arena, options, fleet: None }
+    }
+}
+
+impl crate::lang::SimSpawner for SimulatedFleet {
+    fn spawn(
+        &mut self,
+        count: usize,
+        router: std::net::SocketAddr,
+    ) -> futures::future::BoxFuture<'_, Result<Vec<String>, String>> {
+        Box::pin(async move {
+            if let Some(f) = &self.fleet {
+                return Err(format!("{} simulated agents are already running; spawn once per run", f.names().len()));
+            }
+            let fleet = mech_agent::sim::SimFleet::spawn(count, router, self.arena, self.options.clone())
+                .await
+                .map_err(|e| e.to_string())?;
+            let names = fleet.names();
+            tracing::info!(count, %router, "simulated agents started");
+            self.fleet = Some(fleet);
+            Ok(names)
+        })
+    }
+
+    fn shutdown(&mut self) -> futures::future::BoxFuture<'_, ()> {
+        Box::pin(async move {
+            if let Some(f) = self.fleet.take() {
+                f.shutdown().await;
+            }
+        })
+    }
+}
+
+/// The simulator `spawn` and `--demo` use: the default arena (the 2017
+/// lab's 3.9 m x 2.8 m) with position noise.
+pub fn simulator() -> Box<dyn crate::lang::SimSpawner> {
+    Box::new(SimulatedFleet::new(mech_agent::sim::Arena::default(), mech_agent::sim::SimFleetOptions::default()))
 }

@@ -162,8 +162,9 @@ impl Executor {
                     }
                 });
                 let l = if *looped { ", looped" } else { "" };
+                let s = if points.len() == 1 { "" } else { "s" };
                 Ok(Outcome::new(format!(
-                    "{} waypoints for {}{l}",
+                    "{} waypoint{s} for {}{l}",
                     points.len(),
                     robots.join(", ")
                 )))

@@ -231,6 +231,11 @@ impl Tables {
         };
         const COMMAND: u8 = 5;
         if head.kind == COMMAND {
+            // The body is checked (a truncated or out-of-range command is
+            // never forwarded) but not re-encoded: the received bytes go on.
+            if let Err(e) = mech_proto::decode(bytes) {
+                return self.bad(from, e.to_string(), events);
+            }
             return self.route_command(&head, from, now, out, events);
         }
         let env = match mech_proto::decode(bytes) {

@@ -1,0 +1,193 @@
+//! Repeatable waypoint trials: one simulated agent (real core, UWB-like
+//! noise, median filter) driven through a mission exactly as the router
+//! would drive it, stepped in simulated time. Used by the accuracy
+//! benchmark (`cargo run --release -p mech-agent --example waypoint_accuracy`)
+//! and its test.
+
+use std::time::Duration;
+
+use mech_proto::{Body, Envelope, Header, Heartbeat, Mission, Pose, Route, Waypoint, Welcome};
+
+use super::agent::SimAgent;
+use super::noise::{UwbNoise, UwbNoiseModel};
+use crate::agent::AgentSettings;
+use crate::platform::PlatformSpec;
+
+/// Outcome of one trial.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrialResult {
+    /// True distance from the final waypoint once the robot has stopped, m.
+    pub final_error: f64,
+    /// Whether the agent reported the mission finished.
+    pub finished: bool,
+    /// Simulated time taken, s.
+    pub seconds: f64,
+}
+
+/// Parameters of a trial.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trial {
+    pub platform: PlatformSpec,
+    pub start: Pose,
+    pub waypoints: Vec<Waypoint>,
+    pub arrival_radius: f64,
+    /// `None`: perfect positions.
+    pub noise: Option<UwbNoiseModel>,
+    pub seed: u64,
+    pub control_period: Duration,
+    /// Give up after this much simulated time.
+    pub timeout: Duration,
+    pub filter_window: usize,
+}
+
+impl Trial {
+    /// A mission through `waypoints` from `start`, UWB-like noise, 50 Hz
+    /// control, a 9-sample median filter.
+    pub fn new(platform: PlatformSpec, start: Pose, waypoints: Vec<Waypoint>, seed: u64) -> Trial {
+        Trial {
+            platform,
+            start,
+            waypoints,
+            arrival_radius: 0.03,
+            noise: Some(UwbNoiseModel::default()),
+            seed,
+            control_period: Duration::from_millis(20),
+            timeout: Duration::from_secs(120),
+            filter_window: 9,
+        }
+    }
+
+    /// Runs the trial.
+    pub fn run(&self) -> TrialResult {
+        let mut settings = AgentSettings::new("trial");
+        settings.filter_window = self.filter_window;
+        let noise = self.noise.map(|m| UwbNoise::new(m, self.seed));
+        let mut sim = SimAgent::new(settings, &self.platform, self.start, noise, 0);
+        let msg = |channel: &str, body: Body| {
+            Envelope::new(
+                Header {
+                    sender: "router".into(),
+                    destination: "trial".into(),
+                    channel: channel.into(),
+                    ..Header::default()
+                },
+                body,
+            )
+        };
+        let mut now = Duration::ZERO;
+        sim.tick(now);
+        let route = Route {
+            robot: "trial".into(),
+            channel: "wp/gcs".into(),
+            epoch: 1,
+        };
+        sim.handle(
+            msg(
+                "",
+                Body::Welcome(Welcome {
+                    robot_id: 1,
+                    route,
+                    router_version: "trial".into(),
+                }),
+            ),
+            now,
+        );
+        let mission = Mission {
+            id: 1,
+            waypoints: self.waypoints.clone(),
+            looped: false,
+            arrival_radius: self.arrival_radius,
+            start_index: 0,
+        };
+        sim.handle(msg("wp/gcs", Body::Mission(mission)), now);
+        let mut next_heartbeat = Duration::ZERO;
+        let mut finished_at = None;
+        while now < self.timeout {
+            now += self.control_period;
+            if now >= next_heartbeat {
+                sim.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+                next_heartbeat = now + Duration::from_millis(250);
+            }
+            sim.tick(now);
+            let done = sim.agent.mission("wp/gcs").is_some_and(|m| m.finished());
+            match finished_at {
+                None if done => finished_at = Some(now),
+                // Let the vehicle come to rest before measuring.
+                Some(t) if now >= t + Duration::from_secs(1) => break,
+                _ => {}
+            }
+        }
+        let target = self.waypoints.last().copied().unwrap_or(Waypoint {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            time: None,
+        });
+        let p = sim.robot.pose();
+        let dz = if self.platform.build().flies() {
+            p.z - target.z
+        } else {
+            0.0
+        };
+        TrialResult {
+            final_error: ((p.x - target.x).powi(2) + (p.y - target.y).powi(2) + dz * dz).sqrt(),
+            finished: finished_at.is_some(),
+            seconds: finished_at.unwrap_or(now).as_secs_f64(),
+        }
+    }
+}
+
+/// A standard trial `i`: a three-waypoint course across a 3.9 m x 2.8 m
+/// arena, start pose and course varied by `i`.
+pub fn standard_trial(platform: PlatformSpec, i: u64) -> Trial {
+    let f = i as f64;
+    let start = Pose {
+        x: 0.4 + 0.1 * (f % 5.0),
+        y: 0.4 + 0.15 * (f % 4.0),
+        z: 0.0,
+        heading: 0.7 * f,
+    };
+    let wp = |x: f64, y: f64| Waypoint {
+        x,
+        y,
+        z: 1.0,
+        time: None,
+    };
+    let waypoints = vec![
+        wp(3.2 - 0.1 * (f % 3.0), 0.6 + 0.05 * (f % 4.0)),
+        wp(3.0, 2.2 - 0.1 * (f % 4.0)),
+        wp(1.0 + 0.2 * (f % 6.0), 1.4 + 0.1 * (f % 5.0)),
+    ];
+    Trial::new(platform, start, waypoints, 1000 + i)
+}
+
+/// Median and 95th percentile of `values` (nearest rank).
+pub fn median_p95(values: &[f64]) -> (f64, f64) {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let rank = |q: f64| v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+    (rank(0.5), rank(0.95))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<f64> = (1..=20).map(f64::from).collect();
+        assert_eq!(median_p95(&v), (10.0, 19.0));
+    }
+
+    #[test]
+    fn noiseless_trial_finishes_inside_the_radius() {
+        let mut t = standard_trial(PlatformSpec::diff_drive(), 0);
+        t.noise = None;
+        let r = t.run();
+        assert!(r.finished, "{r:?}");
+        assert!(r.final_error <= t.arrival_radius, "{r:?}");
+    }
+}
