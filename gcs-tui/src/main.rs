@@ -99,9 +99,7 @@ async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyh
     let gcs = Gcs::start(config)
         .await
         .context("cannot start the router")?;
-    let spawner =
-        mech_gcs::script::simulator().unwrap_or_else(mech_gcs::ui::demo::DemoSpawner::boxed);
-    let executor = Executor::new(gcs.clone()).with_spawner(spawner);
+    let executor = Executor::new(gcs.clone()).with_spawner(mech_gcs::script::simulator());
     let mut options = mech_gcs::ui::RunOptions {
         mouse: !no_mouse,
         ..mech_gcs::ui::RunOptions::default()

@@ -15,7 +15,6 @@ pub use fleet::{
     ArenaBounds, ChannelView, ClusterView, FleetSnapshot, LinkState, RobotView, RouteView,
 };
 pub mod cards;
-pub mod demo;
 pub mod events;
 pub mod fixture;
 pub mod help;

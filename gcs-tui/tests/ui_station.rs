@@ -5,8 +5,6 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use mech_gcs::lang::SimSpawner;
-use mech_gcs::ui::demo::DemoSpawner;
 use mech_gcs::ui::{Action, App, CoreLink, LinkState, Select, snapshot};
 use mech_gcs::{Gcs, GcsConfig};
 use mech_proto::Waypoint;
@@ -43,7 +41,7 @@ async fn app_requests_reach_simulated_robots() {
     config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
     config.router.tcp = None;
     let gcs = Gcs::start(config).await.expect("router starts");
-    let mut spawner = DemoSpawner::default();
+    let mut spawner = mech_gcs::script::simulator();
     let names = spawner
         .spawn(2, gcs.router().udp_addr())
         .await
@@ -139,7 +137,7 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
     config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
     config.router.tcp = None;
     let gcs = Gcs::start(config).await.expect("router starts");
-    let mut spawner = DemoSpawner::default();
+    let mut spawner = mech_gcs::script::simulator();
     spawner
         .spawn(1, gcs.router().udp_addr())
         .await

@@ -52,14 +52,15 @@ impl Default for RunOptions {
     }
 }
 
-/// The arena the demo's simulated fleet is spread over (the 2017 lab's
-/// Pozyx area), for the map outline.
+/// The arena the demo's simulated fleet is spread over (the agent
+/// simulator's default, the 2017 lab's Pozyx area), for the map outline.
 pub fn demo_arena() -> ArenaBounds {
+    let a = mech_agent::sim::Arena::default();
     ArenaBounds {
-        min_x: 0.0,
-        min_y: 0.0,
-        max_x: 3.9,
-        max_y: 2.8,
+        min_x: a.min_x,
+        min_y: a.min_y,
+        max_x: a.max_x,
+        max_y: a.max_y,
     }
 }
 
