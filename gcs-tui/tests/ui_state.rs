@@ -346,6 +346,21 @@ fn command_line_runs_through_the_core_with_history() {
     app.update(Action::HistoryNext);
     assert_eq!(app.prompt, Some(Prompt::Command("estop".into())));
     app.update(Action::PromptCancel);
+    app.update(Action::CommandResult(Ok(
+        "2 channels\n joy/0 gcs\n wp/gcs gcs".into(),
+    )));
+    let tail: Vec<&str> = app
+        .log
+        .iter()
+        .rev()
+        .take(3)
+        .map(|l| l.text.as_str())
+        .collect();
+    assert_eq!(
+        tail,
+        [" wp/gcs gcs", " joy/0 gcs", "2 channels"],
+        "details logged line by line"
+    );
     app.update(Action::CommandResult(Err(mech_gcs::ui::PromptError {
         line: "route robot_9 joy/0".into(),
         message: "no robot robot_9".into(),

@@ -408,8 +408,8 @@ impl App {
             Action::CommandResult(r) => match r {
                 Ok(text) => {
                     self.prompt_error = None;
-                    if !text.is_empty() {
-                        self.log(LogLevel::Info, text);
+                    for line in text.lines().filter(|l| !l.is_empty()) {
+                        self.log(LogLevel::Info, line.to_string());
                     }
                 }
                 Err(e) => {

@@ -259,7 +259,14 @@ async fn run_lines(
         let r = executor
             .execute_line(&line)
             .await
-            .map(|o| o.summary)
+            .map(|o| {
+                let mut text = o.summary;
+                for d in o.details {
+                    text.push('\n');
+                    text.push_str(&d);
+                }
+                text
+            })
             .map_err(|e| PromptError {
                 message: e.message,
                 column: Some(char_to_byte(&line, e.span.column.saturating_sub(1))),
