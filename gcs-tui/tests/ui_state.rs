@@ -391,3 +391,38 @@ fn zoom_keys_and_wheel_change_scale_fit_restores() {
     app.update(Action::FitFleet);
     assert_eq!(app.viewport, fitted);
 }
+
+#[test]
+fn clicking_a_routes_cell_picks_it_and_a_second_click_routes() {
+    let mut app = fixture::app(4, 160, 48);
+    let routes = app.areas().routes.expect("routes panel shown");
+    let cols = app.route_columns();
+    let wp = cols
+        .iter()
+        .position(|c| c == "wp/gcs")
+        .expect("wp/gcs column");
+    // Rows: border, header, robot_1, robot_2 ...; columns: border, 9-wide
+    // name and a space, then 7-wide channel cells.
+    let col = routes.x + 1 + 10 + 7 * wp as u16 + 1;
+    let row = routes.y + 1 + 1 + 3; // robot_4
+    app.take_requests();
+    app.update(Action::Click {
+        col,
+        row,
+        add: false,
+    });
+    assert_eq!(app.route_cursor, (3, wp));
+    assert!(app.take_requests().is_empty(), "first click only picks");
+    app.update(Action::Click {
+        col,
+        row,
+        add: false,
+    });
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Route {
+            robot: "robot_4".into(),
+            channel: "wp/gcs".into()
+        }]
+    );
+}

@@ -826,8 +826,21 @@ impl App {
         }
         if areas.waypoints.is_some_and(|a| a.contains(pos)) {
             self.set_focus(Focus::Waypoints);
-        } else if areas.routes.is_some_and(|a| a.contains(pos)) {
+        } else if let Some(routes) = areas.routes.filter(|a| a.contains(pos)) {
             self.set_focus(Focus::Routes);
+            let inner = super::layout::inner(routes);
+            let cols = self.route_columns().len();
+            let w = super::routes::TableWindow::new(self, inner, cols);
+            if let Some((r, c)) = w.cell_at(inner, col, row) {
+                if r < self.robots.len() && c < cols {
+                    // A click picks the cell; a click on the picked cell routes.
+                    if self.route_cursor == (r, c) {
+                        self.update(Action::ApplyRouteCursor);
+                    } else {
+                        self.route_cursor = (r, c);
+                    }
+                }
+            }
         }
     }
 

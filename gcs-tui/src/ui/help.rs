@@ -50,6 +50,7 @@ pub const KEYS: &[(&str, &str)] = &[
         "move the cursor: robot row, channel column",
     ),
     ("Routes: Enter", "route that robot to that channel"),
+    ("Routes: click", "pick a cell; click it again to route"),
     ("t", "keyboard teleop on key/0 on/off"),
     (
         "teleop: arrows WASD",
