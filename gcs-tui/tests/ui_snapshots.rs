@@ -60,6 +60,23 @@ fn estop_banner_and_help_80x24() {
     insta::assert_snapshot!("estop", screen(&app, 80, 24));
     app.update(Action::ToggleHelp);
     insta::assert_snapshot!("help", screen(&app, 80, 24));
+    app.update(Action::HelpScroll(100));
+    insta::assert_snapshot!("help_scrolled", screen(&app, 80, 24));
+}
+
+#[test]
+fn help_lists_every_key_across_its_pages() {
+    let mut app = populated(80, 24);
+    app.update(Action::ToggleHelp);
+    let mut seen = String::new();
+    for _ in 0..mech_gcs::ui::help::KEYS.len() {
+        seen.push_str(&screen(&app, 80, 24));
+        app.update(Action::HelpScroll(1));
+    }
+    for (k, d) in mech_gcs::ui::help::KEYS {
+        assert!(seen.contains(k), "key {k} shown");
+        assert!(seen.contains(d), "description of {k} shown whole");
+    }
 }
 
 #[test]

@@ -114,6 +114,8 @@ pub enum Action {
     Resize(u16, u16),
     Quit,
     ToggleHelp,
+    /// Scroll the help by entries (down positive).
+    HelpScroll(i32),
     /// Fresh state from the core.
     Fleet(FleetSnapshot),
     Select(Select),
@@ -230,6 +232,8 @@ pub struct App {
     pub focus: Focus,
     pub side: SidePanel,
     pub show_help: bool,
+    /// First help entry shown.
+    pub help_scroll: usize,
     pub waypoint_mode: bool,
     /// Waypoints being edited, in mission order.
     pub waypoints: Vec<Waypoint>,
@@ -273,6 +277,7 @@ impl App {
             focus: Focus::Map,
             side: SidePanel::Cards,
             show_help: false,
+            help_scroll: 0,
             waypoint_mode: false,
             waypoints: Vec::new(),
             prompt: None,
@@ -361,7 +366,16 @@ impl App {
                 self.running = false;
                 self.outbox.push(Request::Quit);
             }
-            Action::ToggleHelp => self.show_help = !self.show_help,
+            Action::ToggleHelp => {
+                self.show_help = !self.show_help;
+                self.help_scroll = 0;
+            }
+            Action::HelpScroll(d) => {
+                let rows = super::help::visible_entries(self.size.1);
+                let max = super::help::KEYS.len().saturating_sub(rows);
+                self.help_scroll =
+                    (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
+            }
             Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
             Action::Select(s) => self.select(s),
             Action::Click { col, row, add } => self.click(col, row, add),

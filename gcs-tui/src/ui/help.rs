@@ -3,18 +3,18 @@
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
 use ratatui::text::{Line, Span};
-use ratatui::widgets::{Block, Clear, Paragraph, Widget, Wrap};
+use ratatui::widgets::{Block, Clear, Paragraph, Widget};
 
 use super::theme::Theme;
 
 /// Every key binding: (keys, what it does).
 pub const KEYS: &[(&str, &str)] = &[
     (
-        "X  or Ctrl+X",
-        "E-STOP every robot (works in every mode, Ctrl+X while typing)",
+        "X  Ctrl+X",
+        "E-STOP every robot, in every mode (Ctrl+X while typing)",
     ),
     ("Ctrl+R / :release", "release the e-stop"),
-    ("?", "this help (any key closes)"),
+    ("?", "this help (↑↓ PgUp PgDn scroll, any other key closes)"),
     ("q  Ctrl+C", "quit"),
     (":", "command line (↑↓ history, Enter run, Esc cancel)"),
     (
@@ -62,16 +62,25 @@ pub const KEYS: &[(&str, &str)] = &[
     ),
 ];
 
-/// The help overlay, drawn centred over the screen.
+/// The help overlay, drawn centred over the screen; scrolls when the
+/// terminal is too short for every key.
 #[derive(Debug)]
 pub struct HelpOverlay {
     pub theme: Theme,
+    /// First entry shown.
+    pub scroll: usize,
+}
+
+/// Entries that fit in a terminal of `height` rows.
+pub fn visible_entries(height: u16) -> usize {
+    usize::from(height.saturating_sub(2)).max(1)
 }
 
 impl Widget for HelpOverlay {
     fn render(self, area: Rect, buf: &mut Buffer) {
-        let w = area.width.saturating_sub(4).min(90);
-        let h = area.height.saturating_sub(2).min(KEYS.len() as u16 + 2);
+        let w = if area.width > 84 { 80 } else { area.width };
+        let rows = visible_entries(area.height).min(KEYS.len());
+        let h = (rows as u16 + 2).min(area.height);
         let r = Rect {
             x: area.x + (area.width - w) / 2,
             y: area.y + (area.height - h) / 2,
@@ -79,8 +88,19 @@ impl Widget for HelpOverlay {
             height: h,
         };
         Clear.render(r, buf);
+        let first = self.scroll.min(KEYS.len() - rows);
+        let title = if rows < KEYS.len() {
+            format!(
+                " Keys {}-{} of {} (↑↓ scroll) ",
+                first + 1,
+                first + rows,
+                KEYS.len()
+            )
+        } else {
+            " Keys (any key closes) ".to_string()
+        };
         let block = Block::bordered()
-            .title(" Keys (? or Esc closes) ")
+            .title(title)
             .border_style(self.theme.focused_border());
         let key_w = KEYS
             .iter()
@@ -89,16 +109,15 @@ impl Widget for HelpOverlay {
             .unwrap_or(0);
         let lines: Vec<Line> = KEYS
             .iter()
+            .skip(first)
+            .take(rows)
             .map(|(k, d)| {
                 Line::from(vec![
-                    Span::styled(format!("{k:<key_w$}  "), self.theme.title()),
+                    Span::styled(format!("{k:<key_w$} "), self.theme.title()),
                     Span::raw(*d),
                 ])
             })
             .collect();
-        Paragraph::new(lines)
-            .block(block)
-            .wrap(Wrap { trim: false })
-            .render(r, buf);
+        Paragraph::new(lines).block(block).render(r, buf);
     }
 }

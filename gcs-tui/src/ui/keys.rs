@@ -36,7 +36,13 @@ pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
         _ => {}
     }
     if app.show_help {
-        return vec![Action::ToggleHelp];
+        return vec![match key.code {
+            KeyCode::Up | KeyCode::Char('k') => Action::HelpScroll(-1),
+            KeyCode::Down | KeyCode::Char('j') => Action::HelpScroll(1),
+            KeyCode::PageUp => Action::HelpScroll(-10),
+            KeyCode::PageDown | KeyCode::Char(' ') => Action::HelpScroll(10),
+            _ => Action::ToggleHelp,
+        }];
     }
     if app.prompt.is_some() {
         return prompt_key(app, key);

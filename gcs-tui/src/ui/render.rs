@@ -57,7 +57,11 @@ impl Widget for &App {
             EStopBanner { theme }.render(r, buf);
         }
         if self.show_help {
-            HelpOverlay { theme }.render(area, buf);
+            HelpOverlay {
+                theme,
+                scroll: self.help_scroll,
+            }
+            .render(area, buf);
         }
     }
 }
