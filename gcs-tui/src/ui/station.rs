@@ -38,6 +38,8 @@ pub struct RunOptions {
     pub gamepads: bool,
     /// Command-language lines to run first (e.g. `spawn 4` for the demo).
     pub startup: Vec<String>,
+    /// Dead-man, buttons, rate, shaping and limits of the gamepads.
+    pub teleop: crate::gamepad::TeleopConfig,
 }
 
 impl Default for RunOptions {
@@ -48,6 +50,7 @@ impl Default for RunOptions {
             arena: None,
             gamepads: true,
             startup: Vec::new(),
+            teleop: crate::gamepad::TeleopConfig::default(),
         }
     }
 }
@@ -142,6 +145,7 @@ async fn event_loop(
     app.mouse = options.mouse;
     app.monochrome = options.monochrome;
     app.arena = options.arena;
+    app.teleop = crate::gamepad::Teleop::new(options.teleop.clone());
     let size = terminal.size()?;
     app.update(Action::Resize(size.width, size.height));
     app.update(Action::FitFleet);
