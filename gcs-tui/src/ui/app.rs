@@ -22,7 +22,9 @@ pub const WAYPOINT_CHANNEL: &str = "wp/gcs";
 
 /// How long a robot's path stays on the map.
 pub const TRAIL_SECONDS: f64 = 10.0;
-const TRAIL_MAX_POINTS: usize = 200;
+const TRAIL_MAX_POINTS: usize = 400;
+/// Distance (m) between kept path points, above position-fix noise.
+const TRAIL_SPACING: f64 = 0.02;
 const LOG_LINES: usize = 200;
 const HISTORY_LINES: usize = 100;
 
@@ -512,7 +514,7 @@ impl App {
             let trail = self.trails.entry(r.name.clone()).or_default();
             let moved = trail
                 .back()
-                .is_none_or(|(_, x, y)| (x - r.pose.x).hypot(y - r.pose.y) > 1e-3);
+                .is_none_or(|(_, x, y)| (x - r.pose.x).hypot(y - r.pose.y) > TRAIL_SPACING);
             if moved {
                 trail.push_back((now, r.pose.x, r.pose.y));
                 if trail.len() > TRAIL_MAX_POINTS {
