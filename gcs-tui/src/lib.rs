@@ -8,7 +8,9 @@
 //! - [`script`]: the headless script runner (one JSON line per event);
 //! - [`control`]: fleet (cluster, follow-the-leader) and offboard
 //!   controllers publishing through the router;
-//! - [`config`], [`logging`].
+//! - [`config`], [`logging`];
+//! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
+//! - [`ui`]: the terminal user interface over all of the above.
 //!
 //! [`Gcs`] ties them together: start one, then read the fleet with
 //! [`Gcs::snapshot`] / [`Gcs::with_fleet`], act through [`Gcs::router`], and
@@ -19,10 +21,12 @@
 pub mod config;
 pub mod control;
 pub mod fleet;
+pub mod gamepad;
 pub mod lang;
 pub mod logging;
 pub mod router;
 pub mod script;
+pub mod ui;
 
 use std::sync::{Arc, Mutex};
 

@@ -64,10 +64,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
     config.validate()?;
     let Some(script_path) = cli.script else {
-        eprintln!(
-            "mech-gcs: the TUI is not built yet; run a command script with --script FILE (see docs/commands.md)"
-        );
-        return Ok(ExitCode::from(2));
+        let _log = logging::init(&config.log, None).context("cannot start logging")?;
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .context("cannot start the async runtime")?;
+        runtime.block_on(run_tui(config, cli.demo, cli.no_mouse))?;
+        return Ok(ExitCode::SUCCESS);
     };
     let source = if script_path.as_os_str() == "-" {
         let mut s = String::new();
@@ -87,6 +91,27 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         .context("cannot start the async runtime")?;
     let code = runtime.block_on(run_script(config, cli.demo, &source))?;
     Ok(ExitCode::from(code))
+}
+
+/// The interactive station; `--demo N` spawns N simulated robots first.
+async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyhow::Result<()> {
+    tracing::info!(version = env!("CARGO_PKG_VERSION"), "mech-gcs starting");
+    let gcs = Gcs::start(config)
+        .await
+        .context("cannot start the router")?;
+    let executor = Executor::new(gcs.clone()).with_spawner(mech_gcs::script::simulator());
+    let mut options = mech_gcs::ui::RunOptions {
+        mouse: !no_mouse,
+        ..mech_gcs::ui::RunOptions::default()
+    };
+    if let Some(n) = demo {
+        options.startup.push(format!("spawn {n}"));
+        options.arena = Some(mech_gcs::ui::demo_arena());
+    }
+    let result = mech_gcs::ui::run(gcs.clone(), executor, options).await;
+    gcs.shutdown().await;
+    tracing::info!("mech-gcs stopped");
+    result.context("terminal error")
 }
 
 async fn run_script(config: GcsConfig, demo: Option<usize>, source: &str) -> anyhow::Result<u8> {

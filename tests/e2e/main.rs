@@ -3,3 +3,4 @@
 mod cli;
 mod cluster_script;
 mod script;
+mod tui;

@@ -1,0 +1,491 @@
+//! Gamepad teleoperation: turns pad events into commands on channel `joy/N`.
+//!
+//! A pad drives only while its dead-man button is held (configurable). It
+//! publishes at once on any input change and again at a steady rate while
+//! enabled, so the agent's channel-silence failsafe never trips on a held
+//! stick. Releasing the dead-man or unplugging the pad publishes one zero
+//! command and then silence. Time is passed in, never read, so the rate and
+//! the release logic are tested without sleeping.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use super::input::{PadAxis, PadButton, PadEvent, PadEventKind, PadId};
+use super::mapping::{Limits, Mapped, Sticks, TeleopMode, map};
+use super::shaping::Shaping;
+
+/// Tunables for every pad.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeleopConfig {
+    /// Button that must be held to drive; `None` disables the dead-man (the
+    /// pad drives whenever connected).
+    pub deadman: Option<PadButton>,
+    /// Cycles [`TeleopMode`].
+    pub mode_button: PadButton,
+    /// Engages the fleet e-stop, whatever the dead-man.
+    pub estop_button: PadButton,
+    /// Steady publish rate while enabled, Hz.
+    pub rate_hz: f64,
+    pub shaping: Shaping,
+    pub limits: Limits,
+    /// Mode a newly connected pad starts in.
+    pub initial_mode: TeleopMode,
+}
+
+impl Default for TeleopConfig {
+    fn default() -> Self {
+        Self {
+            deadman: Some(PadButton::LeftBumper),
+            mode_button: PadButton::Select,
+            estop_button: PadButton::Start,
+            rate_hz: 20.0,
+            shaping: Shaping::default(),
+            limits: Limits::default(),
+            initial_mode: TeleopMode::default(),
+        }
+    }
+}
+
+impl TeleopConfig {
+    fn period(&self) -> Duration {
+        let hz = if self.rate_hz.is_finite() && self.rate_hz > 0.0 {
+            self.rate_hz
+        } else {
+            20.0
+        };
+        Duration::from_nanos((1e9 / hz).round() as u64)
+    }
+}
+
+/// Raw axis values as last reported by the pad.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct RawAxes {
+    left_x: f64,
+    left_y: f64,
+    right_x: f64,
+    right_y: f64,
+    left_trigger: f64,
+    right_trigger: f64,
+}
+
+/// What one pad is doing, for display and for the publish logic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PadState {
+    pub id: PadId,
+    /// Name the backend reported.
+    pub name: String,
+    pub mode: TeleopMode,
+    /// Dead-man held (or no dead-man configured).
+    pub enabled: bool,
+    /// Shaped inputs.
+    pub sticks: Sticks,
+    /// Last output published, if any.
+    pub last: Option<Mapped>,
+    raw: RawAxes,
+    last_sent: Option<Instant>,
+    last_heading: f64,
+}
+
+impl PadState {
+    /// The channel this pad publishes on.
+    pub fn channel(&self) -> String {
+        self.id.channel()
+    }
+}
+
+/// What the teleop logic wants the ground station to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TeleopAction {
+    /// Publish this on the channel: a [`mech_proto::Command`] goes to every
+    /// robot the router has routed to the channel; a cluster velocity goes to
+    /// the cluster being driven.
+    Publish(Mapped),
+    /// Engage the fleet e-stop.
+    EStop,
+    /// A pad appeared (name) and now owns the channel.
+    Connected(String),
+    /// A pad went away (its zero command precedes this).
+    Disconnected,
+    ModeChanged(TeleopMode),
+}
+
+/// One output of the teleop logic, on a controller channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeleopOutput {
+    /// `joy/N` or `key/0`.
+    pub channel: String,
+    pub action: TeleopAction,
+}
+
+/// All connected pads and their publish logic.
+#[derive(Debug, Clone, Default)]
+pub struct Teleop {
+    config: TeleopConfig,
+    pads: BTreeMap<PadId, PadState>,
+}
+
+impl Teleop {
+    pub fn new(config: TeleopConfig) -> Self {
+        Self {
+            config,
+            pads: BTreeMap::new(),
+        }
+    }
+
+    pub fn config(&self) -> &TeleopConfig {
+        &self.config
+    }
+
+    /// Connected pads, by id.
+    pub fn pads(&self) -> impl Iterator<Item = &PadState> {
+        self.pads.values()
+    }
+
+    pub fn pad(&self, id: PadId) -> Option<&PadState> {
+        self.pads.get(&id)
+    }
+
+    /// Applies one pad event and returns what to publish now.
+    pub fn handle(&mut self, ev: &PadEvent, now: Instant) -> Vec<TeleopOutput> {
+        let mut out = Vec::new();
+        let channel = ev.pad.channel();
+        match &ev.kind {
+            PadEventKind::Connected(name) => {
+                if let Some(old) = self.pads.remove(&ev.pad) {
+                    out.push(publish(&channel, Mapped::zero(old.mode)));
+                }
+                self.pads.insert(
+                    ev.pad,
+                    PadState {
+                        id: ev.pad,
+                        name: name.clone(),
+                        mode: self.config.initial_mode,
+                        enabled: self.config.deadman.is_none(),
+                        sticks: Sticks::default(),
+                        last: None,
+                        raw: RawAxes::default(),
+                        last_sent: None,
+                        last_heading: 0.0,
+                    },
+                );
+                out.push(TeleopOutput {
+                    channel,
+                    action: TeleopAction::Connected(name.clone()),
+                });
+            }
+            PadEventKind::Disconnected => {
+                if let Some(old) = self.pads.remove(&ev.pad) {
+                    out.push(publish(&channel, Mapped::zero(old.mode)));
+                    out.push(TeleopOutput {
+                        channel,
+                        action: TeleopAction::Disconnected,
+                    });
+                }
+            }
+            PadEventKind::ButtonPressed(b) => {
+                let Some(pad) = self.pads.get_mut(&ev.pad) else {
+                    return out;
+                };
+                if *b == self.config.estop_button {
+                    out.push(TeleopOutput {
+                        channel,
+                        action: TeleopAction::EStop,
+                    });
+                } else if Some(*b) == self.config.deadman {
+                    pad.enabled = true;
+                    send_mapped(pad, &self.config, now, true, &mut out);
+                } else if *b == self.config.mode_button {
+                    let old = pad.mode;
+                    pad.mode = old.next();
+                    out.push(TeleopOutput {
+                        channel: channel.clone(),
+                        action: TeleopAction::ModeChanged(pad.mode),
+                    });
+                    if pad.enabled {
+                        let zero = Mapped::zero(old);
+                        pad.last = Some(zero.clone());
+                        out.push(publish(&channel, zero));
+                        send_mapped(pad, &self.config, now, true, &mut out);
+                    }
+                }
+            }
+            PadEventKind::ButtonReleased(b) => {
+                let Some(pad) = self.pads.get_mut(&ev.pad) else {
+                    return out;
+                };
+                if Some(*b) == self.config.deadman && pad.enabled {
+                    pad.enabled = false;
+                    let zero = Mapped::zero(pad.mode);
+                    pad.last = Some(zero.clone());
+                    pad.last_sent = Some(now);
+                    out.push(publish(&channel, zero));
+                }
+            }
+            PadEventKind::AxisChanged(axis, v) => {
+                let Some(pad) = self.pads.get_mut(&ev.pad) else {
+                    return out;
+                };
+                let slot = match axis {
+                    PadAxis::LeftStickX => &mut pad.raw.left_x,
+                    PadAxis::LeftStickY => &mut pad.raw.left_y,
+                    PadAxis::RightStickX => &mut pad.raw.right_x,
+                    PadAxis::RightStickY => &mut pad.raw.right_y,
+                    PadAxis::LeftTrigger => &mut pad.raw.left_trigger,
+                    PadAxis::RightTrigger => &mut pad.raw.right_trigger,
+                };
+                *slot = *v;
+                let s = &self.config.shaping;
+                pad.sticks = Sticks {
+                    left_x: s.apply(pad.raw.left_x),
+                    left_y: s.apply(pad.raw.left_y),
+                    right_x: s.apply(pad.raw.right_x),
+                    right_y: s.apply(pad.raw.right_y),
+                    left_trigger: s.apply(pad.raw.left_trigger).max(0.0),
+                    right_trigger: s.apply(pad.raw.right_trigger).max(0.0),
+                };
+                if pad.enabled {
+                    send_mapped(pad, &self.config, now, false, &mut out);
+                }
+            }
+        }
+        out
+    }
+
+    /// Steady-rate republish: every enabled pad whose last publish is at
+    /// least one period old publishes its current output again.
+    pub fn tick(&mut self, now: Instant) -> Vec<TeleopOutput> {
+        let period = self.config.period();
+        let mut out = Vec::new();
+        for pad in self.pads.values_mut() {
+            if !pad.enabled {
+                continue;
+            }
+            let due = pad
+                .last_sent
+                .is_none_or(|t| now.saturating_duration_since(t) >= period);
+            if due {
+                send_mapped(pad, &self.config, now, true, &mut out);
+            }
+        }
+        out
+    }
+}
+
+fn publish(channel: &str, m: Mapped) -> TeleopOutput {
+    TeleopOutput {
+        channel: channel.to_string(),
+        action: TeleopAction::Publish(m),
+    }
+}
+
+/// Publishes the pad's mapped output; unless `force`, only if it changed.
+fn send_mapped(
+    pad: &mut PadState,
+    config: &TeleopConfig,
+    now: Instant,
+    force: bool,
+    out: &mut Vec<TeleopOutput>,
+) {
+    let m = map(pad.mode, &pad.sticks, &config.limits, pad.last_heading);
+    if let Mapped::Command(mech_proto::Command::VelocityHeading(v)) = &m {
+        pad.last_heading = v.heading;
+    }
+    if !force && pad.last.as_ref() == Some(&m) {
+        return;
+    }
+    pad.last = Some(m.clone());
+    pad.last_sent = Some(now);
+    out.push(publish(&pad.id.channel(), m));
+}
+
+#[cfg(test)]
+mod tests {
+    use mech_proto::{Command, Stop, Twist};
+
+    use super::*;
+
+    fn ev(kind: PadEventKind) -> PadEvent {
+        PadEvent::new(0, kind)
+    }
+
+    fn published(out: &[TeleopOutput]) -> Vec<Mapped> {
+        out.iter()
+            .filter_map(|o| match &o.action {
+                TeleopAction::Publish(m) => Some(m.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn twist_pad() -> (Teleop, Instant) {
+        let mut t = Teleop::new(TeleopConfig {
+            initial_mode: TeleopMode::Twist,
+            shaping: Shaping {
+                deadzone: 0.1,
+                expo: 0.0,
+            },
+            ..TeleopConfig::default()
+        });
+        let now = Instant::now();
+        t.handle(&ev(PadEventKind::Connected("test pad".into())), now);
+        (t, now)
+    }
+
+    #[test]
+    fn nothing_is_published_without_the_deadman() {
+        let (mut t, now) = twist_pad();
+        let out = t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0)),
+            now,
+        );
+        assert!(published(&out).is_empty());
+        assert!(t.tick(now + Duration::from_secs(1)).is_empty());
+    }
+
+    #[test]
+    fn deadman_held_drives_and_release_zeroes_once() {
+        let (mut t, now) = twist_pad();
+        t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0)),
+            now,
+        );
+        let out = t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        let p = published(&out);
+        assert_eq!(p.len(), 1);
+        let Mapped::Command(Command::Twist(tw)) = &p[0] else {
+            panic!("twist expected, got {p:?}");
+        };
+        assert!((tw.vx - Limits::default().max_speed).abs() < 1e-12);
+        assert_eq!(out[0].channel, "joy/0");
+
+        let out = t.handle(
+            &ev(PadEventKind::ButtonReleased(PadButton::LeftBumper)),
+            now + Duration::from_millis(10),
+        );
+        assert_eq!(
+            published(&out),
+            vec![Mapped::Command(Command::Stop(Stop {}))]
+        );
+        assert!(
+            t.tick(now + Duration::from_secs(2)).is_empty(),
+            "silent after the zero"
+        );
+    }
+
+    #[test]
+    fn stick_inside_deadzone_commands_zero() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 0.08)),
+            now,
+        );
+        t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::RightStickX, -0.05)),
+            now,
+        );
+        let out = t.tick(now + Duration::from_millis(50));
+        assert_eq!(
+            published(&out),
+            vec![Mapped::Command(Command::Twist(Twist::default()))]
+        );
+    }
+
+    #[test]
+    fn unplug_zeroes_the_channel_even_without_deadman() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 0.9)),
+            now,
+        );
+        let out = t.handle(&ev(PadEventKind::Disconnected), now);
+        assert_eq!(
+            published(&out),
+            vec![Mapped::Command(Command::Stop(Stop {}))]
+        );
+        assert_eq!(out[0].channel, "joy/0");
+        assert!(t.pads().next().is_none());
+        assert!(t.tick(now + Duration::from_secs(1)).is_empty());
+    }
+
+    #[test]
+    fn steady_rate_while_enabled() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        // 20 Hz: ticks every 10 ms for one second publish ~20 times.
+        let mut n = 0;
+        for i in 1..=100 {
+            n += published(&t.tick(now + Duration::from_millis(10 * i))).len();
+        }
+        assert_eq!(n, 20);
+    }
+
+    #[test]
+    fn input_change_publishes_at_once_but_repeats_do_not() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        let a = t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 0.5)),
+            now,
+        );
+        assert_eq!(published(&a).len(), 1);
+        let b = t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 0.5)),
+            now,
+        );
+        assert!(published(&b).is_empty());
+    }
+
+    #[test]
+    fn mode_button_cycles_and_estop_always_works() {
+        let (mut t, now) = twist_pad();
+        let out = t.handle(&ev(PadEventKind::ButtonPressed(PadButton::Select)), now);
+        assert!(out.contains(&TeleopOutput {
+            channel: "joy/0".into(),
+            action: TeleopAction::ModeChanged(TeleopMode::Cluster)
+        }));
+        let out = t.handle(&ev(PadEventKind::ButtonPressed(PadButton::Start)), now);
+        assert_eq!(out[0].action, TeleopAction::EStop);
+    }
+
+    #[test]
+    fn mode_change_while_driving_zeroes_old_mode_first() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        let out = t.handle(&ev(PadEventKind::ButtonPressed(PadButton::Select)), now);
+        let p = published(&out);
+        assert_eq!(p[0], Mapped::Command(Command::Stop(Stop {})));
+        assert!(matches!(p[1], Mapped::Cluster(_)));
+    }
+
+    #[test]
+    fn second_pad_is_its_own_channel() {
+        let (mut t, now) = twist_pad();
+        t.handle(
+            &PadEvent::new(1, PadEventKind::Connected("other".into())),
+            now,
+        );
+        let out = t.handle(
+            &PadEvent::new(1, PadEventKind::ButtonPressed(PadButton::LeftBumper)),
+            now,
+        );
+        assert_eq!(out[0].channel, "joy/1");
+        assert_eq!(t.pads().count(), 2);
+    }
+
+    #[test]
+    fn without_deadman_configured_the_pad_drives() {
+        let mut t = Teleop::new(TeleopConfig {
+            deadman: None,
+            ..TeleopConfig::default()
+        });
+        let now = Instant::now();
+        t.handle(&ev(PadEventKind::Connected("p".into())), now);
+        let out = t.handle(
+            &ev(PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0)),
+            now,
+        );
+        assert_eq!(published(&out).len(), 1);
+    }
+}

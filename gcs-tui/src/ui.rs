@@ -1,0 +1,30 @@
+//! Terminal user interface: robot cards, braille map, waypoints, routing
+//! table, events, command line and help, over the GCS core.
+//!
+//! [`app::App`] is the state and [`app::Action`] the only way to change it;
+//! rendering (`impl Widget for &App`) is a pure function of that state, with
+//! each panel a small widget of its own.
+
+pub mod app;
+pub mod fleet;
+pub mod layout;
+pub mod viewport;
+
+pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
+pub use fleet::{
+    ArenaBounds, ChannelView, ClusterView, FleetSnapshot, LinkState, RobotView, RouteView,
+};
+pub mod cards;
+pub mod events;
+pub mod fixture;
+pub mod help;
+pub mod keys;
+pub mod map;
+pub mod render;
+pub mod routes;
+pub mod station;
+pub mod status;
+pub mod theme;
+pub mod waypoints;
+
+pub use station::{CoreLink, RunOptions, demo_arena, run, snapshot};

@@ -1,0 +1,1023 @@
+//! The UI state machine: [`App`] holds everything the screen shows, every
+//! user intent is an [`Action`], and [`App::update`] is the only place state
+//! changes. What must reach the robots is queued as [`Request`]s that the
+//! event loop hands to the GCS core; the App itself does no I/O.
+
+use std::collections::{BTreeSet, HashMap, VecDeque};
+use std::time::{Duration, Instant};
+
+use mech_proto::{ClusterVelocity, Command, Waypoint};
+use ratatui::layout::{Position, Rect};
+
+use super::fleet::{ArenaBounds, ChannelView, ClusterView, FleetSnapshot, RobotView};
+use super::layout::{Areas, SidePanel};
+use super::viewport::Viewport;
+use crate::gamepad::{
+    DriveKey, KEY_CHANNEL, KeyTeleop, Mapped, PadEvent, PadState, Teleop, TeleopAction,
+    TeleopConfig, TeleopOutput,
+};
+
+/// Channel the UI publishes waypoint missions on.
+pub const WAYPOINT_CHANNEL: &str = "wp/gcs";
+
+/// How long a robot's path stays on the map.
+pub const TRAIL_SECONDS: f64 = 10.0;
+const TRAIL_MAX_POINTS: usize = 400;
+/// Distance (m) between kept path points, above position-fix noise.
+const TRAIL_SPACING: f64 = 0.02;
+const LOG_LINES: usize = 200;
+const HISTORY_LINES: usize = 100;
+
+/// Which panel receives navigation keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Focus {
+    #[default]
+    Map,
+    Cards,
+    Waypoints,
+    Routes,
+}
+
+impl Focus {
+    fn next(self) -> Focus {
+        match self {
+            Focus::Map => Focus::Cards,
+            Focus::Cards => Focus::Waypoints,
+            Focus::Waypoints => Focus::Routes,
+            Focus::Routes => Focus::Map,
+        }
+    }
+
+    fn prev(self) -> Focus {
+        match self {
+            Focus::Map => Focus::Routes,
+            Focus::Cards => Focus::Map,
+            Focus::Waypoints => Focus::Cards,
+            Focus::Routes => Focus::Waypoints,
+        }
+    }
+}
+
+/// A one-line text entry in progress.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Prompt {
+    /// `:` command line, run by the shared command language.
+    Command(String),
+    /// `x,y[,t]` waypoint entry.
+    Waypoint(String),
+}
+
+/// The last command-line error, with the column it points at.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PromptError {
+    pub line: String,
+    pub message: String,
+    /// Byte offset in `line` of the mistake, if known.
+    pub column: Option<usize>,
+}
+
+/// Selection changes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Select {
+    /// Only this robot.
+    Only(String),
+    /// Add or remove this robot.
+    Toggle(String),
+    Next,
+    Prev,
+    /// Add the robot after the last selected one.
+    AddNext,
+    All,
+    Clear,
+    /// Every member of a cluster.
+    Cluster(String),
+}
+
+/// Severity of a log line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LogLevel {
+    Info,
+    Warn,
+    Error,
+}
+
+/// One line of the events pane.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogLine {
+    pub level: LogLevel,
+    pub text: String,
+}
+
+/// Everything that can happen to the UI.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Render tick: time moves on (teleop rates, trails).
+    Tick(Instant),
+    Resize(u16, u16),
+    Quit,
+    ToggleHelp,
+    /// Scroll the help by entries (down positive).
+    HelpScroll(i32),
+    /// Fresh state from the core.
+    Fleet(FleetSnapshot),
+    Select(Select),
+    /// Left click at an absolute terminal cell; `add` when shift/ctrl held.
+    Click {
+        col: u16,
+        row: u16,
+        add: bool,
+    },
+    /// Mouse drag to a cell (pans the map).
+    Drag {
+        col: u16,
+        row: u16,
+    },
+    /// Mouse button released.
+    MouseUp,
+    /// Mouse wheel over a cell: zoom about it (`steps` > 0 zooms in).
+    Scroll {
+        col: u16,
+        row: u16,
+        steps: i32,
+    },
+    Zoom(f64),
+    /// Pan by cells (right / up positive).
+    Pan(f64, f64),
+    FitFleet,
+    FocusNext,
+    FocusPrev,
+    MakeCluster,
+    /// Enter or leave waypoint mode.
+    WaypointMode(bool),
+    AddWaypoint(Waypoint),
+    RemoveLastWaypoint,
+    ClearWaypoints,
+    /// Send the waypoint list to the selected robots.
+    SendWaypoints,
+    OpenCommandLine,
+    OpenWaypointEntry,
+    PromptChar(char),
+    PromptBackspace,
+    PromptSubmit,
+    PromptCancel,
+    HistoryPrev,
+    HistoryNext,
+    /// Outcome of a command line the core ran.
+    CommandResult(Result<String, PromptError>),
+    /// Move the routing-table cursor (robot rows, channel columns).
+    RouteCursor(i32, i32),
+    /// Route the robot under the cursor to the channel under the cursor.
+    ApplyRouteCursor,
+    Route {
+        robot: String,
+        channel: String,
+    },
+    EStop,
+    Release,
+    ToggleKeyTeleop,
+    Drive(DriveKey),
+    DriveStop,
+    Pad(PadEvent),
+    Log(LogLevel, String),
+}
+
+/// What the core must do on the UI's behalf.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    Route {
+        robot: String,
+        channel: String,
+    },
+    /// Upload a waypoint mission on [`WAYPOINT_CHANNEL`] to each robot.
+    Mission {
+        robots: Vec<String>,
+        waypoints: Vec<Waypoint>,
+    },
+    EStop {
+        engage: bool,
+    },
+    /// A teleop command on `channel` for the robots routed to it.
+    Publish {
+        channel: String,
+        robots: Vec<String>,
+        command: Command,
+    },
+    /// A cluster velocity from a pad in cluster mode (`channel` is the
+    /// pad's); it goes to the cluster controller on `fleet/<cluster>`.
+    ClusterVelocity {
+        channel: String,
+        cluster: String,
+        members: Vec<String>,
+        velocity: ClusterVelocity,
+    },
+    DefineCluster {
+        name: String,
+        members: Vec<String>,
+    },
+    /// A command-language line for the core's executor.
+    Exec(String),
+    Quit,
+}
+
+/// The whole UI state. Rendering is a pure function of it.
+#[derive(Debug)]
+pub struct App {
+    pub router_addr: String,
+    pub robots: Vec<RobotView>,
+    pub channels: Vec<ChannelView>,
+    pub clusters: Vec<ClusterView>,
+    pub selection: BTreeSet<String>,
+    pub arena: Option<ArenaBounds>,
+    pub viewport: Viewport,
+    /// Terminal size, for click resolution.
+    pub size: (u16, u16),
+    pub focus: Focus,
+    pub side: SidePanel,
+    pub show_help: bool,
+    /// First help entry shown.
+    pub help_scroll: usize,
+    pub waypoint_mode: bool,
+    /// Waypoints being edited, in mission order.
+    pub waypoints: Vec<Waypoint>,
+    pub prompt: Option<Prompt>,
+    pub prompt_error: Option<PromptError>,
+    pub history: Vec<String>,
+    history_pos: Option<usize>,
+    /// Fleet-wide e-stop engaged (requested here or reported by the core).
+    pub estop: bool,
+    pub log: VecDeque<LogLine>,
+    /// Routing-table cursor: robot row, channel column.
+    pub route_cursor: (usize, usize),
+    pub cards_scroll: usize,
+    pub trails: HashMap<String, VecDeque<(Instant, f64, f64)>>,
+    pub key_teleop_on: bool,
+    pub key_teleop: KeyTeleop,
+    pub teleop: Teleop,
+    /// Cluster a pad in cluster mode drives (the last one made or selected).
+    pub active_cluster: Option<String>,
+    pub now: Instant,
+    /// Draw with modifiers only, no colours.
+    pub monochrome: bool,
+    pub mouse: bool,
+    pub running: bool,
+    drag_from: Option<(u16, u16)>,
+    fitted_once: bool,
+    outbox: Vec<Request>,
+}
+
+impl App {
+    pub fn new(router_addr: impl Into<String>, now: Instant) -> App {
+        App {
+            router_addr: router_addr.into(),
+            robots: Vec::new(),
+            channels: Vec::new(),
+            clusters: Vec::new(),
+            selection: BTreeSet::new(),
+            arena: None,
+            viewport: Viewport::default(),
+            size: (80, 24),
+            focus: Focus::Map,
+            side: SidePanel::Cards,
+            show_help: false,
+            help_scroll: 0,
+            waypoint_mode: false,
+            waypoints: Vec::new(),
+            prompt: None,
+            prompt_error: None,
+            history: Vec::new(),
+            history_pos: None,
+            estop: false,
+            log: VecDeque::new(),
+            route_cursor: (0, 0),
+            cards_scroll: 0,
+            trails: HashMap::new(),
+            key_teleop_on: false,
+            key_teleop: KeyTeleop::default(),
+            teleop: Teleop::new(TeleopConfig::default()),
+            active_cluster: None,
+            now,
+            monochrome: false,
+            mouse: true,
+            running: true,
+            drag_from: None,
+            fitted_once: false,
+            outbox: Vec::new(),
+        }
+    }
+
+    /// Requests queued since the last call, oldest first.
+    pub fn take_requests(&mut self) -> Vec<Request> {
+        std::mem::take(&mut self.outbox)
+    }
+
+    /// The current layout.
+    pub fn areas(&self) -> Areas {
+        Areas::compute(Rect::new(0, 0, self.size.0, self.size.1), self.side)
+    }
+
+    pub fn robot(&self, name: &str) -> Option<&RobotView> {
+        self.robots.iter().find(|r| r.name == name)
+    }
+
+    /// Channel columns of the routing table: none, every live channel, the
+    /// waypoint and keyboard channels, and any channel a robot is routed to.
+    pub fn route_columns(&self) -> Vec<String> {
+        let mut cols: Vec<String> = vec![String::new()];
+        let mut push = |c: &str| {
+            if !cols.iter().any(|x| x == c) {
+                cols.push(c.to_string());
+            }
+        };
+        push(WAYPOINT_CHANNEL);
+        push(KEY_CHANNEL);
+        for p in self.teleop.pads() {
+            push(&p.channel());
+        }
+        for c in &self.channels {
+            push(&c.name);
+        }
+        for r in &self.robots {
+            if !r.route.channel.is_empty() {
+                push(&r.route.channel);
+            }
+        }
+        cols
+    }
+
+    /// Connected pads, for display.
+    pub fn pads(&self) -> Vec<&PadState> {
+        self.teleop.pads().collect()
+    }
+
+    pub fn log(&mut self, level: LogLevel, text: impl Into<String>) {
+        self.log.push_back(LogLine {
+            level,
+            text: text.into(),
+        });
+        while self.log.len() > LOG_LINES {
+            self.log.pop_front();
+        }
+    }
+
+    /// Applies one action.
+    pub fn update(&mut self, action: Action) {
+        match action {
+            Action::Tick(now) => self.tick(now),
+            Action::Resize(w, h) => self.size = (w, h),
+            Action::Quit => {
+                self.running = false;
+                self.outbox.push(Request::Quit);
+            }
+            Action::ToggleHelp => {
+                self.show_help = !self.show_help;
+                self.help_scroll = 0;
+            }
+            Action::HelpScroll(d) => {
+                let rows = super::help::visible_entries(self.size.1);
+                let max = super::help::KEYS.len().saturating_sub(rows);
+                self.help_scroll =
+                    (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
+            }
+            Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
+            Action::Select(s) => self.select(s),
+            Action::Click { col, row, add } => self.click(col, row, add),
+            Action::Drag { col, row } => self.drag(col, row),
+            Action::MouseUp => self.drag_from = None,
+            Action::Scroll { col, row, steps } => self.scroll(col, row, steps),
+            Action::Zoom(f) => self.viewport.zoom(f),
+            Action::Pan(dx, dy) => self.viewport.pan_cells(dx, dy),
+            Action::FitFleet => self.fit_fleet(),
+            Action::FocusNext => self.set_focus(self.focus.next()),
+            Action::FocusPrev => self.set_focus(self.focus.prev()),
+            Action::MakeCluster => self.make_cluster(),
+            Action::WaypointMode(on) => {
+                self.waypoint_mode = on;
+                if on {
+                    self.set_focus(Focus::Waypoints);
+                }
+            }
+            Action::AddWaypoint(w) => self.add_waypoint(w),
+            Action::RemoveLastWaypoint => {
+                self.waypoints.pop();
+            }
+            Action::ClearWaypoints => self.waypoints.clear(),
+            Action::SendWaypoints => self.send_waypoints(),
+            Action::OpenCommandLine => {
+                self.prompt = Some(Prompt::Command(String::new()));
+                self.history_pos = None;
+            }
+            Action::OpenWaypointEntry => self.prompt = Some(Prompt::Waypoint(String::new())),
+            Action::PromptChar(c) => {
+                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
+                    s.push(c);
+                }
+            }
+            Action::PromptBackspace => {
+                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
+                    s.pop();
+                }
+            }
+            Action::PromptSubmit => self.submit_prompt(),
+            Action::PromptCancel => self.prompt = None,
+            Action::HistoryPrev => self.history_step(-1),
+            Action::HistoryNext => self.history_step(1),
+            Action::CommandResult(r) => match r {
+                Ok(text) => {
+                    self.prompt_error = None;
+                    for line in text.lines().filter(|l| !l.is_empty()) {
+                        self.log(LogLevel::Info, line.to_string());
+                    }
+                }
+                Err(e) => {
+                    self.log(LogLevel::Error, format!("{}: {}", e.line, e.message));
+                    self.prompt_error = Some(e);
+                }
+            },
+            Action::RouteCursor(dr, dc) => {
+                let rows = self.robots.len().max(1) as i64;
+                let cols = self.route_columns().len().max(1) as i64;
+                let r = (self.route_cursor.0 as i64 + i64::from(dr)).rem_euclid(rows);
+                let c = (self.route_cursor.1 as i64 + i64::from(dc)).rem_euclid(cols);
+                self.route_cursor = (r as usize, c as usize);
+            }
+            Action::ApplyRouteCursor => {
+                let cols = self.route_columns();
+                if let (Some(r), Some(c)) = (
+                    self.robots.get(self.route_cursor.0),
+                    cols.get(self.route_cursor.1),
+                ) {
+                    let (robot, channel) = (r.name.clone(), c.clone());
+                    self.route(robot, channel);
+                }
+            }
+            Action::Route { robot, channel } => self.route(robot, channel),
+            Action::EStop => {
+                self.estop = true;
+                self.outbox.push(Request::EStop { engage: true });
+                self.log(LogLevel::Warn, "E-STOP engaged");
+            }
+            Action::Release => {
+                self.estop = false;
+                self.outbox.push(Request::EStop { engage: false });
+                self.log(LogLevel::Warn, "e-stop released");
+            }
+            Action::ToggleKeyTeleop => {
+                self.key_teleop_on = !self.key_teleop_on;
+                if !self.key_teleop_on && self.key_teleop.driving() {
+                    let c = self.key_teleop.stop(self.now);
+                    self.publish(KEY_CHANNEL, c);
+                }
+                let state = if self.key_teleop_on { "on" } else { "off" };
+                self.log(
+                    LogLevel::Info,
+                    format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
+                );
+            }
+            Action::Drive(k) => {
+                if let Some(c) = self.key_teleop.press(k, self.now) {
+                    self.publish(KEY_CHANNEL, c);
+                }
+            }
+            Action::DriveStop => {
+                let c = self.key_teleop.stop(self.now);
+                self.publish(KEY_CHANNEL, c);
+            }
+            Action::Pad(ev) => {
+                let out = self.teleop.handle(&ev, self.now);
+                self.teleop_outputs(out);
+            }
+            Action::Log(level, text) => self.log(level, text),
+        }
+    }
+
+    fn tick(&mut self, now: Instant) {
+        self.now = now;
+        let out = self.teleop.tick(now);
+        self.teleop_outputs(out);
+        if let Some(c) = self.key_teleop.tick(now) {
+            self.publish(KEY_CHANNEL, c);
+        }
+        let horizon = Duration::from_secs_f64(TRAIL_SECONDS);
+        for trail in self.trails.values_mut() {
+            while trail
+                .front()
+                .is_some_and(|(t, _, _)| now.saturating_duration_since(*t) > horizon)
+            {
+                trail.pop_front();
+            }
+        }
+    }
+
+    fn apply_snapshot(&mut self, s: FleetSnapshot) {
+        let now = self.now;
+        for r in &s.robots {
+            let trail = self.trails.entry(r.name.clone()).or_default();
+            let moved = trail
+                .back()
+                .is_none_or(|(_, x, y)| (x - r.pose.x).hypot(y - r.pose.y) > TRAIL_SPACING);
+            if moved {
+                trail.push_back((now, r.pose.x, r.pose.y));
+                if trail.len() > TRAIL_MAX_POINTS {
+                    trail.pop_front();
+                }
+            }
+        }
+        self.trails
+            .retain(|name, _| s.robots.iter().any(|r| &r.name == name));
+        if s.estop != self.estop {
+            self.estop = s.estop;
+        }
+        let first = self.robots.is_empty() && !s.robots.is_empty();
+        self.robots = s.robots;
+        self.channels = s.channels;
+        if let Some(c) = s.clusters {
+            self.clusters = c;
+        }
+        self.selection
+            .retain(|n| self.robots.iter().any(|r| &r.name == n));
+        if first && !self.fitted_once {
+            self.fitted_once = true;
+            self.fit_fleet();
+        }
+    }
+
+    fn fit_fleet(&mut self) {
+        let inner = self.areas().map_inner();
+        let mut pts: Vec<(f64, f64)> = self.robots.iter().map(|r| (r.pose.x, r.pose.y)).collect();
+        if let Some(a) = self.arena {
+            pts.push((a.min_x, a.min_y));
+            pts.push((a.max_x, a.max_y));
+        }
+        pts.extend(self.waypoints.iter().map(|w| (w.x, w.y)));
+        self.viewport.fit(pts, inner.width, inner.height, 1.0);
+    }
+
+    fn set_focus(&mut self, f: Focus) {
+        self.focus = f;
+        self.side = match f {
+            Focus::Cards => SidePanel::Cards,
+            Focus::Waypoints => SidePanel::Waypoints,
+            Focus::Routes => SidePanel::Routes,
+            Focus::Map => self.side,
+        };
+    }
+
+    fn select(&mut self, s: Select) {
+        let names: Vec<String> = self.robots.iter().map(|r| r.name.clone()).collect();
+        let idx_of = |n: &str| names.iter().position(|x| x == n);
+        match s {
+            Select::Only(n) => {
+                self.selection.clear();
+                if idx_of(&n).is_some() {
+                    self.selection.insert(n);
+                }
+            }
+            Select::Toggle(n) => {
+                if !self.selection.remove(&n) && idx_of(&n).is_some() {
+                    self.selection.insert(n);
+                }
+            }
+            Select::Next | Select::Prev | Select::AddNext => {
+                if names.is_empty() {
+                    return;
+                }
+                let last = self.selection.iter().filter_map(|n| idx_of(n)).max();
+                let i = match (&s, last) {
+                    (Select::Prev, Some(i)) => (i + names.len() - 1) % names.len(),
+                    (Select::Prev, None) => names.len() - 1,
+                    (_, Some(i)) => (i + 1) % names.len(),
+                    (_, None) => 0,
+                };
+                if s != Select::AddNext {
+                    self.selection.clear();
+                }
+                self.selection.insert(names[i].clone());
+                self.route_cursor.0 = i;
+            }
+            Select::All => self.selection = names.iter().cloned().collect(),
+            Select::Clear => self.selection.clear(),
+            Select::Cluster(c) => {
+                if let Some(cl) = self.clusters.iter().find(|x| x.name == c) {
+                    self.selection = cl.members.iter().cloned().collect();
+                    self.active_cluster = Some(c);
+                }
+            }
+        }
+        self.keep_selection_visible();
+    }
+
+    /// Lines one robot card takes.
+    pub fn card_height(&self) -> usize {
+        super::cards::CARD_HEIGHT
+    }
+
+    fn keep_selection_visible(&mut self) {
+        let Some(area) = self.areas().cards else {
+            return;
+        };
+        let per = self.card_height();
+        let visible = (usize::from(area.height.saturating_sub(2)) / per).max(1);
+        let Some(i) = self
+            .robots
+            .iter()
+            .position(|r| self.selection.contains(&r.name))
+        else {
+            return;
+        };
+        if i < self.cards_scroll {
+            self.cards_scroll = i;
+        } else if i >= self.cards_scroll + visible {
+            self.cards_scroll = i + 1 - visible;
+        }
+    }
+
+    fn make_cluster(&mut self) {
+        let members: Vec<String> = self
+            .robots
+            .iter()
+            .filter(|r| self.selection.contains(&r.name))
+            .map(|r| r.name.clone())
+            .collect();
+        if members.len() < 2 {
+            self.log(
+                LogLevel::Warn,
+                "select at least two robots to make a cluster",
+            );
+            return;
+        }
+        let mut n = self.clusters.len() + 1;
+        while self.clusters.iter().any(|c| c.name == format!("c{n}")) {
+            n += 1;
+        }
+        let name = format!("c{n}");
+        self.log(
+            LogLevel::Info,
+            format!("cluster {name}: {}", members.join(" ")),
+        );
+        self.outbox.push(Request::DefineCluster {
+            name: name.clone(),
+            members: members.clone(),
+        });
+        self.clusters.push(ClusterView {
+            name: name.clone(),
+            members,
+        });
+        self.active_cluster = Some(name);
+    }
+
+    fn add_waypoint(&mut self, w: Waypoint) {
+        if self.waypoints.len() < mech_proto::MAX_WAYPOINTS {
+            self.waypoints.push(w);
+        }
+    }
+
+    fn send_waypoints(&mut self) {
+        if self.waypoints.is_empty() {
+            self.log(LogLevel::Warn, "no waypoints to send");
+            return;
+        }
+        let robots: Vec<String> = self
+            .robots
+            .iter()
+            .filter(|r| self.selection.contains(&r.name))
+            .map(|r| r.name.clone())
+            .collect();
+        if robots.is_empty() {
+            self.log(
+                LogLevel::Warn,
+                "select a robot or a cluster to send waypoints to",
+            );
+            return;
+        }
+        self.log(
+            LogLevel::Info,
+            format!(
+                "mission of {} waypoint(s) -> {} on {WAYPOINT_CHANNEL}",
+                self.waypoints.len(),
+                robots.join(" ")
+            ),
+        );
+        self.outbox.push(Request::Mission {
+            robots,
+            waypoints: self.waypoints.clone(),
+        });
+    }
+
+    fn route(&mut self, robot: String, channel: String) {
+        if self.robot(&robot).is_none() {
+            self.log(LogLevel::Error, format!("no robot named {robot}"));
+            return;
+        }
+        let shown = if channel.is_empty() { "none" } else { &channel };
+        self.log(LogLevel::Info, format!("route {robot} -> {shown}"));
+        if let Some(r) = self.robots.iter_mut().find(|r| r.name == robot) {
+            r.route.channel = channel.clone();
+            r.route.acknowledged = false;
+        }
+        self.outbox.push(Request::Route { robot, channel });
+    }
+
+    fn submit_prompt(&mut self) {
+        match self.prompt.take() {
+            Some(Prompt::Command(line)) => {
+                let line = line.trim().to_string();
+                if line.is_empty() {
+                    return;
+                }
+                if self.history.last() != Some(&line) {
+                    self.history.push(line.clone());
+                    if self.history.len() > HISTORY_LINES {
+                        self.history.remove(0);
+                    }
+                }
+                self.history_pos = None;
+                self.prompt_error = None;
+                self.outbox.push(Request::Exec(line));
+            }
+            Some(Prompt::Waypoint(text)) => match parse_waypoint(&text) {
+                Ok(w) => {
+                    self.prompt_error = None;
+                    self.add_waypoint(w);
+                }
+                Err((message, column)) => {
+                    self.prompt_error = Some(PromptError {
+                        line: text.clone(),
+                        message,
+                        column: Some(column),
+                    });
+                    self.prompt = Some(Prompt::Waypoint(text));
+                }
+            },
+            None => {}
+        }
+    }
+
+    fn history_step(&mut self, dir: i32) {
+        let Some(Prompt::Command(s)) = &mut self.prompt else {
+            return;
+        };
+        if self.history.is_empty() {
+            return;
+        }
+        let last = self.history.len() - 1;
+        let pos = match (self.history_pos, dir < 0) {
+            (None, true) => Some(last),
+            (None, false) => None,
+            (Some(p), true) => Some(p.saturating_sub(1)),
+            (Some(p), false) => (p < last).then_some(p + 1),
+        };
+        self.history_pos = pos;
+        *s = pos.map(|p| self.history[p].clone()).unwrap_or_default();
+    }
+
+    /// The robot drawn at (or next to) an absolute terminal cell of the map.
+    pub fn robot_at_cell(&self, col: u16, row: u16) -> Option<&RobotView> {
+        let inner = self.areas().map_inner();
+        if !inner.contains(Position::new(col, row)) {
+            return None;
+        }
+        let p = self.viewport.project(inner.width, inner.height);
+        let (cx, cy) = (col - inner.x, row - inner.y);
+        let (wx, wy) = p.cell_to_world(cx, cy);
+        self.robots
+            .iter()
+            .filter_map(|r| {
+                let (rc, rr) = p.world_to_cell(r.pose.x, r.pose.y)?;
+                (rc.abs_diff(cx) <= 1 && rr.abs_diff(cy) <= 1)
+                    .then(|| ((r.pose.x - wx).hypot(r.pose.y - wy), r))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, r)| r)
+    }
+
+    /// World point (m) under an absolute terminal cell of the map.
+    pub fn map_point(&self, col: u16, row: u16) -> Option<(f64, f64)> {
+        let inner = self.areas().map_inner();
+        if !inner.contains(Position::new(col, row)) {
+            return None;
+        }
+        let p = self.viewport.project(inner.width, inner.height);
+        Some(p.cell_to_world(col - inner.x, row - inner.y))
+    }
+
+    fn click(&mut self, col: u16, row: u16, add: bool) {
+        let areas = self.areas();
+        let pos = Position::new(col, row);
+        if areas.map_inner().contains(pos) {
+            self.focus = Focus::Map;
+            if self.waypoint_mode {
+                if let Some((x, y)) = self.map_point(col, row) {
+                    self.add_waypoint(Waypoint {
+                        x,
+                        y,
+                        z: 0.0,
+                        time: None,
+                    });
+                }
+                return;
+            }
+            match self.robot_at_cell(col, row).map(|r| r.name.clone()) {
+                Some(name) if add => self.select(Select::Toggle(name)),
+                Some(name) => self.select(Select::Only(name)),
+                None if !add => self.drag_from = Some((col, row)),
+                None => {}
+            }
+            return;
+        }
+        if let Some(cards) = areas.cards.filter(|a| a.contains(pos)) {
+            self.focus = Focus::Cards;
+            let inner = super::layout::inner(cards);
+            if row < inner.y {
+                return;
+            }
+            let i = self.cards_scroll + usize::from(row - inner.y) / self.card_height();
+            if let Some(name) = self.robots.get(i).map(|r| r.name.clone()) {
+                self.select(if add {
+                    Select::Toggle(name)
+                } else {
+                    Select::Only(name)
+                });
+            }
+            return;
+        }
+        if areas.waypoints.is_some_and(|a| a.contains(pos)) {
+            self.set_focus(Focus::Waypoints);
+        } else if let Some(routes) = areas.routes.filter(|a| a.contains(pos)) {
+            self.set_focus(Focus::Routes);
+            let inner = super::layout::inner(routes);
+            let cols = self.route_columns().len();
+            let w = super::routes::TableWindow::new(self, inner, cols);
+            if let Some((r, c)) = w.cell_at(inner, col, row) {
+                if r < self.robots.len() && c < cols {
+                    // A click picks the cell; a click on the picked cell routes.
+                    if self.route_cursor == (r, c) {
+                        self.update(Action::ApplyRouteCursor);
+                    } else {
+                        self.route_cursor = (r, c);
+                    }
+                }
+            }
+        }
+    }
+
+    fn drag(&mut self, col: u16, row: u16) {
+        let Some((c0, r0)) = self.drag_from else {
+            return;
+        };
+        let dx = f64::from(c0) - f64::from(col);
+        let dy = f64::from(row) - f64::from(r0);
+        self.viewport.pan_cells(dx, dy);
+        self.drag_from = Some((col, row));
+    }
+
+    fn scroll(&mut self, col: u16, row: u16, steps: i32) {
+        let factor = 1.25f64.powi(steps);
+        match self.map_point(col, row) {
+            Some((x, y)) => self.viewport.zoom_about(factor, x, y),
+            None => {
+                if self
+                    .areas()
+                    .cards
+                    .is_some_and(|a| a.contains(Position::new(col, row)))
+                {
+                    if steps < 0 {
+                        self.cards_scroll =
+                            (self.cards_scroll + 1).min(self.robots.len().saturating_sub(1));
+                    } else {
+                        self.cards_scroll = self.cards_scroll.saturating_sub(1);
+                    }
+                }
+            }
+        }
+    }
+
+    fn publish(&mut self, channel: &str, command: Command) {
+        let robots: Vec<String> = self
+            .robots
+            .iter()
+            .filter(|r| r.route.channel == channel)
+            .map(|r| r.name.clone())
+            .collect();
+        self.outbox.push(Request::Publish {
+            channel: channel.to_string(),
+            robots,
+            command,
+        });
+    }
+
+    fn teleop_outputs(&mut self, out: Vec<TeleopOutput>) {
+        for o in out {
+            match o.action {
+                TeleopAction::Publish(Mapped::Command(c)) => self.publish(&o.channel, c),
+                TeleopAction::Publish(Mapped::Cluster(velocity)) => {
+                    let Some(cluster) = self
+                        .active_cluster
+                        .as_ref()
+                        .and_then(|n| self.clusters.iter().find(|c| &c.name == n))
+                    else {
+                        continue;
+                    };
+                    self.outbox.push(Request::ClusterVelocity {
+                        channel: o.channel,
+                        cluster: cluster.name.clone(),
+                        members: cluster.members.clone(),
+                        velocity,
+                    });
+                }
+                TeleopAction::EStop => self.update(Action::EStop),
+                TeleopAction::Connected(name) => {
+                    self.log(LogLevel::Info, format!("gamepad {name} on {}", o.channel));
+                }
+                TeleopAction::Disconnected => {
+                    self.log(
+                        LogLevel::Warn,
+                        format!("gamepad on {} unplugged", o.channel),
+                    );
+                }
+                TeleopAction::ModeChanged(m) => {
+                    self.log(LogLevel::Info, format!("{} mode {}", o.channel, m.as_str()));
+                }
+            }
+        }
+    }
+}
+
+/// Parses `x,y[,t]` (commas or spaces) into a waypoint; on error, the
+/// message and the byte column of the offending field.
+pub fn parse_waypoint(text: &str) -> Result<Waypoint, (String, usize)> {
+    let mut fields: Vec<(usize, &str)> = Vec::new();
+    let mut start = None;
+    for (i, ch) in text.char_indices() {
+        let sep = ch == ',' || ch.is_whitespace();
+        match (sep, start) {
+            (false, None) => start = Some(i),
+            (true, Some(s)) => {
+                fields.push((s, &text[s..i]));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        fields.push((s, &text[s..]));
+    }
+    if fields.len() < 2 {
+        return Err((
+            "expected x,y[,t] in metres (and seconds)".into(),
+            text.len(),
+        ));
+    }
+    if fields.len() > 3 {
+        return Err(("too many numbers: x,y[,t]".into(), fields[3].0));
+    }
+    let mut nums = [0.0f64; 3];
+    for (k, (col, f)) in fields.iter().enumerate() {
+        let v: f64 = f
+            .parse()
+            .map_err(|_| (format!("{f:?} is not a number"), *col))?;
+        if !v.is_finite() {
+            return Err((format!("{f:?} is not a finite number"), *col));
+        }
+        nums[k] = v;
+    }
+    let time = if fields.len() == 3 {
+        if nums[2] < 0.0 {
+            return Err(("arrival time must not be negative".into(), fields[2].0));
+        }
+        Some(nums[2])
+    } else {
+        None
+    };
+    Ok(Waypoint {
+        x: nums[0],
+        y: nums[1],
+        z: 0.0,
+        time,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waypoint_text_parses_with_optional_time() {
+        assert_eq!(
+            parse_waypoint("1.5, -2"),
+            Ok(Waypoint {
+                x: 1.5,
+                y: -2.0,
+                z: 0.0,
+                time: None
+            })
+        );
+        assert_eq!(parse_waypoint("1 2 30").map(|w| w.time), Ok(Some(30.0)));
+    }
+
+    #[test]
+    fn waypoint_errors_point_at_the_field() {
+        assert_eq!(parse_waypoint("1,abc").map_err(|e| e.1), Err(2));
+        assert_eq!(parse_waypoint("1,2,-3").map_err(|e| e.1), Err(4));
+        assert!(parse_waypoint("7").is_err());
+    }
+}

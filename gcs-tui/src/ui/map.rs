@@ -1,0 +1,350 @@
+//! The arena map: a braille canvas in metres with grid and scale, arena
+//! bounds, robots with heading lines and recent paths, selection rings,
+//! clusters joined to their centre, and numbered waypoint flags.
+
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::style::{Color, Style, Stylize};
+use ratatui::symbols::Marker;
+use ratatui::text::Line as TextLine;
+use ratatui::widgets::canvas::{Canvas, Context, Painter, Shape};
+use ratatui::widgets::{Block, Widget};
+
+use super::app::{App, Focus};
+use super::theme::Theme;
+use super::viewport::Projection;
+
+/// The map panel.
+#[derive(Debug)]
+pub struct MapPanel<'a> {
+    pub app: &'a App,
+    pub theme: Theme,
+}
+
+/// A grid spacing of 1, 2 or 5 x 10^k metres, at least `min` metres.
+pub fn grid_step(min: f64) -> f64 {
+    if !(min.is_finite() && min > 0.0) {
+        return 1.0;
+    }
+    let mag = 10f64.powf(min.log10().floor());
+    for k in [1.0, 2.0, 5.0, 10.0] {
+        if k * mag >= min {
+            return k * mag;
+        }
+    }
+    10.0 * mag
+}
+
+/// Human-readable length.
+pub fn format_length(m: f64) -> String {
+    if m >= 1000.0 {
+        format!("{} km", m / 1000.0)
+    } else if m >= 1.0 {
+        format!("{m} m")
+    } else if m >= 0.01 {
+        format!("{} cm", (m * 100.0).round())
+    } else {
+        format!("{} mm", (m * 1000.0).round())
+    }
+}
+
+/// Dots painted straight from world coordinates through the projection, so
+/// the map and click handling share one mapping.
+struct Dots<'a> {
+    proj: &'a Projection,
+    points: &'a [(f64, f64)],
+    color: Color,
+}
+
+impl Shape for Dots<'_> {
+    fn draw(&self, painter: &mut Painter) {
+        for &(x, y) in self.points {
+            if let Some((i, j)) = self.proj.world_to_dot(x, y) {
+                painter.paint(i, j, self.color);
+            }
+        }
+    }
+}
+
+/// A robot's recent path, straight from the App's trail buffer.
+struct Trail<'a> {
+    proj: &'a Projection,
+    trail: &'a std::collections::VecDeque<(std::time::Instant, f64, f64)>,
+    color: Color,
+}
+
+impl Shape for Trail<'_> {
+    fn draw(&self, painter: &mut Painter) {
+        for &(_, x, y) in self.trail {
+            if let Some((i, j)) = self.proj.world_to_dot(x, y) {
+                painter.paint(i, j, self.color);
+            }
+        }
+    }
+}
+
+/// A straight segment rasterised on the dot grid (clipped to the view).
+struct Segment<'a> {
+    proj: &'a Projection,
+    from: (f64, f64),
+    to: (f64, f64),
+    color: Color,
+    /// Paint every n-th dot (1 = solid).
+    every: usize,
+}
+
+impl Shape for Segment<'_> {
+    fn draw(&self, painter: &mut Painter) {
+        let m = self.proj.metres_per_dot;
+        let (x0, y0) = self.from;
+        let (x1, y1) = self.to;
+        let len_dots = ((x1 - x0).hypot(y1 - y0) / m).ceil();
+        if !len_dots.is_finite() {
+            return;
+        }
+        let n = (len_dots as usize).clamp(1, 4096);
+        let every = self.every.max(1);
+        for k in (0..=n).step_by(every) {
+            let f = k as f64 / n as f64;
+            if let Some((i, j)) = self
+                .proj
+                .world_to_dot(x0 + (x1 - x0) * f, y0 + (y1 - y0) * f)
+            {
+                painter.paint(i, j, self.color);
+            }
+        }
+    }
+}
+
+impl Widget for MapPanel<'_> {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        let app = self.app;
+        let t = self.theme;
+        let inner = super::layout::inner(area);
+        let proj = app.viewport.project(inner.width, inner.height);
+        let m = proj.metres_per_dot;
+        let step = grid_step(m * 16.0);
+        let mut title = format!(" Map  grid {} ", format_length(step));
+        if app.waypoint_mode {
+            title.push_str("│ WAYPOINT MODE: click to place, Esc leaves ");
+        }
+        let border = if app.focus == Focus::Map {
+            t.focused_border()
+        } else {
+            Style::new()
+        };
+        let block = Block::bordered().title(title).border_style(border);
+        let canvas = Canvas::default()
+            .block(block)
+            .marker(Marker::Braille)
+            .x_bounds(proj.x_bounds())
+            .y_bounds(proj.y_bounds())
+            .paint(|ctx| paint(ctx, app, &proj, step, &t));
+        canvas.render(area, buf);
+    }
+}
+
+fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) {
+    let m = proj.metres_per_dot;
+    let (xmin, ymin, xmax, ymax) = proj.world_rect();
+
+    // Grid: a small cross at every intersection, the axes through the
+    // origin dotted, so the robots stay the brightest thing on the map.
+    let mut crosses = Vec::new();
+    let mut gx = (xmin / step).ceil() * step;
+    while gx <= xmax {
+        let mut gy = (ymin / step).ceil() * step;
+        while gy <= ymax {
+            crosses.extend([
+                (gx, gy),
+                (gx - m, gy),
+                (gx + m, gy),
+                (gx, gy - m),
+                (gx, gy + m),
+            ]);
+            gy += step;
+        }
+        gx += step;
+    }
+    ctx.draw(&Dots {
+        proj,
+        points: &crosses,
+        color: t.grid(),
+    });
+    if xmin <= 0.0 && xmax >= 0.0 {
+        ctx.draw(&Segment {
+            proj,
+            from: (0.0, ymin),
+            to: (0.0, ymax),
+            color: t.grid(),
+            every: 3,
+        });
+    }
+    if ymin <= 0.0 && ymax >= 0.0 {
+        ctx.draw(&Segment {
+            proj,
+            from: (xmin, 0.0),
+            to: (xmax, 0.0),
+            color: t.grid(),
+            every: 3,
+        });
+    }
+    ctx.layer();
+
+    if let Some(a) = app.arena {
+        let corners = [
+            (a.min_x, a.min_y),
+            (a.max_x, a.min_y),
+            (a.max_x, a.max_y),
+            (a.min_x, a.max_y),
+        ];
+        for k in 0..4 {
+            ctx.draw(&Segment {
+                proj,
+                from: corners[k],
+                to: corners[(k + 1) % 4],
+                color: t.arena(),
+                every: 1,
+            });
+        }
+    }
+
+    // Paths of the last seconds.
+    for (i, r) in app.robots.iter().enumerate() {
+        if let Some(trail) = app.trails.get(&r.name) {
+            ctx.draw(&Trail {
+                proj,
+                trail,
+                color: t.robot(i),
+            });
+        }
+    }
+
+    // Waypoint legs, in mission order.
+    for w in app.waypoints.windows(2) {
+        ctx.draw(&Segment {
+            proj,
+            from: (w[0].x, w[0].y),
+            to: (w[1].x, w[1].y),
+            color: t.waypoint(),
+            every: 3,
+        });
+    }
+
+    // Clusters: members joined to the centre.
+    for c in &app.clusters {
+        let pos: Vec<(f64, f64)> = c
+            .members
+            .iter()
+            .filter_map(|n| app.robot(n))
+            .map(|r| (r.pose.x, r.pose.y))
+            .collect();
+        if pos.is_empty() {
+            continue;
+        }
+        let cx = pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64;
+        let cy = pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64;
+        for p in &pos {
+            ctx.draw(&Segment {
+                proj,
+                from: *p,
+                to: (cx, cy),
+                color: t.cluster(),
+                every: 2,
+            });
+        }
+        label(
+            ctx,
+            proj,
+            (cx, cy),
+            0,
+            TextLine::from(format!("✚{}", c.name)).bold(),
+        );
+    }
+
+    // Robots: heading line, selection ring.
+    let heading_len = 6.0 * m;
+    for (i, r) in app.robots.iter().enumerate() {
+        let (x, y, h) = (r.pose.x, r.pose.y, r.pose.heading);
+        let colour = t.robot(i);
+        ctx.draw(&Segment {
+            proj,
+            from: (x, y),
+            to: (x + heading_len * h.cos(), y + heading_len * h.sin()),
+            color: colour,
+            every: 1,
+        });
+        if app.selection.contains(&r.name) {
+            let ring: Vec<(f64, f64)> = (0..16)
+                .map(|k| {
+                    let a = f64::from(k) * std::f64::consts::TAU / 16.0;
+                    (x + 3.0 * m * a.cos(), y + 3.0 * m * a.sin())
+                })
+                .collect();
+            ctx.draw(&Dots {
+                proj,
+                points: &ring,
+                color: colour,
+            });
+        }
+    }
+
+    // Labels last, so they sit on top.
+    for (k, w) in app.waypoints.iter().enumerate() {
+        label(
+            ctx,
+            proj,
+            (w.x, w.y),
+            0,
+            TextLine::styled(format!("⚑{}", k + 1), Style::new().fg(t.waypoint()).bold()),
+        );
+    }
+    for (i, r) in app.robots.iter().enumerate() {
+        let selected = app.selection.contains(&r.name);
+        let mut style = Style::new().fg(t.robot(i));
+        if selected {
+            style = style.patch(t.selected());
+        }
+        let glyph = if selected { "◉" } else { "●" };
+        let at = (r.pose.x, r.pose.y);
+        label(ctx, proj, at, 0, TextLine::styled(glyph, style));
+        label(
+            ctx,
+            proj,
+            at,
+            2,
+            TextLine::styled(r.name.clone(), Style::new().fg(t.robot(i))),
+        );
+    }
+}
+
+/// Prints a label in the cell containing world point `at`, `dx` cells to
+/// the right; nothing if that cell is off the map.
+fn label(ctx: &mut Context, proj: &Projection, at: (f64, f64), dx: u16, line: TextLine<'static>) {
+    if let Some((c, r)) = proj.world_to_cell(at.0, at.1) {
+        let c = c.saturating_add(dx);
+        if c < proj.width {
+            let (x, y) = proj.label_anchor(c, r);
+            ctx.print(x, y, line);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_steps_are_round() {
+        assert_eq!(grid_step(0.7), 1.0);
+        assert_eq!(grid_step(1.2), 2.0);
+        assert_eq!(grid_step(3.0), 5.0);
+        assert!((grid_step(0.031) - 0.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn lengths_read_naturally() {
+        assert_eq!(format_length(2.0), "2 m");
+        assert_eq!(format_length(0.5), "50 cm");
+    }
+}

@@ -1,0 +1,67 @@
+//! `impl Widget for &App`: the whole screen as a pure function of the state.
+
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::widgets::Widget;
+
+use super::app::App;
+use super::cards::CardsPanel;
+use super::events::EventsPanel;
+use super::help::HelpOverlay;
+use super::layout::Areas;
+use super::map::MapPanel;
+use super::routes::RoutesPanel;
+use super::status::{BottomBar, EStopBanner, PromptErrorBox, StatusBar};
+use super::theme::Theme;
+use super::waypoints::WaypointPanel;
+
+impl Widget for &App {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        let theme = Theme::new(self.monochrome);
+        let a = Areas::compute(area, self.side);
+        StatusBar { app: self, theme }.render(a.status, buf);
+        if let Some(r) = a.cards {
+            CardsPanel { app: self, theme }.render(r, buf);
+        }
+        if let Some(r) = a.waypoints {
+            WaypointPanel { app: self, theme }.render(r, buf);
+        }
+        if let Some(r) = a.routes {
+            RoutesPanel { app: self, theme }.render(r, buf);
+        }
+        MapPanel { app: self, theme }.render(a.map, buf);
+        EventsPanel {
+            app: self,
+            theme,
+            bordered: a.wide,
+        }
+        .render(a.log, buf);
+        BottomBar { app: self, theme }.render(a.bottom, buf);
+        if let Some(e) = &self.prompt_error {
+            let h = 2;
+            let r = Rect {
+                x: area.x,
+                y: a.bottom.y.saturating_sub(h),
+                width: area.width,
+                height: h.min(a.bottom.y),
+            };
+            PromptErrorBox { error: e, theme }.render(r, buf);
+        }
+        if self.estop {
+            let r = Rect {
+                x: a.map.x,
+                y: a.map.y,
+                width: a.map.width,
+                height: 3.min(a.map.height),
+            };
+            EStopBanner { theme }.render(r, buf);
+        }
+        if self.show_help {
+            HelpOverlay {
+                theme,
+                scroll: self.help_scroll,
+            }
+            .render(area, buf);
+        }
+    }
+}

@@ -1,0 +1,182 @@
+//! The routing table: robots x channels, the active route marked
+//! acknowledged (●) or pending (◌), a cursor to re-route with Enter, and the
+//! live channels with their publisher and rate.
+
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::style::Style;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Block, Paragraph, Widget};
+
+use super::app::{App, Focus};
+use super::theme::Theme;
+
+const NAME_W: usize = 9;
+const COL_W: usize = 7;
+
+/// The routing-table panel.
+#[derive(Debug)]
+pub struct RoutesPanel<'a> {
+    pub app: &'a App,
+    pub theme: Theme,
+}
+
+fn clip(s: &str, w: usize) -> String {
+    if s.chars().count() <= w {
+        format!("{s:<w$}")
+    } else {
+        let mut out: String = s.chars().take(w.saturating_sub(1)).collect();
+        out.push('…');
+        out
+    }
+}
+
+/// Which part of the table is visible: the cursor is always in view.
+/// Shared by drawing and click handling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TableWindow {
+    pub first_col: usize,
+    pub cols: usize,
+    pub first_row: usize,
+    pub rows: usize,
+}
+
+impl TableWindow {
+    /// The window for a table of `n_cols` channel columns in `inner`.
+    pub fn new(app: &App, inner: Rect, n_cols: usize) -> TableWindow {
+        let cols = (usize::from(inner.width).saturating_sub(NAME_W + 1) / COL_W).max(1);
+        let first_col = app
+            .route_cursor
+            .1
+            .saturating_sub(cols - 1)
+            .min(n_cols.saturating_sub(1));
+        let rows = usize::from(inner.height).saturating_sub(1 + 2).max(1);
+        let first_row = app.route_cursor.0.saturating_sub(rows - 1);
+        TableWindow {
+            first_col,
+            cols,
+            first_row,
+            rows,
+        }
+    }
+
+    /// The (robot row, channel column) under a cell of `inner`, if any.
+    pub fn cell_at(&self, inner: Rect, col: u16, row: u16) -> Option<(usize, usize)> {
+        let dy = usize::from(row.checked_sub(inner.y)?);
+        let dx = usize::from(col.checked_sub(inner.x)?);
+        if dy == 0 || dy > self.rows || dx < NAME_W + 1 {
+            return None;
+        }
+        let c = (dx - NAME_W - 1) / COL_W;
+        (c < self.cols).then_some((self.first_row + dy - 1, self.first_col + c))
+    }
+}
+
+impl Widget for RoutesPanel<'_> {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        let app = self.app;
+        let t = self.theme;
+        let focused = app.focus == Focus::Routes;
+        let border = if focused {
+            t.focused_border()
+        } else {
+            Style::new()
+        };
+        let block = Block::bordered().title(" Routes ").border_style(border);
+        let inner = block.inner(area);
+        block.render(area, buf);
+
+        let cols = app.route_columns();
+        let w = TableWindow::new(app, inner, cols.len());
+        let (first, fit, first_row, rows_fit) = (w.first_col, w.cols, w.first_row, w.rows);
+        let shown = &cols[first..(first + fit).min(cols.len())];
+
+        let mut lines: Vec<Line> = Vec::new();
+        let mut head = vec![Span::raw(" ".repeat(NAME_W + 1))];
+        for c in shown {
+            let name = if c.is_empty() { "none" } else { c };
+            head.push(Span::styled(clip(name, COL_W), t.title()));
+        }
+        lines.push(Line::from(head));
+        for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
+            let mut spans = vec![Span::styled(
+                format!("{} ", clip(&r.name, NAME_W)),
+                Style::new().fg(t.robot(ri)),
+            )];
+            for (k, c) in shown.iter().enumerate() {
+                let ci = first + k;
+                let active = &r.route.channel == c;
+                let mark = match (active, r.route.acknowledged) {
+                    (true, true) => "●ack",
+                    (true, false) => "◌pend",
+                    _ => "·",
+                };
+                let mut style = if active && r.route.acknowledged {
+                    t.ok()
+                } else if active {
+                    t.warn()
+                } else {
+                    t.dim()
+                };
+                if focused && app.route_cursor == (ri, ci) {
+                    style = style.patch(t.selected());
+                }
+                spans.push(Span::styled(clip(mark, COL_W), style));
+            }
+            lines.push(Line::from(spans));
+        }
+        if app.robots.is_empty() {
+            lines.push(Line::styled("no robots", t.dim()));
+        }
+        if !app.channels.is_empty() {
+            lines.push(Line::styled("live channels", t.title()));
+            for c in &app.channels {
+                lines.push(Line::raw(format!(
+                    " {:<10} {:<8}{:>6.1}Hz",
+                    c.name, c.publisher, c.rate_hz
+                )));
+            }
+        }
+        let pads = app.pads();
+        if !pads.is_empty() || app.key_teleop_on {
+            lines.push(Line::styled("controllers", t.title()));
+            for p in pads {
+                let state = if p.enabled {
+                    Span::styled("driving", t.warn())
+                } else {
+                    Span::styled("hold LB", t.dim())
+                };
+                lines.push(Line::from(vec![
+                    Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.as_str())),
+                    state,
+                    Span::styled(format!(" {}", p.name), t.dim()),
+                ]));
+            }
+            if app.key_teleop_on {
+                lines.push(Line::from(vec![
+                    Span::raw(format!(
+                        " {:<6} {:<8} ",
+                        crate::gamepad::KEY_CHANNEL,
+                        "twist"
+                    )),
+                    Span::styled("keys", t.warn()),
+                ]));
+            }
+        }
+        if !app.clusters.is_empty() {
+            lines.push(Line::styled("clusters", t.title()));
+            for (k, c) in app.clusters.iter().enumerate() {
+                let active = app.active_cluster.as_deref() == Some(c.name.as_str());
+                let style = if active { t.title() } else { Style::new() };
+                lines.push(Line::from(vec![
+                    Span::styled(format!(" {} {:<4}", k + 1, c.name), style),
+                    Span::raw(c.members.join(" ")),
+                ]));
+            }
+        }
+        if focused {
+            lines.push(Line::styled("↑↓ robot  ←→ channel  Enter route", t.dim()));
+        }
+        Paragraph::new(lines).render(inner, buf);
+    }
+}

@@ -1,0 +1,95 @@
+//! The waypoint panel: the list being edited (newest first), where it will
+//! be sent, and the mission progress of the selected robots.
+
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::style::Style;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Block, Paragraph, Widget};
+
+use super::app::{App, Focus, WAYPOINT_CHANNEL};
+use super::theme::Theme;
+
+/// The waypoint panel.
+#[derive(Debug)]
+pub struct WaypointPanel<'a> {
+    pub app: &'a App,
+    pub theme: Theme,
+}
+
+impl Widget for WaypointPanel<'_> {
+    fn render(self, area: Rect, buf: &mut Buffer) {
+        let app = self.app;
+        let t = self.theme;
+        let border = if app.focus == Focus::Waypoints || app.waypoint_mode {
+            t.focused_border()
+        } else {
+            Style::new()
+        };
+        let mode = if app.waypoint_mode { " [placing]" } else { "" };
+        let block = Block::bordered()
+            .title(format!(" Waypoints {}{mode} ", app.waypoints.len()))
+            .border_style(border);
+        let inner = block.inner(area);
+        block.render(area, buf);
+
+        let mut lines: Vec<Line> = Vec::new();
+        let targets: Vec<&str> = app
+            .robots
+            .iter()
+            .filter(|r| app.selection.contains(&r.name))
+            .map(|r| r.name.as_str())
+            .collect();
+        let to = if targets.is_empty() {
+            "select robots".to_string()
+        } else {
+            targets.join(" ")
+        };
+        lines.push(Line::from(vec![
+            Span::styled("to ", t.dim()),
+            Span::raw(to),
+            Span::styled(format!(" on {WAYPOINT_CHANNEL}"), t.dim()),
+        ]));
+        for r in app
+            .robots
+            .iter()
+            .filter(|r| app.selection.contains(&r.name))
+        {
+            if let Some(m) = r.mission {
+                let state = if m.next >= m.total {
+                    Span::styled("arrived", t.ok())
+                } else {
+                    Span::raw(format!("to wp {}/{}", m.next + 1, m.total))
+                };
+                lines.push(Line::from(vec![
+                    Span::raw(format!(" {} mission {} ", r.name, m.id)),
+                    state,
+                ]));
+            }
+        }
+        let n = app.waypoints.len();
+        for (k, w) in app.waypoints.iter().enumerate().rev() {
+            let time = w.time.map(|s| format!(" t {s:.1}s")).unwrap_or_default();
+            lines.push(Line::from(vec![
+                Span::styled(format!("⚑{:<3}", k + 1), Style::new().fg(t.waypoint())),
+                Span::raw(format!("x{:7.2} y{:7.2}{time}", w.x, w.y)),
+            ]));
+            if lines.len() >= usize::from(inner.height).saturating_sub(1) && k > 0 {
+                lines.push(Line::styled(format!("… {k} older"), t.dim()));
+                break;
+            }
+        }
+        if n == 0 {
+            lines.push(Line::styled(
+                "f: waypoint mode, click the map or e: type x,y[,t]",
+                t.dim(),
+            ));
+        } else {
+            lines.push(Line::styled(
+                "Enter send  ⌫ remove last  Del clear  Esc done",
+                t.dim(),
+            ));
+        }
+        Paragraph::new(lines).render(inner, buf);
+    }
+}

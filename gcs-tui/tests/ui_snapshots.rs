@@ -1,0 +1,129 @@
+//! Screen snapshots of the main screen with a fixed fleet.
+
+use mech_gcs::ui::fixture;
+use mech_gcs::ui::{Action, Select};
+use mech_proto::Waypoint;
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+
+fn screen(app: &mech_gcs::ui::App, w: u16, h: u16) -> String {
+    let mut term = Terminal::new(TestBackend::new(w, h)).expect("test terminal");
+    term.draw(|f| f.render_widget(app, f.area()))
+        .expect("draws");
+    term.backend().to_string()
+}
+
+fn populated(w: u16, h: u16) -> mech_gcs::ui::App {
+    let mut app = fixture::app(6, w, h);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::Select(Select::Toggle("robot_2".into())));
+    app.update(Action::MakeCluster);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: 1.0,
+        y: 1.0,
+        z: 0.0,
+        time: None,
+    }));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: -1.0,
+        y: 0.5,
+        z: 0.0,
+        time: Some(12.0),
+    }));
+    app
+}
+
+#[test]
+fn main_screen_80x24() {
+    let app = populated(80, 24);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+#[test]
+fn main_screen_160x48() {
+    let app = populated(160, 48);
+    insta::assert_snapshot!(screen(&app, 160, 48));
+}
+
+#[test]
+fn routes_panel_80x24() {
+    let mut app = populated(80, 24);
+    app.update(Action::FocusPrev);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+#[test]
+fn estop_banner_and_help_80x24() {
+    let mut app = populated(80, 24);
+    app.update(Action::EStop);
+    insta::assert_snapshot!("estop", screen(&app, 80, 24));
+    app.update(Action::ToggleHelp);
+    insta::assert_snapshot!("help", screen(&app, 80, 24));
+    app.update(Action::HelpScroll(100));
+    insta::assert_snapshot!("help_scrolled", screen(&app, 80, 24));
+}
+
+#[test]
+fn help_lists_every_key_across_its_pages() {
+    let mut app = populated(80, 24);
+    app.update(Action::ToggleHelp);
+    let mut seen = String::new();
+    for _ in 0..mech_gcs::ui::help::KEYS.len() {
+        seen.push_str(&screen(&app, 80, 24));
+        app.update(Action::HelpScroll(1));
+    }
+    for (k, d) in mech_gcs::ui::help::KEYS {
+        assert!(seen.contains(k), "key {k} shown");
+        assert!(seen.contains(d), "description of {k} shown whole");
+    }
+}
+
+#[test]
+fn monochrome_screen_keeps_the_text() {
+    let mut app = populated(80, 24);
+    let colour = screen(&app, 80, 24);
+    app.monochrome = true;
+    assert_eq!(colour, screen(&app, 80, 24), "same glyphs without colour");
+}
+
+#[test]
+fn tiny_and_odd_terminal_sizes_render_without_panicking() {
+    for (w, h) in [
+        (1, 1),
+        (5, 3),
+        (20, 6),
+        (40, 10),
+        (79, 23),
+        (119, 35),
+        (300, 90),
+    ] {
+        let mut app = populated(w, h);
+        app.update(Action::EStop);
+        app.update(Action::ToggleHelp);
+        app.update(Action::CommandResult(Err(mech_gcs::ui::PromptError {
+            line: "route x".into(),
+            message: "bad".into(),
+            column: Some(99),
+        })));
+        let s = screen(&app, w, h);
+        assert_eq!(s.lines().count(), usize::from(h), "{w}x{h}");
+    }
+}
+
+#[test]
+fn routes_panel_lists_pads_and_keyboard_teleop() {
+    use mech_gcs::gamepad::{PadButton, PadEvent, PadEventKind};
+    let mut app = populated(80, 24);
+    app.update(Action::Pad(PadEvent::new(
+        1,
+        PadEventKind::Connected("Synthetic Pad".into()),
+    )));
+    app.update(Action::Pad(PadEvent::new(
+        1,
+        PadEventKind::ButtonPressed(PadButton::LeftBumper),
+    )));
+    app.update(Action::ToggleKeyTeleop);
+    app.update(Action::FocusPrev);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}

@@ -1,0 +1,428 @@
+//! UI state changes, driven by `App::update(Action)` and the key bindings.
+
+use crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+use mech_gcs::ui::fixture;
+use mech_gcs::ui::keys::on_key;
+use mech_gcs::ui::{Action, App, Prompt, Request, Select};
+use mech_proto::Waypoint;
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+
+fn render(app: &App) -> ratatui::buffer::Buffer {
+    let mut term = Terminal::new(TestBackend::new(app.size.0, app.size.1)).expect("test terminal");
+    term.draw(|f| f.render_widget(app, f.area()))
+        .expect("draws");
+    term.backend().buffer().clone()
+}
+
+/// Cell (absolute) where a robot's glyph was drawn on the map.
+fn drawn_robot_cell(app: &App, name: &str) -> (u16, u16) {
+    let buf = render(app);
+    let inner = app.areas().map_inner();
+    let r = app.robot(name).expect("robot exists");
+    let right = inner.x + inner.width;
+    for row in inner.y..inner.y + inner.height {
+        for col in inner.x..right.saturating_sub(2) {
+            let g = buf[(col, row)].symbol();
+            let label: String = (col + 2..(col + 2 + r.name.len() as u16).min(right))
+                .map(|c| buf[(c, row)].symbol())
+                .collect();
+            if (g == "●" || g == "◉") && label == r.name {
+                return (col, row);
+            }
+        }
+    }
+    panic!("{name} not drawn on the map");
+}
+
+fn key(code: KeyCode) -> KeyEvent {
+    KeyEvent::new(code, KeyModifiers::NONE)
+}
+
+#[test]
+fn clicking_a_robot_selects_it_and_shift_click_adds() {
+    let mut app = fixture::app(6, 160, 48);
+    let (c, r) = drawn_robot_cell(&app, "robot_3");
+    app.update(Action::Click {
+        col: c,
+        row: r,
+        add: false,
+    });
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+    let (c, r) = drawn_robot_cell(&app, "robot_5");
+    app.update(Action::Click {
+        col: c,
+        row: r,
+        add: true,
+    });
+    assert_eq!(
+        app.selection.iter().collect::<Vec<_>>(),
+        ["robot_3", "robot_5"]
+    );
+}
+
+#[test]
+fn clicking_a_card_selects_its_robot() {
+    let mut app = fixture::app(6, 80, 24);
+    let cards = app.areas().cards.expect("cards shown");
+    // Third card: rows 1 + 2*3 inside the border.
+    app.update(Action::Click {
+        col: cards.x + 3,
+        row: cards.y + 1 + 2 * 3,
+        add: false,
+    });
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+}
+
+#[test]
+fn keys_cycle_select_all_and_clear() {
+    let mut app = fixture::app(4, 80, 24);
+    for a in on_key(&app, &key(KeyCode::Char('n'))) {
+        app.update(a);
+    }
+    assert!(app.selection.contains("robot_1"));
+    app.update(Action::Select(Select::Next));
+    app.update(Action::Select(Select::Next));
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+    app.update(Action::Select(Select::Prev));
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_2"]);
+    app.update(Action::Select(Select::AddNext));
+    assert_eq!(app.selection.len(), 2);
+    app.update(Action::Select(Select::All));
+    assert_eq!(app.selection.len(), 4);
+    app.update(Action::Select(Select::Clear));
+    assert!(app.selection.is_empty());
+}
+
+#[test]
+fn cluster_from_selection_is_listed_and_requested() {
+    let mut app = fixture::app(4, 80, 24);
+    app.update(Action::Select(Select::Only("robot_2".into())));
+    app.update(Action::MakeCluster);
+    assert!(app.clusters.is_empty(), "one robot is not a cluster");
+    app.update(Action::Select(Select::Toggle("robot_4".into())));
+    app.take_requests();
+    app.update(Action::MakeCluster);
+    assert_eq!(app.clusters.len(), 1);
+    assert_eq!(app.clusters[0].name, "c1");
+    assert_eq!(app.clusters[0].members, ["robot_2", "robot_4"]);
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::DefineCluster {
+            name: "c1".into(),
+            members: vec!["robot_2".into(), "robot_4".into()]
+        }]
+    );
+    app.update(Action::Select(Select::Clear));
+    for a in on_key(&app, &key(KeyCode::Char('1'))) {
+        app.update(a);
+    }
+    assert_eq!(app.selection.len(), 2, "1 selects cluster c1");
+}
+
+#[test]
+fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
+    let mut app = fixture::app(6, 160, 48);
+    app.update(Action::Zoom(1.6));
+    app.update(Action::Pan(3.0, -2.0));
+    app.update(Action::WaypointMode(true));
+
+    // 1. Exact arithmetic: the click maps to the centre of the clicked cell.
+    let inner = app.areas().map_inner();
+    let v = app.viewport;
+    let (col, row) = (inner.x + 7, inner.y + 5);
+    app.update(Action::Click {
+        col,
+        row,
+        add: false,
+    });
+    let m = v.metres_per_dot;
+    let want_x = v.centre_x - f64::from(inner.width) * m + (2.0 * 7.0 + 1.0) * m;
+    let want_y = v.centre_y + f64::from(inner.height) * 2.0 * m - (4.0 * 5.0 + 2.0) * m;
+    let w = app.waypoints[0];
+    assert!(
+        (w.x - want_x).abs() < 1e-9 && (w.y - want_y).abs() < 1e-9,
+        "{w:?}"
+    );
+
+    // 2. Agreement with the drawing: clicking where robot_2 is drawn places
+    //    the waypoint on robot_2, within half a cell.
+    let (c, r) = drawn_robot_cell(&app, "robot_2");
+    app.update(Action::Click {
+        col: c,
+        row: r,
+        add: false,
+    });
+    let w = app.waypoints[1];
+    let pose = app.robot("robot_2").expect("robot_2").pose;
+    assert!((w.x - pose.x).abs() <= m + 1e-9, "x {} vs {}", w.x, pose.x);
+    assert!(
+        (w.y - pose.y).abs() <= 2.0 * m + 1e-9,
+        "y {} vs {}",
+        w.y,
+        pose.y
+    );
+    assert!(
+        app.selection.is_empty(),
+        "waypoint mode clicks do not select"
+    );
+}
+
+#[test]
+fn typed_waypoints_edit_and_send_to_the_selection() {
+    let mut app = fixture::app(4, 80, 24);
+    app.update(Action::Select(Select::Only("robot_2".into())));
+    app.update(Action::WaypointMode(true));
+    for a in on_key(&app, &key(KeyCode::Char('e'))) {
+        app.update(a);
+    }
+    for ch in "1.5,-0.5,8".chars() {
+        app.update(Action::PromptChar(ch));
+    }
+    app.update(Action::PromptSubmit);
+    app.update(Action::OpenWaypointEntry);
+    for ch in "2,x".chars() {
+        app.update(Action::PromptChar(ch));
+    }
+    app.update(Action::PromptSubmit);
+    let err = app.prompt_error.clone().expect("bad waypoint reported");
+    assert_eq!(err.column, Some(2), "points at the bad field");
+    assert!(
+        matches!(app.prompt, Some(Prompt::Waypoint(_))),
+        "stays open"
+    );
+    app.update(Action::PromptCancel);
+    app.update(Action::AddWaypoint(Waypoint {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        time: None,
+    }));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: 9.0,
+        y: 9.0,
+        z: 0.0,
+        time: None,
+    }));
+    for a in on_key(&app, &key(KeyCode::Backspace)) {
+        app.update(a);
+    }
+    assert_eq!(app.waypoints.len(), 2);
+    app.take_requests();
+    for a in on_key(&app, &key(KeyCode::Enter)) {
+        app.update(a);
+    }
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Mission {
+            robots: vec!["robot_2".into()],
+            waypoints: vec![
+                Waypoint {
+                    x: 1.5,
+                    y: -0.5,
+                    z: 0.0,
+                    time: Some(8.0)
+                },
+                Waypoint {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.0,
+                    time: None
+                },
+            ]
+        }]
+    );
+    for a in on_key(&app, &key(KeyCode::Esc)) {
+        app.update(a);
+    }
+    assert!(!app.waypoint_mode);
+    app.update(Action::ClearWaypoints);
+    assert!(app.waypoints.is_empty());
+}
+
+#[test]
+fn route_change_from_the_table_cursor() {
+    let mut app = fixture::app(4, 80, 24);
+    app.update(Action::FocusPrev); // map -> routes
+    let cols = app.route_columns();
+    let key0 = cols
+        .iter()
+        .position(|c| c == "key/0")
+        .expect("key/0 column");
+    for a in on_key(&app, &key(KeyCode::Down)) {
+        app.update(a);
+    }
+    for _ in 0..key0 {
+        for a in on_key(&app, &key(KeyCode::Right)) {
+            app.update(a);
+        }
+    }
+    app.take_requests();
+    for a in on_key(&app, &key(KeyCode::Enter)) {
+        app.update(a);
+    }
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Route {
+            robot: "robot_2".into(),
+            channel: "key/0".into()
+        }]
+    );
+    let r = app.robot("robot_2").expect("robot_2");
+    assert_eq!(r.route.channel, "key/0");
+    assert!(
+        !r.route.acknowledged,
+        "pending until the core reports the ack"
+    );
+    app.update(Action::Route {
+        robot: "robot_99".into(),
+        channel: "joy/0".into(),
+    });
+    assert!(app.take_requests().is_empty(), "unknown robot is refused");
+}
+
+#[test]
+fn estop_key_works_in_every_mode_and_shows_a_banner() {
+    let mut app = fixture::app(4, 80, 24);
+    let shift_x = KeyEvent::new(KeyCode::Char('X'), KeyModifiers::SHIFT);
+    let ctrl_x = KeyEvent::new(KeyCode::Char('x'), KeyModifiers::CONTROL);
+    let modes: [fn(&mut App); 5] = [
+        |_| {},
+        |a| a.update(Action::ToggleHelp),
+        |a| a.update(Action::WaypointMode(true)),
+        |a| a.update(Action::ToggleKeyTeleop),
+        |a| a.update(Action::FocusPrev),
+    ];
+    for enter in &modes {
+        let mut a = fixture::app(4, 80, 24);
+        enter(&mut a);
+        assert_eq!(on_key(&a, &shift_x), vec![Action::EStop]);
+        assert_eq!(on_key(&a, &ctrl_x), vec![Action::EStop]);
+    }
+    app.update(Action::OpenCommandLine);
+    assert_eq!(on_key(&app, &ctrl_x), vec![Action::EStop], "typing: Ctrl+X");
+    assert_eq!(
+        on_key(&app, &shift_x),
+        vec![Action::PromptChar('X')],
+        "typing: X is a letter"
+    );
+    app.update(Action::PromptCancel);
+
+    app.take_requests();
+    app.update(Action::EStop);
+    assert!(app.estop);
+    assert_eq!(app.take_requests(), vec![Request::EStop { engage: true }]);
+    let screen = format!("{:?}", render(&app));
+    assert!(screen.contains("E-STOP ENGAGED"));
+    app.update(Action::Release);
+    assert_eq!(app.take_requests(), vec![Request::EStop { engage: false }]);
+    assert!(!format!("{:?}", render(&app)).contains("E-STOP ENGAGED"));
+}
+
+#[test]
+fn command_line_runs_through_the_core_with_history() {
+    let mut app = fixture::app(2, 80, 24);
+    for line in ["route robot_1 joy/0", "estop"] {
+        app.update(Action::OpenCommandLine);
+        for ch in line.chars() {
+            app.update(Action::PromptChar(ch));
+        }
+        app.update(Action::PromptSubmit);
+    }
+    assert_eq!(
+        app.take_requests(),
+        vec![
+            Request::Exec("route robot_1 joy/0".into()),
+            Request::Exec("estop".into())
+        ]
+    );
+    app.update(Action::OpenCommandLine);
+    app.update(Action::HistoryPrev);
+    app.update(Action::HistoryPrev);
+    assert_eq!(
+        app.prompt,
+        Some(Prompt::Command("route robot_1 joy/0".into()))
+    );
+    app.update(Action::HistoryNext);
+    assert_eq!(app.prompt, Some(Prompt::Command("estop".into())));
+    app.update(Action::PromptCancel);
+    app.update(Action::CommandResult(Ok(
+        "2 channels\n joy/0 gcs\n wp/gcs gcs".into(),
+    )));
+    let tail: Vec<&str> = app
+        .log
+        .iter()
+        .rev()
+        .take(3)
+        .map(|l| l.text.as_str())
+        .collect();
+    assert_eq!(
+        tail,
+        [" wp/gcs gcs", " joy/0 gcs", "2 channels"],
+        "details logged line by line"
+    );
+    app.update(Action::CommandResult(Err(mech_gcs::ui::PromptError {
+        line: "route robot_9 joy/0".into(),
+        message: "no robot robot_9".into(),
+        column: Some(6),
+    })));
+    let screen = format!("{:?}", render(&app));
+    assert!(screen.contains("      ^ no robot robot_9"), "{screen}");
+}
+
+#[test]
+fn zoom_keys_and_wheel_change_scale_fit_restores() {
+    let mut app = fixture::app(4, 80, 24);
+    let fitted = app.viewport;
+    for a in on_key(&app, &key(KeyCode::Char('+'))) {
+        app.update(a);
+    }
+    assert!(app.viewport.metres_per_dot < fitted.metres_per_dot);
+    let inner = app.areas().map_inner();
+    let (c, r) = (inner.x + 4, inner.y + 3);
+    let before = app.map_point(c, r).expect("on map");
+    app.update(Action::Scroll {
+        col: c,
+        row: r,
+        steps: 2,
+    });
+    let after = app.map_point(c, r).expect("on map");
+    assert!((before.0 - after.0).abs() < 1e-9 && (before.1 - after.1).abs() < 1e-9);
+    app.update(Action::FitFleet);
+    assert_eq!(app.viewport, fitted);
+}
+
+#[test]
+fn clicking_a_routes_cell_picks_it_and_a_second_click_routes() {
+    let mut app = fixture::app(4, 160, 48);
+    let routes = app.areas().routes.expect("routes panel shown");
+    let cols = app.route_columns();
+    let wp = cols
+        .iter()
+        .position(|c| c == "wp/gcs")
+        .expect("wp/gcs column");
+    // Rows: border, header, robot_1, robot_2 ...; columns: border, 9-wide
+    // name and a space, then 7-wide channel cells.
+    let col = routes.x + 1 + 10 + 7 * wp as u16 + 1;
+    let row = routes.y + 1 + 1 + 3; // robot_4
+    app.take_requests();
+    app.update(Action::Click {
+        col,
+        row,
+        add: false,
+    });
+    assert_eq!(app.route_cursor, (3, wp));
+    assert!(app.take_requests().is_empty(), "first click only picks");
+    app.update(Action::Click {
+        col,
+        row,
+        add: false,
+    });
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Route {
+            robot: "robot_4".into(),
+            channel: "wp/gcs".into()
+        }]
+    );
+}

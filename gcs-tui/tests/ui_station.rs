@@ -1,0 +1,210 @@
+//! The station's link to the core, without a terminal: a real router and
+//! simulated agents, the App fed from the fleet model, and the App's
+//! requests carried back to the router.
+
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use mech_gcs::ui::{Action, App, CoreLink, LinkState, Select, snapshot};
+use mech_gcs::{Gcs, GcsConfig};
+use mech_proto::Waypoint;
+
+async fn refresh(app: &mut App, gcs: &Gcs) {
+    let snap = gcs.with_fleet(|f| snapshot(f, gcs.router().channels()));
+    app.update(Action::Tick(Instant::now()));
+    app.update(Action::Fleet(snap));
+}
+
+/// Polls the fleet into the App until `pred` holds (the simulated agents
+/// run in real time); panics after `timeout`.
+async fn wait_for(
+    app: &mut App,
+    gcs: &Gcs,
+    what: &str,
+    timeout: Duration,
+    pred: impl Fn(&App) -> bool,
+) {
+    let start = Instant::now();
+    loop {
+        refresh(app, gcs).await;
+        if pred(app) {
+            return;
+        }
+        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn app_requests_reach_simulated_robots() {
+    let mut config = GcsConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.expect("router starts");
+    let mut spawner = mech_gcs::script::simulator();
+    let names = spawner
+        .spawn(2, gcs.router().udp_addr())
+        .await
+        .expect("simulated agents start");
+    assert_eq!(names, ["robot_1", "robot_2"]);
+
+    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
+    let mut link = CoreLink::new(gcs.clone(), lines);
+    let mut app = App::new(gcs.router().udp_addr().to_string(), Instant::now());
+    wait_for(
+        &mut app,
+        &gcs,
+        "two connected robots",
+        Duration::from_secs(10),
+        |a| {
+            a.robots.len() == 2
+                && a.robots
+                    .iter()
+                    .all(|r| r.link == LinkState::Connected && r.pose.x != 0.0)
+        },
+    )
+    .await;
+    assert!(
+        app.robots.iter().any(|r| r.platform == "kiwi"),
+        "mixed platforms"
+    );
+
+    // A waypoint 0.3 m ahead of robot_1, sent and routed from the App.
+    let p = app.robot("robot_1").expect("robot_1").pose;
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: p.x + 0.3,
+        y: p.y,
+        z: 0.0,
+        time: None,
+    }));
+    app.update(Action::SendWaypoints);
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: "wp/gcs".into(),
+    });
+    for req in app.take_requests() {
+        link.carry(req, &mut app).await;
+    }
+    wait_for(
+        &mut app,
+        &gcs,
+        "route acknowledged and mission done",
+        Duration::from_secs(20),
+        |a| {
+            let r = a.robot("robot_1").expect("robot_1");
+            r.route.channel == "wp/gcs"
+                && r.route.acknowledged
+                && r.mission.is_some_and(|m| m.total == 1 && m.next == 1)
+        },
+    )
+    .await;
+    let r = app.robot("robot_1").expect("robot_1");
+    assert!(
+        (r.pose.x - (p.x + 0.3)).abs() < 0.15,
+        "arrived near the waypoint: {:?}",
+        r.pose
+    );
+
+    // E-stop from the App latches every robot.
+    app.update(Action::EStop);
+    for req in app.take_requests() {
+        link.carry(req, &mut app).await;
+    }
+    wait_for(
+        &mut app,
+        &gcs,
+        "every robot e-stopped",
+        Duration::from_secs(10),
+        |a| {
+            a.estop
+                && a.robots
+                    .iter()
+                    .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
+        },
+    )
+    .await;
+
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
+    use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
+
+    let mut config = GcsConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.expect("router starts");
+    let mut spawner = mech_gcs::script::simulator();
+    spawner
+        .spawn(1, gcs.router().udp_addr())
+        .await
+        .expect("simulated agent starts");
+    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
+    let mut link = CoreLink::new(gcs.clone(), lines);
+    let mut app = App::new("router", Instant::now());
+    wait_for(&mut app, &gcs, "robot_1", Duration::from_secs(10), |a| {
+        a.robot("robot_1").is_some_and(|r| r.pose.x != 0.0)
+    })
+    .await;
+
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: "joy/0".into(),
+    });
+    for ev in [
+        PadEventKind::Connected("synthetic".into()),
+        PadEventKind::ButtonPressed(PadButton::LeftBumper),
+        PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0),
+    ] {
+        app.update(Action::Pad(PadEvent::new(0, ev)));
+    }
+    // Keep the pad publishing at its rate while the robot drives.
+    let start = Instant::now();
+    loop {
+        for req in app.take_requests() {
+            link.carry(req, &mut app).await;
+        }
+        refresh(&mut app, &gcs).await;
+        let r = app.robot("robot_1").expect("robot_1");
+        if r.route.acknowledged && r.speed() > 0.05 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "pad drives robot_1"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+
+    // Re-route away while the dead-man is still held: the pad keeps
+    // publishing on joy/0, but robot_1 must come to rest.
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: String::new(),
+    });
+    let start = Instant::now();
+    loop {
+        for req in app.take_requests() {
+            link.carry(req, &mut app).await;
+        }
+        refresh(&mut app, &gcs).await;
+        let r = app.robot("robot_1").expect("robot_1");
+        if r.route.acknowledged && r.route.channel.is_empty() && r.speed() < 0.01 {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "robot_1 stops: {r:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(
+        app.pads()[0].enabled,
+        "the pad was still driving its channel"
+    );
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}

@@ -1,0 +1,176 @@
+//! The TUI end to end: `mech-gcs --demo` inside a detached tmux session.
+//! Keys and SGR mouse clicks go in with `send-keys`, the screen comes back
+//! with `capture-pane -p`. A waypoint is typed near robot_1, sent to it,
+//! robot_1 is routed to the waypoint channel from the command line, and its
+//! card must report the mission arrived.
+
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+struct Tmux {
+    socket: String,
+    session: String,
+    _state: std::path::PathBuf,
+}
+
+impl Tmux {
+    fn run(&self, args: &[&str]) -> Output {
+        Command::new("tmux")
+            .arg("-L")
+            .arg(&self.socket)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("tmux {args:?}: {e}"))
+    }
+
+    fn keys(&self, keys: &[&str]) {
+        let mut args = vec!["send-keys", "-t", self.session.as_str()];
+        args.extend_from_slice(keys);
+        let out = self.run(&args);
+        assert!(out.status.success(), "send-keys {keys:?}");
+    }
+
+    fn literal(&self, text: &str) {
+        let out = self.run(&["send-keys", "-t", &self.session, "-l", text]);
+        assert!(out.status.success(), "send-keys -l {text:?}");
+    }
+
+    fn screen(&self) -> String {
+        String::from_utf8_lossy(
+            &self
+                .run(&["capture-pane", "-p", "-t", &self.session])
+                .stdout,
+        )
+        .into_owned()
+    }
+
+    /// Waits until `pred` holds for the screen; panics with the screen after
+    /// `timeout`.
+    fn wait_for(&self, what: &str, timeout: Duration, pred: impl Fn(&str) -> bool) -> String {
+        let start = Instant::now();
+        loop {
+            let s = self.screen();
+            if pred(&s) {
+                return s;
+            }
+            if start.elapsed() > timeout {
+                panic!("timed out waiting for {what}; screen:\n{s}");
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = self.run(&["kill-session", "-t", &self.session]);
+        let _ = self.run(&["kill-server"]);
+        let _ = std::fs::remove_dir_all(&self._state);
+    }
+}
+
+/// The card line after robot_1's title: " x  0.91 y  0.83 z ..." -> (x, y).
+fn card_position(screen: &str, robot: &str) -> Option<(f64, f64)> {
+    let mut lines = screen.lines();
+    lines.find(|l| l.contains(&format!("{robot} #")))?;
+    let pose = lines.next()?;
+    let after_x = pose.split(" x").nth(1)?;
+    let mut parts = after_x.split(" y");
+    let x: f64 = parts.next()?.trim().parse().ok()?;
+    let y: f64 = parts.next()?.split(" z").next()?.trim().parse().ok()?;
+    Some((x, y))
+}
+
+/// Third line of a robot's card (mode, route, failsafe, mission).
+fn card_status(screen: &str, robot: &str) -> String {
+    let mut lines = screen.lines();
+    if lines.find(|l| l.contains(&format!("{robot} #"))).is_none() {
+        return String::new();
+    }
+    lines.nth(1).unwrap_or_default().to_string()
+}
+
+#[test]
+fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
+    if Command::new("tmux").arg("-V").output().is_err() {
+        println!("skipped: tmux is not installed");
+        return;
+    }
+    let state = std::env::temp_dir().join(format!("mech-e2e-tui-{}", std::process::id()));
+    std::fs::create_dir_all(&state).expect("temp dir");
+    let tmux = Tmux {
+        socket: format!("mech-e2e-tui-{}", std::process::id()),
+        session: "gcs".into(),
+        _state: state.clone(),
+    };
+    let gcs = mech_e2e::binary("mech-gcs");
+    let cmd = format!(
+        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
+        state.display(),
+        gcs.display()
+    );
+    let out = tmux.run(&[
+        "new-session",
+        "-d",
+        "-s",
+        "gcs",
+        "-x",
+        "160",
+        "-y",
+        "48",
+        &cmd,
+    ]);
+    assert!(out.status.success(), "tmux new-session: {out:?}");
+
+    let screen = tmux.wait_for("two connected robots", Duration::from_secs(20), |s| {
+        s.contains("robots 2 (2 ok")
+            && card_position(s, "robot_1").is_some_and(|(x, y)| x.abs() + y.abs() > 0.05)
+    });
+    let (x, y) = card_position(&screen, "robot_1").expect("robot_1 pose on its card");
+
+    // Mouse: an SGR click on robot_2's card (second card, 1-based row 6)
+    // selects it.
+    tmux.literal("\x1b[<0;6;6M\x1b[<0;6;6m");
+    tmux.wait_for("robot_2 selected by a click", Duration::from_secs(5), |s| {
+        s.contains("▶robot_2") && s.contains("sel 1")
+    });
+
+    // Keys: select robot_1, waypoint mode, type a waypoint 0.3 m ahead.
+    tmux.keys(&["n"]);
+    tmux.wait_for("robot_1 selected", Duration::from_secs(5), |s| {
+        s.contains("▶robot_1")
+    });
+    tmux.keys(&["f", "e"]);
+    tmux.literal(&format!("{:.2},{:.2}", x + 0.3, y));
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the waypoint listed", Duration::from_secs(5), |s| {
+        s.contains("⚑1") && s.contains("Waypoints 1")
+    });
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the mission acknowledged", Duration::from_secs(10), |s| {
+        s.contains("robot_1 acknowledged mission")
+    });
+
+    // Route robot_1 to the waypoint channel with the command language.
+    tmux.keys(&["Escape", ":"]);
+    tmux.literal("route robot_1 wp/gcs");
+    tmux.keys(&["Enter"]);
+    let screen = tmux.wait_for("robot_1 arrived", Duration::from_secs(30), |s| {
+        card_status(s, "robot_1").contains("arrived")
+    });
+    assert!(
+        card_status(&screen, "robot_1").contains("wp/gcs✓"),
+        "route acknowledged on the card:\n{screen}"
+    );
+
+    // E-stop on one key, banner until released.
+    tmux.keys(&["X"]);
+    tmux.wait_for("the e-stop banner", Duration::from_secs(5), |s| {
+        s.contains("E-STOP ENGAGED")
+    });
+    tmux.keys(&["C-r"]);
+    tmux.wait_for("the e-stop released", Duration::from_secs(5), |s| {
+        !s.contains("E-STOP ENGAGED")
+    });
+    tmux.keys(&["q"]);
+}
