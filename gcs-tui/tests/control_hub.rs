@@ -67,6 +67,7 @@ async fn cluster_waypoints_through_the_router_and_a_member_routed_away() {
     // Real time on a shared machine: the precise bounds are checked in
     // stepped time (control_cluster.rs); this checks it works end to end.
     run(&mut exec, "cluster-expect c1 max-error 0.4").await;
+    run(&mut exec, "cluster-wait c1 settled 0.05 10s").await;
     let view = exec.control().cluster_view("c1").unwrap();
     let m = view.status.measured.unwrap();
     assert!(
