@@ -84,6 +84,14 @@ async fn cluster_waypoints_through_the_router_and_a_member_routed_away() {
     tokio::time::sleep(Duration::from_millis(120)).await;
     let view = exec.control().cluster_view("c1").unwrap();
     assert_eq!(view.status.absent, vec!["robot_4".to_string()]);
+    let status = exec.execute_line("cluster-status c1").await.unwrap();
+    println!("{}\n  {}", status.summary, status.details.join("\n  "));
+    assert_eq!(
+        status.details.len(),
+        4,
+        "three slots and robot_4 not routed"
+    );
+    assert!(status.details[3].contains("robot_4 not routed to fleet/c1"));
     assert!(view.status.slots.iter().all(|s| s.robot != "robot_4"));
     let drops_before = gcs.router().counters().dropped.not_routed;
     tokio::time::sleep(Duration::from_millis(300)).await;
