@@ -176,9 +176,8 @@ impl Router {
         config: RouterConfig,
         fleet: Arc<Mutex<Fleet>>,
     ) -> Result<Router, RouterError> {
-        let udp = UdpSocket::bind(config.udp)
-            .await
-            .map_err(|source| RouterError::Bind {
+        let udp =
+            bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
                 what: "UDP",
                 addr: config.udp,
                 source,
@@ -255,6 +254,22 @@ impl Router {
         self.handle.shared.bus.close();
         tracing::info!("router stopped");
     }
+}
+
+/// Binds the router's UDP socket with large kernel buffers (best effort: a
+/// smaller system limit is logged, not fatal).
+fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
+    if let Err(e) = socket.set_recv_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP receive buffer");
+    }
+    if let Err(e) = socket.set_send_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP send buffer");
+    }
+    socket.set_nonblocking(true)?;
+    socket.bind(&addr.into())?;
+    UdpSocket::from_std(socket.into())
 }
 
 /// A cheap, cloneable handle to a running router: publish, route, send

@@ -10,6 +10,7 @@
 //! cluster-wait c1 [TIMEOUT]                  # until the waypoints are done
 //! cluster-wait c1 settled TOLERANCE [TIMEOUT] # every member routed, reporting, within TOLERANCE of its slot
 //! cluster-expect c1 max-error|rms-error METRES
+//! cluster-status c1                          # pose, slots, tracking errors
 //! follow robot_2 robot_1 DX,DY               # offset in robot_1's frame
 //! follow robot_2 none
 //! nav robot_1 offboard|onboard
@@ -26,8 +27,8 @@ use std::time::Duration;
 use mech_proto::{ClusterVelocity, Formation, Offset};
 use tokio::time::Instant;
 
-use super::cluster::ClusterWaypoint;
-use super::hub::{ControlError, ControlHub, cluster_channel, follow_channel};
+use super::cluster::{ClusterMotion, ClusterWaypoint};
+use super::hub::{ClusterView, ControlError, ControlHub, cluster_channel, follow_channel};
 use super::spec::{formation_name, parse_cluster_waypoint, parse_formation, parse_offset};
 use crate::lang::parse::Args;
 use crate::lang::{Command, LangError, Outcome, Span, Target};
@@ -73,6 +74,9 @@ pub enum ControlCommand {
         velocity: ClusterVelocity,
     },
     ClusterHold {
+        cluster: Target,
+    },
+    ClusterStatus {
         cluster: Target,
     },
     ClusterWaypoints {
@@ -156,6 +160,13 @@ pub fn parse_cluster_move(a: &mut Args<'_>) -> Result<Command, LangError> {
 /// `cluster-hold CLUSTER`
 pub fn parse_cluster_hold(a: &mut Args<'_>) -> Result<Command, LangError> {
     Ok(Command::Control(ControlCommand::ClusterHold {
+        cluster: a.target()?,
+    }))
+}
+
+/// `cluster-status CLUSTER`
+pub fn parse_cluster_status(a: &mut Args<'_>) -> Result<Command, LangError> {
+    Ok(Command::Control(ControlCommand::ClusterStatus {
         cluster: a.target()?,
     }))
 }
@@ -285,6 +296,58 @@ pub fn parse_nav_wait(a: &mut Args<'_>) -> Result<Command, LangError> {
     }))
 }
 
+/// `cluster-status` output: one summary line, then one line per slot.
+fn cluster_status(name: &str, v: &ClusterView) -> Outcome {
+    let st = &v.status;
+    let pose = |p: Option<mech_proto::ClusterPose>| match p {
+        Some(p) => format!(
+            "({:.2}, {:.2}) heading {:.2} rad scale {:.2}",
+            p.x, p.y, p.heading, p.scale
+        ),
+        None => "unknown".to_string(),
+    };
+    let motion = match &v.motion {
+        ClusterMotion::Hold => "holding".to_string(),
+        ClusterMotion::Velocity(c) => {
+            format!(
+                "moving vx {} vy {} wz {} scale rate {}",
+                c.vx, c.vy, c.wz, c.scale_rate
+            )
+        }
+        ClusterMotion::Waypoints { list, next, .. } => {
+            format!("waypoint {next} of {}", list.len())
+        }
+    };
+    let mut details: Vec<String> = st
+        .slots
+        .iter()
+        .map(|s| {
+            format!(
+                "{} slot {} at ({:.2}, {:.2}) error {:.3} m",
+                s.robot, s.slot, s.x, s.y, s.error
+            )
+        })
+        .collect();
+    for r in &st.lost {
+        details.push(format!("{r} lost (stale telemetry): not commanded"));
+    }
+    for r in &st.absent {
+        details.push(format!("{r} not routed to {}", v.channel));
+    }
+    Outcome {
+        summary: format!(
+            "{name} {} {}: desired {}, measured {}; {motion}; slot error max {:.3} m, RMS {:.3} m since sent",
+            formation_name(st.formation.kind),
+            v.channel,
+            pose(st.desired),
+            pose(st.measured),
+            v.stats.max,
+            v.stats.rms()
+        ),
+        details,
+    }
+}
+
 fn fail(target: &Target, e: ControlError) -> LangError {
     LangError::new(target.span, e.to_string())
 }
@@ -331,6 +394,12 @@ impl ControlHub {
                 self.hold_cluster(&cluster.name)
                     .map_err(|e| fail(cluster, e))?;
                 Ok(outcome(format!("{} holding", cluster.name)))
+            }
+            ControlCommand::ClusterStatus { cluster } => {
+                let v = self.cluster_view(&cluster.name).ok_or_else(|| {
+                    fail(cluster, ControlError::UnknownCluster(cluster.name.clone()))
+                })?;
+                Ok(cluster_status(&cluster.name, &v))
             }
             ControlCommand::ClusterWaypoints {
                 cluster,
@@ -619,6 +688,10 @@ mod tests {
         assert!(matches!(
             control("cluster-hold c1"),
             ControlCommand::ClusterHold { .. }
+        ));
+        assert!(matches!(
+            control("cluster-status c1"),
+            ControlCommand::ClusterStatus { .. }
         ));
         assert!(matches!(
             control("follow robot_2 robot_1 -0.8,0.5"),

@@ -142,6 +142,12 @@ pub static VERBS: &[Verb] = &[
         parse: control::parse_cluster_hold,
     },
     Verb {
+        name: "cluster-status",
+        usage: "cluster-status CLUSTER",
+        help: "cluster pose (desired and measured), slot targets and tracking errors",
+        parse: control::parse_cluster_status,
+    },
+    Verb {
         name: "cluster-waypoint",
         usage: "cluster-waypoint CLUSTER X,Y[,HEADING]... [loop]",
         help: "set a cluster's waypoints (heading in rad, or deg suffix); start with `send CLUSTER`",
