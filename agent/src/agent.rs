@@ -426,9 +426,11 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now. `velocity` is the body-frame twist the
-    /// current outputs produce (the platform's forward kinematics), which is
-    /// what a robot without wheel encoders knows of its motion.
+    /// The robot's telemetry now. `velocity` is the twist the current
+    /// outputs produce (the platform's forward kinematics, which is what a
+    /// robot without wheel encoders knows of its motion), turned from the
+    /// body frame into the world frame by the estimated heading, as the
+    /// protocol specifies.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
         let twist = self.controller.platform().motion(&self.outputs);
@@ -439,11 +441,13 @@ impl Agent {
         let faulted = self
             .last_driver_fault
             .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
+        let pose = self.estimate.map(|e| e.pose).unwrap_or_default();
+        let (sin, cos) = pose.heading.sin_cos();
         Telemetry {
-            pose: self.estimate.map(|e| e.pose).unwrap_or_default(),
+            pose,
             velocity: Velocity {
-                vx: twist.vx,
-                vy: twist.vy,
+                vx: twist.vx * cos - twist.vy * sin,
+                vy: twist.vx * sin + twist.vy * cos,
                 vz: twist.vz,
                 wz: twist.wz,
             },
@@ -1069,6 +1073,29 @@ mod tests {
             "recovers once the driver works"
         );
         assert_eq!(a.counters().driver_faults, 2);
+    }
+
+    #[test]
+    fn telemetry_velocity_is_in_the_world_frame() {
+        let mut a = routed("joy/0");
+        // Enough samples facing +y to fill the median filter's window.
+        for _ in 0..AgentSettings::new("r1").filter_window {
+            a.observe_position(PositionSample {
+                pose: Pose {
+                    heading: std::f64::consts::FRAC_PI_2,
+                    ..Pose::default()
+                },
+                stamp: ms(0),
+                quality: 1.0,
+                has_heading: true,
+            });
+        }
+        a.handle(msg("joy/0", twist(0.2)), ms(0));
+        a.tick(PERIOD);
+        let v = a.telemetry(PERIOD).velocity;
+        // Facing +y, driving forward moves the robot along world +y.
+        assert!(v.vx.abs() < 1e-9, "vx {}", v.vx);
+        assert!(v.vy > 0.1, "vy {}", v.vy);
     }
 
     #[test]
