@@ -106,8 +106,13 @@ fn recv_command(sock: &UdpSocket, buf: &mut [u8]) -> Option<(u32, String)> {
 
 /// A blocking agent: registers, acknowledges the Welcome route.
 fn agent(name: &str, router: SocketAddr) -> UdpSocket {
-    // Not connected: the latency baseline sends to it directly.
-    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    // Not connected: the latency baseline sends to it directly. A large
+    // receive buffer, so the throughput run's window fits in it.
+    let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::DGRAM, None).unwrap();
+    sock.set_recv_buffer_size(4 << 20).unwrap();
+    sock.bind(&SocketAddr::from(([127, 0, 0, 1], 0)).into())
+        .unwrap();
+    let sock: UdpSocket = sock.into();
     sock.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
     sock.send_to(&hello(name), router).unwrap();
     let mut buf = [0u8; 2048];
