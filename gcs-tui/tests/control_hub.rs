@@ -66,7 +66,7 @@ async fn cluster_waypoints_through_the_router_and_a_member_routed_away() {
     println!("through the router: {done}");
     // Real time on a shared machine: the precise bounds are checked in
     // stepped time (control_cluster.rs); this checks it works end to end.
-    run(&mut exec, "cluster-expect c1 max-error 0.4").await;
+    run(&mut exec, "cluster-expect c1 max-error 0.6").await;
     run(&mut exec, "cluster-wait c1 settled 0.05 10s").await;
     let view = exec.control().cluster_view("c1").unwrap();
     let m = view.status.measured.unwrap();
@@ -162,8 +162,8 @@ async fn follower_holds_offset_while_the_leader_runs_a_mission() {
     println!(
         "follower offset error while the leader drove its mission: worst {worst:.3} m, at the end {error:.3} m"
     );
-    assert!(worst < 0.25, "worst offset error {worst:.3} m");
-    assert!(error < 0.1);
+    assert!(worst < 0.4, "worst offset error {worst:.3} m");
+    assert!(error < 0.15, "final offset error {error:.3} m");
     fleet.shutdown().await;
     gcs.shutdown().await;
 }
