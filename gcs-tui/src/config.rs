@@ -85,6 +85,10 @@ pub struct RouterConfig {
     pub default_route: Option<String>,
     /// Number of tasks receiving on the UDP socket.
     pub udp_workers: usize,
+    /// Kernel receive and send buffer of the UDP socket, bytes (capped by
+    /// the system's `net.core.rmem_max`). Large, so that a burst of
+    /// telemetry from a big fleet is queued rather than lost.
+    pub socket_buffer: usize,
 }
 
 impl Default for RouterConfig {
@@ -106,6 +110,7 @@ impl Default for RouterConfig {
             subscriber_queue: 4096,
             default_route: None,
             udp_workers: 2,
+            socket_buffer: 4 << 20,
         }
     }
 }

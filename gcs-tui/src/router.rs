@@ -91,11 +91,18 @@ impl Shared {
         out: &mut Outbox,
         events: &mut Vec<event::Event>,
     ) -> Delivery {
-        let delivery = lock(&self.tables).handle(bytes, from, Instant::now(), out, events);
+        let delivery = {
+            let mut tables = lock(&self.tables);
+            let delivery = tables.handle(bytes, from, Instant::now(), out, events);
+            // Emitted under the table lock, so the fleet model sees events
+            // in the order the tables made them (a mission is "sent" before
+            // its acknowledgement, whichever worker handles the ack).
+            for e in events.drain(..) {
+                self.bus.emit(e);
+            }
+            delivery
+        };
         self.flush(bytes, out).await;
-        for e in events.drain(..) {
-            self.bus.emit(e);
-        }
         delivery
     }
 
@@ -141,16 +148,15 @@ impl Shared {
     ) -> R {
         let mut out = Outbox::default();
         let mut events = Vec::new();
-        let r = f(
-            &mut lock(&self.tables),
-            Instant::now(),
-            &mut out,
-            &mut events,
-        );
+        let r = {
+            let mut tables = lock(&self.tables);
+            let r = f(&mut tables, Instant::now(), &mut out, &mut events);
+            for e in events {
+                self.bus.emit(e);
+            }
+            r
+        };
         self.flush(&[], &mut out).await;
-        for e in events {
-            self.bus.emit(e);
-        }
         r
     }
 }
@@ -170,9 +176,8 @@ impl Router {
         config: RouterConfig,
         fleet: Arc<Mutex<Fleet>>,
     ) -> Result<Router, RouterError> {
-        let udp = UdpSocket::bind(config.udp)
-            .await
-            .map_err(|source| RouterError::Bind {
+        let udp =
+            bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
                 what: "UDP",
                 addr: config.udp,
                 source,
@@ -249,6 +254,22 @@ impl Router {
         self.handle.shared.bus.close();
         tracing::info!("router stopped");
     }
+}
+
+/// Binds the router's UDP socket with large kernel buffers (best effort: a
+/// smaller system limit is logged, not fatal).
+fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
+    if let Err(e) = socket.set_recv_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP receive buffer");
+    }
+    if let Err(e) = socket.set_send_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP send buffer");
+    }
+    socket.set_nonblocking(true)?;
+    socket.bind(&addr.into())?;
+    UdpSocket::from_std(socket.into())
 }
 
 /// A cheap, cloneable handle to a running router: publish, route, send

@@ -192,7 +192,9 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
             emit(&sink, &event_json(&s));
         }
     });
-    let mut outcome = ScriptOutcome::Passed { commands: statements.len() };
+    let mut outcome = ScriptOutcome::Passed {
+        commands: statements.len(),
+    };
     for (i, stmt) in statements.iter().enumerate() {
         // Events are printed while the command runs, and those it caused
         // synchronously (route changes, e-stops) before its result.
@@ -212,7 +214,10 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         }
         emit(&sink, &result_json(gcs, stmt, result.as_ref()));
         if let Err(error) = result {
-            outcome = ScriptOutcome::Failed { error, commands: i + 1 };
+            outcome = ScriptOutcome::Failed {
+                error,
+                commands: i + 1,
+            };
             break;
         }
     }
@@ -255,8 +260,15 @@ pub struct SimulatedFleet {
 }
 
 impl SimulatedFleet {
-    pub fn new(arena: mech_agent::sim::Arena, options: mech_agent::sim::SimFleetOptions) -> SimulatedFleet {
-        SimulatedFleet { arena, options, fleet: None }
+    pub fn new(
+        arena: mech_agent::sim::Arena,
+        options: mech_agent::sim::SimFleetOptions,
+    ) -> SimulatedFleet {
+        SimulatedFleet {
+            arena,
+            options,
+            fleet: None,
+        }
     }
 }
 
@@ -268,11 +280,15 @@ impl crate::lang::SimSpawner for SimulatedFleet {
     ) -> futures::future::BoxFuture<'_, Result<Vec<String>, String>> {
         Box::pin(async move {
             if let Some(f) = &self.fleet {
-                return Err(format!("{} simulated agents are already running; spawn once per run", f.names().len()));
+                return Err(format!(
+                    "{} simulated agents are already running; spawn once per run",
+                    f.names().len()
+                ));
             }
-            let fleet = mech_agent::sim::SimFleet::spawn(count, router, self.arena, self.options.clone())
-                .await
-                .map_err(|e| e.to_string())?;
+            let fleet =
+                mech_agent::sim::SimFleet::spawn(count, router, self.arena, self.options.clone())
+                    .await
+                    .map_err(|e| e.to_string())?;
             let names = fleet.names();
             tracing::info!(count, %router, "simulated agents started");
             self.fleet = Some(fleet);
@@ -292,5 +308,8 @@ impl crate::lang::SimSpawner for SimulatedFleet {
 /// The simulator `spawn` and `--demo` use: the default arena (the 2017
 /// lab's 3.9 m x 2.8 m) with position noise.
 pub fn simulator() -> Box<dyn crate::lang::SimSpawner> {
-    Box::new(SimulatedFleet::new(mech_agent::sim::Arena::default(), mech_agent::sim::SimFleetOptions::default()))
+    Box::new(SimulatedFleet::new(
+        mech_agent::sim::Arena::default(),
+        mech_agent::sim::SimFleetOptions::default(),
+    ))
 }

@@ -1,4 +1,5 @@
 //! End-to-end tests: the real binaries, over real sockets.
 
 mod cli;
+mod script;
 mod tui;
