@@ -67,7 +67,10 @@ pub fn demo_arena() -> ArenaBounds {
     }
 }
 
-/// Converts the core's fleet model into what the screen shows.
+/// Converts the core's fleet model into what the screen shows. Read
+/// `channels` from the router *before* taking the fleet lock: the router
+/// holds its tables while it updates the fleet, so asking it for channels
+/// inside [`Gcs::with_fleet`] can deadlock.
 pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> FleetSnapshot {
     let robots = fleet
         .robots
