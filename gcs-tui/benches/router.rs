@@ -106,8 +106,13 @@ fn recv_command(sock: &UdpSocket, buf: &mut [u8]) -> Option<(u32, String)> {
 
 /// A blocking agent: registers, acknowledges the Welcome route.
 fn agent(name: &str, router: SocketAddr) -> UdpSocket {
-    // Not connected: the latency baseline sends to it directly.
-    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    // Not connected: the latency baseline sends to it directly. A large
+    // receive buffer, so the throughput run's window fits in it.
+    let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::DGRAM, None).unwrap();
+    sock.set_recv_buffer_size(4 << 20).unwrap();
+    sock.bind(&SocketAddr::from(([127, 0, 0, 1], 0)).into())
+        .unwrap();
+    let sock: UdpSocket = sock.into();
     sock.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
     sock.send_to(&hello(name), router).unwrap();
     let mut buf = [0u8; 2048];
@@ -149,6 +154,26 @@ fn acknowledge_routes(sock: &UdpSocket, name: &str, router: SocketAddr) {
         }
     }
     let _ = sock.set_read_timeout(Some(Duration::from_secs(2)));
+}
+
+/// CPU time (user + system) of the calling thread, seconds, from
+/// /proc/thread-self/stat (clock ticks of 10 ms: use over long runs).
+fn thread_cpu() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // After the command name: state is field 0, utime 11, stime 12.
+    (ticks(11) + ticks(12)) / 100.0
 }
 
 fn percentiles(label: &str, mut v: Vec<Duration>) -> [Duration; 3] {
@@ -254,7 +279,7 @@ fn main() {
         })
     };
     let msg = command("pad", "robot_1", "joy/0", 1);
-    const WINDOW: u64 = 128;
+    const WINDOW: u64 = 1024;
     let run = Duration::from_secs(3);
     let before = router.counters();
     let t = Instant::now();
@@ -286,12 +311,54 @@ fn main() {
         after.forwarded - before.forwarded
     );
 
+    // (b') the router's own cost per command: an in-process publisher
+    // (same decision code and the same socket send as UDP input) with no
+    // receive syscall, single task.
+    {
+        let mut publisher = router.publisher("bench", "joy/0");
+        const N: u32 = 200_000;
+        let cpu0 = thread_cpu();
+        let t = Instant::now();
+        let forwarded = rt.block_on(async {
+            let mut ok = 0u32;
+            for _ in 0..N {
+                let cmd = Command::Twist(Twist {
+                    vx: 0.5,
+                    vy: 0.0,
+                    vz: 0.0,
+                    wz: 0.1,
+                });
+                if publisher.send("robot_1", cmd).await.unwrap()
+                    == mech_gcs::router::Delivery::Forwarded(1)
+                {
+                    ok += 1;
+                }
+            }
+            ok
+        });
+        let per = t.elapsed().as_secs_f64() / f64::from(N);
+        let cpu = (thread_cpu() - cpu0) / f64::from(N);
+        println!(
+            "  in-process publisher: {:.0} commands/s wall ({:.2} us each), {:.2} us CPU each = {:.0} commands/s per core; {forwarded} forwarded (includes encoding each command)",
+            1.0 / per,
+            per * 1e6,
+            cpu * 1e6,
+            1.0 / cpu
+        );
+        let mut b = vec![0u8; 2048];
+        let _ = robot.set_read_timeout(Some(Duration::from_millis(100)));
+        while robot.recv(&mut b).is_ok() {}
+    }
+
     // (c) switch latency
     robot
         .set_read_timeout(Some(Duration::from_secs(2)))
         .unwrap();
     let mut switch = Vec::new();
     let mut late_old = 0;
+    // Sequence numbers of this phase start high, so stragglers of earlier
+    // phases are told apart from this phase's old-channel messages.
+    const BASE: u32 = 1 << 30;
     for i in 0..2000u32 {
         let (new, old) = if i % 2 == 0 {
             ("joy/1", "joy/0")
@@ -301,17 +368,19 @@ fn main() {
         let t = Instant::now();
         rt.block_on(router.set_route("robot_1", Some(new))).unwrap();
         controller
-            .send_to(&command("pad", "robot_1", old, i), addr)
+            .send_to(&command("pad", "robot_1", old, BASE + i), addr)
             .unwrap();
         controller
-            .send_to(&command("pad", "robot_1", new, i), addr)
+            .send_to(&command("pad", "robot_1", new, BASE + i), addr)
             .unwrap();
         loop {
-            let (_, ch) = recv_command(&robot, &mut buf).unwrap();
-            if ch == new {
+            let (seq, ch) = recv_command(&robot, &mut buf).unwrap();
+            if ch == new && seq == BASE + i {
                 break;
             }
-            late_old += 1;
+            if seq >= BASE && ch == old {
+                late_old += 1;
+            }
         }
         switch.push(t.elapsed());
     }
