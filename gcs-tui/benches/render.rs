@@ -30,7 +30,29 @@ fn app_with_paths(n: usize, w: u16, h: u16) -> mech_gcs::ui::App {
     app
 }
 
+fn percentiles(n: usize, w: u16, h: u16) {
+    let app = app_with_paths(n, w, h);
+    let area = Rect::new(0, 0, w, h);
+    let mut buf = Buffer::empty(area);
+    let mut samples = Vec::with_capacity(200);
+    for _ in 0..200 {
+        buf.reset();
+        let t = Instant::now();
+        (&app).render(area, &mut buf);
+        samples.push(t.elapsed());
+    }
+    samples.sort();
+    let pct = |p: f64| samples[((samples.len() - 1) as f64 * p) as usize];
+    println!(
+        "render {n} robots @ {w}x{h}: p50 {:?} p99 {:?}",
+        pct(0.5),
+        pct(0.99)
+    );
+}
+
 fn render(c: &mut Criterion) {
+    percentiles(1000, 200, 50);
+    percentiles(4, 80, 24);
     let (w, h) = (200, 50);
     let app = app_with_paths(200, w, h);
     let area = Rect::new(0, 0, w, h);

@@ -426,3 +426,26 @@ fn clicking_a_routes_cell_picks_it_and_a_second_click_routes() {
         }]
     );
 }
+
+#[test]
+fn dragging_the_map_pans_it_with_the_pointer() {
+    let mut app = fixture::app(4, 160, 48);
+    let inner = app.areas().map_inner();
+    // A corner cell, away from every robot.
+    let (c, r) = (inner.x + 1, inner.y + 1);
+    assert!(app.robot_at_cell(c, r).is_none());
+    let grabbed = app.map_point(c, r).expect("on map");
+    app.update(Action::Click {
+        col: c,
+        row: r,
+        add: false,
+    });
+    app.update(Action::Drag {
+        col: c + 5,
+        row: r + 3,
+    });
+    app.update(Action::MouseUp);
+    let under = app.map_point(c + 5, r + 3).expect("on map");
+    assert!((under.0 - grabbed.0).abs() < 1e-9 && (under.1 - grabbed.1).abs() < 1e-9);
+    assert!(app.selection.is_empty());
+}

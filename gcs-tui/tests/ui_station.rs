@@ -10,7 +10,10 @@ use mech_gcs::{Gcs, GcsConfig};
 use mech_proto::Waypoint;
 
 async fn refresh(app: &mut App, gcs: &Gcs) {
-    let snap = gcs.with_fleet(|f| snapshot(f, gcs.router().channels()));
+    // Channels first: the router's tables must not be locked while the
+    // fleet model is (the router locks them the other way round).
+    let channels = gcs.router().channels();
+    let snap = gcs.with_fleet(|f| snapshot(f, channels));
     app.update(Action::Tick(Instant::now()));
     app.update(Action::Fleet(snap));
 }

@@ -125,7 +125,7 @@ impl KeyTeleop {
         }
         let due = self
             .last_sent
-            .is_none_or(|t| now.saturating_duration_since(t) >= self.period);
+            .is_none_or(|t| now.saturating_duration_since(t) + self.period / 10 >= self.period);
         due.then(|| self.send(now))
     }
 

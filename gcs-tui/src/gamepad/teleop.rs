@@ -260,9 +260,11 @@ impl Teleop {
             if !pad.enabled {
                 continue;
             }
+            // A tenth of a period of slack, so a tick that arrives a little
+            // early (timer jitter) does not halve the rate.
             let due = pad
                 .last_sent
-                .is_none_or(|t| now.saturating_duration_since(t) >= period);
+                .is_none_or(|t| now.saturating_duration_since(t) + period / 10 >= period);
             if due {
                 send_mapped(pad, &self.config, now, true, &mut out);
             }
@@ -418,6 +420,17 @@ mod tests {
         for i in 1..=100 {
             n += published(&t.tick(now + Duration::from_millis(10 * i))).len();
         }
+        assert_eq!(n, 20);
+    }
+
+    #[test]
+    fn slightly_early_ticks_keep_the_rate() {
+        let (mut t, now) = twist_pad();
+        t.handle(&ev(PadEventKind::ButtonPressed(PadButton::LeftBumper)), now);
+        // Ticks every 49 ms (timer jitter) still publish every tick.
+        let n: usize = (1..=20)
+            .map(|i| published(&t.tick(now + Duration::from_millis(49 * i))).len())
+            .sum();
         assert_eq!(n, 20);
     }
 

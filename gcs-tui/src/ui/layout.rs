@@ -67,7 +67,12 @@ impl Areas {
                 wide,
             }
         } else {
-            let left_w = (area.width * 2 / 5).clamp(20, 40);
+            // The routing table needs the width for its channel columns.
+            let left_w = if side == SidePanel::Routes {
+                (area.width / 2).clamp(20, 44)
+            } else {
+                (area.width * 2 / 5).clamp(20, 40)
+            };
             let [left, map] =
                 Layout::horizontal([Constraint::Length(left_w), Constraint::Min(10)]).areas(body);
             let (cards, waypoints, routes) = match side {

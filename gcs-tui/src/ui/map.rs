@@ -11,6 +11,7 @@ use ratatui::widgets::canvas::{Canvas, Context, Painter, Shape};
 use ratatui::widgets::{Block, Widget};
 
 use super::app::{App, Focus};
+use super::fleet::RobotView;
 use super::theme::Theme;
 use super::viewport::Projection;
 
@@ -232,11 +233,16 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
     }
 
     // Clusters: members joined to the centre.
+    let by_name: std::collections::HashMap<&str, &RobotView> = if app.clusters.is_empty() {
+        std::collections::HashMap::new()
+    } else {
+        app.robots.iter().map(|r| (r.name.as_str(), r)).collect()
+    };
     for c in &app.clusters {
         let pos: Vec<(f64, f64)> = c
             .members
             .iter()
-            .filter_map(|n| app.robot(n))
+            .filter_map(|n| by_name.get(n.as_str()))
             .map(|r| (r.pose.x, r.pose.y))
             .collect();
         if pos.is_empty() {

@@ -67,7 +67,10 @@ pub fn demo_arena() -> ArenaBounds {
     }
 }
 
-/// Converts the core's fleet model into what the screen shows.
+/// Converts the core's fleet model into what the screen shows. Read
+/// `channels` from the router *before* taking the fleet lock: the router
+/// holds its tables while it updates the fleet, so asking it for channels
+/// inside [`Gcs::with_fleet`] can deadlock.
 pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> FleetSnapshot {
     let robots = fleet
         .robots
@@ -172,6 +175,15 @@ async fn event_loop(
     let mut tick = tokio::time::interval(Duration::from_millis(1000 / FPS));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut link = CoreLink::new(gcs.clone(), line_tx.clone());
+    // Teleop publishes on its own clock so its rate does not depend on the
+    // frame rate.
+    let rate = if options.teleop.rate_hz.is_finite() && options.teleop.rate_hz > 0.0 {
+        options.teleop.rate_hz
+    } else {
+        20.0
+    };
+    let mut teleop_tick = tokio::time::interval(Duration::from_secs_f64(1.0 / rate));
+    teleop_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut log_last: Option<(Duration, String)> = None;
 
     while app.running {
@@ -199,6 +211,7 @@ async fn event_loop(
                 Some(Err(e)) => return Err(e),
                 None => break,
             },
+            _ = teleop_tick.tick() => app.update(Action::Tick(Instant::now())),
             Some(pad) = pad_rx.recv() => app.update(Action::Pad(pad)),
             Some(result) = result_rx.recv() => app.update(Action::CommandResult(result)),
         }
