@@ -83,12 +83,20 @@ impl Gcs {
 
     /// Reads the fleet model in place (no copy); keep `f` short, the router
     /// waits for it to apply events.
+    ///
+    /// Lock order: the router holds its tables while it applies events to
+    /// the fleet model (tables, then fleet). So never ask the router for
+    /// anything that locks its tables (`channels()`, `counters()`,
+    /// `set_route`, publishing) from inside `f`: read those first, then take
+    /// the fleet, as [`Gcs::snapshot`] does. The same holds for
+    /// [`Gcs::update_fleet`].
     pub fn with_fleet<R>(&self, f: impl FnOnce(&Fleet) -> R) -> R {
         f(&lock(&self.fleet))
     }
 
     /// Changes GCS-side state of the fleet model (clusters, waypoint drafts,
-    /// log lines).
+    /// log lines). Same lock order as [`Gcs::with_fleet`]: nothing that locks
+    /// the router's tables inside `f`.
     pub fn update_fleet<R>(&self, f: impl FnOnce(&mut Fleet) -> R) -> R {
         f(&mut lock(&self.fleet))
     }
