@@ -449,3 +449,21 @@ fn dragging_the_map_pans_it_with_the_pointer() {
     assert!((under.0 - grabbed.0).abs() < 1e-9 && (under.1 - grabbed.1).abs() < 1e-9);
     assert!(app.selection.is_empty());
 }
+
+#[test]
+fn nav_toggle_asks_for_the_selected_robots_only() {
+    let mut app = fixture::app(4, 80, 24);
+    app.update(Action::ToggleNav);
+    assert!(app.take_requests().is_empty(), "nothing selected");
+    assert!(app.log.iter().any(|l| l.text.contains("select a robot")));
+
+    app.update(Action::Select(Select::Only("robot_3".into())));
+    app.update(Action::Select(Select::Toggle("robot_1".into())));
+    app.update(Action::ToggleNav);
+    assert_eq!(
+        app.take_requests(),
+        [Request::ToggleNav {
+            robots: vec!["robot_1".into(), "robot_3".into()]
+        }]
+    );
+}

@@ -52,7 +52,8 @@ async fn app_requests_reach_simulated_robots() {
     assert_eq!(names, ["robot_1", "robot_2"]);
 
     let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
-    let mut link = CoreLink::new(gcs.clone(), lines);
+    let control = mech_gcs::control::ControlHub::new(gcs.clone());
+    let mut link = CoreLink::new(gcs.clone(), lines, control);
     let mut app = App::new(gcs.router().udp_addr().to_string(), Instant::now());
     wait_for(
         &mut app,
@@ -146,7 +147,8 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
         .await
         .expect("simulated agent starts");
     let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
-    let mut link = CoreLink::new(gcs.clone(), lines);
+    let control = mech_gcs::control::ControlHub::new(gcs.clone());
+    let mut link = CoreLink::new(gcs.clone(), lines, control);
     let mut app = App::new("router", Instant::now());
     wait_for(&mut app, &gcs, "robot_1", Duration::from_secs(10), |a| {
         a.robot("robot_1").is_some_and(|r| r.pose.x != 0.0)
@@ -208,6 +210,224 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
         app.pads()[0].enabled,
         "the pad was still driving its channel"
     );
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}
+
+/// A real router and `n` simulated agents, the App fed from the fleet
+/// model, and a link whose controllers are shared with a command-language
+/// executor, as in the station.
+async fn station(
+    n: usize,
+) -> (
+    Gcs,
+    Box<dyn mech_gcs::lang::exec::SimSpawner>,
+    mech_gcs::lang::Executor,
+    CoreLink,
+    App,
+) {
+    let mut config = GcsConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.expect("router starts");
+    let mut spawner = mech_gcs::script::simulator();
+    spawner
+        .spawn(n, gcs.router().udp_addr())
+        .await
+        .expect("simulated agents start");
+    let executor = mech_gcs::lang::Executor::new(gcs.clone());
+    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
+    let link = CoreLink::new(gcs.clone(), lines, executor.control().clone());
+    let mut app = App::new("router", Instant::now());
+    wait_for(
+        &mut app,
+        &gcs,
+        "connected robots",
+        Duration::from_secs(10),
+        |a| a.robots.len() == n && a.robots.iter().all(|r| r.pose.x != 0.0),
+    )
+    .await;
+    (gcs, spawner, executor, link, app)
+}
+
+async fn carry_all(app: &mut App, link: &mut CoreLink) {
+    for req in app.take_requests() {
+        link.carry(req, app).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
+    use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
+
+    let (gcs, mut spawner, executor, mut link, mut app) = station(3).await;
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    app.update(Action::Select(Select::Toggle("robot_2".into())));
+    app.update(Action::MakeCluster);
+    for r in ["robot_1", "robot_2"] {
+        app.update(Action::Route {
+            robot: r.into(),
+            channel: "fleet/c1".into(),
+        });
+    }
+    carry_all(&mut app, &mut link).await;
+    let start: Vec<_> = ["robot_1", "robot_2", "robot_3"]
+        .iter()
+        .map(|r| app.robot(r).expect("robot").pose)
+        .collect();
+
+    // Pad: steering-throttle -> ... -> cluster (four Selects), dead-man,
+    // left stick forward.
+    let mut events = vec![PadEventKind::Connected("synthetic".into())];
+    events.extend((0..4).map(|_| PadEventKind::ButtonPressed(PadButton::Select)));
+    events.push(PadEventKind::ButtonPressed(PadButton::LeftBumper));
+    events.push(PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0));
+    for ev in events {
+        app.update(Action::Pad(PadEvent::new(0, ev)));
+    }
+    let t0 = Instant::now();
+    loop {
+        carry_all(&mut app, &mut link).await;
+        refresh(&mut app, &gcs).await;
+        let moved = ["robot_1", "robot_2"].iter().zip(&start).all(|(r, p)| {
+            let q = app.robot(r).expect("member").pose;
+            (q.x - p.x).hypot(q.y - p.y) > 0.3
+        });
+        if moved {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(15),
+            "members move under the pad: {:?}",
+            app.robots
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let view = executor
+        .control()
+        .cluster_view("c1")
+        .expect("the executor's hub runs c1");
+    assert!(view.status.slots.len() == 2, "{view:?}");
+    let r3 = app.robot("robot_3").expect("robot_3");
+    assert!(
+        r3.speed() < 0.02,
+        "robot_3 is not in the cluster and stays put: {r3:?}"
+    );
+
+    // A pad velocity lapses: if the pad's stream stops reaching the hub
+    // (dead-man still held, nothing carried), the cluster holds and the
+    // members come to rest.
+    let t0 = Instant::now();
+    loop {
+        app.take_requests();
+        refresh(&mut app, &gcs).await;
+        if ["robot_1", "robot_2"]
+            .iter()
+            .all(|r| app.robot(r).expect("member").speed() < 0.02)
+        {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "stale pad velocity lapses"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+
+    // Releasing the dead-man holds the cluster too.
+    app.update(Action::Pad(PadEvent::new(
+        0,
+        PadEventKind::ButtonReleased(PadButton::LeftBumper),
+    )));
+    let t0 = Instant::now();
+    loop {
+        carry_all(&mut app, &mut link).await;
+        refresh(&mut app, &gcs).await;
+        if ["robot_1", "robot_2"]
+            .iter()
+            .all(|r| app.robot(r).expect("member").speed() < 0.02)
+        {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(10), "members stop");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nav_key_switches_the_route_to_offboard_and_back() {
+    let (gcs, mut spawner, _executor, mut link, mut app) = station(1).await;
+    let p = app.robot("robot_1").expect("robot_1").pose;
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    for (dx, dy) in [(0.3, 0.0), (0.3, 0.3), (0.0, 0.3), (0.0, 0.0)] {
+        app.update(Action::AddWaypoint(Waypoint {
+            x: p.x + dx,
+            y: p.y + dy,
+            z: 0.0,
+            time: None,
+        }));
+    }
+    app.update(Action::SendWaypoints);
+    app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: "wp/gcs".into(),
+    });
+    carry_all(&mut app, &mut link).await;
+    wait_for(
+        &mut app,
+        &gcs,
+        "mission running onboard",
+        Duration::from_secs(10),
+        |a| {
+            let r = a.robot("robot_1").expect("robot_1");
+            r.route.channel == "wp/gcs" && r.route.acknowledged && r.mission.is_some()
+        },
+    )
+    .await;
+
+    let keys = mech_gcs::ui::keys::on_key(
+        &app,
+        &crossterm::event::KeyEvent::new(
+            crossterm::event::KeyCode::Char('o'),
+            crossterm::event::KeyModifiers::NONE,
+        ),
+    );
+    assert_eq!(keys, [Action::ToggleNav]);
+    for a in keys {
+        app.update(a);
+    }
+    carry_all(&mut app, &mut link).await;
+    wait_for(
+        &mut app,
+        &gcs,
+        "route offboard/robot_1",
+        Duration::from_secs(10),
+        |a| {
+            let r = a.robot("robot_1").expect("robot_1");
+            r.route.channel == "offboard/robot_1"
+                && r.route.acknowledged
+                && r.computation == mech_proto::Computation::Offboard
+        },
+    )
+    .await;
+    assert!(link.control().nav_view("robot_1").is_some());
+
+    app.update(Action::ToggleNav);
+    carry_all(&mut app, &mut link).await;
+    wait_for(
+        &mut app,
+        &gcs,
+        "route back to wp/gcs",
+        Duration::from_secs(10),
+        |a| {
+            let r = a.robot("robot_1").expect("robot_1");
+            r.route.channel == "wp/gcs" && r.route.acknowledged
+        },
+    )
+    .await;
+    assert!(link.control().nav_view("robot_1").is_none());
     spawner.shutdown().await;
     gcs.shutdown().await;
 }

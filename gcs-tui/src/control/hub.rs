@@ -353,6 +353,19 @@ impl ControlHub {
         name: &str,
         f: impl FnOnce(&mut ClusterEntry) -> Result<R, ControlError>,
     ) -> Result<R, ControlError> {
+        self.change_cluster(name, true, f)
+    }
+
+    /// [`ControlHub::with_cluster`]; `stale_status` says whether the change
+    /// invalidates the last status (a new formation or goal does; a refreshed
+    /// gamepad velocity does not, and must not blank displays 20 times a
+    /// second).
+    fn change_cluster<R>(
+        &self,
+        name: &str,
+        stale_status: bool,
+        f: impl FnOnce(&mut ClusterEntry) -> Result<R, ControlError>,
+    ) -> Result<R, ControlError> {
         let members = self
             .shared
             .gcs
@@ -385,7 +398,7 @@ impl ControlHub {
             }
         };
         let r = f(entry);
-        if r.is_ok() {
+        if r.is_ok() && stale_status {
             // The next period's status is the first to reflect the change.
             entry.status = None;
         }
@@ -422,7 +435,7 @@ impl ControlHub {
     ) -> Result<(), ControlError> {
         let expires = self.shared.gcs.router().elapsed().as_secs_f64()
             + self.shared.config.drive_timeout.as_secs_f64();
-        self.with_cluster(cluster, |e| {
+        self.change_cluster(cluster, false, |e| {
             e.controller.set_velocity(velocity);
             e.drive_expires = Some(expires);
             e.finished = false;

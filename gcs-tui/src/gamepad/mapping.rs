@@ -14,6 +14,8 @@ use mech_proto::{
     Actuators, ClusterVelocity, Command, SteeringThrottle, Stop, Twist, VelocityHeading,
 };
 
+use crate::control::{ClusterStickRates, ClusterSticks, cluster_velocity_from_sticks};
+
 /// What the sticks drive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum TeleopMode {
@@ -139,12 +141,23 @@ pub fn map(mode: TeleopMode, s: &Sticks, limits: &Limits, last_heading: f64) -> 
             vz: (s.right_trigger - s.left_trigger) * limits.max_speed,
             wz: -s.right_x * limits.max_yaw_rate,
         })),
-        TeleopMode::Cluster => Mapped::Cluster(ClusterVelocity {
-            vx: s.left_y * limits.max_speed,
-            vy: -s.left_x * limits.max_speed,
-            wz: -s.right_x * limits.max_yaw_rate,
-            scale_rate: s.right_y * limits.max_scale_rate,
-        }),
+        // The one cluster stick mapping; the sticks are already shaped
+        // (deadzone and expo), so no second dead zone here.
+        TeleopMode::Cluster => Mapped::Cluster(cluster_velocity_from_sticks(
+            &ClusterSticks {
+                forward: s.left_y,
+                left: -s.left_x,
+                turn_left: -s.right_x,
+                grow: s.right_y.max(0.0),
+                shrink: (-s.right_y).max(0.0),
+            },
+            &ClusterStickRates {
+                speed: limits.max_speed,
+                yaw_rate: limits.max_yaw_rate,
+                scale_rate: limits.max_scale_rate,
+                dead_zone: 0.0,
+            },
+        )),
     }
 }
 

@@ -175,6 +175,9 @@ pub enum Action {
     EStop,
     Release,
     ToggleKeyTeleop,
+    /// Move the selected robots' waypoint navigation to the other side
+    /// (onboard <-> offboard).
+    ToggleNav,
     Drive(DriveKey),
     DriveStop,
     Pad(PadEvent),
@@ -213,6 +216,11 @@ pub enum Request {
     DefineCluster {
         name: String,
         members: Vec<String>,
+    },
+    /// Switch each robot's waypoint navigation between the agent and the
+    /// GCS loop (`offboard/<robot>`), keeping the mission's progress.
+    ToggleNav {
+        robots: Vec<String>,
     },
     /// A command-language line for the core's executor.
     Exec(String),
@@ -473,6 +481,7 @@ impl App {
                     format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
                 );
             }
+            Action::ToggleNav => self.toggle_nav(),
             Action::Drive(k) => {
                 if let Some(c) = self.key_teleop.press(k, self.now) {
                     self.publish(KEY_CHANNEL, c);
@@ -663,6 +672,31 @@ impl App {
             members,
         });
         self.active_cluster = Some(name);
+    }
+
+    fn toggle_nav(&mut self) {
+        let robots = self.selected_robots();
+        if robots.is_empty() {
+            self.log(
+                LogLevel::Warn,
+                "select a robot to switch onboard/offboard navigation",
+            );
+            return;
+        }
+        self.log(
+            LogLevel::Info,
+            format!("navigation onboard/offboard switch: {}", robots.join(" ")),
+        );
+        self.outbox.push(Request::ToggleNav { robots });
+    }
+
+    /// Selected robots, in card order.
+    fn selected_robots(&self) -> Vec<String> {
+        self.robots
+            .iter()
+            .filter(|r| self.selection.contains(&r.name))
+            .map(|r| r.name.clone())
+            .collect()
     }
 
     fn add_waypoint(&mut self, w: Waypoint) {

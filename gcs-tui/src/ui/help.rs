@@ -51,6 +51,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ),
     ("Routes: Enter", "route that robot to that channel"),
     ("Routes: click", "pick a cell; click it again to route"),
+    (
+        "o",
+        "selected robots: waypoint navigation onboard <-> offboard",
+    ),
     ("t", "keyboard teleop on key/0 on/off"),
     (
         "teleop: arrows WASD",

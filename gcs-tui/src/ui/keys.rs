@@ -121,6 +121,7 @@ pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
         KeyCode::Char('-') => Action::Zoom(0.8),
         KeyCode::Char('0') | KeyCode::Char('z') => Action::FitFleet,
         KeyCode::Char('t') => Action::ToggleKeyTeleop,
+        KeyCode::Char('o') => Action::ToggleNav,
         KeyCode::Left => Action::Pan(-4.0, 0.0),
         KeyCode::Right => Action::Pan(4.0, 0.0),
         KeyCode::Up => Action::Pan(0.0, 2.0),

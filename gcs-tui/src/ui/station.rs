@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use crossterm::event::{DisableMouseCapture, EnableMouseCapture, EventStream};
 use crossterm::execute;
 use futures::StreamExt;
-use mech_proto::{Body, ClusterCommand, ClusterGoal, Mission};
+use mech_proto::Mission;
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
@@ -17,6 +17,7 @@ use super::fleet::{
     ArenaBounds, ChannelView, ClusterView, FleetSnapshot, LinkState, RobotView, RouteView,
 };
 use crate::Gcs;
+use crate::control::ControlHub;
 use crate::fleet::{Fleet, Severity};
 use crate::lang::Executor;
 use crate::lang::exec::SENDER;
@@ -166,6 +167,8 @@ async fn event_loop(
     // The command language runs in its own task: a line may wait.
     let (line_tx, line_rx) = mpsc::unbounded_channel::<String>();
     let (result_tx, mut result_rx) = mpsc::unbounded_channel();
+    // One set of controllers for the command line, the pads and the keys.
+    let control = executor.control().clone();
     let exec_task = tokio::spawn(run_lines(executor, line_rx, result_tx));
     for line in &options.startup {
         let _ = line_tx.send(line.clone());
@@ -174,7 +177,7 @@ async fn event_loop(
     let mut events = EventStream::new();
     let mut tick = tokio::time::interval(Duration::from_millis(1000 / FPS));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut link = CoreLink::new(gcs.clone(), line_tx.clone());
+    let mut link = CoreLink::new(gcs.clone(), line_tx.clone(), control);
     // Teleop publishes on its own clock so its rate does not depend on the
     // frame rate.
     let rate = if options.teleop.rate_hz.is_finite() && options.teleop.rate_hz > 0.0 {
@@ -301,7 +304,8 @@ fn char_to_byte(s: &str, chars: usize) -> usize {
 }
 
 /// Carries the App's [`Request`]s to the GCS core: routes, missions,
-/// e-stop, teleop publishing, clusters and command-language lines.
+/// e-stop, teleop publishing, clusters, fleet and offboard control and
+/// command-language lines.
 #[derive(Debug)]
 pub struct CoreLink {
     gcs: Gcs,
@@ -309,31 +313,38 @@ pub struct CoreLink {
     /// router's per-channel rate are those of one steady publisher.
     publishers: HashMap<String, Publisher>,
     lines: mpsc::UnboundedSender<String>,
+    /// The controllers the command line's executor runs too, so a cluster
+    /// moved by a pad and by `:cluster-move` is one and the same.
+    control: ControlHub,
 }
 
 impl CoreLink {
-    /// `lines` receives command-language lines for the executor task.
-    pub fn new(gcs: Gcs, lines: mpsc::UnboundedSender<String>) -> CoreLink {
+    /// `lines` receives command-language lines for the executor task;
+    /// `control` is that executor's [`ControlHub`] ([`Executor::control`]).
+    pub fn new(gcs: Gcs, lines: mpsc::UnboundedSender<String>, control: ControlHub) -> CoreLink {
         CoreLink {
             gcs,
             publishers: HashMap::new(),
             lines,
+            control,
         }
+    }
+
+    /// The fleet and offboard controllers requests go to.
+    pub fn control(&self) -> &ControlHub {
+        &self.control
     }
 
     /// Carries one request; failures are logged on the App.
     pub async fn carry(&mut self, req: Request, app: &mut App) {
-        carry(&self.gcs, &mut self.publishers, &self.lines, req, app).await;
+        carry(self, req, app).await;
     }
 }
 
-async fn carry(
-    gcs: &Gcs,
-    publishers: &mut HashMap<String, Publisher>,
-    lines: &mpsc::UnboundedSender<String>,
-    req: Request,
-    app: &mut App,
-) {
+async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
+    let gcs = &link.gcs;
+    let publishers = &mut link.publishers;
+    let lines = &link.lines;
     let router = gcs.router();
     match req {
         Request::Route { robot, channel } => {
@@ -388,22 +399,28 @@ async fn carry(
         Request::ClusterVelocity {
             channel: _,
             cluster,
-            members,
+            members: _,
             velocity,
         } => {
-            // The cluster controller listens on the cluster's own channel.
-            let channel = format!("fleet/{cluster}");
-            let p = publishers
-                .entry(channel.clone())
-                .or_insert_with(|| router.publisher(SENDER, &channel));
-            let body = Body::Cluster(ClusterCommand {
-                cluster,
-                members,
-                goal: ClusterGoal::Velocity(velocity),
-                formation: None,
-            });
-            if let Err(e) = p.send_body(mech_proto::ROUTER, body).await {
-                app.log(LogLevel::Error, e.to_string());
+            // A pad velocity lapses unless the pad refreshes it, so a pad
+            // that stops publishing leaves the cluster holding.
+            if let Err(e) = link.control.drive_cluster(&cluster, velocity) {
+                app.log(LogLevel::Error, format!("{cluster}: {e}"));
+            }
+        }
+        Request::ToggleNav { robots } => {
+            // Handing navigation back onboard waits for the agent's mission
+            // acknowledgement: run it beside the event loop and report in the
+            // fleet log.
+            for robot in robots {
+                let hub = link.control.clone();
+                tokio::spawn(async move {
+                    let (severity, text) = match hub.toggle_nav(&robot).await {
+                        Ok(text) => (Severity::Info, text),
+                        Err(e) => (Severity::Error, format!("nav {robot}: {e}")),
+                    };
+                    hub.gcs().update_fleet(|f| f.log(severity, text));
+                });
             }
         }
         Request::DefineCluster { name, members } => {
