@@ -1,5 +1,5 @@
 //! GCS configuration (`gcs.toml`): router endpoints, link-state thresholds,
-//! retry periods, subscriber queues and log files. Every field has a default,
+//! retry periods, subscriber queues, log files and gamepad teleop. Every field has a default,
 //! so an empty file (or none) gives a working ground station on port 7400.
 
 use std::net::SocketAddr;
@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
+
+use crate::gamepad::{Limits, PadButton, Shaping, TeleopConfig, TeleopMode};
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -35,6 +37,200 @@ pub struct GcsConfig {
     /// Clusters defined at start-up (`[[cluster]]` tables: name, members,
     /// formation, spacing, offsets).
     pub cluster: Vec<crate::control::ClusterSpec>,
+    /// Gamepad teleop: shaping, dead-man and other buttons, rate, limits.
+    pub gamepad: GamepadConfig,
+}
+
+/// Gamepad settings as written in `[gamepad]`; [`GamepadConfig::teleop`]
+/// turns them into the station's [`TeleopConfig`].
+///
+/// Button names: south east north west left-bumper right-bumper
+/// left-trigger right-trigger select start mode left-thumb right-thumb
+/// dpad-up dpad-down dpad-left dpad-right. Modes: steering-throttle
+/// velocity-heading tank twist cluster.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GamepadConfig {
+    /// Fraction of stick travel around centre that reads as zero, `[0, 1)`.
+    pub deadzone: f64,
+    /// Blend between linear (0) and cubic (1) stick response, `[0, 1]`.
+    pub expo: f64,
+    /// Button held to drive (the dead-man), or `"none"` to drive whenever a
+    /// pad is connected (not recommended: a dropped pad keeps its stick).
+    pub deadman: String,
+    /// Button that cycles the teleop mode.
+    pub mode_button: String,
+    /// Button that engages the fleet e-stop.
+    pub estop_button: String,
+    /// Mode a newly connected pad starts in.
+    pub initial_mode: String,
+    /// Steady publish rate while the dead-man is held, Hz. Agents stop a
+    /// silent channel after 0.5 s, so keep it well above 2 Hz.
+    pub rate_hz: f64,
+    /// m/s at full stick (velocity-level modes and cluster translation).
+    pub max_speed: f64,
+    /// rad/s at full stick.
+    pub max_yaw_rate: f64,
+    /// Formation growth rate at full stick, 1/s (cluster mode).
+    pub max_scale_rate: f64,
+}
+
+impl Default for GamepadConfig {
+    fn default() -> Self {
+        let t = TeleopConfig::default();
+        GamepadConfig {
+            deadzone: t.shaping.deadzone,
+            expo: t.shaping.expo,
+            deadman: t.deadman.map_or("none", button_name).to_string(),
+            mode_button: button_name(t.mode_button).to_string(),
+            estop_button: button_name(t.estop_button).to_string(),
+            initial_mode: mode_name(t.initial_mode).to_string(),
+            rate_hz: t.rate_hz,
+            max_speed: t.limits.max_speed,
+            max_yaw_rate: t.limits.max_yaw_rate,
+            max_scale_rate: t.limits.max_scale_rate,
+        }
+    }
+}
+
+const BUTTONS: [(&str, PadButton); 17] = [
+    ("south", PadButton::South),
+    ("east", PadButton::East),
+    ("north", PadButton::North),
+    ("west", PadButton::West),
+    ("left-bumper", PadButton::LeftBumper),
+    ("right-bumper", PadButton::RightBumper),
+    ("left-trigger", PadButton::LeftTrigger),
+    ("right-trigger", PadButton::RightTrigger),
+    ("select", PadButton::Select),
+    ("start", PadButton::Start),
+    ("mode", PadButton::Mode),
+    ("left-thumb", PadButton::LeftThumb),
+    ("right-thumb", PadButton::RightThumb),
+    ("dpad-up", PadButton::DPadUp),
+    ("dpad-down", PadButton::DPadDown),
+    ("dpad-left", PadButton::DPadLeft),
+    ("dpad-right", PadButton::DPadRight),
+];
+
+const MODES: [(&str, TeleopMode); 5] = [
+    ("steering-throttle", TeleopMode::SteeringThrottle),
+    ("velocity-heading", TeleopMode::VelocityHeading),
+    ("tank", TeleopMode::Tank),
+    ("twist", TeleopMode::Twist),
+    ("cluster", TeleopMode::Cluster),
+];
+
+fn button_name(b: PadButton) -> &'static str {
+    BUTTONS
+        .iter()
+        .find(|(_, x)| *x == b)
+        .map_or("?", |(n, _)| n)
+}
+
+fn mode_name(m: TeleopMode) -> &'static str {
+    MODES.iter().find(|(_, x)| *x == m).map_or("?", |(n, _)| n)
+}
+
+fn button(key: &str, name: &str) -> Result<PadButton, ConfigError> {
+    BUTTONS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, b)| *b)
+        .ok_or_else(|| {
+            let names: Vec<&str> = BUTTONS.iter().map(|(n, _)| *n).collect();
+            ConfigError::Invalid(format!(
+                "gamepad.{key}: unknown button {name:?}; buttons are {}",
+                names.join(", ")
+            ))
+        })
+}
+
+impl GamepadConfig {
+    /// The teleop settings these values describe, or the first value at
+    /// fault.
+    pub fn teleop(&self) -> Result<TeleopConfig, ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid(m));
+        if !(self.deadzone.is_finite() && (0.0..1.0).contains(&self.deadzone)) {
+            return bad(format!(
+                "gamepad.deadzone must be in [0, 1), found {}",
+                self.deadzone
+            ));
+        }
+        if !(self.expo.is_finite() && (0.0..=1.0).contains(&self.expo)) {
+            return bad(format!(
+                "gamepad.expo must be in [0, 1], found {}",
+                self.expo
+            ));
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz > 2.0 && self.rate_hz <= 200.0) {
+            return bad(format!(
+                "gamepad.rate_hz must be above 2 (agents stop a channel silent for 0.5 s) \
+                 and at most 200, found {}",
+                self.rate_hz
+            ));
+        }
+        for (key, v) in [
+            ("max_speed", self.max_speed),
+            ("max_yaw_rate", self.max_yaw_rate),
+            ("max_scale_rate", self.max_scale_rate),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!("gamepad.{key} must be positive, found {v}"));
+            }
+        }
+        let deadman = match self.deadman.as_str() {
+            "none" => None,
+            name => Some(button("deadman", name)?),
+        };
+        let mode_button = button("mode_button", &self.mode_button)?;
+        let estop_button = button("estop_button", &self.estop_button)?;
+        let pairs = [
+            ("deadman", deadman, "mode_button", Some(mode_button)),
+            ("deadman", deadman, "estop_button", Some(estop_button)),
+            (
+                "mode_button",
+                Some(mode_button),
+                "estop_button",
+                Some(estop_button),
+            ),
+        ];
+        for (a, x, b, y) in pairs {
+            if x.is_some() && x == y {
+                return bad(format!(
+                    "gamepad.{a} and gamepad.{b} must be different buttons"
+                ));
+            }
+        }
+        let initial_mode = MODES
+            .iter()
+            .find(|(n, _)| *n == self.initial_mode)
+            .map(|(_, m)| *m)
+            .ok_or_else(|| {
+                let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
+                ConfigError::Invalid(format!(
+                    "gamepad.initial_mode: unknown mode {:?}; modes are {}",
+                    self.initial_mode,
+                    names.join(", ")
+                ))
+            })?;
+        Ok(TeleopConfig {
+            deadman,
+            mode_button,
+            estop_button,
+            rate_hz: self.rate_hz,
+            shaping: Shaping {
+                deadzone: self.deadzone,
+                expo: self.expo,
+            },
+            limits: Limits {
+                max_speed: self.max_speed,
+                max_yaw_rate: self.max_yaw_rate,
+                max_scale_rate: self.max_scale_rate,
+            },
+            initial_mode,
+        })
+    }
 }
 
 /// Router endpoints and timing. Durations are in seconds in the file.
@@ -250,6 +446,7 @@ impl GcsConfig {
                 )));
             }
         }
+        self.gamepad.teleop()?;
         if self.fleet.arrival_radius.is_nan() || self.fleet.arrival_radius <= 0.0 {
             return Err(ConfigError::Invalid(
                 "fleet.arrival_radius must be positive".into(),
@@ -299,6 +496,54 @@ mod tests {
         assert!(GcsConfig::parse("[router]\nstale_after = 3\n").is_err());
         assert!(GcsConfig::parse("[router]\nbogus = 1\n").is_err());
         assert!(GcsConfig::parse("[router]\ntick = -1\n").is_err());
+    }
+
+    #[test]
+    fn gamepad_section_reaches_the_teleop_settings() {
+        let cfg = GcsConfig::parse(
+            "[gamepad]\ndeadzone = 0.2\nexpo = 0\ndeadman = \"right-bumper\"\n\
+             mode_button = \"north\"\nestop_button = \"mode\"\nrate_hz = 50\n\
+             initial_mode = \"cluster\"\nmax_speed = 0.8\n",
+        )
+        .unwrap();
+        let t = cfg.gamepad.teleop().unwrap();
+        assert_eq!(t.deadman, Some(PadButton::RightBumper));
+        assert_eq!(t.mode_button, PadButton::North);
+        assert_eq!(t.estop_button, PadButton::Mode);
+        assert_eq!(t.rate_hz, 50.0);
+        assert_eq!(t.initial_mode, TeleopMode::Cluster);
+        assert_eq!(
+            t.shaping,
+            Shaping {
+                deadzone: 0.2,
+                expo: 0.0
+            }
+        );
+        assert_eq!(t.limits.max_speed, 0.8);
+        assert_eq!(t.limits.max_yaw_rate, Limits::default().max_yaw_rate);
+        let none = GcsConfig::parse("[gamepad]\ndeadman = \"none\"\n").unwrap();
+        assert_eq!(none.gamepad.teleop().unwrap().deadman, None);
+        assert_eq!(
+            GcsConfig::default().gamepad.teleop().unwrap(),
+            TeleopConfig::default()
+        );
+    }
+
+    #[test]
+    fn bad_gamepad_values_say_what_is_wrong() {
+        let err = |text: &str| GcsConfig::parse(text).unwrap_err().to_string();
+        assert!(err("[gamepad]\ndeadzone = 1.0\n").contains("gamepad.deadzone"));
+        assert!(err("[gamepad]\nexpo = -0.1\n").contains("gamepad.expo"));
+        assert!(err("[gamepad]\nrate_hz = 1\n").contains("gamepad.rate_hz"));
+        assert!(err("[gamepad]\nmax_speed = 0\n").contains("gamepad.max_speed"));
+        let e = err("[gamepad]\ndeadman = \"LB\"\n");
+        assert!(
+            e.contains("unknown button \"LB\"") && e.contains("left-bumper"),
+            "{e}"
+        );
+        assert!(err("[gamepad]\nestop_button = \"left-bumper\"\n").contains("different"));
+        assert!(err("[gamepad]\ninitial_mode = \"fly\"\n").contains("modes are"));
+        assert!(err("[gamepad]\nbogus = 1\n").contains("bogus"));
     }
 
     #[test]

@@ -96,12 +96,17 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 /// The interactive station; `--demo N` spawns N simulated robots first.
 async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyhow::Result<()> {
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "mech-gcs starting");
+    let teleop = config
+        .gamepad
+        .teleop()
+        .context("invalid [gamepad] configuration")?;
     let gcs = Gcs::start(config)
         .await
         .context("cannot start the router")?;
     let executor = Executor::new(gcs.clone()).with_spawner(mech_gcs::script::simulator());
     let mut options = mech_gcs::ui::RunOptions {
         mouse: !no_mouse,
+        teleop,
         ..mech_gcs::ui::RunOptions::default()
     };
     if let Some(n) = demo {
