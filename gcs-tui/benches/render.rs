@@ -1,7 +1,7 @@
 //! Frame render time: the full screen for 200 robots (with 10 s paths and a
 //! cluster) on a 200x50 terminal. Target: <= 2 ms per frame.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use mech_gcs::ui::fixture;
@@ -12,18 +12,22 @@ use ratatui::widgets::Widget;
 
 fn app_with_paths(n: usize, w: u16, h: u16) -> mech_gcs::ui::App {
     let mut app = fixture::app(n, w, h);
-    let t0 = app.now;
-    // 10 s of telemetry at 10 Hz: every robot drifts, leaving a path.
-    for k in 0..100u32 {
-        let mut snap = fixture::fleet(n);
-        for r in &mut snap.robots {
-            let f = f64::from(k) * 0.01;
-            r.pose.x += f * r.pose.heading.cos();
-            r.pose.y += f * r.pose.heading.sin();
+    // 10 s of path at 10 Hz: every robot drifted along its heading.
+    let mut snap = fixture::fleet(n);
+    for r in &mut snap.robots {
+        let (x0, y0) = (r.pose.x, r.pose.y);
+        r.trail = (0..100u32)
+            .map(|k| {
+                let f = f64::from(k) * 0.01;
+                (x0 + f * r.pose.heading.cos(), y0 + f * r.pose.heading.sin())
+            })
+            .collect();
+        if let Some(&(x, y)) = r.trail.last() {
+            r.pose.x = x;
+            r.pose.y = y;
         }
-        app.update(Action::Tick(t0 + Duration::from_millis(100 * u64::from(k))));
-        app.update(Action::Fleet(snap));
     }
+    app.update(Action::Fleet(snap));
     app.update(Action::Select(Select::All));
     app.update(Action::MakeCluster);
     app.update(Action::Select(Select::Only("robot_1".into())));

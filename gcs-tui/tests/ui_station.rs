@@ -110,6 +110,15 @@ async fn app_requests_reach_simulated_robots() {
         r.pose
     );
 
+    // The map trail is the core's recorded path: it runs from about the
+    // start to about where the robot is now.
+    let trail = &r.trail;
+    let passes = |x: f64, y: f64| trail.iter().any(|(a, b)| (a - x).hypot(b - y) < 0.1);
+    assert!(
+        passes(p.x, p.y) && passes(p.x + 0.3, p.y),
+        "the trail runs from the start to the waypoint: {trail:?}"
+    );
+
     // E-stop from the App latches every robot.
     app.update(Action::EStop);
     for req in app.take_requests() {

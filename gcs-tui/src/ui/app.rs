@@ -3,8 +3,8 @@
 //! changes. What must reach the robots is queued as [`Request`]s that the
 //! event loop hands to the GCS core; the App itself does no I/O.
 
-use std::collections::{BTreeSet, HashMap, VecDeque};
-use std::time::{Duration, Instant};
+use std::collections::{BTreeSet, VecDeque};
+use std::time::Instant;
 
 use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::{Position, Rect};
@@ -22,9 +22,6 @@ pub const WAYPOINT_CHANNEL: &str = "wp/gcs";
 
 /// How long a robot's path stays on the map.
 pub const TRAIL_SECONDS: f64 = 10.0;
-const TRAIL_MAX_POINTS: usize = 400;
-/// Distance (m) between kept path points, above position-fix noise.
-const TRAIL_SPACING: f64 = 0.02;
 const LOG_LINES: usize = 200;
 const HISTORY_LINES: usize = 100;
 
@@ -257,7 +254,6 @@ pub struct App {
     /// Routing-table cursor: robot row, channel column.
     pub route_cursor: (usize, usize),
     pub cards_scroll: usize,
-    pub trails: HashMap<String, VecDeque<(Instant, f64, f64)>>,
     pub key_teleop_on: bool,
     pub key_teleop: KeyTeleop,
     pub teleop: Teleop,
@@ -298,7 +294,6 @@ impl App {
             log: VecDeque::new(),
             route_cursor: (0, 0),
             cards_scroll: 0,
-            trails: HashMap::new(),
             key_teleop_on: false,
             key_teleop: KeyTeleop::default(),
             teleop: Teleop::new(TeleopConfig::default()),
@@ -506,33 +501,9 @@ impl App {
         if let Some(c) = self.key_teleop.tick(now) {
             self.publish(KEY_CHANNEL, c);
         }
-        let horizon = Duration::from_secs_f64(TRAIL_SECONDS);
-        for trail in self.trails.values_mut() {
-            while trail
-                .front()
-                .is_some_and(|(t, _, _)| now.saturating_duration_since(*t) > horizon)
-            {
-                trail.pop_front();
-            }
-        }
     }
 
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
-        let now = self.now;
-        for r in &s.robots {
-            let trail = self.trails.entry(r.name.clone()).or_default();
-            let moved = trail
-                .back()
-                .is_none_or(|(_, x, y)| (x - r.pose.x).hypot(y - r.pose.y) > TRAIL_SPACING);
-            if moved {
-                trail.push_back((now, r.pose.x, r.pose.y));
-                if trail.len() > TRAIL_MAX_POINTS {
-                    trail.pop_front();
-                }
-            }
-        }
-        self.trails
-            .retain(|name, _| s.robots.iter().any(|r| &r.name == name));
         if s.estop != self.estop {
             self.estop = s.estop;
         }

@@ -56,6 +56,10 @@ pub struct RobotView {
     /// Fraction `[0, 1]`.
     pub battery: Option<f64>,
     pub mission: Option<MissionProgress>,
+    /// Where the robot went in the last [`super::app::TRAIL_SECONDS`],
+    /// oldest first (x, y in m): the core's recorded path, not a copy the
+    /// UI keeps.
+    pub trail: Vec<(f64, f64)>,
 }
 
 impl RobotView {
@@ -91,6 +95,7 @@ impl RobotView {
             health: Health::Ok,
             battery: None,
             mission: None,
+            trail: Vec::new(),
         }
     }
 }

@@ -70,13 +70,13 @@ impl Shape for Dots<'_> {
 /// A robot's recent path, straight from the App's trail buffer.
 struct Trail<'a> {
     proj: &'a Projection,
-    trail: &'a std::collections::VecDeque<(std::time::Instant, f64, f64)>,
+    trail: &'a [(f64, f64)],
     color: Color,
 }
 
 impl Shape for Trail<'_> {
     fn draw(&self, painter: &mut Painter) {
-        for &(_, x, y) in self.trail {
+        for &(x, y) in self.trail {
             if let Some((i, j)) = self.proj.world_to_dot(x, y) {
                 painter.paint(i, j, self.color);
             }
@@ -212,13 +212,11 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
 
     // Paths of the last seconds.
     for (i, r) in app.robots.iter().enumerate() {
-        if let Some(trail) = app.trails.get(&r.name) {
-            ctx.draw(&Trail {
-                proj,
-                trail,
-                color: t.robot(i),
-            });
-        }
+        ctx.draw(&Trail {
+            proj,
+            trail: &r.trail,
+            color: t.robot(i),
+        });
     }
 
     // Waypoint legs, in mission order.

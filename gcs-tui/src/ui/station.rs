@@ -97,6 +97,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> F
             health: r.health,
             battery: r.battery,
             mission: r.mission,
+            trail: recent_path(r),
         })
         .collect();
     FleetSnapshot {
@@ -121,6 +122,20 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> F
                 .collect(),
         ),
     }
+}
+
+/// The part of the robot's recorded path from the last
+/// [`super::app::TRAIL_SECONDS`] before its newest telemetry.
+fn recent_path(r: &crate::fleet::Robot) -> Vec<(f64, f64)> {
+    let Some(newest) = r.last_telemetry.or_else(|| r.path.back().map(|p| p.at)) else {
+        return Vec::new();
+    };
+    let from = newest.saturating_sub(Duration::from_secs_f64(super::app::TRAIL_SECONDS));
+    r.path
+        .iter()
+        .filter(|p| p.at >= from)
+        .map(|p| (p.x, p.y))
+        .collect()
 }
 
 /// Runs the station until the operator quits. Restores the terminal on
