@@ -12,7 +12,8 @@ pub mod viewport;
 
 pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
 pub use fleet::{
-    ArenaBounds, ChannelView, ClusterView, FleetSnapshot, LinkState, RobotView, RouteView,
+    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, LinkState, RobotView,
+    RouteView, SlotView,
 };
 pub mod cards;
 pub mod events;
@@ -27,4 +28,4 @@ pub mod status;
 pub mod theme;
 pub mod waypoints;
 
-pub use station::{CoreLink, RunOptions, demo_arena, run, snapshot};
+pub use station::{CoreLink, RunOptions, apply_control, demo_arena, run, snapshot};

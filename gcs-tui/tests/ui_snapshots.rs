@@ -127,3 +127,47 @@ fn routes_panel_lists_pads_and_keyboard_teleop() {
     app.update(Action::FocusPrev);
     insta::assert_snapshot!(screen(&app, 80, 24));
 }
+
+/// A cluster under its controller: slot targets (◇) joined to the members,
+/// the desired cluster pose (⊕) and heading, the measured pose (✚c1), and
+/// per-member tracking errors in the routes panel.
+#[test]
+fn cluster_slots_and_tracking_errors_160x48() {
+    use mech_gcs::ui::{ClusterControlView, ClusterView, SlotView};
+
+    let mut app = populated(160, 48);
+    let mut snap = fixture::fleet(6);
+    let p1 = app.robot("robot_1").expect("robot_1").pose;
+    let p2 = app.robot("robot_2").expect("robot_2").pose;
+    let (cx, cy) = ((p1.x + p2.x) / 2.0, (p1.y + p2.y) / 2.0);
+    snap.clusters = Some(vec![ClusterView {
+        name: "c1".into(),
+        members: vec!["robot_1".into(), "robot_2".into(), "robot_3".into()],
+        control: Some(ClusterControlView {
+            desired: Some((cx + 0.6, cy + 0.3, 0.0)),
+            measured: Some((cx, cy, 0.0)),
+            slots: vec![
+                SlotView {
+                    robot: "robot_1".into(),
+                    x: p1.x + 0.6,
+                    y: p1.y + 0.3,
+                    error: 0.67,
+                },
+                SlotView {
+                    robot: "robot_2".into(),
+                    x: p2.x + 0.6,
+                    y: p2.y + 0.3,
+                    error: 0.04,
+                },
+            ],
+            lost: vec![],
+            absent: vec!["robot_3".into()],
+        }),
+    }]);
+    app.update(Action::Fleet(snap));
+    let text = screen(&app, 160, 48);
+    assert!(text.contains("robot_1 67cm"), "{text}");
+    assert!(text.contains("robot_2 4cm"), "{text}");
+    assert!(text.contains('◇') && text.contains('⊕'), "{text}");
+    insta::assert_snapshot!(text);
+}

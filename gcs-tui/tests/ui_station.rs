@@ -317,6 +317,15 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
         .cluster_view("c1")
         .expect("the executor's hub runs c1");
     assert!(view.status.slots.len() == 2, "{view:?}");
+    // What the station copies into the App for the map and routes panel.
+    let channels = gcs.router().channels();
+    let mut snap = gcs.with_fleet(|f| snapshot(f, channels));
+    mech_gcs::ui::apply_control(&mut snap, &executor.control().snapshot());
+    app.update(Action::Fleet(snap));
+    let c1 = app.clusters.iter().find(|c| c.name == "c1").expect("c1");
+    let ctl = c1.control.as_ref().expect("controller status copied");
+    assert_eq!(ctl.slots.len(), 2);
+    assert!(ctl.desired.is_some() && ctl.measured.is_some());
     let r3 = app.robot("robot_3").expect("robot_3");
     assert!(
         r3.speed() < 0.02,

@@ -641,6 +641,7 @@ impl App {
         self.clusters.push(ClusterView {
             name: name.clone(),
             members,
+            control: None,
         });
         self.active_cluster = Some(name);
     }

@@ -110,10 +110,62 @@ pub struct ChannelView {
 }
 
 /// A named group of robots driven together.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ClusterView {
     pub name: String,
     pub members: Vec<String>,
+    /// What the cluster controller reports, once it runs this cluster.
+    pub control: Option<ClusterControlView>,
+}
+
+/// A cluster controller's last period, as the map and the routes panel
+/// show it (copied from [`crate::control::ControlHub::snapshot`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ClusterControlView {
+    /// Cluster pose being tracked (x, y, heading).
+    pub desired: Option<(f64, f64, f64)>,
+    /// Cluster pose measured from the members (x, y, heading).
+    pub measured: Option<(f64, f64, f64)>,
+    /// Slot target and tracking error of each commanded member.
+    pub slots: Vec<SlotView>,
+    /// Members with stale telemetry (not commanded).
+    pub lost: Vec<String>,
+    /// Members not routed to the cluster's channel (or not registered).
+    pub absent: Vec<String>,
+}
+
+/// One member's slot in the formation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlotView {
+    pub robot: String,
+    /// Slot position, m.
+    pub x: f64,
+    pub y: f64,
+    /// Distance from the member to its slot, m.
+    pub error: f64,
+}
+
+impl ClusterControlView {
+    /// The view of one cluster controller's status.
+    pub fn from_status(s: &crate::control::ClusterStatus) -> ClusterControlView {
+        let pose = |p: &mech_proto::ClusterPose| (p.x, p.y, p.heading);
+        ClusterControlView {
+            desired: s.desired.as_ref().map(pose),
+            measured: s.measured.as_ref().map(pose),
+            slots: s
+                .slots
+                .iter()
+                .map(|t| SlotView {
+                    robot: t.robot.clone(),
+                    x: t.x,
+                    y: t.y,
+                    error: t.error,
+                })
+                .collect(),
+            lost: s.lost.clone(),
+            absent: s.absent.clone(),
+        }
+    }
 }
 
 /// The arena rectangle from the config, metres.

@@ -246,8 +246,53 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
         if pos.is_empty() {
             continue;
         }
-        let cx = pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64;
-        let cy = pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64;
+        // The controller's measured cluster pose when it runs the cluster,
+        // else the members' centroid.
+        let control = c.control.as_ref();
+        let (cx, cy) = match control.and_then(|k| k.measured) {
+            Some((x, y, _)) => (x, y),
+            None => (
+                pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64,
+                pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64,
+            ),
+        };
+        if let Some(k) = control {
+            // Slot targets, each joined to its member by a sparse line.
+            for s in &k.slots {
+                if let Some(r) = by_name.get(s.robot.as_str()) {
+                    ctx.draw(&Segment {
+                        proj,
+                        from: (r.pose.x, r.pose.y),
+                        to: (s.x, s.y),
+                        color: t.cluster(),
+                        every: 3,
+                    });
+                }
+                label(ctx, proj, (s.x, s.y), 0, TextLine::from("◇"));
+            }
+            // Desired cluster pose with its heading.
+            if let Some((x, y, h)) = k.desired {
+                let len = 8.0 * proj.metres_per_dot;
+                ctx.draw(&Segment {
+                    proj,
+                    from: (x, y),
+                    to: (x + len * h.cos(), y + len * h.sin()),
+                    color: t.cluster(),
+                    every: 1,
+                });
+                label(ctx, proj, (x, y), 0, TextLine::from("⊕"));
+            }
+            if let Some((x, y, h)) = k.measured {
+                let len = 6.0 * proj.metres_per_dot;
+                ctx.draw(&Segment {
+                    proj,
+                    from: (x, y),
+                    to: (x + len * h.cos(), y + len * h.sin()),
+                    color: t.cluster(),
+                    every: 2,
+                });
+            }
+        }
         for p in &pos {
             ctx.draw(&Segment {
                 proj,

@@ -168,10 +168,31 @@ impl Widget for RoutesPanel<'_> {
             for (k, c) in app.clusters.iter().enumerate() {
                 let active = app.active_cluster.as_deref() == Some(c.name.as_str());
                 let style = if active { t.title() } else { Style::new() };
-                lines.push(Line::from(vec![
-                    Span::styled(format!(" {} {:<4}", k + 1, c.name), style),
-                    Span::raw(c.members.join(" ")),
-                ]));
+                let mut spans = vec![Span::styled(format!(" {} {:<4}", k + 1, c.name), style)];
+                match &c.control {
+                    // Per-member slot tracking error, lost and absent members.
+                    Some(ctl) => {
+                        for m in &c.members {
+                            let (text, st) =
+                                if let Some(s) = ctl.slots.iter().find(|s| &s.robot == m) {
+                                    let cm = (s.error * 100.0).round();
+                                    let st = if s.error > 0.15 {
+                                        t.warn()
+                                    } else {
+                                        Style::new()
+                                    };
+                                    (format!("{m} {cm:.0}cm "), st)
+                                } else if ctl.lost.contains(m) {
+                                    (format!("{m} lost "), t.warn())
+                                } else {
+                                    (format!("{m} – "), t.dim())
+                                };
+                            spans.push(Span::styled(text, st));
+                        }
+                    }
+                    None => spans.push(Span::raw(c.members.join(" "))),
+                }
+                lines.push(Line::from(spans));
             }
         }
         if focused {

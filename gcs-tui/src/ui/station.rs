@@ -14,7 +14,8 @@ use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
 use super::fleet::{
-    ArenaBounds, ChannelView, ClusterView, FleetSnapshot, LinkState, RobotView, RouteView,
+    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, LinkState, RobotView,
+    RouteView,
 };
 use crate::Gcs;
 use crate::control::ControlHub;
@@ -118,9 +119,27 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> F
                 .map(|c| ClusterView {
                     name: c.name.clone(),
                     members: c.members.clone(),
+                    control: None,
                 })
                 .collect(),
         ),
+    }
+}
+
+/// Copies what the cluster controllers report (desired and measured
+/// cluster pose, slot targets, tracking errors) into the snapshot's
+/// clusters, so the screen stays a function of the App's state. Call it
+/// outside [`Gcs::with_fleet`].
+pub fn apply_control(snap: &mut FleetSnapshot, control: &crate::control::ControlSnapshot) {
+    let Some(clusters) = snap.clusters.as_mut() else {
+        return;
+    };
+    for c in clusters {
+        c.control = control
+            .clusters
+            .iter()
+            .find(|v| v.status.cluster == c.name)
+            .map(|v| ClusterControlView::from_status(&v.status));
     }
 }
 
@@ -213,6 +232,7 @@ async fn event_loop(
                 });
                 let mut snap = snap;
                 snap.channels = snapshot_channels(&router);
+                apply_control(&mut snap, &link.control().snapshot());
                 for (level, text) in new_log {
                     app.update(Action::Log(level, text));
                 }
