@@ -270,7 +270,7 @@ async fn carry_all(app: &mut App, link: &mut CoreLink) {
 async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
 
-    let (gcs, mut spawner, executor, mut link, mut app) = station(3).await;
+    let (gcs, mut spawner, mut executor, mut link, mut app) = station(3).await;
     app.update(Action::Select(Select::Only("robot_1".into())));
     app.update(Action::Select(Select::Toggle("robot_2".into())));
     app.update(Action::MakeCluster);
@@ -371,6 +371,26 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
         assert!(t0.elapsed() < Duration::from_secs(10), "members stop");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
+
+    // The command line's `cluster-move` reaches the very controller the pad
+    // drove: the station's link and the executor share one hub.
+    executor
+        .execute_line("cluster-move c1 0.1 0 0")
+        .await
+        .expect("cluster-move runs");
+    // The status of the next control period is the first to show it.
+    let t0 = Instant::now();
+    let motion = loop {
+        match link.control().cluster_view("c1") {
+            Some(v) => break Some(v.motion),
+            None if t0.elapsed() > Duration::from_secs(2) => break None,
+            None => tokio::time::sleep(Duration::from_millis(10)).await,
+        }
+    };
+    assert!(
+        matches!(motion, Some(mech_gcs::control::ClusterMotion::Velocity(v)) if v.vx > 0.05),
+        "{motion:?}"
+    );
     spawner.shutdown().await;
     gcs.shutdown().await;
 }
