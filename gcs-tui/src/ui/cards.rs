@@ -7,7 +7,7 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
-use super::fleet::{LinkState, RobotView, failsafe_str, health_str, mode_str};
+use super::fleet::{LinkState, RobotView, failsafe_str, health_str, link_label, mode_str};
 use super::theme::Theme;
 use mech_proto::{Computation, FailsafeState, Health};
 
@@ -79,7 +79,7 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
         Span::styled(marker, colour),
         Span::styled(r.name.as_str(), name_style),
         Span::raw(format!(" #{} ", r.id)),
-        Span::styled(r.link.as_str(), link_style(r.link, t)),
+        Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
     ]));
     out.push(Line::raw(format!(

@@ -8,24 +8,16 @@ use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
 };
 
-/// Link to a robot as the router judges it from its timeouts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum LinkState {
-    #[default]
-    Connected,
-    /// Heard from recently, but late.
-    Stale,
-    /// Silent past the router's loss timeout.
-    Lost,
-}
+/// Link to a robot as the router judges it from its timeouts (the core's
+/// type: the UI copies it, never derives it).
+pub use crate::fleet::LinkState;
 
-impl LinkState {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LinkState::Connected => "Connected",
-            LinkState::Stale => "Stale",
-            LinkState::Lost => "Lost",
-        }
+/// How a card spells a link state.
+pub fn link_label(link: LinkState) -> &'static str {
+    match link {
+        LinkState::Connected => "Connected",
+        LinkState::Stale => "Stale",
+        LinkState::Lost => "Lost",
     }
 }
 

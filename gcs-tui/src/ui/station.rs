@@ -14,8 +14,7 @@ use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
 use super::fleet::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, LinkState, RobotView,
-    RouteView,
+    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, RobotView, RouteView,
 };
 use crate::Gcs;
 use crate::control::ControlHub;
@@ -89,11 +88,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<crate::router::ChannelStatus>) -> F
                 acknowledged: !r.route.is_pending(),
             },
             computation: r.computation,
-            link: match r.link {
-                crate::fleet::LinkState::Connected => LinkState::Connected,
-                crate::fleet::LinkState::Stale => LinkState::Stale,
-                crate::fleet::LinkState::Lost => LinkState::Lost,
-            },
+            link: r.link,
             failsafe: r.failsafe,
             health: r.health,
             battery: r.battery,
