@@ -22,7 +22,8 @@ struct Cli {
     /// Configuration file (TOML); built-in defaults otherwise.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Start a simulated fleet of N robots (default 4).
+    /// Start a simulated fleet of N robots (default 4). Without --config or
+    /// --udp the router then listens on loopback only (127.0.0.1:7400).
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "4")]
     demo: Option<usize>,
     /// Run a command script headless ("-" for stdin); prints one JSON line
@@ -56,6 +57,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Some(path) => GcsConfig::load(path)?,
         None => GcsConfig::default(),
     };
+    if cli.demo.is_some() && cli.config.is_none() {
+        // A demo fleet lives in this process: nothing on the network needs
+        // to reach the router, so it is not exposed beyond this machine.
+        config
+            .router
+            .udp
+            .set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+    }
     if let Some(udp) = cli.udp {
         config.router.udp = udp;
     }

@@ -183,3 +183,40 @@ fn a_bad_script_is_rejected_before_anything_runs() {
         "nothing ran: {lines:#?}"
     );
 }
+
+#[test]
+fn a_demo_router_listens_on_loopback_only() {
+    let mut child = Command::new(mech_e2e::binary("mech-gcs"))
+        .args(["--demo", "1", "--script", "-", "--tcp", "127.0.0.1:0"])
+        .env(
+            "XDG_STATE_HOME",
+            std::env::temp_dir().join("mech-e2e-demo-bind"),
+        )
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mech-gcs starts");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(b"wait robots 1 10s\n")
+        .expect("script written");
+    let out = child.wait_with_output().expect("mech-gcs finishes");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if stderr.contains("in use") {
+        eprintln!("skipped: the default port 7400 is taken on this machine ({stderr})");
+        return;
+    }
+    let lines = lines(&out);
+    let listening = lines
+        .iter()
+        .find(|l| l.contains("\"event\":\"listening\""))
+        .unwrap_or_else(|| panic!("no listening event: {lines:#?} {stderr}"));
+    assert!(
+        listening.contains("\"udp\":\"127.0.0.1:7400\""),
+        "demo binds loopback: {listening}"
+    );
+    assert!(out.status.success(), "{stderr}");
+}
