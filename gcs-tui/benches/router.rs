@@ -230,6 +230,22 @@ fn report_steal(from: (u64, u64)) {
     );
 }
 
+/// Datagrams the kernel dropped at the UDP socket bound to `addr` because
+/// its receive buffer was full (the `drops` column of /proc/net/udp).
+fn socket_drops(addr: SocketAddr) -> u64 {
+    let port = format!(":{:04X} ", addr.port());
+    std::fs::read_to_string("/proc/net/udp")
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| {
+            l.split_whitespace()
+                .nth(1)
+                .is_some_and(|a| a.ends_with(port.trim_end()))
+        })
+        .filter_map(|l| l.split_whitespace().last()?.parse::<u64>().ok())
+        .sum()
+}
+
 /// Which phases to run: `MECH_BENCH_PHASES=ab` runs (a) and (b) only.
 fn phase(p: char) -> bool {
     std::env::var("MECH_BENCH_PHASES").map_or(true, |v| v.contains(p))
@@ -294,16 +310,22 @@ impl CommandCounter {
 }
 
 /// Offers `rate` commands per second for `run`, in bursts every ~200 us;
-/// returns (sent, received, seconds the sending took, router CPU seconds).
+/// returns (sent, received, seconds the sending took, router CPU seconds,
+/// where losses happened).
+#[allow(clippy::too_many_arguments)]
 fn offer(
+    handle: &mech_gcs::router::RouterHandle,
     controller: &UdpSocket,
     router: SocketAddr,
+    robot: SocketAddr,
     counter: &CommandCounter,
     msg: &[u8],
     rate: f64,
     run: Duration,
-) -> (u64, u64, f64, f64) {
+) -> (u64, u64, f64, f64, Lost) {
     let base = counter.get();
+    let drops0 = (socket_drops(router), socket_drops(robot));
+    let forwarded0 = handle.counters().forwarded;
     let cpu0 = router_cpu();
     let t = Instant::now();
     let mut sent = 0u64;
@@ -319,7 +341,23 @@ fn offer(
     }
     let took = t.elapsed().as_secs_f64();
     let got = counter.settle(base + sent) - base;
-    (sent, got, took, router_cpu() - cpu0)
+    let cpu = router_cpu() - cpu0;
+    let lost = Lost {
+        at_router: socket_drops(router) - drops0.0,
+        forwarded: handle.counters().forwarded - forwarded0,
+        at_robot: socket_drops(robot) - drops0.1,
+    };
+    (sent, got, took, cpu, lost)
+}
+
+/// Where offered commands went missing.
+struct Lost {
+    /// Dropped by the kernel at the router's socket (the router fell behind).
+    at_router: u64,
+    /// Forwarded by the router.
+    forwarded: u64,
+    /// Dropped by the kernel at the robot's socket (the receiver fell behind).
+    at_robot: u64,
 }
 
 fn percentiles(label: &str, mut v: Vec<Duration>) -> [Duration; 3] {
@@ -493,9 +531,11 @@ fn throughput(
     for rate in [
         25e3, 50e3, 75e3, 100e3, 125e3, 150e3, 175e3, 200e3, 250e3, 300e3, 350e3, 400e3,
     ] {
-        let (sent, got, took, cpu) = offer(
+        let (sent, got, took, cpu, lost) = offer(
+            router,
             controller,
             addr,
+            robot.local_addr().unwrap(),
             &counter,
             &msg,
             rate,
@@ -503,10 +543,13 @@ fn throughput(
         );
         let achieved = sent as f64 / took;
         println!(
-            "  offered {:>6.0}k msg/s: sent {:>6.0}k msg/s, {sent} sent, {got} received, {} lost, router CPU {:.2} us/msg ({:.0}% of a core)",
+            "  offered {:>4.0}k msg/s: sent {:>4.0}k msg/s, {sent} sent, {got} received, {} lost ({} at the router's socket, {} forwarded, {} at the robot's socket), router CPU {:.2} us/msg ({:.0}% of a core)",
             rate / 1e3,
             achieved / 1e3,
             sent.saturating_sub(got),
+            lost.at_router,
+            lost.forwarded,
+            lost.at_robot,
             cpu / got.max(1) as f64 * 1e6,
             cpu / took * 100.0
         );
