@@ -78,6 +78,12 @@ struct Shared {
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
     tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    /// Held by a UDP worker from taking a datagram off the socket until the
+    /// tables have decided on it, so datagrams are decided in the order they
+    /// arrived whatever the number of workers: a command sent before a route
+    /// change is never judged by the new route because another worker ran
+    /// first. Only the sends run in parallel.
+    udp_order: Mutex<()>,
     next_conn: AtomicU64,
     subscriber_queue: usize,
 }
@@ -240,6 +246,7 @@ impl Router {
             udp_addr,
             tcp_addr,
             tcp_peers: Mutex::new(HashMap::new()),
+            udp_order: Mutex::new(()),
             next_conn: AtomicU64::new(1),
         });
         tracing::info!(udp = %udp_addr, tcp = ?tcp_addr, "router started");

@@ -24,7 +24,9 @@ const RECEIVE_BATCH: usize = 64;
 /// drains the socket with non-blocking receives (up to [`RECEIVE_BATCH`]),
 /// so under load a datagram costs one receive and one send syscall and no
 /// trip through the scheduler or epoll. Several workers may share the
-/// socket; the tables' lock keeps their decisions consistent.
+/// socket: each takes a datagram and has it decided under
+/// `Shared::udp_order`, so decisions follow arrival order; their sends
+/// overlap.
 pub(super) async fn udp_worker(shared: Arc<Shared>) {
     let mut buf = vec![0u8; 65_536];
     let mut out = Outbox::default();
@@ -38,12 +40,16 @@ pub(super) async fn udp_worker(shared: Arc<Shared>) {
         let mut handled = 0;
         while handled < RECEIVE_BATCH {
             handled += 1;
-            match shared.udp.try_recv_from(&mut buf) {
-                Ok((n, addr)) => {
-                    shared
-                        .dispatch(&buf[..n], Peer::Udp(addr), &mut out, &mut events)
-                        .await;
-                }
+            let received = {
+                let _order = lock(&shared.udp_order);
+                shared.udp.try_recv_from(&mut buf).map(|(n, addr)| {
+                    let from = Peer::Udp(addr);
+                    shared.decide(&buf[..n], from, Instant::now(), &mut out, &mut events);
+                    n
+                })
+            };
+            match received {
+                Ok(n) => shared.flush(&buf[..n], &mut out).await,
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
                 Err(e) => {
                     // ICMP errors from earlier sends surface here on some
