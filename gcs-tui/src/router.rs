@@ -11,6 +11,7 @@
 //! publishers ([`Publisher`]) go through exactly the same decision code as
 //! UDP and TCP peers.
 
+mod check;
 mod counters;
 mod event;
 mod net;
@@ -77,6 +78,12 @@ struct Shared {
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
     tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    /// Held by a UDP worker from taking a datagram off the socket until the
+    /// tables have decided on it, so datagrams are decided in the order they
+    /// arrived whatever the number of workers: a command sent before a route
+    /// change is never judged by the new route because another worker ran
+    /// first. Only the sends run in parallel.
+    udp_order: Mutex<()>,
     next_conn: AtomicU64,
     subscriber_queue: usize,
 }
@@ -91,38 +98,61 @@ impl Shared {
         out: &mut Outbox,
         events: &mut Vec<event::Event>,
     ) -> Delivery {
-        let delivery = {
-            let mut tables = lock(&self.tables);
-            let delivery = tables.handle(bytes, from, Instant::now(), out, events);
-            // Emitted under the table lock, so the fleet model sees events
-            // in the order the tables made them (a mission is "sent" before
-            // its acknowledgement, whichever worker handles the ack).
-            for e in events.drain(..) {
-                self.bus.emit(e);
-            }
-            delivery
-        };
+        let delivery = self.decide(bytes, from, Instant::now(), out, events);
         self.flush(bytes, out).await;
         delivery
     }
 
-    /// Sends the outbox: `raw` targets get `raw`, `owned` ones their own bytes.
+    /// The synchronous half of [`Shared::dispatch`]: the tables' decision and
+    /// its events, leaving the sends in `out`.
+    fn decide(
+        &self,
+        bytes: &[u8],
+        from: Peer,
+        now: Instant,
+        out: &mut Outbox,
+        events: &mut Vec<event::Event>,
+    ) -> Delivery {
+        let mut tables = lock(&self.tables);
+        let delivery = tables.handle(bytes, from, now, out, events);
+        // Emitted under the table lock, so the fleet model sees events
+        // in the order the tables made them (a mission is "sent" before
+        // its acknowledgement, whichever worker handles the ack).
+        for e in events.drain(..) {
+            self.bus.emit(e);
+        }
+        delivery
+    }
+
+    /// Sends the outbox: `raw` targets get `raw`, `owned` ones their own
+    /// bytes. The outbox keeps its allocations for the next message.
     async fn flush(&self, raw: &[u8], out: &mut Outbox) {
         if out.is_empty() {
             return;
         }
-        for peer in std::mem::take(&mut out.raw) {
-            self.send(peer, raw).await;
+        for i in 0..out.raw.len() {
+            self.send(out.raw[i], raw).await;
         }
-        for (peer, bytes) in std::mem::take(&mut out.owned) {
-            self.send(peer, &bytes).await;
+        out.raw.clear();
+        if !out.owned.is_empty() {
+            for (peer, bytes) in std::mem::take(&mut out.owned) {
+                self.send(peer, &bytes).await;
+            }
         }
     }
 
     async fn send(&self, peer: Peer, bytes: &[u8]) {
         match peer {
             Peer::Udp(addr) => {
-                if let Err(e) = self.udp.send_to(bytes, addr).await {
+                // The common case: the socket has room, one syscall and no
+                // readiness future; only a full send buffer waits.
+                let sent = match self.udp.try_send_to(bytes, addr) {
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                        self.udp.send_to(bytes, addr).await
+                    }
+                    other => other,
+                };
+                if let Err(e) = sent {
                     tracing::debug!(%addr, error = %e, "UDP send failed");
                     lock(&self.tables).count_send_failure(false);
                 }
@@ -216,6 +246,7 @@ impl Router {
             udp_addr,
             tcp_addr,
             tcp_peers: Mutex::new(HashMap::new()),
+            udp_order: Mutex::new(()),
             next_conn: AtomicU64::new(1),
         });
         tracing::info!(udp = %udp_addr, tcp = ?tcp_addr, "router started");

@@ -233,7 +233,8 @@ impl Tables {
         if head.kind == COMMAND {
             // The body is checked (a truncated or out-of-range command is
             // never forwarded) but not re-encoded: the received bytes go on.
-            if let Err(e) = mech_proto::decode(bytes) {
+            // Checked in place: no envelope is built for a forwarded command.
+            if let Err(e) = super::check::command(bytes, &head) {
                 return self.bad(from, e.to_string(), events);
             }
             return self.route_command(&head, from, now, out, events);
