@@ -11,7 +11,6 @@
 //! publishers ([`Publisher`]) go through exactly the same decision code as
 //! UDP and TCP peers.
 
-mod check;
 mod counters;
 mod event;
 mod net;

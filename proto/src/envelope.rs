@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use serde_bytes::ByteBuf;
 
 use crate::body::{self, Body};
+use crate::command::Command;
 use crate::error::Error;
 use crate::tagged::expect_end;
 use crate::{MAX_AUTH_LEN, MAX_MESSAGE_LEN, PROTOCOL_VERSION};
@@ -66,14 +67,7 @@ impl Envelope {
         body::name(&self.header.sender, "sender")?;
         body::name(&self.header.destination, "destination")?;
         body::name(&self.header.channel, "channel")?;
-        if let Some(tag) = &self.auth {
-            if tag.len() > MAX_AUTH_LEN {
-                return Err(Error::Invalid(format!(
-                    "authentication tag of {} bytes, at most {MAX_AUTH_LEN} allowed",
-                    tag.len()
-                )));
-            }
-        }
+        check_auth(self.auth.as_ref())?;
         self.body.validate()
     }
 }
@@ -192,6 +186,8 @@ pub struct Peek<'a> {
     pub sender: &'a str,
     pub destination: &'a str,
     pub channel: &'a str,
+    /// Where the body starts in the message's bytes.
+    pub body_offset: usize,
 }
 
 /// Reads the header of a message (size, version, kind, seq, stamp, names)
@@ -229,7 +225,7 @@ pub fn peek(bytes: &[u8]) -> Result<Peek<'_>, Error> {
     let (sender, rd) = rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("sender"))?;
     let (destination, rd) =
         rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("destination"))?;
-    let (channel, _) = rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("channel"))?;
+    let (channel, body) = rmp::decode::read_str_from_slice(rd).map_err(|_| malformed("channel"))?;
     Ok(Peek {
         kind: kind as u8,
         seq,
@@ -237,7 +233,57 @@ pub fn peek(bytes: &[u8]) -> Result<Peek<'_>, Error> {
         sender,
         destination,
         channel,
+        body_offset: bytes.len() - body.len(),
     })
+}
+
+/// Checks a `Command` message whose header [`peek`] returned, decoding only
+/// the command: it accepts exactly what [`decode`] accepts for such a
+/// message (names, ranges, tag, nothing after the message), without
+/// allocating the header's names. This is the router's forwarding check.
+pub fn check_command(bytes: &[u8], head: &Peek<'_>) -> Result<Command, Error> {
+    if head.kind != COMMAND_KIND {
+        return Err(Error::Invalid(format!(
+            "kind {} is not a command",
+            head.kind
+        )));
+    }
+    body::name(head.sender, "sender")?;
+    body::name(head.destination, "destination")?;
+    body::name(head.channel, "channel")?;
+    let mut rest = bytes
+        .get(head.body_offset..)
+        .ok_or_else(|| Error::Malformed("header outside the message".into()))?;
+    let (command, auth) = {
+        let mut de = rmp_serde::Deserializer::new(&mut rest);
+        let malformed = |e: rmp_serde::decode::Error| Error::Malformed(e.to_string());
+        let command = Command::deserialize(&mut de).map_err(malformed)?;
+        let auth = Option::<AuthTag>::deserialize(&mut de).map_err(malformed)?;
+        (command, auth)
+    };
+    if !rest.is_empty() {
+        return Err(Error::Malformed(format!(
+            "{} bytes after the message",
+            rest.len()
+        )));
+    }
+    check_auth(auth.as_ref())?;
+    command.validate()?;
+    Ok(command)
+}
+
+/// Wire kind of [`Body::Command`], for code that branches on
+/// [`Peek::kind`] before deciding to decode.
+pub const COMMAND_KIND: u8 = 5;
+
+fn check_auth(auth: Option<&AuthTag>) -> Result<(), Error> {
+    match auth {
+        Some(tag) if tag.len() > MAX_AUTH_LEN => Err(Error::Invalid(format!(
+            "authentication tag of {} bytes, at most {MAX_AUTH_LEN} allowed",
+            tag.len()
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// The bytes an authentication tag covers: the whole message up to, not

@@ -34,7 +34,8 @@ pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,
 };
 pub use envelope::{
-    AuthTag, Envelope, Header, Peek, decode, encode, encode_into, peek, signed_region,
+    AuthTag, COMMAND_KIND, Envelope, Header, Peek, check_command, decode, encode, encode_into,
+    peek, signed_region,
 };
 pub use error::{Error, ErrorKind};
 

@@ -229,12 +229,11 @@ impl Tables {
             Ok(h) => h,
             Err(e) => return self.bad(from, e.to_string(), events),
         };
-        const COMMAND: u8 = 5;
-        if head.kind == COMMAND {
+        if head.kind == mech_proto::COMMAND_KIND {
             // The body is checked (a truncated or out-of-range command is
             // never forwarded) but not re-encoded: the received bytes go on.
             // Checked in place: no envelope is built for a forwarded command.
-            if let Err(e) = super::check::command(bytes, &head) {
+            if let Err(e) = mech_proto::check_command(bytes, &head) {
                 return self.bad(from, e.to_string(), events);
             }
             return self.route_command(&head, from, now, out, events);
