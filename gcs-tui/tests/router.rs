@@ -14,7 +14,8 @@ use mech_gcs::fleet::LinkState;
 use mech_gcs::router::{Delivery, DropReason, Event};
 use mech_proto::framing::{StreamDecoder, write_stream_frame};
 use mech_proto::{
-    Body, ChannelsRequest, FleetCommand, Mission, MissionAck, RobotCommand, Subscribe, Waypoint,
+    Body, ChannelsRequest, FleetCommand, Mission, MissionAck, Pose, PositionFix, RobotCommand,
+    Subscribe, Waypoint,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
@@ -804,5 +805,72 @@ async fn tcp_controllers_publish_and_discover_channels() {
         .unwrap();
     assert_eq!(ch.publisher, "matlab");
     assert_eq!(ch.robots, vec!["robot_1".to_string()]);
+    gcs.shutdown().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn subscriptions_lapse_unless_renewed() {
+    let gcs = gcs().await;
+    let mut robot = Peer::new("robot_1", gcs.router().udp_addr()).await;
+    robot.register().await;
+    let mut tool = Peer::new("plotter", gcs.router().udp_addr()).await;
+    let subscribe = Body::Subscribe(Subscribe { telemetry: true });
+    tool.send(mech_proto::ROUTER, "", subscribe.clone()).await;
+    // Renewed within the 5 s timeout: still subscribed at 8 s.
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    tool.send(mech_proto::ROUTER, "", subscribe).await;
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    robot.send_telemetry(telemetry(1.0, 2.0, "", None)).await;
+    let got = tool.recv_within(Duration::from_secs(1)).await;
+    assert!(
+        matches!(got.map(|e| e.body), Some(Body::Telemetry(_))),
+        "a renewed subscription receives telemetry"
+    );
+    // Not renewed for more than 5 s: lapsed.
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    robot.send_telemetry(telemetry(1.5, 2.0, "", None)).await;
+    let got = tool.recv_within(Duration::from_secs(1)).await;
+    assert!(
+        got.is_none(),
+        "a lapsed subscription receives nothing: {got:?}"
+    );
+    gcs.shutdown().await;
+}
+
+#[tokio::test]
+async fn position_fixes_reach_their_robot_and_unknown_robots_are_counted() {
+    let gcs = gcs().await;
+    let mut robot = Peer::new("robot_1", gcs.router().udp_addr()).await;
+    robot.register().await;
+    let mut tracker = Peer::new("mocap", gcs.router().udp_addr()).await;
+    let fix = |robot: &str| {
+        Body::PositionFix(PositionFix {
+            robot: robot.into(),
+            pose: Pose {
+                x: 1.25,
+                y: -0.5,
+                z: 0.0,
+                heading: 0.3,
+            },
+            quality: 0.9,
+        })
+    };
+    tracker.send(mech_proto::ROUTER, "", fix("robot_1")).await;
+    let got = robot
+        .recv_matching(|e| matches!(e.body, Body::PositionFix(_)))
+        .await;
+    assert_eq!(got.header.sender, "mocap");
+    assert_eq!(got.body, fix("robot_1"));
+    tracker.send(mech_proto::ROUTER, "", fix("robot_9")).await;
+    assert!(
+        eventually(Duration::from_secs(2), || gcs
+            .router()
+            .counters()
+            .dropped
+            .unknown_robot
+            == 1)
+        .await,
+        "a fix for an unknown robot is dropped and counted"
+    );
     gcs.shutdown().await;
 }
