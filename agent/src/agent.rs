@@ -73,6 +73,8 @@ pub struct Counters {
     pub refused: u64,
     /// Commands ignored while e-stopped.
     pub ignored_estopped: u64,
+    /// E-stops and releases older than one already obeyed (delayed resends).
+    pub stale_estops: u64,
     /// Messages addressed to another robot.
     pub not_for_me: u64,
     /// Bytes that did not decode as a message.
@@ -106,6 +108,10 @@ pub struct Agent {
     route: Route,
     /// Whether a route has been applied at all (epoch 0 is a valid epoch).
     routed_once: bool,
+    /// Id of the newest e-stop or release obeyed since registering. The
+    /// router numbers them in order, so an older one (a delayed resend of a
+    /// release, overtaken by a new e-stop) must not undo a newer one.
+    last_estop_id: Option<u32>,
     /// Stored missions, by the channel that sent them.
     missions: HashMap<String, MissionRun>,
     seq: u32,
@@ -147,6 +153,7 @@ impl Agent {
                 epoch: 0,
             },
             routed_once: false,
+            last_estop_id: None,
             missions: HashMap::new(),
             seq: 0,
             stamp_origin_us,
@@ -300,6 +307,8 @@ impl Agent {
             Body::Welcome(w) => {
                 if !self.registered {
                     tracing::info!(robot = %self.settings.name, route = %w.route.channel, "registered with the router");
+                    // A (possibly restarted) router numbers e-stops afresh.
+                    self.last_estop_id = None;
                 }
                 self.registered = true;
                 self.next_heartbeat = now;
@@ -320,6 +329,14 @@ impl Agent {
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
             Body::EStop(e) => {
+                let stale = self
+                    .last_estop_id
+                    .is_some_and(|last| (e.id.wrapping_sub(last) as i32) < 0);
+                if stale {
+                    self.counters.stale_estops += 1;
+                    return out;
+                }
+                self.last_estop_id = Some(e.id);
                 if e.engage {
                     self.failsafe.engage_estop(e.id);
                     self.controller.idle();
@@ -506,9 +523,12 @@ impl Agent {
             self.failsafe.channel_heard(now);
             self.route.channel = route.channel;
             self.route.epoch = route.epoch;
-            // Re-routing to a channel resumes its paused mission.
-            if let Some(m) = self.missions.get_mut(&self.route.channel) {
-                m.paused = false;
+            // Re-routing to a channel resumes its paused mission, but not
+            // while e-stopped: missions stay paused through a release.
+            if !self.failsafe.estopped() {
+                if let Some(m) = self.missions.get_mut(&self.route.channel) {
+                    m.paused = false;
+                }
             }
         }
         self.resume_mission(now);
@@ -568,6 +588,14 @@ impl Agent {
             }
             return;
         }
+        if matches!(cmd, Command::Stop(_)) {
+            // A stop holds: the channel's mission must not resume by itself
+            // (on a re-registration or a mission resend) until re-sent or
+            // re-routed.
+            if let Some(m) = self.missions.get_mut(channel) {
+                m.paused = true;
+            }
+        }
         match self.controller.command(cmd) {
             Ok(()) => self.failsafe.channel_heard(now),
             Err(e) => {
@@ -590,6 +618,18 @@ impl Agent {
         out: &mut Vec<Envelope>,
     ) {
         let id = mission.id;
+        if channel.is_empty() {
+            // A robot routed to none has the empty channel: a mission on it
+            // would run without anyone having routed the robot.
+            self.counters.refused += 1;
+            let ack = Body::MissionAck(MissionAck {
+                id,
+                accepted: false,
+                reason: "a mission must be sent on a channel".to_string(),
+            });
+            out.push(self.envelope(mech_proto::ROUTER, ack, now));
+            return;
+        }
         if !self
             .controller
             .capabilities()
@@ -608,20 +648,23 @@ impl Agent {
             out.push(self.envelope(mech_proto::ROUTER, ack, now));
             return;
         }
-        match self.missions.get_mut(channel) {
-            // A repeated upload (a retry, or a re-send after an e-stop):
-            // progress is kept.
-            Some(run) if run.mission.id == id => run.paused = self.failsafe.estopped(),
+        let paused = match self.missions.get_mut(channel) {
+            // A repeated id is a retry of an upload already held (its ack was
+            // lost): progress and pause are kept, so a retry never restarts a
+            // stopped or e-stopped mission. A re-send uses a new id.
+            Some(run) if run.mission.id == id => {
+                run.paused |= self.failsafe.estopped();
+                run.paused
+            }
             _ => {
                 let mut run = MissionRun::new(mission);
                 run.paused = self.failsafe.estopped();
+                let paused = run.paused;
                 self.missions.insert(channel.to_string(), run);
+                paused
             }
-        }
-        if channel == self.route.channel
-            && !self.failsafe.estopped()
-            && self.controller.follow_mission().is_ok()
-        {
+        };
+        if channel == self.route.channel && !paused && self.controller.follow_mission().is_ok() {
             self.failsafe.channel_heard(now);
         }
         let ack = Body::MissionAck(MissionAck {
@@ -935,8 +978,9 @@ mod tests {
         );
         a.handle(msg("wp/gcs", twist(0.2)), ms(90));
         assert!(moving(&a.tick(ms(100)).outputs), "obeys the next command");
-        // Re-sending the mission resumes it with its progress kept.
-        a.handle(msg("wp/gcs", Body::Mission(mission)), ms(110));
+        // Re-sending the mission (a new upload, so a new id) resumes it.
+        let resent = Mission { id: 6, ..mission };
+        a.handle(msg("wp/gcs", Body::Mission(resent)), ms(110));
         assert_eq!(*a.mode(), Mode::Waypoints);
         assert!(moving(&a.tick(ms(120)).outputs));
     }
@@ -1073,6 +1117,93 @@ mod tests {
             "recovers once the driver works"
         );
         assert_eq!(a.counters().driver_faults, 2);
+    }
+
+    fn estop(engage: bool, id: u32) -> Body {
+        Body::EStop(EStop { engage, id })
+    }
+
+    fn one_waypoint(id: u32) -> Body {
+        Body::Mission(Mission {
+            id,
+            waypoints: vec![Waypoint {
+                x: 2.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        })
+    }
+
+    #[test]
+    fn a_delayed_release_cannot_undo_a_newer_estop() {
+        let mut a = routed("joy/0");
+        a.handle(msg("", estop(true, 9)), ms(0));
+        a.handle(msg("", estop(false, 10)), ms(10));
+        a.handle(msg("", estop(true, 11)), ms(20));
+        // A resend of release 10, overtaken on the way by e-stop 11.
+        let out = a.handle(msg("", estop(false, 10)), ms(30));
+        assert!(out.is_empty(), "a stale release is not acknowledged");
+        assert_eq!(a.failsafe_state(ms(30)), FailsafeState::EStopped);
+        assert_eq!(a.counters().stale_estops, 1);
+        a.handle(msg("", estop(false, 12)), ms(40));
+        assert_eq!(a.failsafe_state(ms(40)), FailsafeState::Ok);
+    }
+
+    #[test]
+    fn a_mission_without_a_channel_is_refused_by_an_unrouted_robot() {
+        let mut a = routed("");
+        let out = a.handle(msg("", one_waypoint(3)), ms(0));
+        assert!(matches!(&out[0].body, Body::MissionAck(m) if m.id == 3 && !m.accepted));
+        assert!(
+            !moving(&a.tick(ms(20)).outputs),
+            "routed to none, it holds still"
+        );
+    }
+
+    #[test]
+    fn a_stop_holds_the_mission_through_a_re_registration() {
+        let mut a = routed("wp/gcs");
+        a.handle(msg("wp/gcs", one_waypoint(5)), ms(0));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        a.handle(
+            msg("wp/gcs", Body::Command(Command::Stop(mech_proto::Stop {}))),
+            ms(30),
+        );
+        assert!(!moving(&a.tick(ms(40)).outputs));
+        // The router repeats the mission (its ack was lost), then the robot
+        // re-registers after a link drop: neither restarts the mission.
+        a.handle(msg("wp/gcs", one_waypoint(5)), ms(50));
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: "wp/gcs".into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        a.handle(msg("", w), ms(2000));
+        assert!(!moving(&a.tick(ms(2020)).outputs), "the stop holds");
+    }
+
+    #[test]
+    fn re_routing_while_estopped_keeps_missions_paused() {
+        let mut a = routed("wp/gcs");
+        a.handle(msg("wp/gcs", one_waypoint(5)), ms(0));
+        a.handle(msg("", estop(true, 1)), ms(10));
+        a.handle(msg("", route("joy/0", 2)), ms(20));
+        a.handle(msg("", route("wp/gcs", 3)), ms(30));
+        a.handle(msg("", estop(false, 2)), ms(40));
+        // A resend of the route after the release must not start it either.
+        a.handle(msg("", route("wp/gcs", 3)), ms(50));
+        assert!(
+            !moving(&a.tick(ms(60)).outputs),
+            "the mission stays paused until re-sent"
+        );
     }
 
     #[test]

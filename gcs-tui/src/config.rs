@@ -425,6 +425,18 @@ impl GcsConfig {
                 )));
             }
         }
+        for (name, channel) in [
+            ("fleet.mission_channel", &self.fleet.mission_channel),
+            ("fleet.command_channel", &self.fleet.command_channel),
+        ] {
+            // An empty channel is "none": commands or missions on it would
+            // reach robots nobody routed.
+            if channel.is_empty() || channel.chars().any(|c| c.is_whitespace() || c.is_control()) {
+                return Err(ConfigError::Invalid(format!(
+                    "{name} must be a channel name without spaces, got {channel:?}"
+                )));
+            }
+        }
         for c in &self.cluster {
             c.formation()
                 .map_err(|e| ConfigError::Invalid(format!("cluster {:?}: {e}", c.name)))?;
@@ -544,6 +556,13 @@ mod tests {
         assert!(err("[gamepad]\nestop_button = \"left-bumper\"\n").contains("different"));
         assert!(err("[gamepad]\ninitial_mode = \"fly\"\n").contains("modes are"));
         assert!(err("[gamepad]\nbogus = 1\n").contains("bogus"));
+    }
+
+    #[test]
+    fn gcs_channels_must_be_names() {
+        let err = |text: &str| GcsConfig::parse(text).unwrap_err().to_string();
+        assert!(err("[fleet]\nmission_channel = \"\"\n").contains("fleet.mission_channel"));
+        assert!(err("[fleet]\ncommand_channel = \"cmd gcs\"\n").contains("fleet.command_channel"));
     }
 
     #[test]
