@@ -470,3 +470,21 @@ async fn nav_key_switches_the_route_to_offboard_and_back() {
     spawner.shutdown().await;
     gcs.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_typed_estop_acts_at_once_whatever_the_command_queue_is_doing() {
+    // The station's queue of typed lines is gone here (as if busy forever
+    // with a `wait`): `estop` and `release` must not depend on it.
+    let (gcs, mut spawner, _executor, mut link, mut app) = station(1).await;
+    link.carry(mech_gcs::ui::Request::Exec("estop".into()), &mut app)
+        .await;
+    assert!(gcs.with_fleet(|f| f.estop.engaged), "typed estop engages");
+    link.carry(mech_gcs::ui::Request::Exec("release".into()), &mut app)
+        .await;
+    assert!(
+        !gcs.with_fleet(|f| f.estop.engaged),
+        "typed release releases"
+    );
+    spawner.shutdown().await;
+    gcs.shutdown().await;
+}

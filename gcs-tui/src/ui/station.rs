@@ -457,6 +457,29 @@ async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
             gcs.update_fleet(|f| f.set_cluster(&name, members));
         }
         Request::Exec(line) => {
+            // `estop` and `release` typed at the prompt act at once: the
+            // queue of typed lines may be busy with a `wait` or a `sleep`.
+            if let Ok(Some(statement)) = crate::lang::parse_line(&line) {
+                let engage = match statement.command {
+                    crate::lang::ast::Command::EStop => Some(true),
+                    crate::lang::ast::Command::Release => Some(false),
+                    _ => None,
+                };
+                if let Some(engage) = engage {
+                    let id = if engage {
+                        router.estop().await
+                    } else {
+                        router.release().await
+                    };
+                    let what = if engage {
+                        "E-STOP engaged"
+                    } else {
+                        "e-stop released"
+                    };
+                    app.log(LogLevel::Warn, format!("{what} (id {id})"));
+                    return;
+                }
+            }
             if lines.send(line).is_err() {
                 app.log(LogLevel::Error, "the command language has stopped");
             }
