@@ -929,18 +929,7 @@ mod tests {
     #[test]
     fn estop_latches_until_release_and_pauses_missions() {
         let mut a = routed("wp/gcs");
-        let mission = Mission {
-            id: 5,
-            waypoints: vec![Waypoint {
-                x: 2.0,
-                y: 0.0,
-                z: 0.0,
-                time: None,
-            }],
-            looped: false,
-            arrival_radius: 0.05,
-            start_index: 0,
-        };
+        let mission = mission_to(5, 2.0);
         let out = a.handle(msg("wp/gcs", Body::Mission(mission.clone())), ms(10));
         assert!(matches!(&out[0].body, Body::MissionAck(m) if m.id == 5 && m.accepted));
         assert!(moving(&a.tick(ms(20)).outputs));
@@ -988,18 +977,7 @@ mod tests {
     #[test]
     fn mission_runs_only_while_routed_and_ignores_channel_silence() {
         let mut a = routed("joy/0");
-        let mission = Mission {
-            id: 1,
-            waypoints: vec![Waypoint {
-                x: 5.0,
-                y: 0.0,
-                z: 0.0,
-                time: None,
-            }],
-            looped: false,
-            arrival_radius: 0.05,
-            start_index: 0,
-        };
+        let mission = mission_to(1, 5.0);
         let out = a.handle(msg("wp/gcs", Body::Mission(mission)), ms(10));
         assert!(
             matches!(&out[0].body, Body::MissionAck(m) if m.accepted),
@@ -1053,18 +1031,7 @@ mod tests {
                 ),
                 ms(0),
             );
-            let mission = Mission {
-                id: 1,
-                waypoints: vec![Waypoint {
-                    x: 5.0,
-                    y: 0.0,
-                    z: 0.0,
-                    time: None,
-                }],
-                looped: false,
-                arrival_radius: 0.05,
-                start_index: 0,
-            };
+            let mission = mission_to(1, 5.0);
             a.handle(msg("wp/gcs", Body::Mission(mission)), ms(0));
             let t = a.tick(ms(2000));
             assert_eq!(a.failsafe_state(ms(2000)), FailsafeState::RouterLost);
@@ -1123,11 +1090,12 @@ mod tests {
         Body::EStop(EStop { engage, id })
     }
 
-    fn one_waypoint(id: u32) -> Body {
-        Body::Mission(Mission {
+    /// A mission of one waypoint at (`x`, 0), 5 cm arrival radius.
+    fn mission_to(id: u32, x: f64) -> Mission {
+        Mission {
             id,
             waypoints: vec![Waypoint {
-                x: 2.0,
+                x,
                 y: 0.0,
                 z: 0.0,
                 time: None,
@@ -1135,7 +1103,11 @@ mod tests {
             looped: false,
             arrival_radius: 0.05,
             start_index: 0,
-        })
+        }
+    }
+
+    fn one_waypoint(id: u32) -> Body {
+        Body::Mission(mission_to(id, 2.0))
     }
 
     #[test]

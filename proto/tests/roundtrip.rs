@@ -329,6 +329,30 @@ fn envelope() -> impl Strategy<Value = Envelope> {
         )
 }
 
+/// Frames `envs` with `write`, feeds the byte stream to a decoder in chunks
+/// of the sizes in `cuts` (as reads from a socket or port would split it)
+/// through `feed`, and returns every message decoded, in order.
+fn through_chunks(
+    envs: &[Envelope],
+    cuts: &[usize],
+    write: fn(&Envelope, &mut Vec<u8>) -> Result<(), Error>,
+    mut feed: impl FnMut(&[u8]) -> Vec<Result<Envelope, Error>>,
+) -> Vec<Envelope> {
+    let mut stream = Vec::new();
+    for env in envs {
+        write(env, &mut stream).unwrap();
+    }
+    let mut got = Vec::new();
+    let mut rest = &stream[..];
+    let mut cut = cuts.iter().cycle();
+    while !rest.is_empty() {
+        let n = (*cut.next().unwrap()).min(rest.len());
+        got.extend(feed(&rest[..n]).into_iter().map(Result::unwrap));
+        rest = &rest[n..];
+    }
+    got
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 1000, ..ProptestConfig::default() })]
 
@@ -352,22 +376,11 @@ proptest! {
         envs in vec(envelope(), 1..6),
         cuts in vec(1usize..64, 1..40),
     ) {
-        let mut stream = Vec::new();
-        for env in &envs {
-            write_stream_frame(env, &mut stream).unwrap();
-        }
         let mut dec = StreamDecoder::new();
-        let mut got = Vec::new();
-        let mut rest = &stream[..];
-        let mut cut = cuts.iter().cycle();
-        while !rest.is_empty() {
-            let n = (*cut.next().unwrap()).min(rest.len());
-            dec.push(&rest[..n]);
-            rest = &rest[n..];
-            while let Some(msg) = dec.next_message() {
-                got.push(msg.unwrap());
-            }
-        }
+        let got = through_chunks(&envs, &cuts, write_stream_frame, |bytes| {
+            dec.push(bytes);
+            std::iter::from_fn(|| dec.next_message()).collect()
+        });
         prop_assert_eq!(got, envs);
     }
 
@@ -376,22 +389,11 @@ proptest! {
         envs in vec(envelope(), 1..6),
         cuts in vec(1usize..64, 1..40),
     ) {
-        let mut stream = Vec::new();
-        for env in &envs {
-            write_serial_frame(env, &mut stream).unwrap();
-        }
         let mut dec = SerialDecoder::new();
-        let mut got = Vec::new();
-        let mut rest = &stream[..];
-        let mut cut = cuts.iter().cycle();
-        while !rest.is_empty() {
-            let n = (*cut.next().unwrap()).min(rest.len());
-            dec.push(&rest[..n]);
-            rest = &rest[n..];
-            while let Some(msg) = dec.next_message() {
-                got.push(msg.unwrap());
-            }
-        }
+        let got = through_chunks(&envs, &cuts, write_serial_frame, |bytes| {
+            dec.push(bytes);
+            std::iter::from_fn(|| dec.next_message()).collect()
+        });
         prop_assert_eq!(got, envs);
     }
 
