@@ -1,0 +1,243 @@
+//! Headless script runs (`mech-gcs --script FILE`): parse the whole script,
+//! run it statement by statement with the shared [`Executor`], and print one
+//! JSON object per line for every router event (telemetry excluded) and
+//! every command result. The run succeeds only if every command and
+//! expectation does.
+//!
+//! Output lines (`t` = seconds since the router started):
+//! - `{"type":"event","t":0.12,"event":"registered","robot":"robot_1",...}`
+//! - `{"type":"result","t":0.5,"line":3,"command":"route robot_1 joy/0","ok":true,"summary":"..."}`
+//! - `{"type":"result",...,"ok":false,"error":"line 3, column 7: ..."}`
+//! - last: `{"type":"summary","ok":true,"commands":12,"failed":0}`
+
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+
+use serde_json::{Value, json};
+
+use crate::lang::{Executor, LangError, Outcome, Statement, parse_script};
+use mech_core::{Event, Gcs, LinkState, Stamped};
+
+/// How a script run ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ScriptOutcome {
+    /// Every command and expectation succeeded.
+    Passed { commands: usize },
+    /// The script did not parse; nothing ran.
+    Invalid(LangError),
+    /// This command failed; the rest did not run.
+    Failed { error: LangError, commands: usize },
+}
+
+impl ScriptOutcome {
+    /// Process exit code: 0 passed, 1 a command failed, 2 invalid script.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            ScriptOutcome::Passed { .. } => 0,
+            ScriptOutcome::Failed { .. } => 1,
+            ScriptOutcome::Invalid(_) => 2,
+        }
+    }
+}
+
+/// A line-oriented JSON sink shared by the event printer and the runner.
+pub type Sink = Arc<Mutex<Box<dyn Write + Send>>>;
+
+fn emit(sink: &Sink, value: &Value) {
+    let mut w = sink
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    // Output is best effort: a closed stdout must not stop the robots' script.
+    let _ = writeln!(w, "{value}");
+    let _ = w.flush();
+}
+
+fn secs(d: std::time::Duration) -> f64 {
+    (d.as_secs_f64() * 1e6).round() / 1e6
+}
+
+/// The JSON form of an event.
+pub fn event_json(s: &Stamped) -> Value {
+    let mut v = match &s.event {
+        Event::Listening { udp, tcp } => {
+            json!({"udp": udp.to_string(), "tcp": tcp.map(|t| t.to_string())})
+        }
+        Event::Registered {
+            robot,
+            id,
+            addr,
+            platform,
+            capabilities,
+            known,
+            ..
+        } => json!({
+            "robot": robot, "id": id, "addr": addr.to_string(), "platform": platform,
+            "capabilities": capabilities.iter().map(|c| c.as_str()).collect::<Vec<_>>(), "known": known,
+        }),
+        Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
+        Event::Telemetry {
+            robot,
+            telemetry: t,
+        } => json!({
+            "robot": robot, "x": t.pose.x, "y": t.pose.y, "heading": t.pose.heading, "channel": t.channel,
+        }),
+        Event::RouteChanged {
+            robot,
+            channel,
+            epoch,
+        }
+        | Event::RouteAcked {
+            robot,
+            channel,
+            epoch,
+        } => {
+            json!({"robot": robot, "channel": channel.as_deref().unwrap_or("none"), "epoch": epoch})
+        }
+        Event::MissionSent {
+            robot,
+            channel,
+            id,
+            waypoints,
+            looped,
+        } => {
+            json!({"robot": robot, "channel": channel, "id": id, "waypoints": waypoints.len(), "looped": looped})
+        }
+        Event::MissionAcked {
+            robot,
+            id,
+            accepted,
+            reason,
+        } => {
+            json!({"robot": robot, "id": id, "accepted": accepted, "reason": reason})
+        }
+        Event::MissionFailed { robot, id, reason } => {
+            json!({"robot": robot, "id": id, "reason": reason})
+        }
+        Event::EStop { engage, id } | Event::EStopComplete { engage, id } => {
+            json!({"engage": engage, "id": id})
+        }
+        Event::EStopAcked { robot, engage, id } => {
+            json!({"robot": robot, "engage": engage, "id": id})
+        }
+        Event::ChannelPublisher { channel, publisher } => {
+            json!({"channel": channel, "publisher": publisher})
+        }
+        Event::ClusterCommand { channel, command } => {
+            json!({"channel": channel, "cluster": command.cluster})
+        }
+        Event::Bye { robot, reason } => json!({"robot": robot, "reason": reason}),
+        Event::Notice { from, notice } => {
+            json!({"from": from, "level": format!("{:?}", notice.level), "text": notice.text})
+        }
+        Event::BadPacket { from, error } => json!({"from": from, "error": error}),
+    };
+    if let Value::Object(m) = &mut v {
+        m.insert("type".into(), json!("event"));
+        m.insert("t".into(), json!(secs(s.at)));
+        m.insert("event".into(), json!(s.event.name()));
+    }
+    v
+}
+
+fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
+    let mut v = json!({
+        "type": "result",
+        "t": secs(gcs.router().elapsed()),
+        "line": stmt.span.line,
+        "command": stmt.text,
+        "ok": outcome.is_ok(),
+    });
+    if let Value::Object(m) = &mut v {
+        match outcome {
+            Ok(o) => {
+                m.insert("summary".into(), json!(o.summary));
+                if !o.details.is_empty() {
+                    m.insert("details".into(), json!(o.details));
+                }
+            }
+            Err(e) => {
+                m.insert("error".into(), json!(e.to_string()));
+            }
+        }
+    }
+    v
+}
+
+/// Runs `source` against `gcs` with `executor`, writing JSON lines to `sink`.
+pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -> ScriptOutcome {
+    let statements = match parse_script(source) {
+        Ok(s) => s,
+        Err(e) => {
+            emit(
+                &sink,
+                &json!({"type": "summary", "ok": false, "commands": 0, "error": e.to_string()}),
+            );
+            return ScriptOutcome::Invalid(e);
+        }
+    };
+    let mut events = gcs.router().subscribe_default(false);
+    // Events that happened before the script started (the router binding).
+    gcs.with_fleet(|f| {
+        if let Some(udp) = f.udp {
+            let s = Stamped {
+                at: std::time::Duration::ZERO,
+                event: Event::Listening { udp, tcp: f.tcp },
+            };
+            emit(&sink, &event_json(&s));
+        }
+    });
+    let mut outcome = ScriptOutcome::Passed {
+        commands: statements.len(),
+    };
+    for (i, stmt) in statements.iter().enumerate() {
+        // Events are printed while the command runs, and those it caused
+        // synchronously (route changes, e-stops) before its result.
+        let result = {
+            let run = executor.execute(stmt);
+            tokio::pin!(run);
+            loop {
+                tokio::select! {
+                    biased;
+                    r = &mut run => break r,
+                    Some(ev) = events.recv() => emit(&sink, &event_json(&ev)),
+                }
+            }
+        };
+        while let Some(ev) = events.try_recv() {
+            emit(&sink, &event_json(&ev));
+        }
+        emit(&sink, &result_json(gcs, stmt, result.as_ref()));
+        if let Err(error) = result {
+            outcome = ScriptOutcome::Failed {
+                error,
+                commands: i + 1,
+            };
+            break;
+        }
+    }
+    while let Some(ev) = events.try_recv() {
+        emit(&sink, &event_json(&ev));
+    }
+    let (ok, ran, error) = match &outcome {
+        ScriptOutcome::Passed { commands } => (true, *commands, None),
+        ScriptOutcome::Failed { error, commands } => (false, *commands, Some(error.to_string())),
+        ScriptOutcome::Invalid(e) => (false, 0, Some(e.to_string())),
+    };
+    let robots = gcs.with_fleet(|f| {
+        f.robots
+            .values()
+            .filter(|r| r.link == LinkState::Connected)
+            .count()
+    });
+    let counters = gcs.router().counters();
+    emit(
+        &sink,
+        &json!({
+            "type": "summary", "ok": ok, "commands": ran, "error": error,
+            "connected_robots": robots,
+            "received": counters.received, "forwarded": counters.forwarded,
+            "bad_packets": counters.dropped.bad_packet,
+        }),
+    );
+    outcome
+}

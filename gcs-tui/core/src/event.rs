@@ -1,0 +1,166 @@
+//! What the station saw happen: a robot registered, a route was
+//! acknowledged, telemetry arrived... Each [`Event`] is stamped with router
+//! time ([`Stamped`]). The router makes them; the fleet model and every
+//! subscriber consume them through an [`EventSink`] or a subscription. This
+//! module depends on nothing else in the station, so producers and consumers
+//! never depend on each other.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use mech_proto::{ClusterCommand, CommandKind, Notice, Telemetry, Waypoint};
+
+/// How recently the router heard from a robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum LinkState {
+    /// Heard within `stale_after`.
+    #[default]
+    Connected,
+    /// Silent longer than `stale_after` (0.5 s by default).
+    Stale,
+    /// Silent longer than `lost_after` (1 s by default), or said goodbye.
+    Lost,
+}
+
+impl LinkState {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LinkState::Connected => "connected",
+            LinkState::Stale => "stale",
+            LinkState::Lost => "lost",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<LinkState> {
+        [LinkState::Connected, LinkState::Stale, LinkState::Lost]
+            .into_iter()
+            .find(|l| l.as_str() == s)
+    }
+}
+
+/// Something the router did or saw. Subscribers receive them in order, each
+/// wrapped in a [`Stamped`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// The router is bound and running.
+    Listening {
+        udp: SocketAddr,
+        tcp: Option<SocketAddr>,
+    },
+    /// A robot's `Hello` was accepted (first time, or again after a restart
+    /// or from a new address: `known` says which).
+    Registered {
+        robot: String,
+        id: u16,
+        addr: SocketAddr,
+        platform: String,
+        capabilities: Vec<CommandKind>,
+        motors: u8,
+        max_speed: f64,
+        max_yaw_rate: f64,
+        known: bool,
+    },
+    /// A robot's link state changed.
+    Link { robot: String, state: LinkState },
+    /// A robot sent telemetry.
+    Telemetry { robot: String, telemetry: Telemetry },
+    /// The routing table changed; the robot has not acknowledged yet.
+    RouteChanged {
+        robot: String,
+        channel: Option<String>,
+        epoch: u32,
+    },
+    /// The robot acknowledged the route with this epoch.
+    RouteAcked {
+        robot: String,
+        channel: Option<String>,
+        epoch: u32,
+    },
+    /// A mission is on its way to a robot (retried until acknowledged).
+    MissionSent {
+        robot: String,
+        channel: String,
+        id: u32,
+        waypoints: Vec<Waypoint>,
+        looped: bool,
+    },
+    /// The robot acknowledged (or refused) the mission.
+    MissionAcked {
+        robot: String,
+        id: u32,
+        accepted: bool,
+        reason: String,
+    },
+    /// The mission was not acknowledged in time.
+    MissionFailed {
+        robot: String,
+        id: u32,
+        reason: String,
+    },
+    /// E-stop engaged (`engage`) or released, for every robot.
+    EStop { engage: bool, id: u32 },
+    /// One robot acknowledged the e-stop or release `id`.
+    EStopAcked {
+        robot: String,
+        engage: bool,
+        id: u32,
+    },
+    /// Every robot known when it was sent acknowledged e-stop/release `id`.
+    EStopComplete { engage: bool, id: u32 },
+    /// A channel published for the first time, or got a new publisher.
+    ChannelPublisher { channel: String, publisher: String },
+    /// A cluster command published on a channel, for the fleet controller
+    /// that serves it.
+    ClusterCommand {
+        channel: String,
+        command: ClusterCommand,
+    },
+    /// A robot said goodbye.
+    Bye { robot: String, reason: String },
+    /// A notice from a robot or controller.
+    Notice { from: String, notice: Notice },
+    /// A datagram or frame that could not be used.
+    BadPacket { from: String, error: String },
+}
+
+impl Event {
+    /// Short snake_case name, as printed in JSON output.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Event::Listening { .. } => "listening",
+            Event::Registered { .. } => "registered",
+            Event::Link { .. } => "link",
+            Event::Telemetry { .. } => "telemetry",
+            Event::RouteChanged { .. } => "route_changed",
+            Event::RouteAcked { .. } => "route_acked",
+            Event::MissionSent { .. } => "mission_sent",
+            Event::MissionAcked { .. } => "mission_acked",
+            Event::MissionFailed { .. } => "mission_failed",
+            Event::EStop { .. } => "estop",
+            Event::EStopAcked { .. } => "estop_acked",
+            Event::EStopComplete { .. } => "estop_complete",
+            Event::ChannelPublisher { .. } => "channel_publisher",
+            Event::ClusterCommand { .. } => "cluster_command",
+            Event::Bye { .. } => "bye",
+            Event::Notice { .. } => "notice",
+            Event::BadPacket { .. } => "bad_packet",
+        }
+    }
+}
+
+/// An event with the router time it happened at (tokio time, so tests with a
+/// paused clock see exact times).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stamped {
+    /// Time since the router started.
+    pub at: Duration,
+    pub event: Event,
+}
+
+/// Where the router delivers every event synchronously, in order, before
+/// any subscriber sees it: the fleet model implements it, so the model never
+/// misses a route or link change even when a subscriber lags. Keep
+/// [`EventSink::apply`] short: the router calls it holding its tables.
+pub trait EventSink: Send + Sync + std::fmt::Debug {
+    fn apply(&self, event: &Stamped);
+}

@@ -1,0 +1,35 @@
+//! `mech-core`: the MECH ground station's core, with no terminal, gamepad
+//! or simulator in it, so `--script`, `serve` and any other program can run
+//! a station.
+//!
+//! Modules, leaves first (each depends only on those above it):
+//! - [`sync`], [`config`]: the poison-tolerant lock and what every
+//!   configuration section shares;
+//! - [`event`]: what the station saw happen, and the [`EventSink`] the
+//!   router delivers it to;
+//! - [`counters`]: traffic counters and live channels;
+//! - [`router`]: the UDP/TCP router with live controller switching;
+//! - [`fleet`]: the fleet model, an [`EventSink`] fed by the router;
+//! - [`station`]: [`Gcs`], the router and fleet model started together.
+//!
+//! Start a [`Gcs`], read the fleet with [`Gcs::snapshot`] /
+//! [`Gcs::with_fleet`], and act through [`Gcs::router`].
+
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
+
+pub mod config;
+pub mod counters;
+pub mod event;
+pub mod fleet;
+pub mod router;
+pub mod station;
+pub mod sync;
+
+pub use config::ConfigError;
+pub use counters::{ChannelStatus, Counters, DropReason, Drops, Traffic};
+pub use event::{Event, EventSink, LinkState, Stamped};
+pub use fleet::{Fleet, FleetConfig};
+pub use router::{
+    Delivery, Publisher, Router, RouterConfig, RouterError, RouterHandle, Subscription,
+};
+pub use station::{CoreConfig, Gcs};

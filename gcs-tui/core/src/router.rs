@@ -1,0 +1,467 @@
+//! The router: the heart of the ground station. It registers agents, keeps
+//! the routing table (robot -> the one channel it obeys), forwards each
+//! command only to robots routed to its channel, fans telemetry out to every
+//! subscriber, and delivers missions, route changes and e-stops reliably
+//! (repeating them until acknowledged).
+//!
+//! Layers, as in mini-redis: [`tables`] decides what to do with a message
+//! (synchronous, under one short lock), [`net`] owns the sockets and timers
+//! (a UDP receive loop per worker, a task per TCP peer, one timer task), and
+//! [`RouterHandle`] is the API the rest of the GCS uses. In-process
+//! publishers ([`Publisher`]) go through exactly the same decision code as
+//! UDP and TCP peers.
+
+mod bus;
+mod config;
+mod net;
+mod rate;
+mod tables;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::atomic::AtomicU64;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use mech_proto::{Body, Command, Envelope, FleetCommand, Header, Mission, RobotCommand};
+use tokio::net::UdpSocket;
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+pub use bus::Subscription;
+pub use config::RouterConfig;
+pub use tables::Delivery;
+
+use crate::counters::{ChannelStatus, Counters};
+use crate::event::{Event, EventSink};
+use crate::sync::lock;
+use bus::EventBus;
+use tables::{Outbox, Peer, Tables};
+
+/// Why a router call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RouterError {
+    #[error("cannot bind the {what} endpoint {addr}: {source}")]
+    Bind {
+        what: &'static str,
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
+    #[error("no robot named {0:?} is registered")]
+    UnknownRobot(String),
+    #[error("cannot encode the message: {0}")]
+    Encode(#[from] mech_proto::Error),
+}
+
+/// State shared by the router's tasks and handles.
+#[derive(Debug)]
+struct Shared {
+    tables: Mutex<Tables>,
+    bus: EventBus,
+    udp: Arc<UdpSocket>,
+    udp_addr: SocketAddr,
+    tcp_addr: Option<SocketAddr>,
+    /// Outgoing frame queues of the TCP peers, by connection number.
+    tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    /// Held by a UDP worker from taking a datagram off the socket until the
+    /// tables have decided on it, so datagrams are decided in the order they
+    /// arrived whatever the number of workers: a command sent before a route
+    /// change is never judged by the new route because another worker ran
+    /// first. Only the sends run in parallel.
+    udp_order: Mutex<()>,
+    next_conn: AtomicU64,
+    subscriber_queue: usize,
+}
+
+impl Shared {
+    /// Runs one received message through the tables, then sends what they
+    /// decided and publishes the resulting events.
+    async fn dispatch(
+        &self,
+        bytes: &[u8],
+        from: Peer,
+        out: &mut Outbox,
+        events: &mut Vec<Event>,
+    ) -> Delivery {
+        let delivery = self.decide(bytes, from, Instant::now(), out, events);
+        self.flush(bytes, out).await;
+        delivery
+    }
+
+    /// The synchronous half of [`Shared::dispatch`]: the tables' decision and
+    /// its events, leaving the sends in `out`.
+    fn decide(
+        &self,
+        bytes: &[u8],
+        from: Peer,
+        now: Instant,
+        out: &mut Outbox,
+        events: &mut Vec<Event>,
+    ) -> Delivery {
+        let mut tables = lock(&self.tables);
+        let delivery = tables.handle(bytes, from, now, out, events);
+        // Emitted under the table lock, so the fleet model sees events
+        // in the order the tables made them (a mission is "sent" before
+        // its acknowledgement, whichever worker handles the ack).
+        for e in events.drain(..) {
+            self.bus.emit(e);
+        }
+        delivery
+    }
+
+    /// Sends the outbox: `raw` targets get `raw`, `owned` ones their own
+    /// bytes. The outbox keeps its allocations for the next message.
+    async fn flush(&self, raw: &[u8], out: &mut Outbox) {
+        if out.is_empty() {
+            return;
+        }
+        for i in 0..out.raw.len() {
+            self.send(out.raw[i], raw).await;
+        }
+        out.raw.clear();
+        if !out.owned.is_empty() {
+            for (peer, bytes) in std::mem::take(&mut out.owned) {
+                self.send(peer, &bytes).await;
+            }
+        }
+    }
+
+    async fn send(&self, peer: Peer, bytes: &[u8]) {
+        match peer {
+            Peer::Udp(addr) => {
+                // The common case: the socket has room, one syscall and no
+                // readiness future; only a full send buffer waits.
+                let sent = match self.udp.try_send_to(bytes, addr) {
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                        self.udp.send_to(bytes, addr).await
+                    }
+                    other => other,
+                };
+                if let Err(e) = sent {
+                    tracing::debug!(%addr, error = %e, "UDP send failed");
+                    lock(&self.tables).count_send_failure(false);
+                }
+            }
+            Peer::Tcp(conn) => {
+                let tx = lock(&self.tcp_peers).get(&conn).cloned();
+                let Some(tx) = tx else { return };
+                let mut frame = Vec::with_capacity(bytes.len() + 4);
+                frame.extend_from_slice(&(bytes.len() as u32).to_be_bytes());
+                frame.extend_from_slice(bytes);
+                if tx.try_send(frame).is_err() {
+                    lock(&self.tables).count_send_failure(true);
+                }
+            }
+            Peer::Local => {}
+        }
+    }
+
+    /// Runs a table operation that may produce messages and events.
+    async fn apply<R>(
+        &self,
+        f: impl FnOnce(&mut Tables, Instant, &mut Outbox, &mut Vec<Event>) -> R,
+    ) -> R {
+        let mut out = Outbox::default();
+        let mut events = Vec::new();
+        let r = {
+            let mut tables = lock(&self.tables);
+            let r = f(&mut tables, Instant::now(), &mut out, &mut events);
+            for e in events {
+                self.bus.emit(e);
+            }
+            r
+        };
+        self.flush(&[], &mut out).await;
+        r
+    }
+}
+
+/// A running router: its tasks and a handle to it. Dropping it without
+/// [`Router::shutdown`] leaves the tasks running until the runtime stops.
+#[derive(Debug)]
+pub struct Router {
+    handle: RouterHandle,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl Router {
+    /// Binds the UDP (and, if configured, TCP) endpoints and starts routing.
+    /// Events go to `sink` (the fleet model) first, then to subscribers.
+    pub async fn start(
+        config: RouterConfig,
+        sink: Arc<dyn EventSink>,
+    ) -> Result<Router, RouterError> {
+        let udp =
+            bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
+                what: "UDP",
+                addr: config.udp,
+                source,
+            })?;
+        let udp_addr = udp.local_addr().map_err(|source| RouterError::Bind {
+            what: "UDP",
+            addr: config.udp,
+            source,
+        })?;
+        let tcp =
+            match config.tcp {
+                Some(addr) => Some(tokio::net::TcpListener::bind(addr).await.map_err(
+                    |source| RouterError::Bind {
+                        what: "TCP",
+                        addr,
+                        source,
+                    },
+                )?),
+                None => None,
+            };
+        let tcp_addr = match &tcp {
+            Some(l) => Some(l.local_addr().map_err(|source| RouterError::Bind {
+                what: "TCP",
+                addr: config.tcp.unwrap_or(udp_addr),
+                source,
+            })?),
+            None => None,
+        };
+        let workers = config.udp_workers;
+        let tick = config.tick;
+        let shared = Arc::new(Shared {
+            subscriber_queue: config.subscriber_queue,
+            tables: Mutex::new(Tables::new(config)),
+            bus: EventBus::new(Instant::now(), sink),
+            udp: Arc::new(udp),
+            udp_addr,
+            tcp_addr,
+            tcp_peers: Mutex::new(HashMap::new()),
+            udp_order: Mutex::new(()),
+            next_conn: AtomicU64::new(1),
+        });
+        tracing::info!(udp = %udp_addr, tcp = ?tcp_addr, "router started");
+        shared.bus.emit(Event::Listening {
+            udp: udp_addr,
+            tcp: tcp_addr,
+        });
+        let mut tasks = Vec::new();
+        for _ in 0..workers {
+            tasks.push(tokio::spawn(net::udp_worker(shared.clone())));
+        }
+        tasks.push(tokio::spawn(net::timers(shared.clone(), tick)));
+        if let Some(listener) = tcp {
+            tasks.push(tokio::spawn(net::tcp_accept(shared.clone(), listener)));
+        }
+        Ok(Router {
+            handle: RouterHandle { shared },
+            tasks,
+        })
+    }
+
+    pub fn handle(&self) -> RouterHandle {
+        self.handle.clone()
+    }
+
+    /// Stops every router task and closes subscriptions. Agents then see the
+    /// router lost (their failsafe stops them) within their router timeout.
+    pub async fn shutdown(self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        for t in self.tasks {
+            let _ = t.await;
+        }
+        lock(&self.handle.shared.tcp_peers).clear();
+        self.handle.shared.bus.close();
+        tracing::info!("router stopped");
+    }
+}
+
+/// Binds the router's UDP socket with large kernel buffers (best effort: a
+/// smaller system limit is logged, not fatal).
+fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
+    if let Err(e) = socket.set_recv_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP receive buffer");
+    }
+    if let Err(e) = socket.set_send_buffer_size(buffer) {
+        tracing::warn!(error = %e, buffer, "cannot enlarge the UDP send buffer");
+    }
+    socket.set_nonblocking(true)?;
+    socket.bind(&addr.into())?;
+    UdpSocket::from_std(socket.into())
+}
+
+/// A cheap, cloneable handle to a running router: publish, route, send
+/// missions, e-stop, subscribe, and read channels and counters.
+#[derive(Debug, Clone)]
+pub struct RouterHandle {
+    shared: Arc<Shared>,
+}
+
+impl RouterHandle {
+    /// The bound UDP endpoint (useful when configured with port 0).
+    pub fn udp_addr(&self) -> SocketAddr {
+        self.shared.udp_addr
+    }
+
+    /// The bound TCP endpoint, if enabled.
+    pub fn tcp_addr(&self) -> Option<SocketAddr> {
+        self.shared.tcp_addr
+    }
+
+    /// An in-process publisher on `channel`, named `sender` (e.g. `gamepad`
+    /// on `joy/0`). Its commands take the same routing path as UDP ones.
+    pub fn publisher(&self, sender: &str, channel: &str) -> Publisher {
+        Publisher {
+            router: self.clone(),
+            sender: sender.to_string(),
+            channel: channel.to_string(),
+            seq: 0,
+        }
+    }
+
+    /// Routes `robot` to `channel` (`None` = none). Takes effect for the very
+    /// next message; the agent is told, repeatedly until it acknowledges.
+    /// Returns the new route epoch.
+    pub async fn set_route(&self, robot: &str, channel: Option<&str>) -> Result<u32, RouterError> {
+        self.shared
+            .apply(|t, now, out, ev| t.set_route(robot, channel, now, out, ev))
+            .await
+            .ok_or_else(|| RouterError::UnknownRobot(robot.to_string()))
+    }
+
+    /// Sends a mission to `robot` on `channel` from `sender`, with a fresh id
+    /// (the id in `mission` is replaced). It is repeated until the robot
+    /// acknowledges the id, or reported failed after `mission_give_up`.
+    pub async fn send_mission(
+        &self,
+        sender: &str,
+        robot: &str,
+        channel: &str,
+        mut mission: Mission,
+    ) -> Result<u32, RouterError> {
+        let known = lock(&self.shared.tables).robot_addr(robot).is_some();
+        if !known {
+            return Err(RouterError::UnknownRobot(robot.to_string()));
+        }
+        mission.id = lock(&self.shared.tables).mission_id();
+        let id = mission.id;
+        let env = envelope(sender, robot, channel, 0, Body::Mission(mission));
+        let bytes = mech_proto::encode(&env)?;
+        self.inject(&bytes).await;
+        Ok(id)
+    }
+
+    /// Engages the e-stop on every robot (repeated until each acknowledges;
+    /// robots registering later get it too). Returns its id.
+    pub async fn estop(&self) -> u32 {
+        self.shared
+            .apply(|t, now, out, ev| t.start_estop(true, now, out, ev))
+            .await
+    }
+
+    /// Explicitly releases the e-stop on every robot. Returns its id.
+    pub async fn release(&self) -> u32 {
+        self.shared
+            .apply(|t, now, out, ev| t.start_estop(false, now, out, ev))
+            .await
+    }
+
+    /// A subscription to router events. With `telemetry` it also gets every
+    /// telemetry event (at the fleet's telemetry rate: size `capacity`
+    /// accordingly). A full queue drops this subscriber's events only.
+    pub fn subscribe(&self, capacity: usize, telemetry: bool) -> Subscription {
+        self.shared.bus.subscribe(capacity, telemetry)
+    }
+
+    /// A subscription with the configured queue length.
+    pub fn subscribe_default(&self, telemetry: bool) -> Subscription {
+        self.shared
+            .bus
+            .subscribe(self.shared.subscriber_queue, telemetry)
+    }
+
+    /// Live channels with their publisher, rate and routed robots.
+    pub fn channels(&self) -> Vec<ChannelStatus> {
+        lock(&self.shared.tables).channel_status(Instant::now())
+    }
+
+    /// A copy of every counter.
+    pub fn counters(&self) -> Counters {
+        lock(&self.shared.tables).counters()
+    }
+
+    /// Time since the router started.
+    pub fn elapsed(&self) -> Duration {
+        self.shared.bus.elapsed()
+    }
+
+    /// Runs an encoded message through the router as if it had arrived from
+    /// a peer inside the GCS process.
+    pub async fn inject(&self, bytes: &[u8]) -> Delivery {
+        let mut out = Outbox::default();
+        let mut events = Vec::new();
+        self.shared
+            .dispatch(bytes, Peer::Local, &mut out, &mut events)
+            .await
+    }
+}
+
+fn envelope(sender: &str, destination: &str, channel: &str, seq: u32, body: Body) -> Envelope {
+    let stamp_us = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0);
+    Envelope::new(
+        Header {
+            seq,
+            stamp_us,
+            sender: sender.to_string(),
+            destination: destination.to_string(),
+            channel: channel.to_string(),
+        },
+        body,
+    )
+}
+
+/// An in-process controller publishing on one channel (the TUI's keyboard,
+/// a gamepad, a fleet or offboard controller).
+#[derive(Debug, Clone)]
+pub struct Publisher {
+    router: RouterHandle,
+    sender: String,
+    channel: String,
+    seq: u32,
+}
+
+impl Publisher {
+    pub fn channel(&self) -> &str {
+        &self.channel
+    }
+
+    /// Publishes one command for `robot`; it is forwarded only if the robot
+    /// is routed to this publisher's channel.
+    pub async fn send(&mut self, robot: &str, command: Command) -> Result<Delivery, RouterError> {
+        self.send_body(robot, Body::Command(command)).await
+    }
+
+    /// Publishes commands for several robots at once; each robot routed to
+    /// this channel receives only its own part.
+    pub async fn send_fleet(&mut self, parts: Vec<RobotCommand>) -> Result<Delivery, RouterError> {
+        self.send_body(
+            mech_proto::ROUTER,
+            Body::FleetCommand(FleetCommand { parts }),
+        )
+        .await
+    }
+
+    /// Publishes any body on this channel.
+    pub async fn send_body(
+        &mut self,
+        destination: &str,
+        body: Body,
+    ) -> Result<Delivery, RouterError> {
+        self.seq = self.seq.wrapping_add(1);
+        let env = envelope(&self.sender, destination, &self.channel, self.seq, body);
+        let bytes = mech_proto::encode(&env)?;
+        Ok(self.router.inject(&bytes).await)
+    }
+}

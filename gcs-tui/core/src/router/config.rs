@@ -1,0 +1,130 @@
+//! The router's section of the configuration (`[router]`): endpoints,
+//! link-state thresholds, retry periods, queues and sockets. Every field has
+//! a default, so an empty section gives a working router on port 7400.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use crate::config::{ConfigError, is_channel_name, secs};
+
+/// Router endpoints and timing. Durations are in seconds in the file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RouterConfig {
+    /// UDP endpoint for agents and controllers.
+    pub udp: SocketAddr,
+    /// TCP endpoint (length-prefixed frames) for controllers and tools;
+    /// `None` disables it.
+    pub tcp: Option<SocketAddr>,
+    /// Name the router uses as sender of the messages it originates.
+    pub name: String,
+    /// Silence after which a robot is shown as stale (seconds).
+    #[serde(with = "secs")]
+    pub stale_after: Duration,
+    /// Silence after which a robot is declared lost (seconds). The 2017 UI
+    /// showed a robot as disconnected after about one second.
+    #[serde(with = "secs")]
+    pub lost_after: Duration,
+    /// Period of the router's heartbeat to every robot. Agents declare the
+    /// router lost after their `router_timeout` (1 s) without one.
+    #[serde(with = "secs")]
+    pub heartbeat_period: Duration,
+    /// Resend period of an unacknowledged route change.
+    #[serde(with = "secs")]
+    pub route_retry: Duration,
+    /// Resend period of an unacknowledged mission.
+    #[serde(with = "secs")]
+    pub mission_retry: Duration,
+    /// A mission not acknowledged within this time is reported failed.
+    #[serde(with = "secs")]
+    pub mission_give_up: Duration,
+    /// Resend period of an unacknowledged e-stop or release.
+    #[serde(with = "secs")]
+    pub estop_retry: Duration,
+    /// Resolution of the router's timers (link state, retries).
+    #[serde(with = "secs")]
+    pub tick: Duration,
+    /// An external telemetry subscription lapses unless renewed within this.
+    #[serde(with = "secs")]
+    pub subscriber_timeout: Duration,
+    /// A channel silent for longer is no longer listed as live.
+    #[serde(with = "secs")]
+    pub channel_live_for: Duration,
+    /// Queue length of each subscriber (in-process or TCP); a full queue
+    /// drops that subscriber's events and counts them, never blocks routing.
+    pub subscriber_queue: usize,
+    /// Route given to a robot that registers for the first time; `None`
+    /// (the default) routes it to none, so it holds still.
+    pub default_route: Option<String>,
+    /// Number of tasks receiving on the UDP socket.
+    pub udp_workers: usize,
+    /// Kernel receive and send buffer of the UDP socket, bytes (capped by
+    /// the system's `net.core.rmem_max`). Large, so that a burst of
+    /// telemetry from a big fleet is queued rather than lost.
+    pub socket_buffer: usize,
+}
+
+impl Default for RouterConfig {
+    fn default() -> Self {
+        RouterConfig {
+            udp: SocketAddr::from(([0, 0, 0, 0], 7400)),
+            tcp: Some(SocketAddr::from(([127, 0, 0, 1], 7401))),
+            name: mech_proto::ROUTER.to_string(),
+            stale_after: Duration::from_millis(500),
+            lost_after: Duration::from_millis(1000),
+            heartbeat_period: Duration::from_millis(250),
+            route_retry: Duration::from_millis(100),
+            mission_retry: Duration::from_millis(200),
+            mission_give_up: Duration::from_secs(5),
+            estop_retry: Duration::from_millis(100),
+            tick: Duration::from_millis(20),
+            subscriber_timeout: Duration::from_secs(5),
+            channel_live_for: Duration::from_secs(3),
+            subscriber_queue: 4096,
+            default_route: None,
+            udp_workers: 2,
+            socket_buffer: 4 << 20,
+        }
+    }
+}
+
+impl RouterConfig {
+    /// Rejects settings that would make the router misbehave.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.stale_after >= self.lost_after {
+            return Err(ConfigError(format!(
+                "router.stale_after ({:?}) must be shorter than router.lost_after ({:?})",
+                self.stale_after, self.lost_after
+            )));
+        }
+        for (name, d) in [
+            ("tick", self.tick),
+            ("heartbeat_period", self.heartbeat_period),
+            ("route_retry", self.route_retry),
+            ("mission_retry", self.mission_retry),
+            ("estop_retry", self.estop_retry),
+        ] {
+            if d.is_zero() {
+                return Err(ConfigError(format!("router.{name} must be positive")));
+            }
+        }
+        if self.subscriber_queue == 0 {
+            return Err(ConfigError::new(
+                "router.subscriber_queue must be at least 1",
+            ));
+        }
+        if self.udp_workers == 0 {
+            return Err(ConfigError::new("router.udp_workers must be at least 1"));
+        }
+        if let Some(route) = &self.default_route {
+            if !is_channel_name(route) {
+                return Err(ConfigError(format!(
+                    "router.default_route {route:?} is not a channel name"
+                )));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,148 @@
+//! The router's tasks: UDP receive loops, the TCP acceptor with a reader and
+//! a writer task per peer, and the timer task (heartbeats, link states,
+//! retries). Each hands bytes to [`super::Shared::dispatch`].
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use mech_proto::framing::StreamDecoder;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::mpsc;
+use tokio::time::{Instant, MissedTickBehavior};
+use tracing::{debug, info, warn};
+
+use super::Shared;
+use super::tables::{Outbox, Peer};
+use crate::sync::lock;
+
+/// Most datagrams handled per wake-up before the task lets others run.
+const RECEIVE_BATCH: usize = 64;
+
+/// Receives datagrams and routes them. After each readiness notification it
+/// drains the socket with non-blocking receives (up to [`RECEIVE_BATCH`]),
+/// so under load a datagram costs one receive and one send syscall and no
+/// trip through the scheduler or epoll. Several workers may share the
+/// socket: each takes a datagram and has it decided under
+/// `Shared::udp_order`, so decisions follow arrival order; their sends
+/// overlap.
+pub(super) async fn udp_worker(shared: Arc<Shared>) {
+    let mut buf = vec![0u8; 65_536];
+    let mut out = Outbox::default();
+    let mut events = Vec::new();
+    loop {
+        if let Err(e) = shared.udp.readable().await {
+            debug!(error = %e, "UDP readiness error");
+            tokio::task::yield_now().await;
+            continue;
+        }
+        let mut handled = 0;
+        while handled < RECEIVE_BATCH {
+            handled += 1;
+            let received = {
+                let _order = lock(&shared.udp_order);
+                shared.udp.try_recv_from(&mut buf).map(|(n, addr)| {
+                    let from = Peer::Udp(addr);
+                    shared.decide(&buf[..n], from, Instant::now(), &mut out, &mut events);
+                    n
+                })
+            };
+            match received {
+                Ok(n) => shared.flush(&buf[..n], &mut out).await,
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => {
+                    // ICMP errors from earlier sends surface here on some
+                    // systems; they concern one peer, never the router.
+                    debug!(error = %e, "UDP receive error");
+                    break;
+                }
+            }
+        }
+        if handled == RECEIVE_BATCH {
+            // A full batch: let the timers and TCP peers run before the next.
+            tokio::task::yield_now().await;
+        }
+    }
+}
+
+/// Drives every timer of the router at the configured resolution.
+pub(super) async fn timers(shared: Arc<Shared>, tick: Duration) {
+    let mut interval = tokio::time::interval(tick);
+    interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    loop {
+        interval.tick().await;
+        shared.apply(|t, now, out, ev| t.tick(now, out, ev)).await;
+    }
+}
+
+/// Accepts TCP controllers and tools.
+pub(super) async fn tcp_accept(shared: Arc<Shared>, listener: TcpListener) {
+    loop {
+        match listener.accept().await {
+            Ok((stream, addr)) => {
+                let conn = shared.next_conn.fetch_add(1, Ordering::Relaxed);
+                info!(%addr, conn, "TCP peer connected");
+                tokio::spawn(tcp_peer(shared.clone(), stream, conn));
+            }
+            Err(e) => {
+                warn!(error = %e, "TCP accept failed");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
+}
+
+/// One TCP peer: frames in, dispatched like datagrams; frames out through a
+/// bounded queue so a slow peer only loses its own messages.
+async fn tcp_peer(shared: Arc<Shared>, stream: TcpStream, conn: u64) {
+    let _ = stream.set_nodelay(true);
+    let (mut rd, mut wr) = stream.into_split();
+    let (tx, mut rx) = mpsc::channel::<Vec<u8>>(shared.subscriber_queue);
+    lock(&shared.tcp_peers).insert(conn, tx);
+    let writer = tokio::spawn(async move {
+        while let Some(frame) = rx.recv().await {
+            if wr.write_all(&frame).await.is_err() {
+                break;
+            }
+        }
+    });
+    let mut decoder = StreamDecoder::new();
+    let mut buf = vec![0u8; 65_536];
+    let mut out = Outbox::default();
+    let mut events = Vec::new();
+    let started = Instant::now();
+    'read: loop {
+        let n = match rd.read(&mut buf).await {
+            Ok(0) | Err(_) => break,
+            Ok(n) => n,
+        };
+        decoder.push(&buf[..n]);
+        loop {
+            let frame = match decoder.next_frame() {
+                None => break,
+                Some(Ok(frame)) => frame.to_vec(),
+                Some(Err(e)) => {
+                    // Only a bad length prefix is an error here, and it
+                    // leaves the stream out of step for good.
+                    warn!(conn, error = %e, "TCP stream out of step, closing it");
+                    shared
+                        .apply(|t, _, _, ev| t.count_bad(Peer::Tcp(conn), e.to_string(), ev))
+                        .await;
+                    break 'read;
+                }
+            };
+            shared
+                .dispatch(&frame, Peer::Tcp(conn), &mut out, &mut events)
+                .await;
+        }
+    }
+    lock(&shared.tcp_peers).remove(&conn);
+    lock(&shared.tables).forget_peer(Peer::Tcp(conn));
+    writer.abort();
+    info!(
+        conn,
+        secs = started.elapsed().as_secs_f64(),
+        "TCP peer disconnected"
+    );
+}

@@ -1,0 +1,183 @@
+//! The station's configuration file (`gcs.toml`), assembled from the
+//! sections each layer owns: `[router]` and `[fleet]` (mech-core),
+//! `[[cluster]]` (mech-control), `[log]` and `[gamepad]` (this binary).
+//! Every field has a default, so an empty file (or none) gives a working
+//! ground station on port 7400.
+
+use std::path::{Path, PathBuf};
+
+use mech_control::ClusterSpec;
+use mech_core::{CoreConfig, FleetConfig, RouterConfig};
+use serde::Deserialize;
+
+use crate::gamepad::GamepadConfig;
+use crate::logging::LogConfig;
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Parse {
+        path: PathBuf,
+        source: Box<toml::de::Error>,
+    },
+    #[error("{0}")]
+    Invalid(#[from] mech_core::ConfigError),
+}
+
+/// The whole GCS configuration.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GcsConfig {
+    pub router: RouterConfig,
+    pub log: LogConfig,
+    pub fleet: FleetConfig,
+    /// Clusters defined at start-up (`[[cluster]]` tables: name, members,
+    /// formation, spacing, offsets).
+    pub cluster: Vec<ClusterSpec>,
+    /// Gamepad teleop: shaping, dead-man and other buttons, rate, limits.
+    pub gamepad: GamepadConfig,
+}
+
+impl GcsConfig {
+    /// Reads and checks a TOML file.
+    pub fn load(path: &Path) -> Result<GcsConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        GcsConfig::parse_at(&text, path)
+    }
+
+    /// Parses and checks TOML text.
+    pub fn parse(text: &str) -> Result<GcsConfig, ConfigError> {
+        GcsConfig::parse_at(text, Path::new("<config>"))
+    }
+
+    fn parse_at(text: &str, path: &Path) -> Result<GcsConfig, ConfigError> {
+        let cfg: GcsConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            source: Box::new(e),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The sections the station core runs with.
+    pub fn core(&self) -> CoreConfig {
+        CoreConfig {
+            router: self.router.clone(),
+            fleet: self.fleet.clone(),
+        }
+    }
+
+    /// Checks every section, each by the layer that owns it.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.router.validate()?;
+        self.fleet.validate()?;
+        for c in &self.cluster {
+            c.formation()
+                .map_err(|e| mech_core::ConfigError(format!("cluster {:?}: {e}", c.name)))?;
+        }
+        self.gamepad.teleop()?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gamepad::{Limits, PadButton, Shaping, TeleopConfig, TeleopMode};
+    use std::time::Duration;
+
+    #[test]
+    fn empty_file_gives_defaults_on_port_7400() {
+        let cfg = GcsConfig::parse("").unwrap();
+        assert_eq!(cfg.router.udp.port(), 7400);
+        assert_eq!(cfg.router.lost_after, Duration::from_secs(1));
+        assert!(cfg.router.default_route.is_none());
+    }
+
+    #[test]
+    fn seconds_and_default_route_are_read() {
+        let cfg = GcsConfig::parse(
+            "[router]\nlost_after = 2.5\nstale_after = 1\ndefault_route = \"joy/0\"\n",
+        )
+        .unwrap();
+        assert_eq!(cfg.router.lost_after, Duration::from_millis(2500));
+        assert_eq!(cfg.router.default_route.as_deref(), Some("joy/0"));
+    }
+
+    #[test]
+    fn bad_values_are_errors() {
+        assert!(GcsConfig::parse("[router]\nstale_after = 3\n").is_err());
+        assert!(GcsConfig::parse("[router]\nbogus = 1\n").is_err());
+        assert!(GcsConfig::parse("[router]\ntick = -1\n").is_err());
+    }
+
+    #[test]
+    fn gamepad_section_reaches_the_teleop_settings() {
+        let cfg = GcsConfig::parse(
+            "[gamepad]\ndeadzone = 0.2\nexpo = 0\ndeadman = \"right-bumper\"\n\
+             mode_button = \"north\"\nestop_button = \"mode\"\nrate_hz = 50\n\
+             initial_mode = \"cluster\"\nmax_speed = 0.8\n",
+        )
+        .unwrap();
+        let t = cfg.gamepad.teleop().unwrap();
+        assert_eq!(t.deadman, Some(PadButton::RightBumper));
+        assert_eq!(t.mode_button, PadButton::North);
+        assert_eq!(t.estop_button, PadButton::Mode);
+        assert_eq!(t.rate_hz, 50.0);
+        assert_eq!(t.initial_mode, TeleopMode::Cluster);
+        assert_eq!(
+            t.shaping,
+            Shaping {
+                deadzone: 0.2,
+                expo: 0.0
+            }
+        );
+        assert_eq!(t.limits.max_speed, 0.8);
+        assert_eq!(t.limits.max_yaw_rate, Limits::default().max_yaw_rate);
+        let none = GcsConfig::parse("[gamepad]\ndeadman = \"none\"\n").unwrap();
+        assert_eq!(none.gamepad.teleop().unwrap().deadman, None);
+        assert_eq!(
+            GcsConfig::default().gamepad.teleop().unwrap(),
+            TeleopConfig::default()
+        );
+    }
+
+    #[test]
+    fn bad_gamepad_values_say_what_is_wrong() {
+        let err = |text: &str| GcsConfig::parse(text).unwrap_err().to_string();
+        assert!(err("[gamepad]\ndeadzone = 1.0\n").contains("gamepad.deadzone"));
+        assert!(err("[gamepad]\nexpo = -0.1\n").contains("gamepad.expo"));
+        assert!(err("[gamepad]\nrate_hz = 1\n").contains("gamepad.rate_hz"));
+        assert!(err("[gamepad]\nmax_speed = 0\n").contains("gamepad.max_speed"));
+        let e = err("[gamepad]\ndeadman = \"LB\"\n");
+        assert!(
+            e.contains("unknown button \"LB\"") && e.contains("left-bumper"),
+            "{e}"
+        );
+        assert!(err("[gamepad]\nestop_button = \"left-bumper\"\n").contains("different"));
+        assert!(err("[gamepad]\ninitial_mode = \"fly\"\n").contains("modes are"));
+        assert!(err("[gamepad]\nbogus = 1\n").contains("bogus"));
+    }
+
+    #[test]
+    fn gcs_channels_must_be_names() {
+        let err = |text: &str| GcsConfig::parse(text).unwrap_err().to_string();
+        assert!(err("[fleet]\nmission_channel = \"\"\n").contains("fleet.mission_channel"));
+        assert!(err("[fleet]\ncommand_channel = \"cmd gcs\"\n").contains("fleet.command_channel"));
+    }
+
+    #[test]
+    fn shipped_config_parses() {
+        let text = include_str!("../../../config/gcs.toml");
+        GcsConfig::parse(text).unwrap();
+    }
+}

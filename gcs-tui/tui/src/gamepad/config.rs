@@ -1,0 +1,200 @@
+//! The gamepad section of the configuration (`[gamepad]`): shaping,
+//! dead-man and other buttons, rate and limits, checked and turned into the
+//! station's [`TeleopConfig`].
+
+use mech_core::ConfigError;
+use serde::Deserialize;
+
+use super::{Limits, PadButton, Shaping, TeleopConfig, TeleopMode};
+
+/// Gamepad settings as written in `[gamepad]`; [`GamepadConfig::teleop`]
+/// turns them into the station's [`TeleopConfig`].
+///
+/// Button names: south east north west left-bumper right-bumper
+/// left-trigger right-trigger select start mode left-thumb right-thumb
+/// dpad-up dpad-down dpad-left dpad-right. Modes: steering-throttle
+/// velocity-heading tank twist cluster.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GamepadConfig {
+    /// Fraction of stick travel around centre that reads as zero, `[0, 1)`.
+    pub deadzone: f64,
+    /// Blend between linear (0) and cubic (1) stick response, `[0, 1]`.
+    pub expo: f64,
+    /// Button held to drive (the dead-man), or `"none"` to drive whenever a
+    /// pad is connected (not recommended: a dropped pad keeps its stick).
+    pub deadman: String,
+    /// Button that cycles the teleop mode.
+    pub mode_button: String,
+    /// Button that engages the fleet e-stop.
+    pub estop_button: String,
+    /// Mode a newly connected pad starts in.
+    pub initial_mode: String,
+    /// Steady publish rate while the dead-man is held, Hz. Agents stop a
+    /// silent channel after 0.5 s, so keep it well above 2 Hz.
+    pub rate_hz: f64,
+    /// m/s at full stick (velocity-level modes and cluster translation).
+    pub max_speed: f64,
+    /// rad/s at full stick.
+    pub max_yaw_rate: f64,
+    /// Formation growth rate at full stick, 1/s (cluster mode).
+    pub max_scale_rate: f64,
+}
+
+impl Default for GamepadConfig {
+    fn default() -> Self {
+        let t = TeleopConfig::default();
+        GamepadConfig {
+            deadzone: t.shaping.deadzone,
+            expo: t.shaping.expo,
+            deadman: t.deadman.map_or("none", button_name).to_string(),
+            mode_button: button_name(t.mode_button).to_string(),
+            estop_button: button_name(t.estop_button).to_string(),
+            initial_mode: mode_name(t.initial_mode).to_string(),
+            rate_hz: t.rate_hz,
+            max_speed: t.limits.max_speed,
+            max_yaw_rate: t.limits.max_yaw_rate,
+            max_scale_rate: t.limits.max_scale_rate,
+        }
+    }
+}
+
+const BUTTONS: [(&str, PadButton); 17] = [
+    ("south", PadButton::South),
+    ("east", PadButton::East),
+    ("north", PadButton::North),
+    ("west", PadButton::West),
+    ("left-bumper", PadButton::LeftBumper),
+    ("right-bumper", PadButton::RightBumper),
+    ("left-trigger", PadButton::LeftTrigger),
+    ("right-trigger", PadButton::RightTrigger),
+    ("select", PadButton::Select),
+    ("start", PadButton::Start),
+    ("mode", PadButton::Mode),
+    ("left-thumb", PadButton::LeftThumb),
+    ("right-thumb", PadButton::RightThumb),
+    ("dpad-up", PadButton::DPadUp),
+    ("dpad-down", PadButton::DPadDown),
+    ("dpad-left", PadButton::DPadLeft),
+    ("dpad-right", PadButton::DPadRight),
+];
+
+const MODES: [(&str, TeleopMode); 5] = [
+    ("steering-throttle", TeleopMode::SteeringThrottle),
+    ("velocity-heading", TeleopMode::VelocityHeading),
+    ("tank", TeleopMode::Tank),
+    ("twist", TeleopMode::Twist),
+    ("cluster", TeleopMode::Cluster),
+];
+
+fn button_name(b: PadButton) -> &'static str {
+    BUTTONS
+        .iter()
+        .find(|(_, x)| *x == b)
+        .map_or("?", |(n, _)| n)
+}
+
+fn mode_name(m: TeleopMode) -> &'static str {
+    MODES.iter().find(|(_, x)| *x == m).map_or("?", |(n, _)| n)
+}
+
+fn button(key: &str, name: &str) -> Result<PadButton, ConfigError> {
+    BUTTONS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, b)| *b)
+        .ok_or_else(|| {
+            let names: Vec<&str> = BUTTONS.iter().map(|(n, _)| *n).collect();
+            ConfigError(format!(
+                "gamepad.{key}: unknown button {name:?}; buttons are {}",
+                names.join(", ")
+            ))
+        })
+}
+
+impl GamepadConfig {
+    /// The teleop settings these values describe, or the first value at
+    /// fault.
+    pub fn teleop(&self) -> Result<TeleopConfig, ConfigError> {
+        let bad = |m: String| Err(ConfigError(m));
+        if !(self.deadzone.is_finite() && (0.0..1.0).contains(&self.deadzone)) {
+            return bad(format!(
+                "gamepad.deadzone must be in [0, 1), found {}",
+                self.deadzone
+            ));
+        }
+        if !(self.expo.is_finite() && (0.0..=1.0).contains(&self.expo)) {
+            return bad(format!(
+                "gamepad.expo must be in [0, 1], found {}",
+                self.expo
+            ));
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz > 2.0 && self.rate_hz <= 200.0) {
+            return bad(format!(
+                "gamepad.rate_hz must be above 2 (agents stop a channel silent for 0.5 s) \
+                 and at most 200, found {}",
+                self.rate_hz
+            ));
+        }
+        for (key, v) in [
+            ("max_speed", self.max_speed),
+            ("max_yaw_rate", self.max_yaw_rate),
+            ("max_scale_rate", self.max_scale_rate),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!("gamepad.{key} must be positive, found {v}"));
+            }
+        }
+        let deadman = match self.deadman.as_str() {
+            "none" => None,
+            name => Some(button("deadman", name)?),
+        };
+        let mode_button = button("mode_button", &self.mode_button)?;
+        let estop_button = button("estop_button", &self.estop_button)?;
+        let pairs = [
+            ("deadman", deadman, "mode_button", Some(mode_button)),
+            ("deadman", deadman, "estop_button", Some(estop_button)),
+            (
+                "mode_button",
+                Some(mode_button),
+                "estop_button",
+                Some(estop_button),
+            ),
+        ];
+        for (a, x, b, y) in pairs {
+            if x.is_some() && x == y {
+                return bad(format!(
+                    "gamepad.{a} and gamepad.{b} must be different buttons"
+                ));
+            }
+        }
+        let initial_mode = MODES
+            .iter()
+            .find(|(n, _)| *n == self.initial_mode)
+            .map(|(_, m)| *m)
+            .ok_or_else(|| {
+                let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
+                ConfigError(format!(
+                    "gamepad.initial_mode: unknown mode {:?}; modes are {}",
+                    self.initial_mode,
+                    names.join(", ")
+                ))
+            })?;
+        Ok(TeleopConfig {
+            deadman,
+            mode_button,
+            estop_button,
+            rate_hz: self.rate_hz,
+            shaping: Shaping {
+                deadzone: self.deadzone,
+                expo: self.expo,
+            },
+            limits: Limits {
+                max_speed: self.max_speed,
+                max_yaw_rate: self.max_yaw_rate,
+                max_scale_rate: self.max_scale_rate,
+            },
+            initial_mode,
+        })
+    }
+}

@@ -1,0 +1,20 @@
+//! `mech-gcs`: the MECH ground-control station program: the terminal UI,
+//! gamepads, the simulator for `--demo`, logging and the configuration file,
+//! over the station core (`mech-core`) and its controllers and command
+//! language (`mech-control`).
+//!
+//! - [`ui`]: robot cards, braille map, waypoints, routing table, events;
+//! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
+//! - [`config`]: `gcs.toml`, assembled from each layer's section;
+//! - [`logging`]: rolling log files;
+//! - [`sim`]: simulated agents for `spawn` and `--demo`.
+
+#![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
+
+pub mod config;
+pub mod gamepad;
+pub mod logging;
+pub mod sim;
+pub mod ui;
+
+pub use config::GcsConfig;

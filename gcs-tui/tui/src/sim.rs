@@ -1,0 +1,72 @@
+//! The simulator behind `spawn` and `--demo`: simulated agents from
+//! `mech-agent`, plugged into the command language through its
+//! [`SimSpawner`] trait, so the station's core and control crates never
+//! depend on the simulator.
+
+use mech_control::lang::SimSpawner;
+
+/// Simulated agents (`mech_agent::sim`) for `spawn` and `--demo`: the same
+/// agent core as on a robot, with simulated platforms and UWB-like position
+/// noise, over real loopback UDP. One fleet per run (its robots are named
+/// `robot_1..robot_N`, so a second fleet would reuse the names).
+#[derive(Debug)]
+pub struct SimulatedFleet {
+    pub arena: mech_agent::sim::Arena,
+    pub options: mech_agent::sim::SimFleetOptions,
+    fleet: Option<mech_agent::sim::SimFleet>,
+}
+
+impl SimulatedFleet {
+    pub fn new(
+        arena: mech_agent::sim::Arena,
+        options: mech_agent::sim::SimFleetOptions,
+    ) -> SimulatedFleet {
+        SimulatedFleet {
+            arena,
+            options,
+            fleet: None,
+        }
+    }
+}
+
+impl SimSpawner for SimulatedFleet {
+    fn spawn(
+        &mut self,
+        count: usize,
+        router: std::net::SocketAddr,
+    ) -> futures::future::BoxFuture<'_, Result<Vec<String>, String>> {
+        Box::pin(async move {
+            if let Some(f) = &self.fleet {
+                return Err(format!(
+                    "{} simulated agents are already running; spawn once per run",
+                    f.names().len()
+                ));
+            }
+            let fleet =
+                mech_agent::sim::SimFleet::spawn(count, router, self.arena, self.options.clone())
+                    .await
+                    .map_err(|e| e.to_string())?;
+            let names = fleet.names();
+            tracing::info!(count, %router, "simulated agents started");
+            self.fleet = Some(fleet);
+            Ok(names)
+        })
+    }
+
+    fn shutdown(&mut self) -> futures::future::BoxFuture<'_, ()> {
+        Box::pin(async move {
+            if let Some(f) = self.fleet.take() {
+                f.shutdown().await;
+            }
+        })
+    }
+}
+
+/// The simulator `spawn` and `--demo` use: the default arena (the 2017
+/// lab's 3.9 m x 2.8 m) with position noise.
+pub fn simulator() -> Box<dyn SimSpawner> {
+    Box::new(SimulatedFleet::new(
+        mech_agent::sim::Arena::default(),
+        mech_agent::sim::SimFleetOptions::default(),
+    ))
+}

@@ -1,0 +1,212 @@
+//! What the UI shows about the fleet: a plain snapshot of robots, channels
+//! and clusters, refreshed from the GCS core's fleet model and router.
+//!
+//! The UI never derives link state, routes or failsafes itself; it copies
+//! them from the core, so screens and tests can be built from fixed values.
+
+use mech_proto::{
+    Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+};
+
+/// Link to a robot as the router judges it from its timeouts (the core's
+/// type: the UI copies it, never derives it).
+pub use mech_core::LinkState;
+
+/// How a card spells a link state.
+pub fn link_label(link: LinkState) -> &'static str {
+    match link {
+        LinkState::Connected => "Connected",
+        LinkState::Stale => "Stale",
+        LinkState::Lost => "Lost",
+    }
+}
+
+/// Route of a robot: the channel the router forwards, and whether the agent
+/// has acknowledged it yet.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct RouteView {
+    /// Empty = routed to none.
+    pub channel: String,
+    pub acknowledged: bool,
+}
+
+/// One robot, as the cards and the map show it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotView {
+    pub name: String,
+    /// Router-assigned id.
+    pub id: u16,
+    pub platform: String,
+    pub pose: Pose,
+    pub velocity: Velocity,
+    pub mode: ControlMode,
+    pub route: RouteView,
+    pub computation: Computation,
+    pub link: LinkState,
+    pub failsafe: FailsafeState,
+    pub health: Health,
+    /// Fraction `[0, 1]`.
+    pub battery: Option<f64>,
+    pub mission: Option<MissionProgress>,
+    /// Where the robot went in the last [`super::app::TRAIL_SECONDS`],
+    /// oldest first (x, y in m): the core's recorded path, not a copy the
+    /// UI keeps.
+    pub trail: Vec<(f64, f64)>,
+}
+
+impl RobotView {
+    /// Ground speed, m/s.
+    pub fn speed(&self) -> f64 {
+        self.velocity.vx.hypot(self.velocity.vy)
+    }
+
+    /// Heading in degrees, `(-180, 180]`, counter-clockwise from +x.
+    pub fn heading_deg(&self) -> f64 {
+        let d = self.pose.heading.to_degrees().rem_euclid(360.0);
+        if d > 180.0 { d - 360.0 } else { d }
+    }
+
+    /// A robot with only a name and a position, every status at its default.
+    pub fn at(name: &str, id: u16, platform: &str, x: f64, y: f64, heading: f64) -> Self {
+        Self {
+            name: name.to_string(),
+            id,
+            platform: platform.to_string(),
+            pose: Pose {
+                x,
+                y,
+                z: 0.0,
+                heading,
+            },
+            velocity: Velocity::default(),
+            mode: ControlMode::Idle,
+            route: RouteView::default(),
+            computation: Computation::Onboard,
+            link: LinkState::Connected,
+            failsafe: FailsafeState::Ok,
+            health: Health::Ok,
+            battery: None,
+            mission: None,
+            trail: Vec::new(),
+        }
+    }
+}
+
+/// A live controller channel seen by the router.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelView {
+    pub name: String,
+    /// Last publisher's sender name.
+    pub publisher: String,
+    pub rate_hz: f64,
+}
+
+/// A named group of robots driven together.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClusterView {
+    pub name: String,
+    pub members: Vec<String>,
+    /// What the cluster controller reports, once it runs this cluster.
+    pub control: Option<ClusterControlView>,
+}
+
+/// A cluster controller's last period, as the map and the routes panel
+/// show it (copied from [`crate::control::ControlHub::snapshot`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ClusterControlView {
+    /// Cluster pose being tracked (x, y, heading).
+    pub desired: Option<(f64, f64, f64)>,
+    /// Cluster pose measured from the members (x, y, heading).
+    pub measured: Option<(f64, f64, f64)>,
+    /// Slot target and tracking error of each commanded member.
+    pub slots: Vec<SlotView>,
+    /// Members with stale telemetry (not commanded).
+    pub lost: Vec<String>,
+    /// Members not routed to the cluster's channel (or not registered).
+    pub absent: Vec<String>,
+}
+
+/// One member's slot in the formation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlotView {
+    pub robot: String,
+    /// Slot position, m.
+    pub x: f64,
+    pub y: f64,
+    /// Distance from the member to its slot, m.
+    pub error: f64,
+}
+
+impl ClusterControlView {
+    /// The view of one cluster controller's status.
+    pub fn from_status(s: &mech_control::ClusterStatus) -> ClusterControlView {
+        let pose = |p: &mech_proto::ClusterPose| (p.x, p.y, p.heading);
+        ClusterControlView {
+            desired: s.desired.as_ref().map(pose),
+            measured: s.measured.as_ref().map(pose),
+            slots: s
+                .slots
+                .iter()
+                .map(|t| SlotView {
+                    robot: t.robot.clone(),
+                    x: t.x,
+                    y: t.y,
+                    error: t.error,
+                })
+                .collect(),
+            lost: s.lost.clone(),
+            absent: s.absent.clone(),
+        }
+    }
+}
+
+/// The arena rectangle from the config, metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArenaBounds {
+    pub min_x: f64,
+    pub min_y: f64,
+    pub max_x: f64,
+    pub max_y: f64,
+}
+
+/// Everything the core reports in one refresh.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FleetSnapshot {
+    pub robots: Vec<RobotView>,
+    pub channels: Vec<ChannelView>,
+    /// E-stop engaged (latched) fleet-wide.
+    pub estop: bool,
+    /// Clusters, when the source keeps them (`None` leaves the UI's own).
+    pub clusters: Option<Vec<ClusterView>>,
+}
+
+/// Human-readable names for protocol enums.
+pub fn mode_str(m: ControlMode) -> &'static str {
+    match m {
+        ControlMode::Idle => "idle",
+        ControlMode::Actuators => "actuators",
+        ControlMode::SteeringThrottle => "steer-thr",
+        ControlMode::VelocityHeading => "vel-head",
+        ControlMode::Twist => "twist",
+        ControlMode::Waypoints => "waypoints",
+        ControlMode::Stopped => "stopped",
+    }
+}
+
+pub fn failsafe_str(f: FailsafeState) -> &'static str {
+    match f {
+        FailsafeState::Ok => "ok",
+        FailsafeState::ChannelSilent => "silent",
+        FailsafeState::RouterLost => "router-lost",
+        FailsafeState::EStopped => "E-STOPPED",
+        FailsafeState::Fault => "fault",
+    }
+}
+
+pub fn health_str(h: Health) -> &'static str {
+    match h {
+        Health::Ok => "ok",
+        Health::Degraded => "degraded",
+        Health::Fault => "FAULT",
+    }
+}
