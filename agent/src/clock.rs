@@ -64,15 +64,6 @@ impl Clock for ManualClock {
     }
 }
 
-/// Microseconds since the Unix epoch, for message stamps (never for safety
-/// timing). A clock before 1970 gives 0.
-pub fn unix_micros() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,7 +14,7 @@ use std::time::Duration;
 use mech_proto::{Command, CommandKind, ControlMode, Pose, Twist, VelocityHeading};
 use serde::Deserialize;
 
-use crate::filter::wrap_angle;
+use mech_proto::wrap_angle;
 use crate::platform::Platform;
 
 pub use mission::MissionRun;

@@ -6,7 +6,7 @@
 
 use std::collections::VecDeque;
 
-use mech_proto::Pose;
+use mech_proto::{Pose, wrap_angle};
 
 use crate::hal::PositionSample;
 
@@ -92,16 +92,6 @@ impl MedianFilter {
             _ => (self.scratch[n / 2 - 1] + self.scratch[n / 2]) / 2.0,
         }
     }
-}
-
-/// Wraps an angle to `(-π, π]`.
-pub fn wrap_angle(a: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    let mut w = a.rem_euclid(two_pi);
-    if w > std::f64::consts::PI {
-        w -= two_pi;
-    }
-    w
 }
 
 #[cfg(test)]

@@ -45,7 +45,7 @@ pub async fn run(
     shutdown: watch::Receiver<bool>,
 ) -> Result<(), LaunchError> {
     let origin = Instant::now();
-    let stamp_origin = crate::clock::unix_micros();
+    let stamp_origin = mech_proto::unix_micros();
     let simulated = overrides.sim || matches!(config.position(), PositionConfig::Sim);
     let io = open_link(&config, &overrides).await?;
     let ticker = Ticker::Own(config.control_period());

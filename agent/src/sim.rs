@@ -141,7 +141,7 @@ impl SimFleet {
         let (tick_txs, tick_rxs): (Vec<_>, Vec<_>) =
             (0..phases).map(|_| watch::channel(Duration::ZERO)).unzip();
         let origin = tokio::time::Instant::now();
-        let stamp_origin = crate::clock::unix_micros();
+        let stamp_origin = mech_proto::unix_micros();
         let platforms = if options.platforms.is_empty() {
             SimFleetOptions::default().platforms
         } else {

@@ -21,6 +21,7 @@ mod envelope;
 mod error;
 pub mod framing;
 mod tagged;
+mod units;
 
 pub use body::Body;
 pub use body::{
@@ -38,6 +39,7 @@ pub use envelope::{
     peek, signed_region,
 };
 pub use error::{Error, ErrorKind};
+pub use units::{unix_micros, wrap_angle};
 
 /// Protocol version this build speaks. A message with another version is
 /// rejected with [`Error::Version`] before its body is looked at.

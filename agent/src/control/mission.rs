@@ -6,7 +6,7 @@ use std::time::Duration;
 use mech_proto::{Mission, MissionProgress, Pose, Twist};
 
 use super::{Gains, drive_factor};
-use crate::filter::wrap_angle;
+use mech_proto::wrap_angle;
 use crate::platform::Platform;
 
 /// A mission being flown or driven, with its progress.

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use mech_proto::Pose;
 
-use crate::filter::wrap_angle;
+use mech_proto::wrap_angle;
 use crate::hal::{self, ErrorKind, ErrorType, PositionSample, PositionSource};
 
 /// Mean Earth radius (IUGG), m.

@@ -7,7 +7,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-use crate::filter::wrap_angle;
+use mech_proto::wrap_angle;
 
 /// Parameters of [`UwbNoise`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -31,7 +31,7 @@ use mech_proto::{
 };
 
 use crate::control::{Controller, Gains, MissionRun, Refused};
-use crate::filter::wrap_angle;
+use mech_proto::wrap_angle;
 use crate::platform::{Platform, PlatformSpec};
 
 /// Time constant of the simulated actuators (wheel or velocity-loop lag), s.

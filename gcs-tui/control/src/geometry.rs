@@ -1,21 +1,7 @@
 //! Plane geometry shared by the controllers: angle wrapping and rotations
 //! between the world frame and body or cluster frames.
 
-use std::f64::consts::PI;
-
-/// Wraps an angle to `(-pi, pi]`, the range REP 103 headings use.
-pub fn wrap_angle(a: f64) -> f64 {
-    if !a.is_finite() {
-        return 0.0;
-    }
-    let mut w = a % (2.0 * PI);
-    if w <= -PI {
-        w += 2.0 * PI;
-    } else if w > PI {
-        w -= 2.0 * PI;
-    }
-    w
-}
+pub use mech_proto::wrap_angle;
 
 /// Rotates the vector `(x, y)` counter-clockwise by `angle`.
 pub(crate) fn rotate(x: f64, y: f64, angle: f64) -> (f64, f64) {
@@ -32,6 +18,7 @@ pub(crate) fn norm(x: f64, y: f64) -> f64 {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn wrap_keeps_half_open_range() {
@@ -39,7 +26,7 @@ mod tests {
         assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
         assert_eq!(wrap_angle(0.25), 0.25);
-        assert_eq!(wrap_angle(f64::NAN), 0.0);
+        assert!(wrap_angle(f64::NAN).is_nan(), "a bad angle stays visibly bad");
     }
 
     #[test]

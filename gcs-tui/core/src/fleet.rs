@@ -1,199 +1,28 @@
 //! The fleet model: the ground station's view of every robot, cluster,
 //! channel, route, waypoint list and e-stop, derived from router events.
 //!
-//! The router applies each [`Event`] here before any subscriber sees it, so
-//! the model never misses a route or link change even when a subscriber lags.
-//! The TUI and the script runner read it through [`crate::Gcs::snapshot`] or
+//! The router applies each [`Event`] here before any subscriber sees it (the
+//! model is the router's [`EventSink`]), so the model never misses a route
+//! or link change even when a subscriber lags. One function per event kind
+//! turns it into model changes and an operator log line. The TUI and the
+//! script runner read the model through [`crate::Gcs::snapshot`] or
 //! [`crate::Gcs::with_fleet`]; it holds no sockets and no UI types.
+
+mod config;
+mod robot;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{
-    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    Waypoint,
-};
-
-mod config;
+use mech_proto::{CommandKind, Notice, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
+pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
 
-use crate::counters::{ChannelStatus, Counters, Traffic};
+use crate::counters::{ChannelStatus, Counters};
 use crate::event::{Event, EventSink, LinkState, Stamped};
 use crate::sync::lock;
-
-/// A robot's entry in the routing table, as the GCS knows it.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct RouteState {
-    /// Channel the router forwards to this robot now (`None` = none). Takes
-    /// effect at the router immediately.
-    pub requested: Option<String>,
-    /// Epoch of `requested`.
-    pub epoch: u32,
-    /// Channel the robot has acknowledged (and so is obeying).
-    pub acknowledged: Option<String>,
-    /// Epoch of `acknowledged`.
-    pub acked_epoch: u32,
-}
-
-impl RouteState {
-    /// Whether the robot has not yet acknowledged the latest route change.
-    pub fn is_pending(&self) -> bool {
-        self.acked_epoch != self.epoch
-    }
-}
-
-/// How a mission's delivery went.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Delivery {
-    /// Being sent, repeated until acknowledged.
-    Sending,
-    /// The robot stored it.
-    Acked,
-    /// The robot refused it.
-    Refused(String),
-    /// No acknowledgement in time.
-    Failed(String),
-}
-
-/// A mission sent to a robot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SentMission {
-    pub id: u32,
-    pub channel: String,
-    pub waypoints: Vec<Waypoint>,
-    pub looped: bool,
-    pub delivery: Delivery,
-}
-
-/// A robot's waypoints: the list being edited in the GCS (`draft`) and the
-/// last mission sent.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct WaypointList {
-    pub draft: Vec<Waypoint>,
-    pub looped: bool,
-    pub sent: Option<SentMission>,
-}
-
-/// One point of a robot's recent trail.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PathPoint {
-    pub at: Duration,
-    pub x: f64,
-    pub y: f64,
-}
-
-/// Everything the GCS knows about one robot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Robot {
-    pub name: String,
-    /// Router-assigned id, stable while the GCS runs.
-    pub id: u16,
-    pub platform: String,
-    pub capabilities: Vec<CommandKind>,
-    pub motors: u8,
-    /// m/s
-    pub max_speed: f64,
-    /// rad/s
-    pub max_yaw_rate: f64,
-    pub addr: SocketAddr,
-    pub link: LinkState,
-    /// Router time of the last telemetry.
-    pub last_telemetry: Option<Duration>,
-    pub pose: Pose,
-    pub velocity: Velocity,
-    /// What the robot does with its actuators, from telemetry.
-    pub mode: ControlMode,
-    /// The channel the robot reports obeying (telemetry).
-    pub reported_channel: Option<String>,
-    pub route: RouteState,
-    pub computation: Computation,
-    pub failsafe: FailsafeState,
-    pub health: Health,
-    /// Fraction in `[0, 1]`.
-    pub battery: Option<f64>,
-    pub position_quality: f64,
-    pub actuators: Vec<f64>,
-    pub mission: Option<MissionProgress>,
-    pub waypoints: WaypointList,
-    /// Recent trail, oldest first.
-    pub path: VecDeque<PathPoint>,
-    /// Mode the GCS command line uses when it drives this robot.
-    pub gcs_mode: Option<CommandKind>,
-    /// Traffic counters (copied in by [`crate::Gcs::snapshot`]).
-    pub traffic: Traffic,
-    /// Id of the last e-stop or release this robot acknowledged.
-    pub estop_ack: Option<(bool, u32)>,
-}
-
-impl Robot {
-    fn new(name: &str, id: u16, addr: SocketAddr) -> Robot {
-        Robot {
-            name: name.to_string(),
-            id,
-            platform: String::new(),
-            capabilities: Vec::new(),
-            motors: 0,
-            max_speed: 0.0,
-            max_yaw_rate: 0.0,
-            addr,
-            link: LinkState::Connected,
-            last_telemetry: None,
-            pose: Pose::default(),
-            velocity: Velocity::default(),
-            mode: ControlMode::Idle,
-            reported_channel: None,
-            route: RouteState::default(),
-            computation: Computation::Onboard,
-            failsafe: FailsafeState::Ok,
-            health: Health::Ok,
-            battery: None,
-            position_quality: 0.0,
-            actuators: Vec::new(),
-            mission: None,
-            waypoints: WaypointList::default(),
-            path: VecDeque::new(),
-            gcs_mode: None,
-            traffic: Traffic::default(),
-            estop_ack: None,
-        }
-    }
-
-    /// Ground speed, m/s.
-    pub fn speed(&self) -> f64 {
-        self.velocity.vx.hypot(self.velocity.vy)
-    }
-
-    /// Heading, rad, counter-clockwise from +x.
-    pub fn heading(&self) -> f64 {
-        self.pose.heading
-    }
-
-    /// Distance (m, in the plane) from the robot to a point.
-    pub fn distance_to(&self, x: f64, y: f64) -> f64 {
-        (self.pose.x - x).hypot(self.pose.y - y)
-    }
-
-    /// Whether the last mission sent was acknowledged and the robot reports
-    /// it finished.
-    pub fn arrived(&self) -> bool {
-        match (&self.waypoints.sent, &self.mission) {
-            (Some(sent), Some(p)) => {
-                sent.delivery == Delivery::Acked
-                    && p.id == sent.id
-                    && p.total > 0
-                    && p.next >= p.total
-            }
-            _ => false,
-        }
-    }
-
-    /// Whether the robot obeys `kind` commands.
-    pub fn can(&self, kind: CommandKind) -> bool {
-        self.capabilities.contains(&kind)
-    }
-}
 
 /// A named set of robots.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -236,6 +65,9 @@ impl Severity {
 /// One line of the event log shown to the operator.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LogEntry {
+    /// Numbered from 1 in the order lines were logged, so a display that
+    /// showed up to `seq` asks for what came after ([`Fleet::log_after`]).
+    pub seq: u64,
     pub at: Duration,
     pub severity: Severity,
     pub text: String,
@@ -258,6 +90,8 @@ pub struct Fleet {
     pub tcp: Option<SocketAddr>,
     /// Router time of the last applied event.
     pub now: Duration,
+    /// Sequence number of the last log line.
+    log_seq: u64,
     config: FleetConfig,
 }
 
@@ -273,6 +107,7 @@ impl Fleet {
             udp: None,
             tcp: None,
             now: Duration::ZERO,
+            log_seq: 0,
             config,
         }
     }
@@ -311,9 +146,10 @@ impl Fleet {
 
     /// Appends an operator log line.
     pub fn log(&mut self, severity: Severity, text: impl Into<String>) {
-        let at = self.now;
+        self.log_seq += 1;
         self.log.push_back(LogEntry {
-            at,
+            seq: self.log_seq,
+            at: self.now,
             severity,
             text: text.into(),
         });
@@ -322,20 +158,19 @@ impl Fleet {
         }
     }
 
-    /// Updates the model from one router event.
+    /// Log lines logged after line `seq` (all kept lines for 0), oldest
+    /// first. Lines that scrolled out of the kept window are gone.
+    pub fn log_after(&self, seq: u64) -> impl Iterator<Item = &LogEntry> {
+        let skip = self.log.partition_point(|e| e.seq <= seq);
+        self.log.iter().skip(skip)
+    }
+
+    /// Updates the model from one router event: one function per kind.
     pub fn apply(&mut self, stamped: &Stamped) {
         self.now = self.now.max(stamped.at);
         let at = stamped.at;
         match &stamped.event {
-            Event::Listening { udp, tcp } => {
-                self.udp = Some(*udp);
-                self.tcp = *tcp;
-                let tcp = tcp.map(|t| format!(", TCP {t}")).unwrap_or_default();
-                self.log(
-                    Severity::Info,
-                    format!("router listening on UDP {udp}{tcp}"),
-                );
-            }
+            Event::Listening { udp, tcp } => self.listening(*udp, *tcp),
             Event::Registered {
                 robot,
                 id,
@@ -346,231 +181,285 @@ impl Fleet {
                 max_speed,
                 max_yaw_rate,
                 known,
-            } => {
-                let r = self
-                    .robots
-                    .entry(robot.clone())
-                    .or_insert_with(|| Robot::new(robot, *id, *addr));
-                let moved = r.addr != *addr;
-                r.id = *id;
-                r.addr = *addr;
-                r.platform = platform.clone();
-                r.capabilities = capabilities.clone();
-                r.motors = *motors;
-                r.max_speed = *max_speed;
-                r.max_yaw_rate = *max_yaw_rate;
-                r.link = LinkState::Connected;
-                let text = match (known, moved) {
-                    (false, _) => format!("{robot} ({platform}) connected from {addr}"),
-                    (true, true) => format!("{robot} re-registered from new address {addr}"),
-                    (true, false) => format!("{robot} re-registered"),
-                };
-                self.log(Severity::Info, text);
-            }
-            Event::Link { robot, state } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.link = *state;
-                }
-                let severity = if *state == LinkState::Lost {
-                    Severity::Warn
-                } else {
-                    Severity::Info
-                };
-                self.log(severity, format!("{robot} link {}", state.as_str()));
-            }
-            Event::Telemetry {
+            } => self.registered(
                 robot,
-                telemetry: t,
-            } => {
-                let spacing = self.config.path_spacing;
-                let history = self.config.path_history;
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.last_telemetry = Some(at);
-                    r.pose = t.pose;
-                    r.velocity = t.velocity;
-                    r.mode = t.mode;
-                    r.reported_channel = (!t.channel.is_empty()).then(|| t.channel.clone());
-                    r.computation = t.computation;
-                    r.failsafe = t.failsafe;
-                    r.health = t.health;
-                    r.battery = t.battery;
-                    r.position_quality = t.position_quality;
-                    r.actuators.clone_from(&t.actuators);
-                    r.mission = t.mission;
-                    let far = r
-                        .path
-                        .back()
-                        .is_none_or(|p| (p.x - t.pose.x).hypot(p.y - t.pose.y) >= spacing);
-                    if far {
-                        r.path.push_back(PathPoint {
-                            at,
-                            x: t.pose.x,
-                            y: t.pose.y,
-                        });
-                        while r.path.len() > history {
-                            r.path.pop_front();
-                        }
-                    }
-                }
-            }
+                *id,
+                *addr,
+                Platform {
+                    name: platform,
+                    capabilities,
+                    motors: *motors,
+                    max_speed: *max_speed,
+                    max_yaw_rate: *max_yaw_rate,
+                },
+                *known,
+            ),
+            Event::Link { robot, state } => self.link(robot, *state),
+            Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
             Event::RouteChanged {
                 robot,
                 channel,
                 epoch,
-            } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.route.requested = channel.clone();
-                    r.route.epoch = *epoch;
-                }
-                self.log(
-                    Severity::Info,
-                    format!("{robot} routed to {} (pending)", show(channel)),
-                );
-            }
+            } => self.route_changed(robot, channel, *epoch),
             Event::RouteAcked {
                 robot,
                 channel,
                 epoch,
-            } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.route.acknowledged = channel.clone();
-                    r.route.acked_epoch = *epoch;
-                }
-                self.log(
-                    Severity::Info,
-                    format!("{robot} acknowledged route {}", show(channel)),
-                );
-            }
+            } => self.route_acked(robot, channel, *epoch),
             Event::MissionSent {
                 robot,
                 channel,
                 id,
                 waypoints,
                 looped,
-            } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.waypoints.sent = Some(SentMission {
-                        id: *id,
-                        channel: channel.clone(),
-                        waypoints: waypoints.clone(),
-                        looped: *looped,
-                        delivery: Delivery::Sending,
-                    });
-                }
-                self.log(
-                    Severity::Info,
-                    format!(
-                        "mission {id} ({} waypoints) sent to {robot} on {channel}",
-                        waypoints.len()
-                    ),
-                );
-            }
+            } => self.mission_sent(robot, channel, *id, waypoints, *looped),
             Event::MissionAcked {
                 robot,
                 id,
                 accepted,
                 reason,
-            } => {
-                if let Some(sent) = self
-                    .robots
-                    .get_mut(robot)
-                    .and_then(|r| r.waypoints.sent.as_mut())
-                {
-                    if sent.id == *id {
-                        sent.delivery = if *accepted {
-                            Delivery::Acked
-                        } else {
-                            Delivery::Refused(reason.clone())
-                        };
-                    }
-                }
-                if *accepted {
-                    self.log(Severity::Info, format!("{robot} acknowledged mission {id}"));
-                } else {
-                    self.log(
-                        Severity::Warn,
-                        format!("{robot} refused mission {id}: {reason}"),
-                    );
-                }
-            }
-            Event::MissionFailed { robot, id, reason } => {
-                if let Some(sent) = self
-                    .robots
-                    .get_mut(robot)
-                    .and_then(|r| r.waypoints.sent.as_mut())
-                {
-                    if sent.id == *id {
-                        sent.delivery = Delivery::Failed(reason.clone());
-                    }
-                }
-                self.log(
-                    Severity::Error,
-                    format!("mission {id} to {robot} failed: {reason}"),
-                );
-            }
-            Event::EStop { engage, id } => {
-                self.estop.engaged = *engage;
-                self.estop.id = *id;
-                self.estop.pending = self.robots.keys().cloned().collect();
-                let what = if *engage {
-                    "E-STOP engaged"
-                } else {
-                    "e-stop released"
-                };
-                self.log(
-                    if *engage {
-                        Severity::Error
-                    } else {
-                        Severity::Warn
-                    },
-                    format!("{what} (id {id})"),
-                );
-            }
-            Event::EStopAcked { robot, engage, id } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.estop_ack = Some((*engage, *id));
-                }
-                if *id == self.estop.id && *engage == self.estop.engaged {
-                    self.estop.pending.remove(robot);
-                }
-            }
-            Event::EStopComplete { engage, id } => {
-                if *id == self.estop.id && *engage == self.estop.engaged {
-                    self.estop.pending.clear();
-                }
-                let what = if *engage { "e-stop" } else { "release" };
-                self.log(
-                    Severity::Info,
-                    format!("every robot acknowledged {what} {id}"),
-                );
-            }
-            Event::ChannelPublisher { channel, publisher } => {
-                self.log(
-                    Severity::Info,
-                    format!("channel {channel} published by {publisher}"),
-                );
-            }
+            } => self.mission_acked(robot, *id, *accepted, reason),
+            Event::MissionFailed { robot, id, reason } => self.mission_failed(robot, *id, reason),
+            Event::EStop { engage, id } => self.estop(*engage, *id),
+            Event::EStopAcked { robot, engage, id } => self.estop_acked(robot, *engage, *id),
+            Event::EStopComplete { engage, id } => self.estop_complete(*engage, *id),
+            Event::ChannelPublisher { channel, publisher } => self.log(
+                Severity::Info,
+                format!("channel {channel} published by {publisher}"),
+            ),
             Event::ClusterCommand { .. } => {}
-            Event::Bye { robot, reason } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.link = LinkState::Lost;
-                }
-                self.log(Severity::Warn, format!("{robot} left: {reason}"));
-            }
-            Event::Notice { from, notice } => {
-                let severity = match notice.level {
-                    mech_proto::Level::Debug => Severity::Debug,
-                    mech_proto::Level::Info => Severity::Info,
-                    mech_proto::Level::Warn => Severity::Warn,
-                    mech_proto::Level::Error => Severity::Error,
-                };
-                self.log(severity, format!("{from}: {}", notice.text));
-            }
+            Event::Bye { robot, reason } => self.bye(robot, reason),
+            Event::Notice { from, notice } => self.notice(from, notice),
             Event::BadPacket { from, error } => {
-                self.log(Severity::Warn, format!("bad packet from {from}: {error}"));
+                self.log(Severity::Warn, format!("bad packet from {from}: {error}"))
             }
         }
     }
+
+    fn listening(&mut self, udp: SocketAddr, tcp: Option<SocketAddr>) {
+        self.udp = Some(udp);
+        self.tcp = tcp;
+        let tcp = tcp.map(|t| format!(", TCP {t}")).unwrap_or_default();
+        self.log(
+            Severity::Info,
+            format!("router listening on UDP {udp}{tcp}"),
+        );
+    }
+
+    fn registered(
+        &mut self,
+        robot: &str,
+        id: u16,
+        addr: SocketAddr,
+        platform: Platform<'_>,
+        known: bool,
+    ) {
+        let r = self
+            .robots
+            .entry(robot.to_string())
+            .or_insert_with(|| Robot::new(robot, id, addr));
+        let moved = r.addr != addr;
+        r.id = id;
+        r.addr = addr;
+        r.platform = platform.name.to_string();
+        r.capabilities = platform.capabilities.to_vec();
+        r.motors = platform.motors;
+        r.max_speed = platform.max_speed;
+        r.max_yaw_rate = platform.max_yaw_rate;
+        r.link = LinkState::Connected;
+        let text = match (known, moved) {
+            (false, _) => format!("{robot} ({}) connected from {addr}", platform.name),
+            (true, true) => format!("{robot} re-registered from new address {addr}"),
+            (true, false) => format!("{robot} re-registered"),
+        };
+        self.log(Severity::Info, text);
+    }
+
+    fn link(&mut self, robot: &str, state: LinkState) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.link = state;
+        }
+        let severity = if state == LinkState::Lost {
+            Severity::Warn
+        } else {
+            Severity::Info
+        };
+        self.log(severity, format!("{robot} link {}", state.as_str()));
+    }
+
+    fn telemetry(&mut self, robot: &str, t: &Telemetry, at: Duration) {
+        let (spacing, history) = (self.config.path_spacing, self.config.path_history);
+        let Some(r) = self.robots.get_mut(robot) else {
+            return;
+        };
+        r.last_telemetry = Some(at);
+        r.pose = t.pose;
+        r.velocity = t.velocity;
+        r.mode = t.mode;
+        r.reported_channel = (!t.channel.is_empty()).then(|| t.channel.clone());
+        r.computation = t.computation;
+        r.failsafe = t.failsafe;
+        r.health = t.health;
+        r.battery = t.battery;
+        r.position_quality = t.position_quality;
+        r.actuators.clone_from(&t.actuators);
+        r.mission = t.mission;
+        let far = r
+            .path
+            .back()
+            .is_none_or(|p| (p.x - t.pose.x).hypot(p.y - t.pose.y) >= spacing);
+        if far {
+            r.path.push_back(PathPoint {
+                at,
+                x: t.pose.x,
+                y: t.pose.y,
+            });
+            while r.path.len() > history {
+                r.path.pop_front();
+            }
+        }
+    }
+
+    fn route_changed(&mut self, robot: &str, channel: &Option<String>, epoch: u32) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.route.requested = channel.clone();
+            r.route.epoch = epoch;
+        }
+        self.log(
+            Severity::Info,
+            format!("{robot} routed to {} (pending)", show(channel)),
+        );
+    }
+
+    fn route_acked(&mut self, robot: &str, channel: &Option<String>, epoch: u32) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.route.acknowledged = channel.clone();
+            r.route.acked_epoch = epoch;
+        }
+        self.log(
+            Severity::Info,
+            format!("{robot} acknowledged route {}", show(channel)),
+        );
+    }
+
+    fn mission_sent(
+        &mut self,
+        robot: &str,
+        channel: &str,
+        id: u32,
+        waypoints: &[Waypoint],
+        looped: bool,
+    ) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.waypoints.sent = Some(SentMission {
+                id,
+                channel: channel.to_string(),
+                waypoints: waypoints.to_vec(),
+                looped,
+                delivery: MissionDelivery::Sending,
+            });
+        }
+        self.log(
+            Severity::Info,
+            format!(
+                "mission {id} ({} waypoints) sent to {robot} on {channel}",
+                waypoints.len()
+            ),
+        );
+    }
+
+    /// The delivery state of `robot`'s last mission, if it is mission `id`.
+    fn sent_mission(&mut self, robot: &str, id: u32) -> Option<&mut SentMission> {
+        self.robots
+            .get_mut(robot)
+            .and_then(|r| r.waypoints.sent.as_mut())
+            .filter(|sent| sent.id == id)
+    }
+
+    fn mission_acked(&mut self, robot: &str, id: u32, accepted: bool, reason: &str) {
+        if let Some(sent) = self.sent_mission(robot, id) {
+            sent.delivery = if accepted {
+                MissionDelivery::Acked
+            } else {
+                MissionDelivery::Refused(reason.to_string())
+            };
+        }
+        if accepted {
+            self.log(Severity::Info, format!("{robot} acknowledged mission {id}"));
+        } else {
+            self.log(
+                Severity::Warn,
+                format!("{robot} refused mission {id}: {reason}"),
+            );
+        }
+    }
+
+    fn mission_failed(&mut self, robot: &str, id: u32, reason: &str) {
+        if let Some(sent) = self.sent_mission(robot, id) {
+            sent.delivery = MissionDelivery::Failed(reason.to_string());
+        }
+        self.log(
+            Severity::Error,
+            format!("mission {id} to {robot} failed: {reason}"),
+        );
+    }
+
+    fn estop(&mut self, engage: bool, id: u32) {
+        self.estop.engaged = engage;
+        self.estop.id = id;
+        self.estop.pending = self.robots.keys().cloned().collect();
+        if engage {
+            self.log(Severity::Error, format!("E-STOP engaged (id {id})"));
+        } else {
+            self.log(Severity::Warn, format!("e-stop released (id {id})"));
+        }
+    }
+
+    fn estop_acked(&mut self, robot: &str, engage: bool, id: u32) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.estop_ack = Some((engage, id));
+        }
+        if id == self.estop.id && engage == self.estop.engaged {
+            self.estop.pending.remove(robot);
+        }
+    }
+
+    fn estop_complete(&mut self, engage: bool, id: u32) {
+        if id == self.estop.id && engage == self.estop.engaged {
+            self.estop.pending.clear();
+        }
+        let what = if engage { "e-stop" } else { "release" };
+        self.log(
+            Severity::Info,
+            format!("every robot acknowledged {what} {id}"),
+        );
+    }
+
+    fn bye(&mut self, robot: &str, reason: &str) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.link = LinkState::Lost;
+        }
+        self.log(Severity::Warn, format!("{robot} left: {reason}"));
+    }
+
+    fn notice(&mut self, from: &str, notice: &Notice) {
+        let severity = match notice.level {
+            mech_proto::Level::Debug => Severity::Debug,
+            mech_proto::Level::Info => Severity::Info,
+            mech_proto::Level::Warn => Severity::Warn,
+            mech_proto::Level::Error => Severity::Error,
+        };
+        self.log(severity, format!("{from}: {}", notice.text));
+    }
+}
+
+/// What a registration says about a robot's platform.
+struct Platform<'a> {
+    name: &'a str,
+    capabilities: &'a [CommandKind],
+    motors: u8,
+    max_speed: f64,
+    max_yaw_rate: f64,
 }
 
 /// The fleet model behind its lock is where the router delivers events.
@@ -587,7 +476,9 @@ fn show(channel: &Option<String>) -> &str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mech_proto::{Telemetry, Velocity};
+    use mech_proto::{
+        Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+    };
 
     fn at(ms: u64, event: Event) -> Stamped {
         Stamped {
@@ -773,5 +664,24 @@ mod tests {
         }
         assert_eq!(f.log.len(), 3);
         assert_eq!(f.log.back().unwrap().text, "line 9");
+    }
+
+    #[test]
+    fn log_lines_are_numbered_and_read_after_a_number() {
+        let mut cfg = FleetConfig::default();
+        cfg.event_log = 4;
+        let mut f = Fleet::new(cfg);
+        for i in 1..=6 {
+            f.log(Severity::Info, format!("line {i}"));
+        }
+        let seqs: Vec<u64> = f.log.iter().map(|e| e.seq).collect();
+        assert_eq!(seqs, vec![3, 4, 5, 6]);
+        let after = |f: &Fleet, n| f.log_after(n).map(|e| e.text.clone()).collect::<Vec<_>>();
+        assert_eq!(after(&f, 4), vec!["line 5", "line 6"]);
+        assert_eq!(after(&f, 0).len(), 4, "from the start: what is kept");
+        assert!(after(&f, 6).is_empty());
+        // The same text twice at the same time is still two lines.
+        f.log(Severity::Info, "line 6");
+        assert_eq!(after(&f, 6), vec!["line 6"]);
     }
 }

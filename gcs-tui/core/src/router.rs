@@ -21,7 +21,7 @@ use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use mech_proto::{Body, Command, Envelope, FleetCommand, Header, Mission, RobotCommand};
 use tokio::net::UdpSocket;
@@ -318,6 +318,16 @@ impl RouterHandle {
         }
     }
 
+    /// In-process publishers named `sender`, one per channel, made on first
+    /// use.
+    pub fn publishers(&self, sender: &str) -> Publishers {
+        Publishers {
+            router: self.clone(),
+            sender: sender.to_string(),
+            by_channel: HashMap::new(),
+        }
+    }
+
     /// Routes `robot` to `channel` (`None` = none). Takes effect for the very
     /// next message; the agent is told, repeatedly until it acknowledges.
     /// Returns the new route epoch.
@@ -406,14 +416,10 @@ impl RouterHandle {
 }
 
 fn envelope(sender: &str, destination: &str, channel: &str, seq: u32, body: Body) -> Envelope {
-    let stamp_us = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0);
     Envelope::new(
         Header {
             seq,
-            stamp_us,
+            stamp_us: mech_proto::unix_micros(),
             sender: sender.to_string(),
             destination: destination.to_string(),
             channel: channel.to_string(),
@@ -463,5 +469,25 @@ impl Publisher {
         let env = envelope(&self.sender, destination, &self.channel, self.seq, body);
         let bytes = mech_proto::encode(&env)?;
         Ok(self.router.inject(&bytes).await)
+    }
+}
+
+/// In-process publishers under one sender name, one per channel, made on
+/// first use: a channel keeps one steady publisher, so its sequence numbers
+/// run on and the router's per-channel rate is that publisher's.
+#[derive(Debug)]
+pub struct Publishers {
+    router: RouterHandle,
+    sender: String,
+    by_channel: HashMap<String, Publisher>,
+}
+
+impl Publishers {
+    /// The publisher on `channel`.
+    pub fn on(&mut self, channel: &str) -> &mut Publisher {
+        let (router, sender) = (&self.router, &self.sender);
+        self.by_channel
+            .entry(channel.to_string())
+            .or_insert_with(|| router.publisher(sender, channel))
     }
 }

@@ -4,6 +4,7 @@
 
 use std::sync::{Arc, Mutex};
 
+use mech_proto::{Mission, Waypoint};
 use serde::Deserialize;
 
 use crate::config::ConfigError;
@@ -93,6 +94,30 @@ impl Gcs {
     /// the router's tables inside `f`.
     pub fn update_fleet<R>(&self, f: impl FnOnce(&mut Fleet) -> R) -> R {
         f(&mut lock(&self.fleet))
+    }
+
+    /// Sends `waypoints` to `robot` as a mission on `channel` from
+    /// `sender`, with the station's arrival radius (`fleet.arrival_radius`)
+    /// and a fresh id, repeated until the robot acknowledges it. Returns the
+    /// mission id.
+    pub async fn send_waypoints(
+        &self,
+        sender: &str,
+        robot: &str,
+        channel: &str,
+        waypoints: Vec<Waypoint>,
+        looped: bool,
+    ) -> Result<u32, RouterError> {
+        let mission = Mission {
+            id: 0,
+            waypoints,
+            looped,
+            arrival_radius: self.config.fleet.arrival_radius,
+            start_index: 0,
+        };
+        self.router
+            .send_mission(sender, robot, channel, mission)
+            .await
     }
 
     /// Stops the router. Other clones then see a stopped router.

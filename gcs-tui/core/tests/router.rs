@@ -580,7 +580,7 @@ async fn missions_are_retried_until_acknowledged() {
             .as_ref()
             .unwrap()
             .delivery,
-        mech_core::fleet::Delivery::Acked
+        mech_core::fleet::MissionDelivery::Acked
     );
     gcs.shutdown().await;
 }
@@ -600,7 +600,7 @@ async fn an_unacknowledged_mission_is_reported_failed() {
     let sent = f.robot("robot_1").unwrap().waypoints.sent.clone().unwrap();
     assert_eq!(sent.id, id);
     assert!(
-        matches!(sent.delivery, mech_core::fleet::Delivery::Failed(_)),
+        matches!(sent.delivery, mech_core::fleet::MissionDelivery::Failed(_)),
         "{:?}",
         sent.delivery
     );

@@ -9,7 +9,6 @@
 
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use mech_proto::{
     Body, Channels, ChannelsRequest, EStop, Envelope, Header, Heartbeat, Route, Welcome,
@@ -136,18 +135,9 @@ pub(crate) struct Tables {
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
 /// repeated mission id as the same mission).
 fn clock_seed() -> u32 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs() as u32)
-        .unwrap_or(1)
+    ((mech_proto::unix_micros() / 1_000_000) as u32)
+        .max(1)
         .wrapping_mul(16)
-}
-
-fn stamp_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_micros() as u64)
-        .unwrap_or(0)
 }
 
 fn route_of(channel: &str) -> Option<String> {
@@ -182,7 +172,7 @@ impl Tables {
         self.seq = self.seq.wrapping_add(1);
         let header = Header {
             seq: self.seq,
-            stamp_us: stamp_us(),
+            stamp_us: mech_proto::unix_micros(),
             sender: self.config.name.clone(),
             destination: destination.to_string(),
             channel: String::new(),

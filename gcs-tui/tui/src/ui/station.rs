@@ -216,7 +216,7 @@ async fn event_loop(
     };
     let mut teleop_tick = tokio::time::interval(Duration::from_secs_f64(1.0 / rate));
     teleop_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut log_last: Option<(Duration, String)> = None;
+    let mut log_last = 0;
 
     while app.running {
         tokio::select! {
@@ -270,32 +270,19 @@ fn snapshot_channels(router: &RouterHandle) -> Vec<ChannelView> {
         .collect()
 }
 
-/// Core log lines not shown yet, oldest first.
-fn new_log_lines(f: &Fleet, last: &mut Option<(Duration, String)>) -> Vec<(LogLevel, String)> {
-    let start = match last {
-        None => 0,
-        Some((at, text)) => f
-            .log
-            .iter()
-            .rposition(|e| e.at == *at && &e.text == text)
-            .map_or(0, |i| i + 1),
-    };
-    let out: Vec<(LogLevel, String)> = f
-        .log
-        .iter()
-        .skip(start)
-        .filter(|e| e.severity != Severity::Debug)
-        .map(|e| {
-            let level = match e.severity {
-                Severity::Debug | Severity::Info => LogLevel::Info,
-                Severity::Warn => LogLevel::Warn,
-                Severity::Error => LogLevel::Error,
-            };
-            (level, e.text.clone())
-        })
-        .collect();
-    if let Some(e) = f.log.back() {
-        *last = Some((e.at, e.text.clone()));
+/// Core log lines after line `last`, oldest first; `last` moves on to the
+/// newest.
+fn new_log_lines(f: &Fleet, last: &mut u64) -> Vec<(LogLevel, String)> {
+    let mut out = Vec::new();
+    for e in f.log_after(*last) {
+        *last = e.seq;
+        let level = match e.severity {
+            Severity::Debug => continue,
+            Severity::Info => LogLevel::Info,
+            Severity::Warn => LogLevel::Warn,
+            Severity::Error => LogLevel::Error,
+        };
+        out.push((level, e.text.clone()));
     }
     out
 }

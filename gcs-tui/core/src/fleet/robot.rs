@@ -1,0 +1,188 @@
+//! One robot as the station knows it: identity and platform from its
+//! registration, pose and state from telemetry, its route, waypoints,
+//! mission and recent trail.
+
+use std::collections::VecDeque;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use mech_proto::{
+    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+    Waypoint,
+};
+
+use crate::counters::Traffic;
+use crate::event::LinkState;
+
+/// A robot's entry in the routing table, as the GCS knows it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RouteState {
+    /// Channel the router forwards to this robot now (`None` = none). Takes
+    /// effect at the router immediately.
+    pub requested: Option<String>,
+    /// Epoch of `requested`.
+    pub epoch: u32,
+    /// Channel the robot has acknowledged (and so is obeying).
+    pub acknowledged: Option<String>,
+    /// Epoch of `acknowledged`.
+    pub acked_epoch: u32,
+}
+
+impl RouteState {
+    /// Whether the robot has not yet acknowledged the latest route change.
+    pub fn is_pending(&self) -> bool {
+        self.acked_epoch != self.epoch
+    }
+}
+
+/// How a mission's delivery went.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MissionDelivery {
+    /// Being sent, repeated until acknowledged.
+    Sending,
+    /// The robot stored it.
+    Acked,
+    /// The robot refused it.
+    Refused(String),
+    /// No acknowledgement in time.
+    Failed(String),
+}
+
+/// A mission sent to a robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SentMission {
+    pub id: u32,
+    pub channel: String,
+    pub waypoints: Vec<Waypoint>,
+    pub looped: bool,
+    pub delivery: MissionDelivery,
+}
+
+/// A robot's waypoints: the list being edited in the GCS (`draft`) and the
+/// last mission sent.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct WaypointList {
+    pub draft: Vec<Waypoint>,
+    pub looped: bool,
+    pub sent: Option<SentMission>,
+}
+
+/// One point of a robot's recent trail.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathPoint {
+    pub at: Duration,
+    pub x: f64,
+    pub y: f64,
+}
+
+/// Everything the GCS knows about one robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Robot {
+    pub name: String,
+    /// Router-assigned id, stable while the GCS runs.
+    pub id: u16,
+    pub platform: String,
+    pub capabilities: Vec<CommandKind>,
+    pub motors: u8,
+    /// m/s
+    pub max_speed: f64,
+    /// rad/s
+    pub max_yaw_rate: f64,
+    pub addr: SocketAddr,
+    pub link: LinkState,
+    /// Router time of the last telemetry.
+    pub last_telemetry: Option<Duration>,
+    pub pose: Pose,
+    pub velocity: Velocity,
+    /// What the robot does with its actuators, from telemetry.
+    pub mode: ControlMode,
+    /// The channel the robot reports obeying (telemetry).
+    pub reported_channel: Option<String>,
+    pub route: RouteState,
+    pub computation: Computation,
+    pub failsafe: FailsafeState,
+    pub health: Health,
+    /// Fraction in `[0, 1]`.
+    pub battery: Option<f64>,
+    pub position_quality: f64,
+    pub actuators: Vec<f64>,
+    pub mission: Option<MissionProgress>,
+    pub waypoints: WaypointList,
+    /// Recent trail, oldest first.
+    pub path: VecDeque<PathPoint>,
+    /// Mode the GCS command line uses when it drives this robot.
+    pub gcs_mode: Option<CommandKind>,
+    /// Traffic counters (copied in by [`crate::Gcs::snapshot`]).
+    pub traffic: Traffic,
+    /// Id of the last e-stop or release this robot acknowledged.
+    pub estop_ack: Option<(bool, u32)>,
+}
+
+impl Robot {
+    pub(super) fn new(name: &str, id: u16, addr: SocketAddr) -> Robot {
+        Robot {
+            name: name.to_string(),
+            id,
+            platform: String::new(),
+            capabilities: Vec::new(),
+            motors: 0,
+            max_speed: 0.0,
+            max_yaw_rate: 0.0,
+            addr,
+            link: LinkState::Connected,
+            last_telemetry: None,
+            pose: Pose::default(),
+            velocity: Velocity::default(),
+            mode: ControlMode::Idle,
+            reported_channel: None,
+            route: RouteState::default(),
+            computation: Computation::Onboard,
+            failsafe: FailsafeState::Ok,
+            health: Health::Ok,
+            battery: None,
+            position_quality: 0.0,
+            actuators: Vec::new(),
+            mission: None,
+            waypoints: WaypointList::default(),
+            path: VecDeque::new(),
+            gcs_mode: None,
+            traffic: Traffic::default(),
+            estop_ack: None,
+        }
+    }
+
+    /// Ground speed, m/s.
+    pub fn speed(&self) -> f64 {
+        self.velocity.vx.hypot(self.velocity.vy)
+    }
+
+    /// Heading, rad, counter-clockwise from +x.
+    pub fn heading(&self) -> f64 {
+        self.pose.heading
+    }
+
+    /// Distance (m, in the plane) from the robot to a point.
+    pub fn distance_to(&self, x: f64, y: f64) -> f64 {
+        (self.pose.x - x).hypot(self.pose.y - y)
+    }
+
+    /// Whether the last mission sent was acknowledged and the robot reports
+    /// it finished.
+    pub fn arrived(&self) -> bool {
+        match (&self.waypoints.sent, &self.mission) {
+            (Some(sent), Some(p)) => {
+                sent.delivery == MissionDelivery::Acked
+                    && p.id == sent.id
+                    && p.total > 0
+                    && p.next >= p.total
+            }
+            _ => false,
+        }
+    }
+
+    /// Whether the robot obeys `kind` commands.
+    pub fn can(&self, kind: CommandKind) -> bool {
+        self.capabilities.contains(&kind)
+    }
+}
+
