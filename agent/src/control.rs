@@ -14,8 +14,8 @@ use std::time::Duration;
 use mech_proto::{Command, CommandKind, ControlMode, Pose, Twist, VelocityHeading};
 use serde::Deserialize;
 
-use mech_proto::wrap_angle;
 use crate::platform::Platform;
+use mech_proto::wrap_angle;
 
 pub use mission::MissionRun;
 

@@ -198,11 +198,7 @@ fn edges_of(src: &Path) -> Edges {
                 .map(|n| full[..n].to_vec())
                 .find(|p| modules.contains(p))
                 .unwrap_or_default();
-            let common = me
-                .iter()
-                .zip(&target)
-                .take_while(|(a, b)| a == b)
-                .count();
+            let common = me.iter().zip(&target).take_while(|(a, b)| a == b).count();
             if common == me.len() || common == target.len() {
                 continue; // parent <-> child
             }
@@ -280,11 +276,18 @@ fn no_crate_has_an_import_cycle_between_its_modules() {
             failures.push(format!(
                 "{dir}: {{{}}}{under}: {}",
                 cycle.join(", "),
-                why.iter().map(|w| w.as_str()).collect::<Vec<_>>().join("; ")
+                why.iter()
+                    .map(|w| w.as_str())
+                    .collect::<Vec<_>>()
+                    .join("; ")
             ));
         }
     }
-    assert!(failures.is_empty(), "import cycles:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "import cycles:\n{}",
+        failures.join("\n")
+    );
 }
 
 #[test]
@@ -329,7 +332,15 @@ fn the_station_core_needs_no_terminal_gamepad_or_simulator() {
     for krate in ["mech-core", "mech-control"] {
         let out = Command::new(&cargo)
             .current_dir(workspace())
-            .args(["tree", "-p", krate, "-e", "normal,build", "--prefix", "none"])
+            .args([
+                "tree",
+                "-p",
+                krate,
+                "-e",
+                "normal,build",
+                "--prefix",
+                "none",
+            ])
             .output()
             .expect("cargo tree runs");
         assert!(

@@ -6,8 +6,8 @@ use std::time::Duration;
 use mech_proto::{Mission, MissionProgress, Pose, Twist};
 
 use super::{Gains, drive_factor};
-use mech_proto::wrap_angle;
 use crate::platform::Platform;
+use mech_proto::wrap_angle;
 
 /// A mission being flown or driven, with its progress.
 #[derive(Debug, Clone, PartialEq)]

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mech_proto::Pose;
 
-use mech_proto::wrap_angle;
 use crate::hal::{self, ErrorKind, ErrorType, PositionSample, PositionSource};
+use mech_proto::wrap_angle;
 
 /// Mean Earth radius (IUGG), m.
 const EARTH_RADIUS: f64 = 6_371_008.8;

@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use mech_proto::Pose;
 
-use mech_proto::wrap_angle;
 use crate::hal::{self, ErrorKind, ErrorType, PositionSample, PositionSource};
+use mech_proto::wrap_angle;
 
 const REG_INT_STATUS: u8 = 0x05;
 const REG_POS_X: u8 = 0x30;

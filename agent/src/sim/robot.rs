@@ -31,8 +31,8 @@ use mech_proto::{
 };
 
 use crate::control::{Controller, Gains, MissionRun, Refused};
-use mech_proto::wrap_angle;
 use crate::platform::{Platform, PlatformSpec};
+use mech_proto::wrap_angle;
 
 /// Time constant of the simulated actuators (wheel or velocity-loop lag), s.
 pub const DEFAULT_RESPONSE_TIME: f64 = 0.05;

@@ -16,7 +16,7 @@ use super::parse::{VERBS, failsafe_name, parse_line};
 use super::{LangError, Span};
 use crate::hub::ControlHub;
 use crate::spec::ClusterSpec;
-use mech_core::fleet::{MissionDelivery, Fleet, Robot, Severity};
+use mech_core::fleet::{Fleet, MissionDelivery, Robot, Severity};
 use mech_core::router::{Delivery, Publisher};
 use mech_core::{Gcs, LinkState};
 

@@ -185,4 +185,3 @@ impl Robot {
         self.capabilities.contains(&kind)
     }
 }
-
