@@ -31,6 +31,8 @@ pub enum DropReason {
     SendFailed,
     /// The message could not be decoded.
     BadPacket,
+    /// The router has shut down.
+    Stopped,
 }
 
 impl DropReason {
@@ -40,6 +42,7 @@ impl DropReason {
             DropReason::UnknownRobot => "unknown-robot",
             DropReason::SendFailed => "send-failed",
             DropReason::BadPacket => "bad-packet",
+            DropReason::Stopped => "router-stopped",
         }
     }
 }
@@ -51,11 +54,12 @@ pub struct Drops {
     pub unknown_robot: u64,
     pub send_failed: u64,
     pub bad_packet: u64,
+    pub stopped: u64,
 }
 
 impl Drops {
     pub fn total(&self) -> u64 {
-        self.not_routed + self.unknown_robot + self.send_failed + self.bad_packet
+        self.not_routed + self.unknown_robot + self.send_failed + self.bad_packet + self.stopped
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -64,6 +68,7 @@ impl Drops {
             DropReason::UnknownRobot => self.unknown_robot += 1,
             DropReason::SendFailed => self.send_failed += 1,
             DropReason::BadPacket => self.bad_packet += 1,
+            DropReason::Stopped => self.stopped += 1,
         }
     }
 
@@ -74,6 +79,7 @@ impl Drops {
             DropReason::UnknownRobot => self.unknown_robot,
             DropReason::SendFailed => self.send_failed,
             DropReason::BadPacket => self.bad_packet,
+            DropReason::Stopped => self.stopped,
         }
     }
 }

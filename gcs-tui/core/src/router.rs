@@ -25,7 +25,7 @@ use std::time::Duration;
 
 use mech_proto::{Body, Command, Envelope, FleetCommand, Header, Mission, RobotCommand};
 use tokio::net::UdpSocket;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
@@ -33,7 +33,7 @@ pub use bus::Subscription;
 pub use config::RouterConfig;
 pub use tables::Delivery;
 
-use crate::counters::{ChannelStatus, Counters};
+use crate::counters::{ChannelStatus, Counters, DropReason};
 use crate::event::{Event, EventSink};
 use crate::sync::lock;
 use bus::EventBus;
@@ -72,6 +72,9 @@ struct Shared {
     udp_order: Mutex<()>,
     next_conn: AtomicU64,
     subscriber_queue: usize,
+    /// Set once by [`Router::shutdown`]: every task watches it and stops,
+    /// and nothing is routed any more, from any peer or handle.
+    stop: watch::Sender<bool>,
 }
 
 impl Shared {
@@ -84,9 +87,17 @@ impl Shared {
         out: &mut Outbox,
         events: &mut Vec<Event>,
     ) -> Delivery {
+        if self.stopped() {
+            return Delivery::Dropped(DropReason::Stopped);
+        }
         let delivery = self.decide(bytes, from, Instant::now(), out, events);
         self.flush(bytes, out).await;
         delivery
+    }
+
+    /// Whether the router has been shut down.
+    fn stopped(&self) -> bool {
+        *self.stop.borrow()
     }
 
     /// The synchronous half of [`Shared::dispatch`]: the tables' decision and
@@ -114,6 +125,11 @@ impl Shared {
     /// bytes. The outbox keeps its allocations for the next message.
     async fn flush(&self, raw: &[u8], out: &mut Outbox) {
         if out.is_empty() {
+            return;
+        }
+        if self.stopped() {
+            out.raw.clear();
+            out.owned.clear();
             return;
         }
         for i in 0..out.raw.len() {
@@ -192,35 +208,11 @@ impl Router {
         config: RouterConfig,
         sink: Arc<dyn EventSink>,
     ) -> Result<Router, RouterError> {
-        let udp =
-            bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
-                what: "UDP",
-                addr: config.udp,
-                source,
-            })?;
-        let udp_addr = udp.local_addr().map_err(|source| RouterError::Bind {
-            what: "UDP",
-            addr: config.udp,
-            source,
-        })?;
-        let tcp =
-            match config.tcp {
-                Some(addr) => Some(tokio::net::TcpListener::bind(addr).await.map_err(
-                    |source| RouterError::Bind {
-                        what: "TCP",
-                        addr,
-                        source,
-                    },
-                )?),
-                None => None,
-            };
-        let tcp_addr = match &tcp {
-            Some(l) => Some(l.local_addr().map_err(|source| RouterError::Bind {
-                what: "TCP",
-                addr: config.tcp.unwrap_or(udp_addr),
-                source,
-            })?),
-            None => None,
+        let (udp, tcp) = bind(&config).await?;
+        let udp_addr = local_addr("UDP", config.udp, udp.local_addr())?;
+        let tcp_addr = match (&tcp, config.tcp) {
+            (Some(l), Some(asked)) => Some(local_addr("TCP", asked, l.local_addr())?),
+            _ => None,
         };
         let workers = config.udp_workers;
         let tick = config.tick;
@@ -234,6 +226,7 @@ impl Router {
             tcp_peers: Mutex::new(HashMap::new()),
             udp_order: Mutex::new(()),
             next_conn: AtomicU64::new(1),
+            stop: watch::Sender::new(false),
         });
         tracing::info!(udp = %udp_addr, tcp = ?tcp_addr, "router started");
         shared.bus.emit(Event::Listening {
@@ -258,19 +251,60 @@ impl Router {
         self.handle.clone()
     }
 
-    /// Stops every router task and closes subscriptions. Agents then see the
-    /// router lost (their failsafe stops them) within their router timeout.
+    /// Stops routing and waits until every router task has ended: the UDP
+    /// workers, the timers, the TCP acceptor and every TCP peer (their
+    /// connections are closed), then closes subscriptions. From then on
+    /// nothing is forwarded, from any peer or handle. Agents see the router
+    /// lost (their failsafe stops them) within their router timeout.
     pub async fn shutdown(self) {
-        for t in &self.tasks {
-            t.abort();
-        }
+        let shared = &self.handle.shared;
+        shared.stop.send_replace(true);
         for t in self.tasks {
-            let _ = t.await;
+            if let Err(e) = t.await {
+                tracing::warn!(error = %e, "a router task ended abnormally");
+            }
         }
-        lock(&self.handle.shared.tcp_peers).clear();
-        self.handle.shared.bus.close();
+        lock(&shared.tcp_peers).clear();
+        shared.bus.close();
         tracing::info!("router stopped");
     }
+}
+
+/// Binds the configured endpoints.
+async fn bind(
+    config: &RouterConfig,
+) -> Result<(UdpSocket, Option<tokio::net::TcpListener>), RouterError> {
+    let udp = bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
+        what: "UDP",
+        addr: config.udp,
+        source,
+    })?;
+    let tcp = match config.tcp {
+        Some(addr) => Some(
+            tokio::net::TcpListener::bind(addr)
+                .await
+                .map_err(|source| RouterError::Bind {
+                    what: "TCP",
+                    addr,
+                    source,
+                })?,
+        ),
+        None => None,
+    };
+    Ok((udp, tcp))
+}
+
+/// The address an endpoint was bound to (the port, when 0 was asked for).
+fn local_addr(
+    what: &'static str,
+    asked: SocketAddr,
+    bound: std::io::Result<SocketAddr>,
+) -> Result<SocketAddr, RouterError> {
+    bound.map_err(|source| RouterError::Bind {
+        what,
+        addr: asked,
+        source,
+    })
 }
 
 /// Binds the router's UDP socket with large kernel buffers (best effort: a

@@ -874,3 +874,63 @@ async fn position_fixes_reach_their_robot_and_unknown_robots_are_counted() {
     );
     gcs.shutdown().await;
 }
+
+#[tokio::test]
+async fn after_shutdown_a_connected_tcp_controller_reaches_no_robot() {
+    let gcs = gcs().await;
+    let mut robot = Peer::new("robot_1", gcs.router().udp_addr()).await;
+    robot.register().await;
+    gcs.router()
+        .set_route("robot_1", Some("ext/matlab"))
+        .await
+        .unwrap();
+    robot.follow_route().await;
+    let mut stream = tokio::net::TcpStream::connect(gcs.router().tcp_addr().unwrap())
+        .await
+        .unwrap();
+    let command = |seq, vx| {
+        let mut frame = Vec::new();
+        let env = envelope(
+            "matlab",
+            "robot_1",
+            "ext/matlab",
+            seq,
+            Body::Command(twist(vx)),
+        );
+        write_stream_frame(&env, &mut frame).unwrap();
+        frame
+    };
+    stream.write_all(&command(1, 0.3)).await.unwrap();
+    let got = robot
+        .recv_matching(|e| matches!(e.body, Body::Command(_)))
+        .await;
+    assert_eq!(got.body, Body::Command(twist(0.3)), "routed while running");
+
+    // Shutdown returns only once the TCP peer's task has ended: the router
+    // closes the connection, and what the controller still writes goes
+    // nowhere.
+    let mut pad = gcs.router().publisher("pad", "ext/matlab");
+    gcs.shutdown().await;
+    let mut buf = [0u8; 64];
+    let closed = tokio::time::timeout(Duration::from_secs(2), stream.read(&mut buf)).await;
+    assert!(
+        matches!(closed, Ok(Ok(0)) | Ok(Err(_))),
+        "the router closed the TCP connection: {closed:?}"
+    );
+    let _ = stream.write_all(&command(2, 0.9)).await;
+    assert_eq!(
+        pad.send("robot_1", twist(0.9)).await.unwrap(),
+        Delivery::Dropped(DropReason::Stopped),
+        "in-process publishers are refused too"
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let late: Vec<_> = robot
+        .drain()
+        .into_iter()
+        .filter(|e| matches!(e.body, Body::Command(_)))
+        .collect();
+    assert!(
+        late.is_empty(),
+        "commands after shutdown reached the robot: {late:?}"
+    );
+}

@@ -1,6 +1,8 @@
 //! The router's tasks: UDP receive loops, the TCP acceptor with a reader and
 //! a writer task per peer, and the timer task (heartbeats, link states,
-//! retries). Each hands bytes to [`super::Shared::dispatch`].
+//! retries). Each hands bytes to [`super::Shared::dispatch`]. Every task
+//! watches the router's stop signal and ends on it; the acceptor waits for
+//! its peers, so [`super::Router::shutdown`] waits for them all.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -10,6 +12,7 @@ use mech_proto::framing::StreamDecoder;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::mpsc;
+use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tracing::{debug, info, warn};
 
@@ -31,8 +34,13 @@ pub(super) async fn udp_worker(shared: Arc<Shared>) {
     let mut buf = vec![0u8; 65_536];
     let mut out = Outbox::default();
     let mut events = Vec::new();
+    let mut stop = shared.stop.subscribe();
     loop {
-        if let Err(e) = shared.udp.readable().await {
+        let ready = tokio::select! {
+            r = shared.udp.readable() => r,
+            _ = stop.wait_for(|s| *s) => return,
+        };
+        if let Err(e) = ready {
             debug!(error = %e, "UDP readiness error");
             tokio::task::yield_now().await;
             continue;
@@ -70,20 +78,32 @@ pub(super) async fn udp_worker(shared: Arc<Shared>) {
 pub(super) async fn timers(shared: Arc<Shared>, tick: Duration) {
     let mut interval = tokio::time::interval(tick);
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let mut stop = shared.stop.subscribe();
     loop {
-        interval.tick().await;
+        tokio::select! {
+            _ = interval.tick() => {}
+            _ = stop.wait_for(|s| *s) => return,
+        }
         shared.apply(|t, now, out, ev| t.tick(now, out, ev)).await;
     }
 }
 
-/// Accepts TCP controllers and tools.
+/// Accepts TCP controllers and tools, a task per peer; on stop, waits for
+/// every peer task to end.
 pub(super) async fn tcp_accept(shared: Arc<Shared>, listener: TcpListener) {
+    let mut peers = JoinSet::new();
+    let mut stop = shared.stop.subscribe();
     loop {
-        match listener.accept().await {
+        let accepted = tokio::select! {
+            a = listener.accept() => a,
+            Some(_) = peers.join_next(), if !peers.is_empty() => continue,
+            _ = stop.wait_for(|s| *s) => break,
+        };
+        match accepted {
             Ok((stream, addr)) => {
                 let conn = shared.next_conn.fetch_add(1, Ordering::Relaxed);
                 info!(%addr, conn, "TCP peer connected");
-                tokio::spawn(tcp_peer(shared.clone(), stream, conn));
+                peers.spawn(tcp_peer(shared.clone(), stream, conn));
             }
             Err(e) => {
                 warn!(error = %e, "TCP accept failed");
@@ -91,6 +111,8 @@ pub(super) async fn tcp_accept(shared: Arc<Shared>, listener: TcpListener) {
             }
         }
     }
+    drop(listener);
+    while peers.join_next().await.is_some() {}
 }
 
 /// One TCP peer: frames in, dispatched like datagrams; frames out through a
@@ -112,8 +134,13 @@ async fn tcp_peer(shared: Arc<Shared>, stream: TcpStream, conn: u64) {
     let mut out = Outbox::default();
     let mut events = Vec::new();
     let started = Instant::now();
+    let mut stop = shared.stop.subscribe();
     'read: loop {
-        let n = match rd.read(&mut buf).await {
+        let read = tokio::select! {
+            r = rd.read(&mut buf) => r,
+            _ = stop.wait_for(|s| *s) => break,
+        };
+        let n = match read {
             Ok(0) | Err(_) => break,
             Ok(n) => n,
         };
@@ -140,6 +167,7 @@ async fn tcp_peer(shared: Arc<Shared>, stream: TcpStream, conn: u64) {
     lock(&shared.tcp_peers).remove(&conn);
     lock(&shared.tables).forget_peer(Peer::Tcp(conn));
     writer.abort();
+    let _ = writer.await;
     info!(
         conn,
         secs = started.elapsed().as_secs_f64(),
