@@ -12,7 +12,7 @@ use tokio::time::Instant;
 use crate::agent::Agent;
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
-use crate::runtime::{self, HardwareVehicle, Io, SimVehicle, Ticker};
+use crate::runtime::{self, HardwareVehicle, Io, Ticker};
 use crate::sim::{SimAgent, UwbNoise, UwbNoiseModel};
 
 /// Why a robot could not be brought up.
@@ -68,7 +68,7 @@ pub async fn run(
             heading: s.heading,
         };
         let sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
-        runtime::drive(SimVehicle(sim), io, ticker, origin, shutdown).await;
+        runtime::drive(sim, io, ticker, origin, shutdown).await;
     } else {
         let agent = Agent::new(settings, config.platform().build(), stamp_origin);
         let actuators = open_actuators(&config)?;

@@ -13,7 +13,6 @@ use tokio::time::Instant;
 
 use crate::agent::Agent;
 use crate::hal::{Actuators, PositionSample};
-use crate::sim::SimAgent;
 
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
@@ -26,27 +25,6 @@ pub trait Vehicle: Send {
     fn tick(&mut self, now: Duration) -> Vec<Envelope>;
     /// Zeroes the actuators and returns the `Bye` to send.
     fn stop(&mut self, now: Duration) -> Envelope;
-}
-
-/// A simulated agent as a [`Vehicle`].
-#[derive(Debug)]
-pub struct SimVehicle(pub SimAgent);
-
-impl Vehicle for SimVehicle {
-    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
-        self.0.handle_bytes(bytes, now)
-    }
-    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
-        self.0.handle(env, now)
-    }
-    fn tick(&mut self, now: Duration) -> Vec<Envelope> {
-        self.0.tick(now)
-    }
-    fn stop(&mut self, now: Duration) -> Envelope {
-        let motors = self.0.robot.platform().motors();
-        self.0.robot.step_outputs(&vec![0.0; motors], 1e-6);
-        self.0.bye(now)
-    }
 }
 
 /// A robot with real actuators and (optionally) a position source read by

@@ -166,7 +166,7 @@ impl SimFleet {
             let io = runtime::Io::Udp { socket, router };
             let shutdown_rx = shutdown_rx.clone();
             agents.push(tokio::spawn(async move {
-                runtime::drive(runtime::SimVehicle(sim), io, ticker, origin, shutdown_rx).await;
+                runtime::drive(sim, io, ticker, origin, shutdown_rx).await;
             }));
             names.push(name);
         }

@@ -13,6 +13,7 @@ use super::robot::SimRobot;
 use crate::agent::{Agent, AgentSettings};
 use crate::hal::PositionSample;
 use crate::platform::PlatformSpec;
+use crate::runtime::Vehicle;
 
 /// Agent core + simulated vehicle + position noise.
 #[derive(Debug)]
@@ -76,5 +77,24 @@ impl SimAgent {
     /// The `Bye` sent on shutdown.
     pub fn bye(&mut self, now: Duration) -> Envelope {
         self.agent.bye("shutdown", now)
+    }
+}
+
+/// The simulator runs in the same loop as a robot: a simulated agent is a
+/// [`Vehicle`] whose actuators move its simulated body.
+impl Vehicle for SimAgent {
+    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        SimAgent::handle_bytes(self, bytes, now)
+    }
+    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        SimAgent::handle(self, env, now)
+    }
+    fn tick(&mut self, now: Duration) -> Vec<Envelope> {
+        SimAgent::tick(self, now)
+    }
+    fn stop(&mut self, now: Duration) -> Envelope {
+        let motors = self.robot.platform().motors();
+        self.robot.step_outputs(&vec![0.0; motors], 1e-6);
+        self.bye(now)
     }
 }

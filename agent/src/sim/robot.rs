@@ -72,12 +72,6 @@ impl SimRobot {
         }
     }
 
-    /// Sets the actuator time constant (0 = instantaneous response).
-    pub fn with_response_time(mut self, seconds: f64) -> SimRobot {
-        self.response_time = seconds.max(0.0);
-        self
-    }
-
     /// Uses these controller gains for [`SimRobot::apply`].
     pub fn with_gains(mut self, gains: Gains) -> SimRobot {
         self.controller = Controller::new(self.spec.build(), gains, true);
@@ -91,12 +85,6 @@ impl SimRobot {
     /// True pose (no measurement noise).
     pub fn pose(&self) -> Pose {
         self.pose
-    }
-
-    /// Moves the robot (a reset between runs).
-    pub fn set_pose(&mut self, pose: Pose) {
-        self.pose = pose;
-        self.twist = Twist::default();
     }
 
     /// Actual body-frame velocity.

@@ -286,19 +286,6 @@ impl ClusterController {
         self.reassign = true;
     }
 
-    /// Sets the desired cluster pose outright (e.g. from a configuration), and
-    /// holds it.
-    pub fn set_pose(&mut self, pose: ClusterPose) {
-        let scale = pose
-            .scale
-            .clamp(self.config.min_scale, self.config.max_scale);
-        self.desired = Some(ClusterPose { scale, ..pose });
-        self.anchored = true;
-        self.motion = ClusterMotion::Hold;
-        self.path_speed = 0.0;
-        self.turn_rate = 0.0;
-    }
-
     /// Drive the cluster at a cluster-frame velocity (gamepad, command line).
     pub fn set_velocity(&mut self, velocity: ClusterVelocity) {
         self.motion = ClusterMotion::Velocity(velocity);

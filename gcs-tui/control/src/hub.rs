@@ -707,11 +707,6 @@ impl ControlHub {
         }
     }
 
-    /// Ends a cluster, follow or offboard controller for good.
-    pub fn forget_cluster(&self, cluster: &str) {
-        self.state().clusters.remove(cluster);
-    }
-
     /// The status of one cluster.
     pub fn cluster_view(&self, cluster: &str) -> Option<ClusterView> {
         self.state()

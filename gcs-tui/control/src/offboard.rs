@@ -131,16 +131,6 @@ impl OffboardNavigator {
         self.handover = handover;
     }
 
-    /// Sets the mission start time that arrival times count from (e.g. when
-    /// the onboard mission started, so a switch keeps the schedule).
-    pub fn set_started(&mut self, started: f64) {
-        self.started = Some(started);
-    }
-
-    pub fn started(&self) -> Option<f64> {
-        self.started
-    }
-
     /// Progress in the form the agent reports it.
     pub fn progress(&self) -> MissionProgress {
         MissionProgress {
