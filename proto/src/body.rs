@@ -405,6 +405,24 @@ pub struct Bye {
     pub reason: String,
 }
 
+/// Any peer -> router: what is the station's time? Signed messages carry
+/// station time, and a robot without a real-time clock (a Pi booted without
+/// network time) asks before it signs anything else. The `nonce` is random,
+/// so a replayed answer is recognised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TimeRequest {
+    pub nonce: u64,
+}
+
+/// Router -> requester: the station's clock when it answered a
+/// [`TimeRequest`], with the request's nonce.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Time {
+    pub nonce: u64,
+    /// Microseconds since the Unix epoch.
+    pub station_us: u64,
+}
+
 tagged_enum! {
     /// Every MECH message body; the number is the envelope's kind field.
     #[derive(Debug, Clone, PartialEq)]
@@ -428,6 +446,8 @@ tagged_enum! {
         Subscribe(Subscribe) = 17,
         PositionFix(PositionFix) = 18,
         Bye(Bye) = 19,
+        TimeRequest(TimeRequest) = 20,
+        Time(Time) = 21,
     }
 }
 
@@ -619,6 +639,7 @@ impl Body {
                 fraction(p.quality, "fix quality")
             }
             Body::Bye(b) => text(&b.reason, "bye reason"),
+            Body::TimeRequest(_) | Body::Time(_) => Ok(()),
         }
     }
 }

@@ -15,6 +15,7 @@
 //! corrupt, wrong-version and unknown-kind bytes all return a typed [`Error`].
 //! The byte-level format is specified in `docs/protocol.md`.
 
+pub mod auth;
 mod body;
 mod command;
 mod envelope;
@@ -29,7 +30,7 @@ pub use body::{
     ClusterPose, ClusterVelocity, Computation, ControlMode, EStop, EStopAck, FailsafeState,
     FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello, Level, Mission, MissionAck,
     MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix, RobotCommand, Route, RouteAck,
-    Subscribe, Telemetry, Velocity, Waypoint, Welcome,
+    Subscribe, Telemetry, Time, TimeRequest, Velocity, Waypoint, Welcome,
 };
 pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,

@@ -301,6 +301,9 @@ fn body() -> impl Strategy<Value = Body> {
             }
         )),
         text().prop_map(|reason| Body::Bye(Bye { reason })),
+        any::<u64>().prop_map(|nonce| Body::TimeRequest(TimeRequest { nonce })),
+        (any::<u64>(), any::<u64>())
+            .prop_map(|(nonce, station_us)| Body::Time(Time { nonce, station_us })),
     ]
 }
 

@@ -130,6 +130,11 @@ pub fn event_json(s: &Stamped) -> Value {
             json!({"from": from, "level": format!("{:?}", notice.level), "text": notice.text})
         }
         Event::BadPacket { from, error } => json!({"from": from, "error": error}),
+        Event::Rejected {
+            from,
+            reason,
+            detail,
+        } => json!({"from": from, "reason": reason.as_str(), "detail": detail}),
     };
     if let Value::Object(m) = &mut v {
         m.insert("type".into(), json!("event"));

@@ -33,6 +33,8 @@ pub enum DropReason {
     BadPacket,
     /// The router has shut down.
     Stopped,
+    /// Refused by the authenticated control plane (see [`Rejections`]).
+    Rejected,
 }
 
 impl DropReason {
@@ -43,6 +45,7 @@ impl DropReason {
             DropReason::SendFailed => "send-failed",
             DropReason::BadPacket => "bad-packet",
             DropReason::Stopped => "router-stopped",
+            DropReason::Rejected => "rejected",
         }
     }
 }
@@ -55,11 +58,17 @@ pub struct Drops {
     pub send_failed: u64,
     pub bad_packet: u64,
     pub stopped: u64,
+    pub rejected: u64,
 }
 
 impl Drops {
     pub fn total(&self) -> u64 {
-        self.not_routed + self.unknown_robot + self.send_failed + self.bad_packet + self.stopped
+        self.not_routed
+            + self.unknown_robot
+            + self.send_failed
+            + self.bad_packet
+            + self.stopped
+            + self.rejected
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -69,6 +78,7 @@ impl Drops {
             DropReason::SendFailed => self.send_failed += 1,
             DropReason::BadPacket => self.bad_packet += 1,
             DropReason::Stopped => self.stopped += 1,
+            DropReason::Rejected => self.rejected += 1,
         }
     }
 
@@ -80,7 +90,67 @@ impl Drops {
             DropReason::SendFailed => self.send_failed,
             DropReason::BadPacket => self.bad_packet,
             DropReason::Stopped => self.stopped,
+            DropReason::Rejected => self.rejected,
         }
+    }
+}
+
+/// Rejection reasons, as counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum RejectReason {
+    Unsigned,
+    UnknownKey,
+    BadTag,
+    Replay,
+    NotPermitted,
+}
+
+impl RejectReason {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RejectReason::Unsigned => "unsigned",
+            RejectReason::UnknownKey => "unknown-key",
+            RejectReason::BadTag => "bad-tag",
+            RejectReason::Replay => "replay",
+            RejectReason::NotPermitted => "not-permitted",
+        }
+    }
+}
+
+/// Messages refused, by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Rejections {
+    pub unsigned: u64,
+    pub unknown_key: u64,
+    pub bad_tag: u64,
+    pub replay: u64,
+    pub not_permitted: u64,
+}
+
+impl Rejections {
+    pub fn total(&self) -> u64 {
+        self.unsigned + self.unknown_key + self.bad_tag + self.replay + self.not_permitted
+    }
+
+    pub fn count(&mut self, reason: RejectReason) {
+        match reason {
+            RejectReason::Unsigned => self.unsigned += 1,
+            RejectReason::UnknownKey => self.unknown_key += 1,
+            RejectReason::BadTag => self.bad_tag += 1,
+            RejectReason::Replay => self.replay += 1,
+            RejectReason::NotPermitted => self.not_permitted += 1,
+        }
+    }
+
+    /// `(reason, count)` for every reason.
+    pub fn by_reason(&self) -> [(RejectReason, u64); 5] {
+        [
+            (RejectReason::Unsigned, self.unsigned),
+            (RejectReason::UnknownKey, self.unknown_key),
+            (RejectReason::BadTag, self.bad_tag),
+            (RejectReason::Replay, self.replay),
+            (RejectReason::NotPermitted, self.not_permitted),
+        ]
     }
 }
 
@@ -109,4 +179,6 @@ pub struct Counters {
     pub dropped: Drops,
     /// Telemetry copies not delivered to external subscribers.
     pub fanout_dropped: u64,
+    /// Messages refused by the authenticated control plane, by reason.
+    pub rejected: Rejections,
 }

@@ -10,6 +10,8 @@ use std::time::Duration;
 
 use mech_proto::{ClusterCommand, CommandKind, Notice, Telemetry, Waypoint};
 
+use crate::counters::RejectReason;
+
 /// How recently the router heard from a robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum LinkState {
@@ -121,6 +123,13 @@ pub enum Event {
     Notice { from: String, notice: Notice },
     /// A datagram or frame that could not be used.
     BadPacket { from: String, error: String },
+    /// A message the authenticated control plane refused (reported at most
+    /// once per source per second; every one is counted).
+    Rejected {
+        from: String,
+        reason: RejectReason,
+        detail: String,
+    },
 }
 
 impl Event {
@@ -144,6 +153,7 @@ impl Event {
             Event::Bye { .. } => "bye",
             Event::Notice { .. } => "notice",
             Event::BadPacket { .. } => "bad_packet",
+            Event::Rejected { .. } => "rejected",
         }
     }
 }

@@ -233,6 +233,14 @@ impl Fleet {
             Event::BadPacket { from, error } => {
                 self.log(Severity::Warn, format!("bad packet from {from}: {error}"))
             }
+            Event::Rejected {
+                from,
+                reason,
+                detail,
+            } => self.log(
+                Severity::Warn,
+                format!("rejected from {from} ({}): {detail}", reason.as_str()),
+            ),
         }
     }
 

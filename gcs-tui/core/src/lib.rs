@@ -5,6 +5,8 @@
 //! Modules, leaves first (each depends only on those above it):
 //! - [`sync`], [`config`]: the poison-tolerant lock and what every
 //!   configuration section shares;
+//! - [`auth`]: keys, roles and the `[auth]` section of the authenticated
+//!   control plane;
 //! - [`event`]: what the station saw happen, and the [`EventSink`] the
 //!   router delivers it to;
 //! - [`counters`]: traffic counters and live channels;
@@ -17,6 +19,7 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
+pub mod auth;
 pub mod config;
 pub mod counters;
 pub mod event;

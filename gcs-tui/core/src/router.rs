@@ -33,6 +33,7 @@ pub use bus::Subscription;
 pub use config::RouterConfig;
 pub use tables::Delivery;
 
+use crate::auth::{Identity, Keyring};
 use crate::counters::{ChannelStatus, Counters, DropReason};
 use crate::event::{Event, EventSink};
 use crate::sync::lock;
@@ -52,6 +53,8 @@ pub enum RouterError {
     UnknownRobot(String),
     #[error("cannot encode the message: {0}")]
     Encode(#[from] mech_proto::Error),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
 }
 
 /// State shared by the router's tasks and handles.
@@ -206,6 +209,7 @@ impl Router {
     /// Events go to `sink` (the fleet model) first, then to subscribers.
     pub async fn start(
         config: RouterConfig,
+        auth: Option<Keyring>,
         sink: Arc<dyn EventSink>,
     ) -> Result<Router, RouterError> {
         let (udp, tcp) = bind(&config).await?;
@@ -218,7 +222,7 @@ impl Router {
         let tick = config.tick;
         let shared = Arc::new(Shared {
             subscriber_queue: config.subscriber_queue,
-            tables: Mutex::new(Tables::new(config)),
+            tables: Mutex::new(Tables::new(config, auth)),
             bus: EventBus::new(Instant::now(), sink),
             udp: Arc::new(udp),
             udp_addr,
@@ -426,6 +430,18 @@ impl RouterHandle {
     /// Live channels with their publisher, rate and routed robots.
     pub fn channels(&self) -> Vec<ChannelStatus> {
         lock(&self.shared.tables).channel_status(Instant::now())
+    }
+
+    /// Whether the router checks and signs messages (the authenticated
+    /// control plane); `false` means anyone who reaches it can drive robots.
+    pub fn authenticated(&self) -> bool {
+        lock(&self.shared.tables).auth_on()
+    }
+
+    /// Adds a key while running (simulated robots get theirs this way). Does
+    /// nothing when the router runs unauthenticated.
+    pub fn add_key(&self, identity: Identity) {
+        lock(&self.shared.tables).add_key(identity);
     }
 
     /// A copy of every counter.

@@ -7,24 +7,50 @@ use std::sync::{Arc, Mutex};
 use mech_proto::{Mission, Waypoint};
 use serde::Deserialize;
 
+use crate::auth::{AuthConfig, AuthMode, DEFAULT_WINDOW, Keyring};
 use crate::config::ConfigError;
 use crate::fleet::{Fleet, FleetConfig};
 use crate::router::{Router, RouterConfig, RouterError, RouterHandle};
 use crate::sync::lock;
 
-/// The core's sections of the configuration: `[router]` and `[fleet]`.
+/// The core's sections of the configuration: `[router]`, `[fleet]` and
+/// `[auth]`.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CoreConfig {
     pub router: RouterConfig,
     pub fleet: FleetConfig,
+    pub auth: AuthConfig,
 }
 
 impl CoreConfig {
-    /// Checks both sections.
+    /// Checks every section. Whether a router listening beyond loopback has
+    /// keys is checked when it starts ([`CoreConfig::auth_mode`]), after
+    /// command-line overrides of its endpoints.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.router.validate()?;
-        self.fleet.validate()
+        self.fleet.validate()?;
+        self.auth.validate()
+    }
+
+    /// Whether the station will authenticate, given where it listens.
+    pub fn auth_mode(&self) -> Result<AuthMode, ConfigError> {
+        let mut endpoints = vec![self.router.udp];
+        endpoints.extend(self.router.tcp);
+        self.auth.resolve(&endpoints)
+    }
+
+    /// The keyring the router starts with (reading the key files), or
+    /// `None` when unauthenticated.
+    pub fn keyring(&self) -> Result<Option<Keyring>, ConfigError> {
+        match self.auth_mode()? {
+            AuthMode::Off => Ok(None),
+            AuthMode::Required => Ok(Some(Keyring::new(
+                self.auth.load_keys()?,
+                self.auth.window.unwrap_or(DEFAULT_WINDOW),
+                mech_proto::unix_micros(),
+            ))),
+        }
     }
 }
 
@@ -42,7 +68,8 @@ impl Gcs {
     /// Binds the router's endpoints and starts routing.
     pub async fn start(config: CoreConfig) -> Result<Gcs, RouterError> {
         let fleet = Arc::new(Mutex::new(Fleet::new(config.fleet.clone())));
-        let router = Router::start(config.router.clone(), fleet.clone()).await?;
+        let keyring = config.keyring()?;
+        let router = Router::start(config.router.clone(), keyring, fleet.clone()).await?;
         Ok(Gcs {
             router: router.handle(),
             fleet,

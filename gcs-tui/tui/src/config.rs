@@ -1,5 +1,5 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
-//! sections each layer owns: `[router]` and `[fleet]` (mech-core),
+//! sections each layer owns: `[router]`, `[fleet]` and `[auth]` (mech-core),
 //! `[[cluster]]` (mech-control), `[log]` and `[gamepad]` (this binary).
 //! Every field has a default, so an empty file (or none) gives a working
 //! ground station on port 7400.
@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use mech_control::ClusterSpec;
+use mech_core::auth::AuthConfig;
 use mech_core::{CoreConfig, FleetConfig, RouterConfig};
 use serde::Deserialize;
 
@@ -26,7 +27,7 @@ pub enum ConfigError {
         path: PathBuf,
         source: Box<toml::de::Error>,
     },
-    #[error("{0}")]
+    #[error(transparent)]
     Invalid(#[from] mech_core::ConfigError),
 }
 
@@ -37,6 +38,8 @@ pub struct GcsConfig {
     pub router: RouterConfig,
     pub log: LogConfig,
     pub fleet: FleetConfig,
+    /// Keys and roles of the authenticated control plane.
+    pub auth: AuthConfig,
     /// Clusters defined at start-up (`[[cluster]]` tables: name, members,
     /// formation, spacing, offsets).
     pub cluster: Vec<ClusterSpec>,
@@ -51,7 +54,15 @@ impl GcsConfig {
             path: path.to_owned(),
             source,
         })?;
-        GcsConfig::parse_at(&text, path)
+        let mut cfg = GcsConfig::parse_at(&text, path)?;
+        // Key files are found next to the configuration that names them.
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for k in &mut cfg.auth.keys {
+            if k.file.is_relative() {
+                k.file = dir.join(&k.file);
+            }
+        }
+        Ok(cfg)
     }
 
     /// Parses and checks TOML text.
@@ -73,13 +84,13 @@ impl GcsConfig {
         CoreConfig {
             router: self.router.clone(),
             fleet: self.fleet.clone(),
+            auth: self.auth.clone(),
         }
     }
 
     /// Checks every section, each by the layer that owns it.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        self.router.validate()?;
-        self.fleet.validate()?;
+        self.core().validate()?;
         for c in &self.cluster {
             c.formation()
                 .map_err(|e| mech_core::ConfigError(format!("cluster {:?}: {e}", c.name)))?;

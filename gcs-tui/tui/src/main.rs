@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::Context;
-use clap::Parser;
+use clap::{Parser, Subcommand};
 use mech_control::lang::Executor;
 use mech_control::script::{self, Sink};
 use mech_core::Gcs;
@@ -40,6 +40,25 @@ struct Cli {
     /// TCP endpoint of the router (overrides the configuration).
     #[arg(long, value_name = "ADDR")]
     tcp: Option<SocketAddr>,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Make a new key for a robot, controller, operator or e-stop device,
+    /// in a file only its owner can read. List it in the station's
+    /// `[auth]` section and give the file to its holder (a robot's
+    /// `[auth] key`).
+    Keygen {
+        /// Who signs with it: the robot's, controller's, operator's or
+        /// device's name.
+        name: String,
+        /// Where to write it (default: NAME.key). An existing file is never
+        /// overwritten.
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -54,6 +73,9 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    if let Some(Command::Keygen { name, out }) = &cli.command {
+        return keygen(name, out.clone());
+    }
     let mut config = match &cli.config {
         Some(path) => GcsConfig::load(path)?,
         None => GcsConfig::default(),
@@ -101,6 +123,23 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         .context("cannot start the async runtime")?;
     let code = runtime.block_on(run_script(config, cli.demo, &source))?;
     Ok(ExitCode::from(code))
+}
+
+/// `mech-gcs keygen NAME`: writes a new key and says how to use it.
+fn keygen(name: &str, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+    let path = out.unwrap_or_else(|| PathBuf::from(format!("{name}.key")));
+    let key = mech_core::auth::KeyFile::generate(name, &path)?;
+    println!(
+        "wrote {} (key id {:08x}, readable only by you)\n\n\
+         station (gcs.toml), with role robot, controller, operator or estop:\n\n\
+         [[auth.keys]]\nrole = \"robot\"\nname = {name:?}\nfile = {:?}\n\n\
+         robot (mech-agent config):\n\n[auth]\nkey = {:?}",
+        path.display(),
+        key.key.id(),
+        path.display().to_string(),
+        path.display().to_string(),
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 /// The interactive station; `--demo N` spawns N simulated robots first.

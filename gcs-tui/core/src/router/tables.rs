@@ -19,6 +19,7 @@ use std::net::SocketAddr;
 
 mod commands;
 mod estop;
+mod gate;
 mod missions;
 mod registration;
 mod routes;
@@ -30,7 +31,10 @@ use tracing::{debug, warn};
 
 use super::config::RouterConfig;
 use super::rate::RateMeter;
-use crate::counters::{Counters, DropReason, Drops, Traffic};
+use mech_proto::auth::Stamper;
+
+use crate::auth::Keyring;
+use crate::counters::{Counters, DropReason, Drops, Rejections, Traffic};
 use crate::event::{Event, LinkState};
 
 /// Where a message came from, and where a reply goes.
@@ -106,8 +110,12 @@ struct ChannelEntry {
 struct PendingMission {
     robot: String,
     id: u32,
-    bytes: Vec<u8>,
+    /// The mission message without its `auth` element: each (re)send is
+    /// signed afresh, since a receiver refuses a repeated stamp.
+    region: Vec<u8>,
     reply_to: Peer,
+    /// Who sent it, for relaying the acknowledgement.
+    sender: String,
     first: Instant,
     last: Instant,
 }
@@ -129,8 +137,9 @@ pub(crate) struct Tables {
     channels: HashMap<String, ChannelEntry>,
     /// Last address of each controller or tool, by sender name, for replies.
     peers: HashMap<String, Peer>,
-    /// External telemetry subscribers and when their subscription lapses.
-    subscribers: HashMap<Peer, Instant>,
+    /// External telemetry subscribers: when their subscription lapses, and
+    /// their name (to sign what they are sent).
+    subscribers: HashMap<Peer, (Instant, String)>,
     missions: Vec<PendingMission>,
     estop: Option<EStopRun>,
     /// E-stop engaged and not released: robots that register get it too.
@@ -142,6 +151,16 @@ pub(crate) struct Tables {
     forwarded: u64,
     dropped: Drops,
     fanout_dropped: u64,
+    /// Keys and stream freshness; `None` when the station runs
+    /// unauthenticated.
+    auth: Option<Keyring>,
+    /// Stamps of what the router signs.
+    stamper: Stamper,
+    rejected: Rejections,
+    /// When each source's last rejection was logged.
+    reject_logged: HashMap<String, Instant>,
+    /// When each key's last time request was answered.
+    time_answers: HashMap<u32, Instant>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -163,7 +182,7 @@ pub(crate) struct Incoming<'a> {
 }
 
 impl Tables {
-    pub(crate) fn new(config: RouterConfig) -> Tables {
+    pub(crate) fn new(config: RouterConfig, auth: Option<Keyring>) -> Tables {
         let seed = clock_seed();
         Tables {
             config,
@@ -182,6 +201,11 @@ impl Tables {
             forwarded: 0,
             dropped: Default::default(),
             fanout_dropped: 0,
+            auth,
+            stamper: Stamper::default(),
+            rejected: Rejections::default(),
+            reject_logged: HashMap::new(),
+            time_answers: HashMap::new(),
         }
     }
 
@@ -196,7 +220,10 @@ impl Tables {
             channel: String::new(),
         };
         match mech_proto::encode(&Envelope::new(header, body)) {
-            Ok(b) => Some(b),
+            Ok(mut b) => {
+                b.pop(); // the nil auth element: signed for the receiver
+                self.seal(&b, destination)
+            }
             Err(e) => {
                 warn!(error = %e, destination, "router could not encode its own message");
                 None
@@ -239,17 +266,40 @@ impl Tables {
             // The body is checked (a truncated or out-of-range command is
             // never forwarded) but not re-encoded: the received bytes go on.
             // Checked in place: no envelope is built for a forwarded command.
-            if let Err(e) = mech_proto::check_command(bytes, &head) {
-                return self.bad(from, e.to_string(), events);
+            let command = match mech_proto::check_command(bytes, &head) {
+                Ok(c) => c,
+                Err(e) => return self.bad(from, e.to_string(), events),
+            };
+            let admitted = match self.admit(bytes, head.sender, from, true, events) {
+                Ok((id, _)) => id,
+                Err(d) => return d,
+            };
+            let body = Body::Command(command);
+            if let Err(d) = self.permit(admitted, &body, head.channel, from, events) {
+                return d;
             }
-            return self.route_command(&head, from, now, out, events);
+            return self.route_command(&head, bytes, from, now, out, events);
         }
         let env = match mech_proto::decode(bytes) {
             Ok(env) => env,
             Err(e) => return self.bad(from, e.to_string(), events),
         };
+        let sender = env.header.sender.as_str();
+        // A time request is answered whatever its stamp: the requester does
+        // not know the station's time yet.
+        let fresh = !matches!(env.body, Body::TimeRequest(_));
+        let (admitted, tag) = match self.admit(bytes, sender, from, fresh, events) {
+            Ok(a) => a,
+            Err(d) => return d,
+        };
+        if let Err(d) = self.permit(admitted, &env.body, &env.header.channel, from, events) {
+            return d;
+        }
+        if let Body::TimeRequest(request) = env.body {
+            return self.answer_time(request, tag, sender, from, now, out);
+        }
         if let Peer::Udp(addr) = from {
-            self.seen_robot(&env.header.sender, addr, now, events);
+            self.seen_robot(sender, addr, now, events);
         }
         let m = Incoming {
             header: &env.header,
@@ -280,11 +330,16 @@ impl Tables {
             Body::EStopAck(ack) => self.on_estop_ack(m, ack, events),
             Body::ChannelsRequest(_) => self.on_channels_request(m, out),
             Body::Subscribe(s) => self.on_subscribe(m, s),
-            Body::PositionFix(fix) => self.on_position_fix(fix, out),
+            Body::PositionFix(fix) => self.on_position_fix(m, fix, out),
             Body::Notice(notice) => self.on_notice(m, notice, events),
             Body::Cluster(command) => self.on_cluster(m, command, events),
             Body::Bye(bye) => self.on_bye(m, bye, events),
-            Body::Command(_) | Body::Welcome(_) | Body::Route(_) | Body::Channels(_) => {
+            Body::TimeRequest(_) => Delivery::Consumed,
+            Body::Command(_)
+            | Body::Welcome(_)
+            | Body::Route(_)
+            | Body::Channels(_)
+            | Body::Time(_) => {
                 let what = format!("unexpected {} message", body.kind());
                 self.bad(m.from, what, events)
             }
@@ -298,7 +353,7 @@ impl Tables {
         self.retry_routes(now, out);
         self.retry_estop(now, out);
         self.retry_missions(now, out, events);
-        self.subscribers.retain(|_, until| *until > now);
+        self.subscribers.retain(|_, (until, _)| *until > now);
     }
 
     pub(crate) fn counters(&self) -> Counters {
@@ -317,6 +372,7 @@ impl Tables {
             forwarded: self.forwarded,
             dropped: self.dropped,
             fanout_dropped: self.fanout_dropped,
+            rejected: self.rejected,
         }
     }
 
@@ -337,6 +393,13 @@ impl Tables {
     pub(crate) fn forget_peer(&mut self, peer: Peer) {
         self.subscribers.remove(&peer);
         self.peers.retain(|_, p| *p != peer);
+    }
+
+    /// Adds a key to the keyring (none when unauthenticated).
+    pub(crate) fn add_key(&mut self, identity: crate::auth::Identity) {
+        if let Some(keys) = self.auth.as_mut() {
+            keys.add(identity);
+        }
     }
 
     /// Address of a registered robot.

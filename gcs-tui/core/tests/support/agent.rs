@@ -7,6 +7,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use mech_core::CoreConfig;
+use mech_proto::auth::{Key, Stamper};
 use mech_proto::{
     Body, Command, CommandKind, Computation, ControlMode, Envelope, FailsafeState, Header, Health,
     Hello, MissionProgress, Pose, RouteAck, Telemetry, Twist, Velocity,
@@ -31,6 +32,9 @@ pub struct Peer {
     /// Route the agent applied (from Welcome or Route).
     pub route: String,
     pub epoch: u32,
+    /// Signs what it sends when set.
+    pub key: Option<Key>,
+    stamper: Stamper,
 }
 
 pub fn envelope(sender: &str, destination: &str, channel: &str, seq: u32, body: Body) -> Envelope {
@@ -86,7 +90,28 @@ impl Peer {
             seq: 0,
             route: String::new(),
             epoch: 0,
+            key: None,
+            stamper: Stamper::default(),
         }
+    }
+
+    /// A peer that signs everything with `key` (stamps from the wall clock,
+    /// as a machine with network time does).
+    pub async fn signed(name: &str, router: SocketAddr, key: Key) -> Peer {
+        let mut p = Peer::new(name, router).await;
+        p.key = Some(key);
+        p
+    }
+
+    /// Encodes a message as this peer sends it (signed if it has a key).
+    pub fn encode(&mut self, destination: &str, channel: &str, seq: u32, body: Body) -> Vec<u8> {
+        let mut bytes =
+            mech_proto::encode(&envelope(&self.name, destination, channel, seq, body)).unwrap();
+        if let Some(key) = &self.key {
+            let stamp = self.stamper.next(mech_proto::unix_micros());
+            key.seal(&mut bytes, 0, stamp).unwrap();
+        }
+        bytes
     }
 
     pub fn addr(&self) -> SocketAddr {
@@ -96,8 +121,7 @@ impl Peer {
     /// Sends a message; returns its sequence number.
     pub async fn send(&mut self, destination: &str, channel: &str, body: Body) -> u32 {
         self.seq += 1;
-        let bytes = mech_proto::encode(&envelope(&self.name, destination, channel, self.seq, body))
-            .unwrap();
+        let bytes = self.encode(destination, channel, self.seq, body);
         self.sock.send_to(&bytes, self.router).await.unwrap();
         self.seq
     }

@@ -1,5 +1,6 @@
-//! Commands, the hot path: a command is forwarded, bytes unchanged, only to
-//! a robot routed to its channel; a fleet command is split so each routed
+//! Commands, the hot path: a command is forwarded, bytes unchanged (but
+//! signed for the robot when the station authenticates), only to a robot
+//! routed to its channel; a fleet command is split so each routed
 //! robot gets only its part; a cluster command goes to the controller that
 //! serves the channel. Every publisher is noted with its channel's rate.
 
@@ -19,6 +20,7 @@ impl Tables {
     pub(super) fn route_command(
         &mut self,
         head: &mech_proto::Peek<'_>,
+        bytes: &[u8],
         from: Peer,
         now: Instant,
         out: &mut Outbox,
@@ -32,7 +34,7 @@ impl Tables {
         self.note_publisher(sender, channel, from, now, events);
         match self.check_route(destination, channel) {
             Ok(addr) => {
-                out.raw.push(Peer::Udp(addr));
+                self.pass_on(bytes, Peer::Udp(addr), destination, out);
                 Delivery::Forwarded(1)
             }
             Err(reason) => Delivery::Dropped(reason),
@@ -58,9 +60,12 @@ impl Tables {
                 ..h.clone()
             };
             match mech_proto::encode(&Envelope::new(header, Body::Command(part.command))) {
-                Ok(b) => {
-                    out.owned.push((Peer::Udp(target), b));
-                    delivered += 1;
+                Ok(mut b) => {
+                    b.pop(); // the nil auth element: signed for the robot
+                    if let Some(b) = self.seal(&b, &part.robot) {
+                        out.owned.push((Peer::Udp(target), b));
+                        delivered += 1;
+                    }
                 }
                 Err(e) => {
                     warn!(error = %e, robot = %part.robot, "cannot re-encode fleet command part")

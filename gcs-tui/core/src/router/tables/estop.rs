@@ -147,7 +147,7 @@ impl Tables {
             .filter_map(|name| Some((name.clone(), self.robots.get(name)?.addr)))
             .collect();
         for (name, addr) in due {
-            if let Some(b) = self.make(&name, Body::EStop(e.clone())) {
+            if let Some(b) = self.make(&name, Body::EStop(e)) {
                 out.owned.push((Peer::Udp(addr), b));
             }
         }

@@ -28,14 +28,21 @@ impl Tables {
         let addr = entry.addr;
         entry.traffic.forwarded += 1;
         self.forwarded += 1;
-        out.owned.push((Peer::Udp(addr), m.bytes.to_vec()));
+        let region = match mech_proto::auth::split(m.bytes) {
+            Ok((region, _)) => region.to_vec(),
+            Err(e) => return self.bad(m.from, e.to_string(), events),
+        };
+        if let Some(b) = self.seal(&region, &robot) {
+            out.owned.push((Peer::Udp(addr), b));
+        }
         self.missions
             .retain(|p| !(p.robot == robot && p.id == mission.id));
         self.missions.push(PendingMission {
             robot: robot.clone(),
             id: mission.id,
-            bytes: m.bytes.to_vec(),
+            region,
             reply_to: m.from,
+            sender: h.sender.clone(),
             first: m.now,
             last: m.now,
         });
@@ -67,7 +74,7 @@ impl Tables {
         };
         let pending = self.missions.remove(i);
         if pending.reply_to != Peer::Local {
-            out.raw.push(pending.reply_to);
+            self.pass_on(m.bytes, pending.reply_to, &pending.sender, out);
         }
         info!(
             robot = sender,
@@ -100,6 +107,7 @@ impl Tables {
     ) {
         let (retry, give_up) = (self.config.mission_retry, self.config.mission_give_up);
         let robots = &self.robots;
+        let mut due = Vec::new();
         self.missions.retain_mut(|m| {
             if now.saturating_duration_since(m.first) >= give_up {
                 warn!(robot = %m.robot, id = m.id, "mission not acknowledged, giving up");
@@ -113,10 +121,15 @@ impl Tables {
             if now.saturating_duration_since(m.last) >= retry {
                 m.last = now;
                 if let Some(r) = robots.get(&m.robot) {
-                    out.owned.push((Peer::Udp(r.addr), m.bytes.clone()));
+                    due.push((r.addr, m.robot.clone(), m.region.clone()));
                 }
             }
             true
         });
+        for (addr, robot, region) in due {
+            if let Some(b) = self.seal(&region, &robot) {
+                out.owned.push((Peer::Udp(addr), b));
+            }
+        }
     }
 }

@@ -23,7 +23,14 @@ impl Tables {
             self.dropped.count(DropReason::UnknownRobot);
             return Delivery::Dropped(DropReason::UnknownRobot);
         }
-        out.raw.extend(self.subscribers.keys().copied());
+        let subscribers: Vec<(Peer, String)> = self
+            .subscribers
+            .iter()
+            .map(|(peer, (_, name))| (*peer, name.clone()))
+            .collect();
+        for (peer, name) in subscribers {
+            self.pass_on(m.bytes, peer, &name, out);
+        }
         events.push(Event::Telemetry {
             robot: sender.to_string(),
             telemetry: t,
@@ -34,17 +41,24 @@ impl Tables {
     pub(super) fn on_subscribe(&mut self, m: Incoming<'_>, s: Subscribe) -> Delivery {
         if s.telemetry {
             let until = m.now + self.config.subscriber_timeout;
-            self.subscribers.insert(m.from, until);
+            self.subscribers
+                .insert(m.from, (until, m.header.sender.clone()));
         } else {
             self.subscribers.remove(&m.from);
         }
         Delivery::Consumed
     }
 
-    pub(super) fn on_position_fix(&mut self, fix: PositionFix, out: &mut Outbox) -> Delivery {
+    pub(super) fn on_position_fix(
+        &mut self,
+        m: Incoming<'_>,
+        fix: PositionFix,
+        out: &mut Outbox,
+    ) -> Delivery {
         match self.robots.get(&fix.robot) {
             Some(r) => {
-                out.raw.push(Peer::Udp(r.addr));
+                let to = Peer::Udp(r.addr);
+                self.pass_on(m.bytes, to, &fix.robot, out);
                 Delivery::Consumed
             }
             None => {

@@ -1,0 +1,434 @@
+//! Who may do what on the robot network: keys with roles, the `[auth]`
+//! configuration section, and the gate every received message passes
+//! before the router acts on it.
+//!
+//! | role | may send |
+//! | --- | --- |
+//! | robot | its own registration, telemetry, heartbeats, acknowledgements, notices, Bye |
+//! | controller | commands, fleet and cluster commands and missions on its `channels`; position fixes for robot R if `fix/R` is among them; channel discovery, telemetry subscriptions |
+//! | operator | what a controller may, on every channel; e-stop engage and release |
+//! | estop | e-stop engage only |
+//!
+//! Every message must carry a valid tag from a listed key ([`mech_proto::auth`])
+//! whose name is the message's sender, be fresh on its stream, and be
+//! permitted to the key's role. In-process publishers (the TUI, scripts,
+//! the station's controllers) act as the station's operator. Rejections
+//! are counted by reason.
+
+mod keyfile;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use mech_proto::Body;
+use mech_proto::auth::{AuthError, Freshness, Key, Stream, Tag};
+use serde::Deserialize;
+
+pub use keyfile::{KeyFile, KeyFileError};
+
+use crate::config::{ConfigError, is_channel_name, secs};
+use crate::counters::RejectReason;
+
+/// Whether messages must be signed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AuthMode {
+    /// Every message must be signed by a listed key.
+    Required,
+    /// Nothing is checked: anyone who can reach the router can drive the
+    /// robots. Shown as UNAUTHENTICATED.
+    Off,
+}
+
+/// What a key may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    Robot,
+    Controller,
+    Operator,
+    Estop,
+}
+
+impl Role {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Robot => "robot",
+            Role::Controller => "controller",
+            Role::Operator => "operator",
+            Role::Estop => "estop",
+        }
+    }
+}
+
+/// One `[[auth.keys]]` entry.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeyEntry {
+    pub role: Role,
+    /// The robot, controller, operator or e-stop name the key signs as (a
+    /// message's sender).
+    pub name: String,
+    /// The key file (`mech-gcs keygen NAME`).
+    pub file: PathBuf,
+    /// Channels a controller may publish on: names, or prefixes ending in
+    /// `*` (`ext/*`). Operators may publish everywhere.
+    #[serde(default)]
+    pub channels: Vec<String>,
+}
+
+/// The `[auth]` section.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AuthConfig {
+    /// `required` or `off`. Unset: required when keys are listed; with no
+    /// keys, off on loopback, and a station listening beyond loopback
+    /// refuses to start.
+    pub mode: Option<AuthMode>,
+    /// A stream the receiver has no record of is accepted only if its stamp
+    /// is within this many seconds of the station's clock (default 10).
+    #[serde(with = "secs_opt")]
+    pub window: Option<Duration>,
+    pub keys: Vec<KeyEntry>,
+}
+
+mod secs_opt {
+    use std::time::Duration;
+
+    use serde::Deserializer;
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Duration>, D::Error> {
+        super::secs::deserialize(d).map(Some)
+    }
+}
+
+/// Default freshness window for a new stream.
+pub const DEFAULT_WINDOW: Duration = Duration::from_secs(10);
+
+impl AuthConfig {
+    /// The mode the router runs in, given the endpoints it listens on.
+    pub fn resolve(&self, endpoints: &[SocketAddr]) -> Result<AuthMode, ConfigError> {
+        if let Some(mode) = self.mode {
+            return Ok(mode);
+        }
+        if !self.keys.is_empty() {
+            return Ok(AuthMode::Required);
+        }
+        match endpoints.iter().find(|a| !a.ip().is_loopback()) {
+            None => Ok(AuthMode::Off),
+            Some(open) => Err(ConfigError(format!(
+                "the router listens on {open}, beyond this machine, and no keys are configured: \
+                 anyone on that network could drive the robots. List keys in [auth] \
+                 (make them with `mech-gcs keygen NAME`), or set auth.mode = \"off\" to run \
+                 unauthenticated on a network you trust"
+            ))),
+        }
+    }
+
+    /// Checks names, channels and duplicates (not the files).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let mut seen = HashMap::new();
+        for k in &self.keys {
+            if k.name.is_empty() || k.name.len() > mech_proto::MAX_NAME_LEN {
+                return Err(ConfigError(format!(
+                    "auth.keys: {:?} is not a name",
+                    k.name
+                )));
+            }
+            if let Some(other) = seen.insert((k.name.clone(), k.file.clone()), k.role) {
+                return Err(ConfigError(format!(
+                    "auth.keys: {} {} with {} is listed twice (also as {})",
+                    k.role.as_str(),
+                    k.name,
+                    k.file.display(),
+                    other.as_str()
+                )));
+            }
+            for c in &k.channels {
+                let pattern = c.strip_suffix('*').unwrap_or(c);
+                if !(c == "*" || is_channel_name(pattern)) {
+                    return Err(ConfigError(format!(
+                        "auth.keys: {} channel {c:?} is not a channel name or prefix*",
+                        k.name
+                    )));
+                }
+            }
+            if !k.channels.is_empty() && k.role != Role::Controller {
+                return Err(ConfigError(format!(
+                    "auth.keys: channels are for controllers; {} is a {}",
+                    k.name,
+                    k.role.as_str()
+                )));
+            }
+        }
+        if self.window.is_some_and(|w| w.is_zero()) {
+            return Err(ConfigError::new("auth.window must be positive"));
+        }
+        Ok(())
+    }
+
+    /// Reads every key file.
+    pub fn load_keys(&self) -> Result<Vec<Identity>, ConfigError> {
+        self.keys
+            .iter()
+            .map(|e| {
+                let file = KeyFile::load(&e.file).map_err(|err| ConfigError(err.to_string()))?;
+                if file.name != e.name {
+                    return Err(ConfigError(format!(
+                        "{} is the key of {:?}, but auth.keys lists it for {:?}",
+                        e.file.display(),
+                        file.name,
+                        e.name
+                    )));
+                }
+                Ok(Identity::new(e.role, &e.name, file.key, e.channels.clone()))
+            })
+            .collect()
+    }
+}
+
+/// A key, whose it is, and what it may do.
+#[derive(Debug, Clone)]
+pub struct Identity {
+    pub role: Role,
+    pub name: String,
+    pub key: Key,
+    channels: Vec<String>,
+}
+
+impl Identity {
+    pub fn new(role: Role, name: &str, key: Key, channels: Vec<String>) -> Identity {
+        Identity {
+            role,
+            name: name.to_string(),
+            key,
+            channels,
+        }
+    }
+
+    /// Whether this identity may publish on `channel`.
+    pub fn may_publish(&self, channel: &str) -> bool {
+        match self.role {
+            Role::Operator => true,
+            Role::Controller => self.channels.iter().any(|p| match p.strip_suffix('*') {
+                Some(prefix) => channel.starts_with(prefix),
+                None => p == channel,
+            }),
+            Role::Robot | Role::Estop => false,
+        }
+    }
+
+    /// Whether this identity may send `body` on `channel`; `None` if so,
+    /// else why not.
+    pub fn permits(&self, body: &Body, channel: &str) -> Option<String> {
+        let role = self.role;
+        let ok = match body {
+            Body::Hello(_)
+            | Body::Telemetry(_)
+            | Body::MissionAck(_)
+            | Body::RouteAck(_)
+            | Body::EStopAck(_) => role == Role::Robot,
+            Body::Heartbeat(_) | Body::Notice(_) | Body::Bye(_) | Body::TimeRequest(_) => true,
+            Body::Command(_) | Body::FleetCommand(_) | Body::Cluster(_) | Body::Mission(_) => {
+                self.may_publish(channel)
+            }
+            Body::PositionFix(fix) => self.may_publish(&format!("fix/{}", fix.robot)),
+            Body::ChannelsRequest(_) | Body::Subscribe(_) => {
+                matches!(role, Role::Controller | Role::Operator)
+            }
+            Body::EStop(e) => role == Role::Operator || (e.engage && role == Role::Estop),
+            Body::Welcome(_) | Body::Route(_) | Body::Channels(_) | Body::Time(_) => false,
+        };
+        if ok {
+            return None;
+        }
+        Some(match body {
+            Body::EStop(e) if !e.engage => format!(
+                "{} {} may not release the e-stop (operators only)",
+                role.as_str(),
+                self.name
+            ),
+            Body::Command(_) | Body::FleetCommand(_) | Body::Cluster(_) | Body::Mission(_) => {
+                format!(
+                    "{} {} may not publish on {channel:?}",
+                    role.as_str(),
+                    self.name
+                )
+            }
+            _ => format!(
+                "{} {} may not send {}",
+                role.as_str(),
+                self.name,
+                body.kind()
+            ),
+        })
+    }
+}
+
+/// Why the gate refused a message: a reason to count by, and a detail for
+/// the log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Rejection {
+    pub reason: RejectReason,
+    pub detail: String,
+}
+
+fn reason_of(e: AuthError) -> RejectReason {
+    match e {
+        AuthError::Unsigned => RejectReason::Unsigned,
+        AuthError::UnknownKey(_) => RejectReason::UnknownKey,
+        AuthError::BadTag | AuthError::Shape(_) => RejectReason::BadTag,
+        AuthError::Replay => RejectReason::Replay,
+    }
+}
+
+/// A stream: one sender's messages under one key on one link.
+type StreamId = (u32, String, u8);
+
+/// The keys the router holds and the freshness of every stream: the gate
+/// of the authenticated control plane.
+#[derive(Debug)]
+pub struct Keyring {
+    by_id: HashMap<u32, Identity>,
+    /// Newest key of each name, for signing what the router sends it.
+    by_name: HashMap<String, u32>,
+    streams: HashMap<StreamId, Stream>,
+    freshness: Freshness,
+}
+
+/// A message that passed the tag and freshness checks: who signed it.
+#[derive(Debug, Clone, Copy)]
+pub struct Verified<'a> {
+    pub identity: &'a Identity,
+    pub tag: Tag,
+}
+
+impl Keyring {
+    /// A keyring; new streams are accepted within `window` of the clock and
+    /// not from before `started_us` (the router's start).
+    pub fn new(keys: Vec<Identity>, window: Duration, started_us: u64) -> Keyring {
+        let mut ring = Keyring {
+            by_id: HashMap::new(),
+            by_name: HashMap::new(),
+            streams: HashMap::new(),
+            freshness: Freshness {
+                window_us: window.as_micros() as u64,
+                not_before_us: started_us,
+            },
+        };
+        for k in keys {
+            ring.add(k);
+        }
+        ring
+    }
+
+    /// Adds a key (a later key of the same name is the one the router signs
+    /// with; both verify).
+    pub fn add(&mut self, identity: Identity) {
+        let id = identity.key.id();
+        self.by_name.insert(identity.name.clone(), id);
+        self.by_id.insert(id, identity);
+    }
+
+    /// Number of keys held.
+    pub fn len(&self) -> usize {
+        self.by_id.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.by_id.is_empty()
+    }
+
+    /// The key the router signs with when it sends to `name`.
+    pub fn key_for(&self, name: &str) -> Option<&Key> {
+        self.by_name
+            .get(name)
+            .and_then(|id| self.by_id.get(id))
+            .map(|i| &i.key)
+    }
+
+    /// The identity of a key id.
+    pub fn identity(&self, key_id: u32) -> Option<&Identity> {
+        self.by_id.get(&key_id)
+    }
+
+    /// Checks a message's tag over `region` and that `sender` is the key's
+    /// name; with `fresh`, also that its stamp is new on its stream (and
+    /// records it). `now_us` is the station's clock.
+    pub fn verify(
+        &mut self,
+        region: &[u8],
+        tag: Option<Tag>,
+        sender: &str,
+        now_us: u64,
+        fresh: bool,
+    ) -> Result<Verified<'_>, Rejection> {
+        let reject = |e: AuthError, detail: String| Rejection {
+            reason: reason_of(e),
+            detail,
+        };
+        let tag = tag.ok_or_else(|| {
+            reject(
+                AuthError::Unsigned,
+                format!("unsigned message from {sender:?}"),
+            )
+        })?;
+        let identity = self.by_id.get(&tag.key_id).ok_or_else(|| {
+            reject(
+                AuthError::UnknownKey(tag.key_id),
+                format!("key {:08x} (sender {sender:?}) is not listed", tag.key_id),
+            )
+        })?;
+        if !identity.key.verify(region, &tag) {
+            return Err(reject(
+                AuthError::BadTag,
+                format!(
+                    "tag of {sender:?} does not check with key {:08x}",
+                    tag.key_id
+                ),
+            ));
+        }
+        if identity.name != sender {
+            return Err(Rejection {
+                reason: RejectReason::NotPermitted,
+                detail: format!(
+                    "{:?} signed with the key of {} {:?}",
+                    sender,
+                    identity.role.as_str(),
+                    identity.name
+                ),
+            });
+        }
+        if fresh {
+            let id = (tag.key_id, sender.to_string(), tag.link);
+            match self.streams.get_mut(&id) {
+                Some(stream) => stream.accept(tag.stamp_us).map_err(|e| {
+                    reject(
+                        e,
+                        format!(
+                            "{sender:?} stamp {} is not newer than {} (replay?)",
+                            tag.stamp_us,
+                            stream.last_us()
+                        ),
+                    )
+                })?,
+                None => {
+                    if !self.freshness.admits(tag.stamp_us, now_us) {
+                        return Err(reject(
+                            AuthError::Replay,
+                            format!(
+                                "{sender:?} stamp is {:.1} s from the station's clock (replay, or its clock is off: ask the router for the time)",
+                                (tag.stamp_us as f64 - now_us as f64) / 1e6
+                            ),
+                        ));
+                    }
+                    self.streams.insert(id, Stream::starting_at(tag.stamp_us));
+                }
+            }
+        }
+        let identity = &self.by_id[&tag.key_id];
+        Ok(Verified { identity, tag })
+    }
+}

@@ -1,0 +1,187 @@
+//! The authenticated control plane at the router: every message from a
+//! peer is checked (tag, freshness, role) before the tables act on it, and
+//! everything the router sends a peer is signed for that peer. Off when the
+//! station runs unauthenticated; in-process publishers are the station's
+//! own operator and are never checked.
+
+use std::time::Duration;
+
+use mech_proto::auth::{Tag, split};
+use mech_proto::{Body, Time, TimeRequest};
+use tokio::time::Instant;
+use tracing::warn;
+
+use super::{Delivery, Outbox, Peer, Tables};
+use crate::auth::Rejection;
+use crate::counters::{DropReason, RejectReason};
+use crate::event::Event;
+
+/// The shortest time between two answers to one key's time requests: a
+/// replayed request cannot make the router a reflector.
+const TIME_ANSWER_GAP: Duration = Duration::from_millis(100);
+
+/// Distinct sources whose last rejection log line is remembered; beyond
+/// that the memory is cleared (a flood from many sources logs more, never
+/// grows the table without bound).
+const REJECT_LOG_SOURCES: usize = 4096;
+
+/// A message that passed the gate: the key id it was signed with (`None`
+/// from an in-process publisher or when authentication is off).
+pub(super) type Admitted = Option<u32>;
+
+impl Tables {
+    /// Whether messages are checked and signed.
+    pub(crate) fn auth_on(&self) -> bool {
+        self.auth.is_some()
+    }
+
+    /// Checks the tag and freshness of a message from `from`. On failure the
+    /// rejection is counted (and logged, rate-limited) and the delivery to
+    /// return is given.
+    pub(super) fn admit(
+        &mut self,
+        bytes: &[u8],
+        sender: &str,
+        from: Peer,
+        fresh: bool,
+        events: &mut Vec<Event>,
+    ) -> Result<(Admitted, Option<Tag>), Delivery> {
+        let Some(keys) = self.auth.as_mut().filter(|_| from != Peer::Local) else {
+            return Ok((None, None));
+        };
+        let checked = match split(bytes) {
+            Err(e) => Err(Rejection {
+                reason: RejectReason::BadTag,
+                detail: format!("from {sender:?}: {e}"),
+            }),
+            Ok((region, tag)) => keys
+                .verify(region, tag, sender, mech_proto::unix_micros(), fresh)
+                .map(|v| (Some(v.tag.key_id), Some(v.tag))),
+        };
+        checked.map_err(|r| self.reject(from, r, events))
+    }
+
+    /// Checks that the key `admitted` may send `body` on `channel`.
+    pub(super) fn permit(
+        &mut self,
+        admitted: Admitted,
+        body: &Body,
+        channel: &str,
+        from: Peer,
+        events: &mut Vec<Event>,
+    ) -> Result<(), Delivery> {
+        let (Some(id), Some(keys)) = (admitted, self.auth.as_ref()) else {
+            return Ok(());
+        };
+        let why = match keys.identity(id) {
+            Some(identity) => identity.permits(body, channel),
+            None => Some(format!("key {id:08x} was removed")),
+        };
+        match why {
+            None => Ok(()),
+            Some(detail) => Err(self.reject(
+                from,
+                Rejection {
+                    reason: RejectReason::NotPermitted,
+                    detail,
+                },
+                events,
+            )),
+        }
+    }
+
+    /// Counts a rejection; logs it and reports it as an event at most once
+    /// per source per second.
+    fn reject(&mut self, from: Peer, r: Rejection, events: &mut Vec<Event>) -> Delivery {
+        self.rejected.count(r.reason);
+        let now = Instant::now();
+        let source = from.to_string();
+        let due = self
+            .reject_logged
+            .get(&source)
+            .is_none_or(|t| now.saturating_duration_since(*t) >= Duration::from_secs(1));
+        if due {
+            if self.reject_logged.len() >= REJECT_LOG_SOURCES {
+                self.reject_logged.clear();
+            }
+            self.reject_logged.insert(source.clone(), now);
+            warn!(from = %source, reason = r.reason.as_str(), total = self.rejected.total(), "rejected: {}", r.detail);
+            events.push(Event::Rejected {
+                from: source,
+                reason: r.reason,
+                detail: r.detail,
+            });
+        }
+        Delivery::Dropped(DropReason::Rejected)
+    }
+
+    /// Answers a time request signed with a listed key (its stamp may be
+    /// anything: the requester does not know the time yet), at most every
+    /// [`TIME_ANSWER_GAP`] per key.
+    pub(super) fn answer_time(
+        &mut self,
+        request: TimeRequest,
+        tag: Option<Tag>,
+        sender: &str,
+        from: Peer,
+        now: Instant,
+        out: &mut Outbox,
+    ) -> Delivery {
+        let key_id = tag.map_or(0, |t| t.key_id);
+        let recent = self
+            .time_answers
+            .get(&key_id)
+            .is_some_and(|t| now.saturating_duration_since(*t) < TIME_ANSWER_GAP);
+        if recent {
+            return Delivery::Consumed;
+        }
+        self.time_answers.insert(key_id, now);
+        let body = Body::Time(Time {
+            nonce: request.nonce,
+            station_us: mech_proto::unix_micros(),
+        });
+        if let Some(b) = self.make(sender, body) {
+            out.owned.push((from, b));
+        }
+        Delivery::Consumed
+    }
+
+    /// Sends received `bytes` on to `to`, the peer named `name`: unchanged
+    /// when authentication is off, signed for the receiver when it is on.
+    pub(super) fn pass_on(&mut self, bytes: &[u8], to: Peer, name: &str, out: &mut Outbox) {
+        if !self.auth_on() || to == Peer::Local {
+            out.raw.push(to);
+            return;
+        }
+        match split(bytes) {
+            Ok((region, _)) => {
+                if let Some(b) = self.seal(region, name) {
+                    out.owned.push((to, b));
+                }
+            }
+            Err(e) => warn!(error = %e, "cannot re-sign a message to pass on"),
+        }
+    }
+
+    /// `region` (a message without its `auth` element) with a tag for
+    /// `name`, or with a nil tag when authentication is off. `None` if the
+    /// router holds no key for `name`.
+    pub(super) fn seal(&mut self, region: &[u8], name: &str) -> Option<Vec<u8>> {
+        let mut bytes = Vec::with_capacity(region.len() + mech_proto::auth::TAG_LEN + 2);
+        bytes.extend_from_slice(region);
+        bytes.push(0xc0);
+        let Some(keys) = self.auth.as_ref() else {
+            return Some(bytes);
+        };
+        let Some(key) = keys.key_for(name) else {
+            warn!(to = name, "no key to sign for this receiver; not sent");
+            return None;
+        };
+        let stamp = self.stamper.next(mech_proto::unix_micros());
+        if let Err(e) = key.seal(&mut bytes, 0, stamp) {
+            warn!(error = %e, "cannot sign");
+            return None;
+        }
+        Some(bytes)
+    }
+}
