@@ -15,6 +15,7 @@ use mech_proto::{
     Telemetry, Velocity,
 };
 
+use crate::auth::{Checked, RobotAuth};
 use crate::control::{Controller, Gains, MissionRun, Mode};
 use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::filter::MedianFilter;
@@ -129,6 +130,8 @@ pub struct Agent {
     outputs: Vec<f64>,
     counters: Counters,
     version: String,
+    /// Signing and checking, when the robot has a key.
+    auth: Option<RobotAuth>,
 }
 
 impl Agent {
@@ -167,8 +170,33 @@ impl Agent {
             outputs: vec![0.0; motors],
             counters: Counters::default(),
             version: env!("CARGO_PKG_VERSION").to_string(),
+            auth: None,
             settings,
         }
+    }
+
+    /// Signs everything with `key` and obeys only what the router (named
+    /// `router`) signed for this robot.
+    pub fn with_key(mut self, key: mech_proto::auth::Key, router: &str) -> Agent {
+        self.auth = Some(RobotAuth::new(key, router));
+        self
+    }
+
+    /// Messages refused by authentication, by reason (zero without a key).
+    pub fn auth_rejections(&self) -> crate::auth::RobotRejections {
+        self.auth.as_ref().map(|a| a.rejected).unwrap_or_default()
+    }
+
+    /// Encodes a message to send, signed when the robot has a key. The
+    /// header's stamp is the robot's clock reading.
+    pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        mech_proto::encode_into(env, out)?;
+        if let Some(auth) = self.auth.as_mut() {
+            if let Err(e) = auth.seal(out, env.header.stamp_us) {
+                return Err(mech_proto::Error::Encode(e.to_string()));
+            }
+        }
+        Ok(())
     }
 
     pub fn name(&self) -> &str {
@@ -281,13 +309,31 @@ impl Agent {
     /// Decodes and handles one received datagram or frame; undecodable bytes
     /// are counted and dropped.
     pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
-        match mech_proto::decode(bytes) {
-            Ok(env) => self.handle(env, now),
+        let env = match mech_proto::decode(bytes) {
+            Ok(env) => env,
             Err(_) => {
                 self.counters.bad_messages += 1;
-                Vec::new()
+                return Vec::new();
+            }
+        };
+        let local_us = self.stamp_origin_us + now.as_micros() as u64;
+        if let Some(auth) = self.auth.as_mut() {
+            match auth.check(bytes, &env.header.sender, &env.body, local_us) {
+                Checked::Accept => {}
+                Checked::Synced => {
+                    // Station time known: register now.
+                    self.next_hello = now;
+                    return Vec::new();
+                }
+                Checked::Reject => {
+                    if auth.rejected.total().is_power_of_two() {
+                        tracing::warn!(robot = %self.settings.name, rejected = ?auth.rejected, "refused a message not signed by the router for this robot");
+                    }
+                    return Vec::new();
+                }
             }
         }
+        self.handle(env, now)
     }
 
     /// Handles one message from the router; returns the replies.
@@ -373,11 +419,18 @@ impl Agent {
             // Register again: the router may have restarted, or we moved.
             self.registered = false;
             self.next_hello = now;
+            if let Some(auth) = self.auth.as_mut() {
+                auth.forget_router();
+            }
         }
         if !self.registered && now >= self.next_hello {
             self.next_hello = now + self.settings.hello_period;
-            let hello = Body::Hello(self.hello());
-            outgoing.push(self.envelope(mech_proto::ROUTER, hello, now));
+            // With a key, station time first: signed stamps need it.
+            let body = match self.auth.as_mut() {
+                Some(auth) if !auth.synced() => Body::TimeRequest(auth.time_request()),
+                _ => Body::Hello(self.hello()),
+            };
+            outgoing.push(self.envelope(mech_proto::ROUTER, body, now));
         }
 
         let mission_running = self.mission_running();

@@ -18,6 +18,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
 pub mod agent;
+pub mod auth;
 pub mod clock;
 pub mod config;
 pub mod control;

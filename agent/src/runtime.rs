@@ -19,6 +19,8 @@ use crate::hal::{Actuators, PositionSample};
 pub trait Vehicle: Send {
     /// Handles one received datagram.
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope>;
+    /// Encodes a message to send (signed, when the robot has a key).
+    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error>;
     /// Handles one received message.
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope>;
     /// One control period; returns messages to send.
@@ -47,6 +49,9 @@ impl std::fmt::Debug for HardwareVehicle {
 impl Vehicle for HardwareVehicle {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         self.agent.handle_bytes(bytes, now)
+    }
+    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        self.agent.encode(env, out)
     }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         self.agent.handle(env, now)
@@ -95,10 +100,11 @@ pub enum Io {
         socket: UdpSocket,
         router: SocketAddr,
     },
-    /// Messages decoded elsewhere (a serial link's thread).
+    /// Messages framed and deframed elsewhere (a serial link's threads),
+    /// as encoded bytes.
     Frames {
-        incoming: mpsc::Receiver<Envelope>,
-        outgoing: std::sync::mpsc::Sender<Envelope>,
+        incoming: mpsc::Receiver<Vec<u8>>,
+        outgoing: std::sync::mpsc::Sender<Vec<u8>>,
     },
 }
 
@@ -114,7 +120,6 @@ pub enum Ticker {
 
 enum Incoming {
     Bytes(Vec<u8>),
-    Message(Box<Envelope>),
     Ignored,
     Closed,
 }
@@ -147,27 +152,21 @@ impl Io {
                 }
             },
             Io::Frames { incoming, .. } => match incoming.recv().await {
-                Some(env) => Incoming::Message(Box::new(env)),
+                Some(bytes) => Incoming::Bytes(bytes),
                 None => Incoming::Closed,
             },
         }
     }
 
-    async fn send(&mut self, env: &Envelope, buf: &mut Vec<u8>) {
+    async fn send(&mut self, bytes: &[u8]) {
         match self {
             Io::Udp { socket, router } => {
-                buf.clear();
-                match mech_proto::encode_into(env, buf) {
-                    Ok(()) => {
-                        if let Err(e) = socket.send_to(buf, *router).await {
-                            tracing::debug!(error = %e, "send to router");
-                        }
-                    }
-                    Err(e) => tracing::warn!(error = %e, "cannot encode"),
+                if let Err(e) = socket.send_to(bytes, *router).await {
+                    tracing::debug!(error = %e, "send to router");
                 }
             }
             Io::Frames { outgoing, .. } => {
-                let _ = outgoing.send(env.clone());
+                let _ = outgoing.send(bytes.to_vec());
             }
         }
     }
@@ -223,18 +222,26 @@ pub async fn drive<V: Vehicle>(
                 let now = origin.elapsed();
                 match incoming {
                     Incoming::Bytes(b) => vehicle.handle_bytes(&b, now),
-                    Incoming::Message(env) => vehicle.handle(*env, now),
                     Incoming::Ignored => continue,
                     Incoming::Closed => break,
                 }
             }
         };
         for env in &out {
-            io.send(env, &mut buf).await;
+            send(&mut vehicle, &mut io, env, &mut buf).await;
         }
     }
     let bye = vehicle.stop(origin.elapsed());
-    io.send(&bye, &mut buf).await;
+    send(&mut vehicle, &mut io, &bye, &mut buf).await;
+}
+
+/// Encodes (and signs) one message and sends it to the router.
+async fn send<V: Vehicle>(vehicle: &mut V, io: &mut Io, env: &Envelope, buf: &mut Vec<u8>) {
+    buf.clear();
+    match vehicle.encode(env, buf) {
+        Ok(()) => io.send(buf).await,
+        Err(e) => tracing::warn!(error = %e, "cannot encode"),
+    }
 }
 
 #[cfg(test)]

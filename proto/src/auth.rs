@@ -272,6 +272,81 @@ impl Stamper {
     }
 }
 
+/// A key file's contents: whose key it is, and the key. The file is two
+/// TOML lines, `name = "..."` and `secret = "<64 hex digits>"`, with
+/// comments; [`KeyText::render`] writes it, [`KeyText::parse`] reads it
+/// (the key files themselves are read and written by the station and the
+/// agent, which also check that only their owner can read them:
+/// [`private_mode`]).
+#[derive(Debug, Clone)]
+pub struct KeyText {
+    pub name: String,
+    pub key: Key,
+}
+
+impl KeyText {
+    /// Reads a key file's text.
+    pub fn parse(text: &str) -> Result<KeyText, String> {
+        let mut name = None;
+        let mut secret = None;
+        for (n, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let (k, v) = line
+                .split_once('=')
+                .ok_or_else(|| format!("line {}: expected key = \"value\"", n + 1))?;
+            let v = v.trim();
+            let v = v
+                .strip_prefix('"')
+                .and_then(|v| v.strip_suffix('"'))
+                .ok_or_else(|| format!("line {}: the value must be quoted", n + 1))?;
+            match k.trim() {
+                "name" => name = Some(v.to_string()),
+                "secret" => secret = Some(parse_secret(v).map_err(|e| format!("secret: {e}"))?),
+                other => return Err(format!("line {}: unknown field {other:?}", n + 1)),
+            }
+        }
+        let name = name.ok_or("missing field `name`")?;
+        let secret = secret.ok_or("missing field `secret`")?;
+        if name.is_empty()
+            || name.len() > crate::MAX_NAME_LEN
+            || name
+                .chars()
+                .any(|c| c == '"' || c == '\\' || c.is_control())
+        {
+            return Err(format!("name {name:?} is not a MECH name"));
+        }
+        Ok(KeyText {
+            name,
+            key: Key::new(&secret),
+        })
+    }
+
+    /// The text of a key file for `name` holding `secret`.
+    pub fn render(name: &str, secret: &[u8; KEY_LEN]) -> String {
+        let hex: String = secret.iter().map(|b| format!("{b:02x}")).collect();
+        format!(
+            "# MECH key for {name:?} (id {:08x}). Keep it secret: whoever holds it\n\
+             # can sign as {name}.\nname = {name:?}\nsecret = \"{hex}\"\n",
+            Key::new(secret).id()
+        )
+    }
+}
+
+/// Whether a key file with these Unix permission bits is private enough:
+/// no access for group or others.
+pub fn private_mode(mode: u32) -> Result<(), String> {
+    if mode & 0o077 != 0 {
+        return Err(format!(
+            "it can be read by other users (mode {:o}); a key file must be private (chmod 600)",
+            mode & 0o777
+        ));
+    }
+    Ok(())
+}
+
 /// Reads a key's 32 secret bytes from 64 hex digits (surrounding
 /// whitespace ignored).
 pub fn parse_secret(hex: &str) -> Result<[u8; KEY_LEN], String> {
@@ -357,6 +432,21 @@ mod tests {
         assert_eq!(s.next(25), 1_000_005);
         s.sync(10, 30); // the router's clock went back: stamps still rise
         assert_eq!(s.next(31), 1_000_006);
+    }
+
+    #[test]
+    fn key_files_render_and_parse_back() {
+        let text = KeyText::render("robot_1", &[7; KEY_LEN]);
+        let k = KeyText::parse(&text).unwrap();
+        assert_eq!((k.name.as_str(), k.key.id()), ("robot_1", key(7).id()));
+        assert!(text.starts_with("# MECH key for \"robot_1\""));
+        let e = |t: &str| KeyText::parse(t).unwrap_err();
+        assert!(e("name = \"a\"\n").contains("secret"));
+        assert!(e("name = \"a\"\nsecret = \"00\"\n").contains("64 hex digits"));
+        assert!(e("name = a\n").contains("quoted"));
+        assert!(e("colour = \"red\"\n").contains("unknown field"));
+        assert!(private_mode(0o600).is_ok() && private_mode(0o400).is_ok());
+        assert!(private_mode(0o640).unwrap_err().contains("chmod 600"));
     }
 
     #[test]

@@ -119,12 +119,20 @@ impl StreamDecoder {
 pub fn write_serial_frame(env: &Envelope, out: &mut Vec<u8>) -> Result<(), Error> {
     let mut raw = Vec::with_capacity(64);
     encode_into(env, &mut raw)?;
-    let crc = crc32fast::hash(&raw);
+    write_serial_message(&raw, out);
+    Ok(())
+}
+
+/// Appends an already encoded (and possibly signed) message to `out` as a
+/// serial frame, like [`write_serial_frame`].
+pub fn write_serial_message(message: &[u8], out: &mut Vec<u8>) {
+    let mut raw = Vec::with_capacity(message.len() + SERIAL_CRC_LEN);
+    raw.extend_from_slice(message);
+    let crc = crc32fast::hash(message);
     raw.extend_from_slice(&crc.to_le_bytes());
     out.push(0);
     cobs_encode(&raw, out);
     out.push(0);
-    Ok(())
 }
 
 /// Splits a serial byte stream into messages, resynchronising at every
@@ -135,8 +143,8 @@ pub struct SerialDecoder {
     frame: Vec<u8>,
     /// The current frame overflowed; skip to the next delimiter.
     skipping: bool,
-    /// Complete frames' results, oldest first.
-    ready: std::collections::VecDeque<Result<Envelope, Error>>,
+    /// Complete frames' messages (still encoded), oldest first.
+    ready: std::collections::VecDeque<Result<Vec<u8>, Error>>,
 }
 
 impl SerialDecoder {
@@ -173,12 +181,18 @@ impl SerialDecoder {
 
     /// The next received message (or why a frame was dropped).
     pub fn next_message(&mut self) -> Option<Result<Envelope, Error>> {
+        self.next_bytes().map(|r| r.and_then(|m| decode(&m)))
+    }
+
+    /// The next received message's bytes, checksum checked but not decoded
+    /// (a receiver that authenticates needs the bytes as sent).
+    pub fn next_bytes(&mut self) -> Option<Result<Vec<u8>, Error>> {
         self.ready.pop_front()
     }
 }
 
 /// Undoes COBS and checks the CRC of one frame (without its delimiter).
-fn decode_serial_frame(encoded: &[u8]) -> Result<Envelope, Error> {
+fn decode_serial_frame(encoded: &[u8]) -> Result<Vec<u8>, Error> {
     let raw = cobs_decode(encoded)?;
     if raw.len() <= SERIAL_CRC_LEN {
         return Err(Error::Framing("serial frame shorter than its checksum"));
@@ -191,7 +205,10 @@ fn decode_serial_frame(encoded: &[u8]) -> Result<Envelope, Error> {
     if expected != computed {
         return Err(Error::Checksum { expected, computed });
     }
-    decode(msg)
+    let len = msg.len();
+    let mut raw = raw;
+    raw.truncate(len);
+    Ok(raw)
 }
 
 /// Consistent Overhead Byte Stuffing: removes every zero byte from `data`.

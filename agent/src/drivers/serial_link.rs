@@ -10,7 +10,7 @@
 use std::io::{Read, Write};
 
 use mech_proto::Envelope;
-use mech_proto::framing::{SerialDecoder, write_serial_frame};
+use mech_proto::framing::{SerialDecoder, write_serial_message};
 use tokio::sync::mpsc;
 
 use crate::runtime::Io;
@@ -44,10 +44,16 @@ impl<S: Write> SerialLink<S> {
     /// Writes one framed message. A leading delimiter flushes any garbage a
     /// receiver holds from a half-sent frame.
     pub fn send(&mut self, env: &Envelope) -> std::io::Result<()> {
+        let bytes = mech_proto::encode(env)
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        self.send_bytes(&bytes)
+    }
+
+    /// Writes one encoded (possibly signed) message as a frame.
+    pub fn send_bytes(&mut self, message: &[u8]) -> std::io::Result<()> {
         self.out.clear();
         self.out.push(0);
-        write_serial_frame(env, &mut self.out)
-            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+        write_serial_message(message, &mut self.out);
         self.stream.write_all(&self.out)?;
         self.stream.flush()
     }
@@ -58,8 +64,23 @@ impl<S: Read> SerialLink<S> {
     /// its timeout) if none is already waiting. `Ok(None)`: nothing yet.
     /// Corrupt frames are counted and skipped.
     pub fn poll(&mut self) -> std::io::Result<Option<Envelope>> {
-        if let Some(env) = self.next_good() {
-            return Ok(Some(env));
+        Ok(self
+            .poll_bytes()?
+            .and_then(|bytes| match mech_proto::decode(&bytes) {
+                Ok(env) => Some(env),
+                Err(e) => {
+                    self.corrupt_frames += 1;
+                    tracing::debug!(error = %e, "serial frame dropped");
+                    None
+                }
+            }))
+    }
+
+    /// Like [`SerialLink::poll`], but the message's bytes (checksum
+    /// checked, not decoded): what an authenticating receiver needs.
+    pub fn poll_bytes(&mut self) -> std::io::Result<Option<Vec<u8>>> {
+        if let Some(bytes) = self.next_good() {
+            return Ok(Some(bytes));
         }
         let mut buf = [0u8; 512];
         match self.stream.read(&mut buf) {
@@ -82,10 +103,10 @@ impl<S: Read> SerialLink<S> {
         Ok(self.next_good())
     }
 
-    fn next_good(&mut self) -> Option<Envelope> {
-        while let Some(result) = self.decoder.next_message() {
+    fn next_good(&mut self) -> Option<Vec<u8>> {
+        while let Some(result) = self.decoder.next_bytes() {
             match result {
-                Ok(env) => return Some(env),
+                Ok(bytes) => return Some(bytes),
                 Err(e) => {
                     self.corrupt_frames += 1;
                     tracing::debug!(error = %e, "serial frame dropped");
@@ -105,13 +126,13 @@ where
     W: Write + Send + 'static,
 {
     let (in_tx, incoming) = mpsc::channel(64);
-    let (outgoing, out_rx) = std::sync::mpsc::channel::<Envelope>();
+    let (outgoing, out_rx) = std::sync::mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut link = SerialLink::new(reader);
         loop {
-            match link.poll() {
-                Ok(Some(env)) => {
-                    if in_tx.blocking_send(env).is_err() {
+            match link.poll_bytes() {
+                Ok(Some(bytes)) => {
+                    if in_tx.blocking_send(bytes).is_err() {
                         break;
                     }
                 }
@@ -129,8 +150,8 @@ where
     });
     std::thread::spawn(move || {
         let mut link = SerialLink::new(writer);
-        while let Ok(env) = out_rx.recv() {
-            if let Err(e) = link.send(&env) {
+        while let Ok(bytes) = out_rx.recv() {
+            if let Err(e) = link.send_bytes(&bytes) {
                 tracing::warn!(error = %e, "serial link write");
             }
         }

@@ -86,6 +86,9 @@ impl Vehicle for SimAgent {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         SimAgent::handle_bytes(self, bytes, now)
     }
+    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        self.agent.encode(env, out)
+    }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         SimAgent::handle(self, env, now)
     }

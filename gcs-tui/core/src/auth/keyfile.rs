@@ -1,5 +1,6 @@
-//! Key files: one secret per file, readable only by its owner, written by
-//! `mech-gcs keygen NAME`. A key file is TOML:
+//! Key files on disk: one secret per file, readable only by its owner,
+//! written by `mech-gcs keygen NAME` (the format is
+//! [`mech_proto::auth::KeyText`]):
 //!
 //! ```toml
 //! # MECH key for "robot_1" (id 1a2b3c4d). Keep it secret: whoever holds it
@@ -11,8 +12,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use mech_proto::auth::{KEY_LEN, Key, parse_secret};
-use serde::Deserialize;
+use mech_proto::auth::{KEY_LEN, Key, KeyText};
 
 /// Why a key file could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -24,10 +24,8 @@ pub enum KeyFileError {
     },
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
-    #[error(
-        "{path} can be read by other users (mode {mode:o}); a key file must be private: chmod 600 {path}"
-    )]
-    Exposed { path: PathBuf, mode: u32 },
+    #[error("{path}: {why}")]
+    Exposed { path: PathBuf, why: String },
     #[error("cannot write the key file {path}: {source}")]
     Write {
         path: PathBuf,
@@ -56,13 +54,6 @@ impl std::fmt::Debug for KeyFile {
     }
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Raw {
-    name: String,
-    secret: String,
-}
-
 impl KeyFile {
     /// Reads a key file; refuses one that others can read.
     pub fn load(path: &Path) -> Result<KeyFile, KeyFileError> {
@@ -71,22 +62,13 @@ impl KeyFile {
             path: path.to_owned(),
             source,
         })?;
-        KeyFile::parse(&text).map_err(|message| KeyFileError::Invalid {
+        let k = KeyText::parse(&text).map_err(|message| KeyFileError::Invalid {
             path: path.to_owned(),
             message,
-        })
-    }
-
-    /// Parses a key file's text.
-    pub fn parse(text: &str) -> Result<KeyFile, String> {
-        let raw: Raw = toml::from_str(text).map_err(|e| e.message().to_string())?;
-        if raw.name.is_empty() || raw.name.len() > mech_proto::MAX_NAME_LEN {
-            return Err(format!("name {:?} is not a MECH name", raw.name));
-        }
-        let secret = parse_secret(&raw.secret).map_err(|e| format!("secret: {e}"))?;
+        })?;
         Ok(KeyFile {
-            name: raw.name,
-            key: Key::new(&secret),
+            name: k.name,
+            key: k.key,
         })
     }
 
@@ -95,13 +77,11 @@ impl KeyFile {
     pub fn generate(name: &str, path: &Path) -> Result<KeyFile, KeyFileError> {
         let mut secret = [0u8; KEY_LEN];
         getrandom::fill(&mut secret).map_err(|e| KeyFileError::Random(e.to_string()))?;
-        let key = Key::new(&secret);
-        let hex: String = secret.iter().map(|b| format!("{b:02x}")).collect();
-        let text = format!(
-            "# MECH key for {name:?} (id {:08x}). Keep it secret: whoever holds it\n\
-             # can sign as {name}.\nname = {name:?}\nsecret = \"{hex}\"\n",
-            key.id()
-        );
+        let text = KeyText::render(name, &secret);
+        KeyText::parse(&text).map_err(|message| KeyFileError::Invalid {
+            path: path.to_owned(),
+            message,
+        })?;
         let write_err = |source| KeyFileError::Write {
             path: path.to_owned(),
             source,
@@ -117,7 +97,7 @@ impl KeyFile {
         file.sync_all().map_err(write_err)?;
         Ok(KeyFile {
             name: name.to_string(),
-            key,
+            key: Key::new(&secret),
         })
     }
 }
@@ -147,14 +127,10 @@ fn check_private(path: &Path) -> Result<(), KeyFileError> {
         path: path.to_owned(),
         source,
     })?;
-    let mode = meta.permissions().mode() & 0o777;
-    if mode & 0o077 != 0 {
-        return Err(KeyFileError::Exposed {
-            path: path.to_owned(),
-            mode,
-        });
-    }
-    Ok(())
+    mech_proto::auth::private_mode(meta.permissions().mode()).map_err(|why| KeyFileError::Exposed {
+        path: path.to_owned(),
+        why,
+    })
 }
 
 #[cfg(not(unix))]
@@ -190,20 +166,14 @@ mod tests {
     }
 
     #[test]
-    fn bad_key_files_say_what_is_wrong() {
-        assert!(
-            KeyFile::parse("name = \"a\"\nsecret = \"00\"\n")
-                .unwrap_err()
-                .contains("64 hex digits")
-        );
-        assert!(
-            KeyFile::parse("name = \"a\"\n")
-                .unwrap_err()
-                .contains("secret")
-        );
-        let s = "00".repeat(32);
-        assert!(KeyFile::parse(&format!("name = \"\"\nsecret = \"{s}\"\n")).is_err());
-        let k = KeyFile::parse(&format!("name = \"a\"\nsecret = \"{s}\"\n")).unwrap();
-        assert_eq!(k.key.id(), Key::new(&[0; 32]).id());
+    fn a_bad_key_file_names_its_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.key");
+        create_private(&path)
+            .unwrap()
+            .write_all(b"name = \"a\"\n")
+            .unwrap();
+        let e = KeyFile::load(&path).unwrap_err().to_string();
+        assert!(e.contains("bad.key") && e.contains("secret"), "{e}");
     }
 }

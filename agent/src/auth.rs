@@ -1,0 +1,211 @@
+//! The robot's side of the authenticated control plane: it signs what it
+//! sends with its key and obeys only messages the router signed for it.
+//!
+//! A robot often has no real-time clock (a Pi booted without network
+//! time), yet signed messages carry station time. So after boot, and again
+//! whenever the router is lost, the agent asks the router for the time
+//! (`TimeRequest` with a fresh random nonce) before it registers. The
+//! router's `Time` answer is signed with the robot's key and echoes the
+//! nonce, so it cannot be a replay; it gives the offset from the robot's
+//! clock to station time and starts the router's stream. From then on every
+//! router message must be newer than the last one accepted.
+
+use mech_proto::Body;
+use mech_proto::auth::{AuthError, Key, Stamper, Stream, split};
+
+/// Signing and checking for one robot.
+#[derive(Debug)]
+pub struct RobotAuth {
+    key: Key,
+    /// The router's sender name (its messages must say so).
+    router: String,
+    stamper: Stamper,
+    /// The router's stream, once a `Time` answer started it.
+    router_stream: Option<Stream>,
+    /// Nonce of the time request waiting for an answer.
+    asked: Option<u64>,
+    /// Messages refused, by reason.
+    pub rejected: RobotRejections,
+}
+
+/// Messages the robot refused, by reason (shown in its log and counters).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RobotRejections {
+    /// Not signed, or signed with another key.
+    pub bad_tag: u64,
+    /// Not newer than the router's last message, or before the robot knew
+    /// station time.
+    pub replay: u64,
+    /// Signed for this robot but not from the router.
+    pub not_router: u64,
+}
+
+impl RobotRejections {
+    pub fn total(&self) -> u64 {
+        self.bad_tag + self.replay + self.not_router
+    }
+}
+
+/// What checking a received message decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Checked {
+    /// Authentic and fresh: obey it.
+    Accept,
+    /// The router's answer to our time request: station time is known now
+    /// (the caller should register at once).
+    Synced,
+    /// Refused (counted).
+    Reject,
+}
+
+impl RobotAuth {
+    pub fn new(key: Key, router: &str) -> RobotAuth {
+        RobotAuth {
+            key,
+            router: router.to_string(),
+            stamper: Stamper::default(),
+            router_stream: None,
+            asked: None,
+            rejected: RobotRejections::default(),
+        }
+    }
+
+    /// Whether station time is known (a `Time` answer was accepted since
+    /// the last [`RobotAuth::forget_router`]).
+    pub fn synced(&self) -> bool {
+        self.router_stream.is_some()
+    }
+
+    /// A new time request: its nonce is random and remembered.
+    pub fn time_request(&mut self) -> mech_proto::TimeRequest {
+        let nonce = rand::random::<u64>();
+        self.asked = Some(nonce);
+        mech_proto::TimeRequest { nonce }
+    }
+
+    /// The router was lost (it may have restarted, or someone is replaying
+    /// its traffic): ask the time again before trusting it.
+    pub fn forget_router(&mut self) {
+        self.router_stream = None;
+        self.asked = None;
+    }
+
+    /// Signs an encoded message (nil `auth` element) with station time
+    /// `local_us` + offset.
+    pub fn seal(&mut self, bytes: &mut Vec<u8>, local_us: u64) -> Result<(), AuthError> {
+        let stamp = self.stamper.next(local_us);
+        self.key.seal(bytes, 0, stamp)
+    }
+
+    /// Checks a received message whose decoded form is `sender` + `body`,
+    /// when the robot's clock reads `local_us`.
+    pub fn check(&mut self, bytes: &[u8], sender: &str, body: &Body, local_us: u64) -> Checked {
+        let tag = match split(bytes) {
+            Ok((region, Some(tag))) if self.key.verify(region, &tag) => tag,
+            _ => {
+                self.rejected.bad_tag += 1;
+                return Checked::Reject;
+            }
+        };
+        if sender != self.router {
+            self.rejected.not_router += 1;
+            return Checked::Reject;
+        }
+        if let Body::Time(t) = body {
+            if self.asked == Some(t.nonce) {
+                self.asked = None;
+                self.stamper.sync(t.station_us, local_us);
+                self.router_stream = Some(Stream::starting_at(tag.stamp_us));
+                return Checked::Synced;
+            }
+            self.rejected.replay += 1;
+            return Checked::Reject;
+        }
+        match self.router_stream.as_mut().map(|s| s.accept(tag.stamp_us)) {
+            Some(Ok(())) => Checked::Accept,
+            _ => {
+                self.rejected.replay += 1;
+                Checked::Reject
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_proto::{Envelope, Header, Time};
+
+    fn router_msg(key: &Key, body: Body, stamp: u64) -> (Vec<u8>, Body) {
+        let env = Envelope::new(
+            Header {
+                sender: "router".into(),
+                destination: "robot_1".into(),
+                ..Header::default()
+            },
+            body.clone(),
+        );
+        let mut b = mech_proto::encode(&env).unwrap();
+        key.seal(&mut b, 0, stamp).unwrap();
+        (b, body)
+    }
+
+    #[test]
+    fn a_robot_booted_in_1970_syncs_then_takes_only_newer_router_messages() {
+        let key = Key::new(&[4; 32]);
+        let mut auth = RobotAuth::new(key.clone(), "router");
+        let hb = Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 });
+        let (b, body) = router_msg(&key, hb.clone(), 10);
+        assert_eq!(
+            auth.check(&b, "router", &body, 5),
+            Checked::Reject,
+            "not synced"
+        );
+        let req = auth.time_request();
+        // A replayed old answer (another nonce) is refused.
+        let old = Body::Time(Time {
+            nonce: req.nonce ^ 1,
+            station_us: 7,
+        });
+        let (b, body) = router_msg(&key, old, 50);
+        assert_eq!(auth.check(&b, "router", &body, 5), Checked::Reject);
+        let answer = Body::Time(Time {
+            nonce: req.nonce,
+            station_us: 1_700_000_000_000_000,
+        });
+        let (b, body) = router_msg(&key, answer, 1_700_000_000_000_000);
+        assert_eq!(auth.check(&b, "router", &body, 100), Checked::Synced);
+        // Our stamps are station time now.
+        let mut mine = mech_proto::encode(&Envelope::new(Header::default(), hb.clone())).unwrap();
+        auth.seal(&mut mine, 150).unwrap();
+        let (_, tag) = split(&mine).unwrap();
+        assert_eq!(tag.unwrap().stamp_us, 1_700_000_000_000_050);
+        let (b, body) = router_msg(&key, hb.clone(), 1_700_000_000_000_001);
+        assert_eq!(auth.check(&b, "router", &body, 200), Checked::Accept);
+        assert_eq!(
+            auth.check(&b, "router", &body, 200),
+            Checked::Reject,
+            "replay"
+        );
+        let (b, body) = router_msg(&Key::new(&[5; 32]), hb.clone(), 1_700_000_000_000_009);
+        assert_eq!(
+            auth.check(&b, "router", &body, 200),
+            Checked::Reject,
+            "wrong key"
+        );
+        let (b, body) = router_msg(&key, hb, 1_700_000_000_000_010);
+        assert_eq!(
+            auth.check(&b, "matlab", &body, 200),
+            Checked::Reject,
+            "not the router"
+        );
+        assert_eq!(
+            auth.rejected,
+            RobotRejections {
+                bad_tag: 1,
+                replay: 3,
+                not_router: 1
+            }
+        );
+    }
+}
