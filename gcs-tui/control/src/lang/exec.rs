@@ -1,13 +1,12 @@
 //! Runs [`Statement`]s against a running [`Gcs`]: the one executor behind
 //! the TUI command line and `--script`.
 
-use std::collections::HashMap;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
 use futures::future::BoxFuture;
 use mech_proto::{
-    Actuators, Command as Cmd, CommandKind, Mission, SteeringThrottle, Stop, Twist, VelocityHeading,
+    Actuators, Command as Cmd, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,
 };
 use tokio::time::Instant;
 
@@ -16,8 +15,8 @@ use super::parse::{VERBS, failsafe_name, parse_line};
 use super::{LangError, Span};
 use crate::hub::ControlHub;
 use crate::spec::ClusterSpec;
-use mech_core::fleet::{MissionDelivery, Fleet, Robot, Severity};
-use mech_core::router::{Delivery, Publisher};
+use mech_core::fleet::{Fleet, MissionDelivery, Robot, Severity};
+use mech_core::router::{Delivery, Publishers};
 use mech_core::{Gcs, LinkState};
 
 /// Sender name of everything the command language publishes.
@@ -64,7 +63,7 @@ impl Outcome {
 pub struct Executor {
     gcs: Gcs,
     spawner: Option<Box<dyn SimSpawner>>,
-    publishers: HashMap<String, Publisher>,
+    publishers: Publishers,
     /// Fleet and offboard controllers started by this executor's commands.
     control: ControlHub,
 }
@@ -73,9 +72,9 @@ impl Executor {
     pub fn new(gcs: Gcs) -> Executor {
         Executor {
             control: ControlHub::new(gcs.clone()),
+            publishers: gcs.router().publishers(SENDER),
             gcs,
             spawner: None,
-            publishers: HashMap::new(),
         }
     }
 
@@ -208,7 +207,6 @@ impl Executor {
                 let channel = channel
                     .clone()
                     .unwrap_or_else(|| self.gcs.config().fleet.mission_channel.clone());
-                let radius = self.gcs.config().fleet.arrival_radius;
                 let mut ids = Vec::new();
                 for r in &robots {
                     let draft = self.gcs.with_fleet(|f| {
@@ -221,17 +219,9 @@ impl Executor {
                             format!("{r} has no waypoints; set them with `waypoint {r} X,Y ...`"),
                         ));
                     };
-                    let mission = Mission {
-                        id: 0,
-                        waypoints,
-                        looped,
-                        arrival_radius: radius,
-                        start_index: 0,
-                    };
                     let id = self
                         .gcs
-                        .router()
-                        .send_mission(SENDER, r, &channel, mission)
+                        .send_waypoints(SENDER, r, &channel, waypoints, looped)
                         .await
                         .map_err(|e| LangError::new(target.span, e.to_string()))?;
                     ids.push(format!("{r}: mission {id}"));
@@ -269,7 +259,8 @@ impl Executor {
                         .with_fleet(|f| f.robot(r).and_then(|x| x.route.requested.clone()));
                     let Some(channel) = channel else { continue };
                     let delivery = self
-                        .publisher(&channel)
+                        .publishers
+                        .on(&channel)
                         .send(r, Cmd::Stop(Stop {}))
                         .await
                         .map_err(|e| LangError::new(at, e.to_string()))?;
@@ -366,13 +357,6 @@ impl Executor {
         }
     }
 
-    fn publisher(&mut self, channel: &str) -> &mut Publisher {
-        let router = self.gcs.router().clone();
-        self.publishers
-            .entry(channel.to_string())
-            .or_insert_with(|| router.publisher(SENDER, channel))
-    }
-
     /// Robots named by `target`; an error at the target if it names nothing.
     fn resolve(&self, target: &Target) -> Result<Vec<String>, LangError> {
         self.gcs
@@ -399,7 +383,8 @@ impl Executor {
             })?;
             let cmd = command(mode, values).map_err(|m| LangError::new(target.span, m))?;
             let delivery = self
-                .publisher(&channel)
+                .publishers
+                .on(&channel)
                 .send(r, cmd)
                 .await
                 .map_err(|e| LangError::new(target.span, e.to_string()))?;
