@@ -26,7 +26,10 @@ mod tests {
         assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
         assert_eq!(wrap_angle(0.25), 0.25);
-        assert!(wrap_angle(f64::NAN).is_nan(), "a bad angle stays visibly bad");
+        assert!(
+            wrap_angle(f64::NAN).is_nan(),
+            "a bad angle stays visibly bad"
+        );
     }
 
     #[test]
