@@ -1,8 +1,9 @@
 //! Ground-side closed-loop controllers: cluster-space (fleet) control with
 //! formations and slot assignment, follow-the-leader, and offboard waypoint
 //! navigation; [`ControlHub`] runs them against the router on the channels
-//! `fleet/<cluster>`, `follow/<leader>` and `offboard/<robot>`, and
-//! [`ControlCommand`] is their part of the command language.
+//! `fleet/<cluster>`, `follow/<leader>` and `offboard/<robot>`, and the
+//! verbs of [`lang`] (`formation`, `cluster-move`, `follow`, `nav`...) drive
+//! them.
 //!
 //! Every controller here is a pure state machine over plain inputs: each
 //! member's last [`MemberState`] (pose, velocity and platform limits taken from
@@ -44,7 +45,9 @@ pub use hub::{
     ClusterView, ControlError, ControlHub, ControlSnapshot, FollowView, HubConfig, NavView,
     TrackingStats, cluster_channel, follow_channel, offboard_channel,
 };
-pub use lang::control::{ClusterUntil, ControlCommand, ErrorMetric, NavSide};
+pub use lang::verbs::cluster_expect::ErrorMetric;
+pub use lang::verbs::cluster_wait::ClusterUntil;
+pub use lang::verbs::nav::NavSide;
 pub use offboard::{NavConfig, NavOutput, OffboardNavigator};
 pub use spec::{
     ClusterSpec, ClusterStickRates, ClusterSticks, DEFAULT_SPACING, SpecError,
