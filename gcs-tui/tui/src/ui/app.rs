@@ -10,7 +10,7 @@ use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::{Position, Rect};
 
 use super::fleet::{ArenaBounds, ChannelView, ClusterView, FleetSnapshot, RobotView};
-use super::layout::{Areas, SidePanel};
+use super::layout::{Areas, CARD_HEIGHT, SidePanel, TableWindow};
 use super::viewport::Viewport;
 use crate::gamepad::{
     DriveKey, KEY_CHANNEL, KeyTeleop, Mapped, PadEvent, PadState, Teleop, TeleopAction,
@@ -588,7 +588,7 @@ impl App {
 
     /// Lines one robot card takes.
     pub fn card_height(&self) -> usize {
-        super::cards::CARD_HEIGHT
+        CARD_HEIGHT
     }
 
     fn keep_selection_visible(&mut self) {
@@ -852,7 +852,7 @@ impl App {
             self.set_focus(Focus::Routes);
             let inner = super::layout::inner(routes);
             let cols = self.route_columns().len();
-            let w = super::routes::TableWindow::new(self, inner, cols);
+            let w = TableWindow::new(self.route_cursor, inner, cols);
             if let Some((r, c)) = w.cell_at(inner, col, row) {
                 if r < self.robots.len() && c < cols {
                     // A click picks the cell; a click on the picked cell routes.

@@ -8,11 +8,9 @@ use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
 use super::fleet::{LinkState, RobotView, failsafe_str, health_str, link_label, mode_str};
+use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
 use mech_proto::{Computation, FailsafeState, Health};
-
-/// Lines per card.
-pub const CARD_HEIGHT: usize = 3;
 
 /// The cards panel.
 #[derive(Debug)]

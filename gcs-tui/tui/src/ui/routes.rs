@@ -9,10 +9,8 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
+use super::layout::{ROUTE_COL_W, ROUTE_NAME_W, TableWindow};
 use super::theme::Theme;
-
-const NAME_W: usize = 9;
-const COL_W: usize = 7;
 
 /// The routing-table panel.
 #[derive(Debug)]
@@ -31,47 +29,6 @@ fn clip(s: &str, w: usize) -> String {
     }
 }
 
-/// Which part of the table is visible: the cursor is always in view.
-/// Shared by drawing and click handling.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TableWindow {
-    pub first_col: usize,
-    pub cols: usize,
-    pub first_row: usize,
-    pub rows: usize,
-}
-
-impl TableWindow {
-    /// The window for a table of `n_cols` channel columns in `inner`.
-    pub fn new(app: &App, inner: Rect, n_cols: usize) -> TableWindow {
-        let cols = (usize::from(inner.width).saturating_sub(NAME_W + 1) / COL_W).max(1);
-        let first_col = app
-            .route_cursor
-            .1
-            .saturating_sub(cols - 1)
-            .min(n_cols.saturating_sub(1));
-        let rows = usize::from(inner.height).saturating_sub(1 + 2).max(1);
-        let first_row = app.route_cursor.0.saturating_sub(rows - 1);
-        TableWindow {
-            first_col,
-            cols,
-            first_row,
-            rows,
-        }
-    }
-
-    /// The (robot row, channel column) under a cell of `inner`, if any.
-    pub fn cell_at(&self, inner: Rect, col: u16, row: u16) -> Option<(usize, usize)> {
-        let dy = usize::from(row.checked_sub(inner.y)?);
-        let dx = usize::from(col.checked_sub(inner.x)?);
-        if dy == 0 || dy > self.rows || dx < NAME_W + 1 {
-            return None;
-        }
-        let c = (dx - NAME_W - 1) / COL_W;
-        (c < self.cols).then_some((self.first_row + dy - 1, self.first_col + c))
-    }
-}
-
 impl Widget for RoutesPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
@@ -87,20 +44,20 @@ impl Widget for RoutesPanel<'_> {
         block.render(area, buf);
 
         let cols = app.route_columns();
-        let w = TableWindow::new(app, inner, cols.len());
+        let w = TableWindow::new(app.route_cursor, inner, cols.len());
         let (first, fit, first_row, rows_fit) = (w.first_col, w.cols, w.first_row, w.rows);
         let shown = &cols[first..(first + fit).min(cols.len())];
 
         let mut lines: Vec<Line> = Vec::new();
-        let mut head = vec![Span::raw(" ".repeat(NAME_W + 1))];
+        let mut head = vec![Span::raw(" ".repeat(ROUTE_NAME_W + 1))];
         for c in shown {
             let name = if c.is_empty() { "none" } else { c };
-            head.push(Span::styled(clip(name, COL_W), t.title()));
+            head.push(Span::styled(clip(name, ROUTE_COL_W), t.title()));
         }
         lines.push(Line::from(head));
         for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
             let mut spans = vec![Span::styled(
-                format!("{} ", clip(&r.name, NAME_W)),
+                format!("{} ", clip(&r.name, ROUTE_NAME_W)),
                 Style::new().fg(t.robot(ri)),
             )];
             for (k, c) in shown.iter().enumerate() {
@@ -121,7 +78,7 @@ impl Widget for RoutesPanel<'_> {
                 if focused && app.route_cursor == (ri, ci) {
                     style = style.patch(t.selected());
                 }
-                spans.push(Span::styled(clip(mark, COL_W), style));
+                spans.push(Span::styled(clip(mark, ROUTE_COL_W), style));
             }
             lines.push(Line::from(spans));
         }
