@@ -6,14 +6,14 @@
 //! each panel a small widget of its own.
 
 pub mod app;
-pub mod fleet;
 pub mod layout;
+pub mod view;
 pub mod viewport;
 
 pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
-pub use fleet::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, LinkState, RobotView,
-    RouteView, SlotView,
+pub use view::{
+    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkState,
+    RobotView, RouteView, SlotView,
 };
 pub mod cards;
 pub mod events;

@@ -9,8 +9,8 @@ use std::time::Instant;
 use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::{Position, Rect};
 
-use super::fleet::{ArenaBounds, ChannelView, ClusterView, FleetSnapshot, RobotView};
 use super::layout::{Areas, CARD_HEIGHT, SidePanel, TableWindow};
+use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView};
 use super::viewport::Viewport;
 use crate::gamepad::{
     DriveKey, KEY_CHANNEL, KeyTeleop, Mapped, PadEvent, PadState, Teleop, TeleopAction,
@@ -230,7 +230,7 @@ pub struct App {
     pub router_addr: String,
     pub robots: Vec<RobotView>,
     pub channels: Vec<ChannelView>,
-    pub clusters: Vec<ClusterView>,
+    pub clusters: Vec<ClusterOnScreen>,
     pub selection: BTreeSet<String>,
     pub arena: Option<ArenaBounds>,
     pub viewport: Viewport,
@@ -638,7 +638,7 @@ impl App {
             name: name.clone(),
             members: members.clone(),
         });
-        self.clusters.push(ClusterView {
+        self.clusters.push(ClusterOnScreen {
             name: name.clone(),
             members,
             control: None,

@@ -11,8 +11,8 @@ use ratatui::widgets::canvas::{Canvas, Context, Painter, Shape};
 use ratatui::widgets::{Block, Widget};
 
 use super::app::{App, Focus};
-use super::fleet::RobotView;
 use super::theme::Theme;
+use super::view::RobotView;
 use super::viewport::Projection;
 
 /// The map panel.

@@ -13,8 +13,9 @@ use mech_proto::Mission;
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
-use super::fleet::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, RobotView, RouteView,
+use super::view::{
+    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView,
+    RouteView,
 };
 use mech_control::ControlHub;
 use mech_control::lang::Executor;
@@ -111,7 +112,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             fleet
                 .clusters
                 .values()
-                .map(|c| ClusterView {
+                .map(|c| ClusterOnScreen {
                     name: c.name.clone(),
                     members: c.members.clone(),
                     control: None,
