@@ -202,12 +202,11 @@ pub enum Request {
         robots: Vec<String>,
         command: Command,
     },
-    /// A cluster velocity from a pad in cluster mode (`channel` is the
-    /// pad's); it goes to the cluster controller on `fleet/<cluster>`.
+    /// A cluster velocity from a pad in cluster mode, for the active
+    /// cluster; it goes to the cluster controller on `fleet/<cluster>`,
+    /// which knows the members.
     ClusterVelocity {
-        channel: String,
         cluster: String,
-        members: Vec<String>,
         velocity: ClusterVelocity,
     },
     DefineCluster {
@@ -924,9 +923,7 @@ impl App {
                         continue;
                     };
                     self.outbox.push(Request::ClusterVelocity {
-                        channel: o.channel,
                         cluster: cluster.name.clone(),
-                        members: cluster.members.clone(),
                         velocity,
                     });
                 }

@@ -414,12 +414,7 @@ async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
                 }
             }
         }
-        Request::ClusterVelocity {
-            channel: _,
-            cluster,
-            members: _,
-            velocity,
-        } => {
+        Request::ClusterVelocity { cluster, velocity } => {
             // A pad velocity lapses unless the pad refreshes it, so a pad
             // that stops publishing leaves the cluster holding.
             if let Err(e) = link.control.drive_cluster(&cluster, velocity) {
