@@ -3,13 +3,11 @@
 //! results, feeds them to [`App::update`], and carries the App's
 //! [`Request`]s to the GCS core (router, fleet model, command language).
 
-use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use crossterm::event::{DisableMouseCapture, EnableMouseCapture, EventStream};
 use crossterm::execute;
 use futures::StreamExt;
-use mech_proto::Mission;
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
@@ -21,7 +19,7 @@ use mech_control::ControlHub;
 use mech_control::lang::Executor;
 use mech_control::lang::exec::SENDER;
 use mech_core::fleet::{Fleet, Robot, Severity};
-use mech_core::router::Publisher;
+use mech_core::router::Publishers;
 use mech_core::{ChannelStatus, Gcs, RouterHandle};
 
 /// Frames per second of the render tick.
@@ -329,7 +327,7 @@ pub struct CoreLink {
     gcs: Gcs,
     /// One in-process publisher per channel, so sequence numbers and the
     /// router's per-channel rate are those of one steady publisher.
-    publishers: HashMap<String, Publisher>,
+    publishers: Publishers,
     lines: mpsc::UnboundedSender<String>,
     /// The controllers the command line's executor runs too, so a cluster
     /// moved by a pad and by `:cluster-move` is one and the same.
@@ -341,8 +339,8 @@ impl CoreLink {
     /// `control` is that executor's [`ControlHub`] ([`Executor::control`]).
     pub fn new(gcs: Gcs, lines: mpsc::UnboundedSender<String>, control: ControlHub) -> CoreLink {
         CoreLink {
+            publishers: gcs.router().publishers(SENDER),
             gcs,
-            publishers: HashMap::new(),
             lines,
             control,
         }
@@ -372,22 +370,14 @@ async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
             }
         }
         Request::Mission { robots, waypoints } => {
-            let radius = gcs.config().fleet.arrival_radius;
             for robot in robots {
                 gcs.update_fleet(|f| {
                     if let Some(r) = f.robot_mut(&robot) {
                         r.waypoints.draft.clone_from(&waypoints);
                     }
                 });
-                let mission = Mission {
-                    id: 0,
-                    waypoints: waypoints.clone(),
-                    looped: false,
-                    arrival_radius: radius,
-                    start_index: 0,
-                };
-                if let Err(e) = router
-                    .send_mission(SENDER, &robot, WAYPOINT_CHANNEL, mission)
+                if let Err(e) = gcs
+                    .send_waypoints(SENDER, &robot, WAYPOINT_CHANNEL, waypoints.clone(), false)
                     .await
                 {
                     app.log(LogLevel::Error, e.to_string());
@@ -405,9 +395,7 @@ async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
             robots,
             command,
         } => {
-            let p = publishers
-                .entry(channel.clone())
-                .or_insert_with(|| router.publisher(SENDER, &channel));
+            let p = publishers.on(&channel);
             for robot in robots {
                 if let Err(e) = p.send(&robot, command.clone()).await {
                     app.log(LogLevel::Error, e.to_string());
