@@ -47,7 +47,10 @@ impl Default for TeleopConfig {
 }
 
 impl TeleopConfig {
-    fn period(&self) -> Duration {
+    /// Time between steady publishes: one over [`TeleopConfig::rate_hz`],
+    /// or that of 20 Hz when the rate is not a positive number, so the
+    /// station's teleop clock and the pads' own rate check agree.
+    pub fn period(&self) -> Duration {
         let hz = if self.rate_hz.is_finite() && self.rate_hz > 0.0 {
             self.rate_hz
         } else {
