@@ -361,25 +361,14 @@ impl App {
         }
     }
 
-    /// Applies one action.
+    /// Applies one action: a flat dispatch, one method per kind of change.
     pub fn update(&mut self, action: Action) {
         match action {
             Action::Tick(now) => self.tick(now),
             Action::Resize(w, h) => self.size = (w, h),
-            Action::Quit => {
-                self.running = false;
-                self.outbox.push(Request::Quit);
-            }
-            Action::ToggleHelp => {
-                self.show_help = !self.show_help;
-                self.help_scroll = 0;
-            }
-            Action::HelpScroll(d) => {
-                let rows = super::help::visible_entries(self.size.1);
-                let max = super::help::KEYS.len().saturating_sub(rows);
-                self.help_scroll =
-                    (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
-            }
+            Action::Quit => self.quit(),
+            Action::ToggleHelp => self.toggle_help(),
+            Action::HelpScroll(d) => self.scroll_help(d),
             Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
             Action::Select(s) => self.select(s),
             Action::Click { col, row, add } => self.click(col, row, add),
@@ -392,105 +381,151 @@ impl App {
             Action::FocusNext => self.set_focus(self.focus.next()),
             Action::FocusPrev => self.set_focus(self.focus.prev()),
             Action::MakeCluster => self.make_cluster(),
-            Action::WaypointMode(on) => {
-                self.waypoint_mode = on;
-                if on {
-                    self.set_focus(Focus::Waypoints);
-                }
-            }
+            Action::WaypointMode(on) => self.set_waypoint_mode(on),
             Action::AddWaypoint(w) => self.add_waypoint(w),
             Action::RemoveLastWaypoint => {
                 self.waypoints.pop();
             }
             Action::ClearWaypoints => self.waypoints.clear(),
             Action::SendWaypoints => self.send_waypoints(),
-            Action::OpenCommandLine => {
-                self.prompt = Some(Prompt::Command(String::new()));
-                self.history_pos = None;
-            }
+            Action::OpenCommandLine => self.open_command_line(),
             Action::OpenWaypointEntry => self.prompt = Some(Prompt::Waypoint(String::new())),
-            Action::PromptChar(c) => {
-                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
-                    s.push(c);
-                }
-            }
-            Action::PromptBackspace => {
-                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
-                    s.pop();
-                }
-            }
+            Action::PromptChar(c) => self.edit_prompt(|s| s.push(c)),
+            Action::PromptBackspace => self.edit_prompt(|s| {
+                s.pop();
+            }),
             Action::PromptSubmit => self.submit_prompt(),
             Action::PromptCancel => self.prompt = None,
             Action::HistoryPrev => self.history_step(-1),
             Action::HistoryNext => self.history_step(1),
-            Action::CommandResult(r) => match r {
-                Ok(text) => {
-                    self.prompt_error = None;
-                    for line in text.lines().filter(|l| !l.is_empty()) {
-                        self.log(LogLevel::Info, line.to_string());
-                    }
-                }
-                Err(e) => {
-                    self.log(LogLevel::Error, format!("{}: {}", e.line, e.message));
-                    self.prompt_error = Some(e);
-                }
-            },
-            Action::RouteCursor(dr, dc) => {
-                let rows = self.robots.len().max(1) as i64;
-                let cols = self.route_columns().len().max(1) as i64;
-                let r = (self.route_cursor.0 as i64 + i64::from(dr)).rem_euclid(rows);
-                let c = (self.route_cursor.1 as i64 + i64::from(dc)).rem_euclid(cols);
-                self.route_cursor = (r as usize, c as usize);
-            }
-            Action::ApplyRouteCursor => {
-                let cols = self.route_columns();
-                if let (Some(r), Some(c)) = (
-                    self.robots.get(self.route_cursor.0),
-                    cols.get(self.route_cursor.1),
-                ) {
-                    let (robot, channel) = (r.name.clone(), c.clone());
-                    self.route(robot, channel);
-                }
-            }
+            Action::CommandResult(r) => self.command_result(r),
+            Action::RouteCursor(dr, dc) => self.move_route_cursor(dr, dc),
+            Action::ApplyRouteCursor => self.apply_route_cursor(),
             Action::Route { robot, channel } => self.route(robot, channel),
-            Action::EStop => {
-                self.estop = true;
-                self.outbox.push(Request::EStop { engage: true });
-                self.log(LogLevel::Warn, "E-STOP engaged");
-            }
-            Action::Release => {
-                self.estop = false;
-                self.outbox.push(Request::EStop { engage: false });
-                self.log(LogLevel::Warn, "e-stop released");
-            }
-            Action::ToggleKeyTeleop => {
-                self.key_teleop_on = !self.key_teleop_on;
-                if !self.key_teleop_on && self.key_teleop.driving() {
-                    let c = self.key_teleop.stop(self.now);
-                    self.publish(KEY_CHANNEL, c);
-                }
-                let state = if self.key_teleop_on { "on" } else { "off" };
-                self.log(
-                    LogLevel::Info,
-                    format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
-                );
-            }
+            Action::EStop => self.set_estop(true),
+            Action::Release => self.set_estop(false),
+            Action::ToggleKeyTeleop => self.toggle_key_teleop(),
             Action::ToggleNav => self.toggle_nav(),
-            Action::Drive(k) => {
-                if let Some(c) = self.key_teleop.press(k, self.now) {
-                    self.publish(KEY_CHANNEL, c);
-                }
-            }
-            Action::DriveStop => {
-                let c = self.key_teleop.stop(self.now);
-                self.publish(KEY_CHANNEL, c);
-            }
-            Action::Pad(ev) => {
-                let out = self.teleop.handle(&ev, self.now);
-                self.teleop_outputs(out);
-            }
+            Action::Drive(k) => self.drive(k),
+            Action::DriveStop => self.drive_stop(),
+            Action::Pad(ev) => self.pad(&ev),
             Action::Log(level, text) => self.log(level, text),
         }
+    }
+
+    fn quit(&mut self) {
+        self.running = false;
+        self.outbox.push(Request::Quit);
+    }
+
+    fn toggle_help(&mut self) {
+        self.show_help = !self.show_help;
+        self.help_scroll = 0;
+    }
+
+    /// Scrolls the help by `d` entries, keeping the last page full.
+    fn scroll_help(&mut self, d: i32) {
+        let rows = super::help::visible_entries(self.size.1);
+        let max = super::help::KEYS.len().saturating_sub(rows);
+        self.help_scroll = (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
+    }
+
+    fn set_waypoint_mode(&mut self, on: bool) {
+        self.waypoint_mode = on;
+        if on {
+            self.set_focus(Focus::Waypoints);
+        }
+    }
+
+    fn open_command_line(&mut self) {
+        self.prompt = Some(Prompt::Command(String::new()));
+        self.history_pos = None;
+    }
+
+    /// Changes the text of the open prompt, if any.
+    fn edit_prompt(&mut self, edit: impl FnOnce(&mut String)) {
+        if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
+            edit(s);
+        }
+    }
+
+    /// Logs what a command line printed, or its error (kept for the error
+    /// box).
+    fn command_result(&mut self, r: Result<String, PromptError>) {
+        match r {
+            Ok(text) => {
+                self.prompt_error = None;
+                for line in text.lines().filter(|l| !l.is_empty()) {
+                    self.log(LogLevel::Info, line.to_string());
+                }
+            }
+            Err(e) => {
+                self.log(LogLevel::Error, format!("{}: {}", e.line, e.message));
+                self.prompt_error = Some(e);
+            }
+        }
+    }
+
+    /// Moves the routing-table cursor, wrapping around at the edges.
+    fn move_route_cursor(&mut self, dr: i32, dc: i32) {
+        let rows = self.robots.len().max(1) as i64;
+        let cols = self.route_columns().len().max(1) as i64;
+        let r = (self.route_cursor.0 as i64 + i64::from(dr)).rem_euclid(rows);
+        let c = (self.route_cursor.1 as i64 + i64::from(dc)).rem_euclid(cols);
+        self.route_cursor = (r as usize, c as usize);
+    }
+
+    fn apply_route_cursor(&mut self) {
+        let cols = self.route_columns();
+        if let (Some(r), Some(c)) = (
+            self.robots.get(self.route_cursor.0),
+            cols.get(self.route_cursor.1),
+        ) {
+            let (robot, channel) = (r.name.clone(), c.clone());
+            self.route(robot, channel);
+        }
+    }
+
+    /// Engages (or releases) the fleet e-stop at once on screen and asks the
+    /// core to do the same.
+    fn set_estop(&mut self, engage: bool) {
+        self.estop = engage;
+        self.outbox.push(Request::EStop { engage });
+        if engage {
+            self.log(LogLevel::Warn, "E-STOP engaged");
+        } else {
+            self.log(LogLevel::Warn, "e-stop released");
+        }
+    }
+
+    /// Turns keyboard teleop on or off; turning it off mid-drive publishes
+    /// one stop.
+    fn toggle_key_teleop(&mut self) {
+        self.key_teleop_on = !self.key_teleop_on;
+        if !self.key_teleop_on && self.key_teleop.driving() {
+            self.drive_stop();
+        }
+        let state = if self.key_teleop_on { "on" } else { "off" };
+        self.log(
+            LogLevel::Info,
+            format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
+        );
+    }
+
+    fn drive(&mut self, key: DriveKey) {
+        if let Some(c) = self.key_teleop.press(key, self.now) {
+            self.publish(KEY_CHANNEL, c);
+        }
+    }
+
+    fn drive_stop(&mut self) {
+        let c = self.key_teleop.stop(self.now);
+        self.publish(KEY_CHANNEL, c);
+    }
+
+    fn pad(&mut self, ev: &PadEvent) {
+        let out = self.teleop.handle(ev, self.now);
+        self.teleop_outputs(out);
     }
 
     fn tick(&mut self, now: Instant) {
@@ -611,12 +646,7 @@ impl App {
     }
 
     fn make_cluster(&mut self) {
-        let members: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|r| self.selection.contains(&r.name))
-            .map(|r| r.name.clone())
-            .collect();
+        let members = self.selected_robots();
         if members.len() < 2 {
             self.log(
                 LogLevel::Warn,
@@ -681,12 +711,7 @@ impl App {
             self.log(LogLevel::Warn, "no waypoints to send");
             return;
         }
-        let robots: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|r| self.selection.contains(&r.name))
-            .map(|r| r.name.clone())
-            .collect();
+        let robots = self.selected_robots();
         if robots.is_empty() {
             self.log(
                 LogLevel::Warn,
@@ -856,7 +881,7 @@ impl App {
                 if r < self.robots.len() && c < cols {
                     // A click picks the cell; a click on the picked cell routes.
                     if self.route_cursor == (r, c) {
-                        self.update(Action::ApplyRouteCursor);
+                        self.apply_route_cursor();
                     } else {
                         self.route_cursor = (r, c);
                     }
@@ -927,7 +952,7 @@ impl App {
                         velocity,
                     });
                 }
-                TeleopAction::EStop => self.update(Action::EStop),
+                TeleopAction::EStop => self.set_estop(true),
                 TeleopAction::Connected(name) => {
                     self.log(LogLevel::Info, format!("gamepad {name} on {}", o.channel));
                 }
