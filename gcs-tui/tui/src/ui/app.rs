@@ -451,10 +451,11 @@ impl App {
         }
     }
 
+    /// Takes the core's state as it is: the e-stop, robots, channels and
+    /// (when the source keeps them) clusters; fits the map to the first
+    /// robots seen.
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
-        if s.estop != self.estop {
-            self.estop = s.estop;
-        }
+        self.estop = s.estop;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;

@@ -55,7 +55,7 @@ impl App {
     }
 
     /// Queues `command` on `channel` for the robots routed to it.
-    pub(super) fn publish(&mut self, channel: &str, command: Command) {
+    fn publish(&mut self, channel: &str, command: Command) {
         let robots: Vec<String> = self
             .robots
             .iter()
@@ -71,7 +71,7 @@ impl App {
 
     /// Turns teleop outputs into requests and log lines; a pad's cluster
     /// velocity goes to the active cluster, or nowhere without one.
-    pub(super) fn teleop_outputs(&mut self, out: Vec<TeleopOutput>) {
+    fn teleop_outputs(&mut self, out: Vec<TeleopOutput>) {
         for o in out {
             match o.action {
                 TeleopAction::Publish(Mapped::Command(c)) => self.publish(&o.channel, c),
