@@ -109,17 +109,13 @@ fn pad_estop_and_cluster_mode() {
     feed(&mut app, &mut src);
     let reqs = app.take_requests();
     let cluster = reqs.iter().rev().find_map(|r| match r {
-        Request::ClusterVelocity {
-            cluster,
-            members,
-            velocity,
-            ..
-        } => Some((cluster.clone(), members.clone(), *velocity)),
+        Request::ClusterVelocity { cluster, velocity } => Some((cluster.clone(), *velocity)),
         _ => None,
     });
-    let (name, members, v) = cluster.expect("cluster velocity published");
+    let (name, v) = cluster.expect("cluster velocity published");
     assert_eq!(name, "c1");
-    assert_eq!(members, ["robot_1", "robot_3"]);
+    let c1 = app.clusters.iter().find(|c| c.name == "c1").expect("c1");
+    assert_eq!(c1.members, ["robot_1", "robot_3"], "the cluster driven");
     assert!(v.wz > 0.0, "stick left rotates counter-clockwise");
 
     src.push(PadEvent::new(

@@ -133,14 +133,14 @@ fn routes_panel_lists_pads_and_keyboard_teleop() {
 /// per-member tracking errors in the routes panel.
 #[test]
 fn cluster_slots_and_tracking_errors_160x48() {
-    use mech_gcs::ui::{ClusterControlView, ClusterView, SlotView};
+    use mech_gcs::ui::{ClusterControlView, ClusterOnScreen, SlotView};
 
     let mut app = populated(160, 48);
     let mut snap = fixture::fleet(6);
     let p1 = app.robot("robot_1").expect("robot_1").pose;
     let p2 = app.robot("robot_2").expect("robot_2").pose;
     let (cx, cy) = ((p1.x + p2.x) / 2.0, (p1.y + p2.y) / 2.0);
-    snap.clusters = Some(vec![ClusterView {
+    snap.clusters = Some(vec![ClusterOnScreen {
         name: "c1".into(),
         members: vec!["robot_1".into(), "robot_2".into(), "robot_3".into()],
         control: Some(ClusterControlView {

@@ -112,10 +112,48 @@ fn button(key: &str, name: &str) -> Result<PadButton, ConfigError> {
         })
 }
 
+/// The mode named `name`, or an error naming `gamepad.<key>` and the modes.
+fn mode(key: &str, name: &str) -> Result<TeleopMode, ConfigError> {
+    MODES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, m)| *m)
+        .ok_or_else(|| {
+            let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
+            ConfigError(format!(
+                "gamepad.{key}: unknown mode {name:?}; modes are {}",
+                names.join(", ")
+            ))
+        })
+}
+
 impl GamepadConfig {
     /// The teleop settings these values describe, or the first value at
     /// fault.
     pub fn teleop(&self) -> Result<TeleopConfig, ConfigError> {
+        self.check_numbers()?;
+        let (deadman, mode_button, estop_button) = self.buttons()?;
+        let initial_mode = mode("initial_mode", &self.initial_mode)?;
+        Ok(TeleopConfig {
+            deadman,
+            mode_button,
+            estop_button,
+            rate_hz: self.rate_hz,
+            shaping: Shaping {
+                deadzone: self.deadzone,
+                expo: self.expo,
+            },
+            limits: Limits {
+                max_speed: self.max_speed,
+                max_yaw_rate: self.max_yaw_rate,
+                max_scale_rate: self.max_scale_rate,
+            },
+            initial_mode,
+        })
+    }
+
+    /// Shaping, rate and limits in range.
+    fn check_numbers(&self) -> Result<(), ConfigError> {
         let bad = |m: String| Err(ConfigError(m));
         if !(self.deadzone.is_finite() && (0.0..1.0).contains(&self.deadzone)) {
             return bad(format!(
@@ -145,6 +183,12 @@ impl GamepadConfig {
                 return bad(format!("gamepad.{key} must be positive, found {v}"));
             }
         }
+        Ok(())
+    }
+
+    /// The dead-man (if any), mode and e-stop buttons, each a different
+    /// button.
+    fn buttons(&self) -> Result<(Option<PadButton>, PadButton, PadButton), ConfigError> {
         let deadman = match self.deadman.as_str() {
             "none" => None,
             name => Some(button("deadman", name)?),
@@ -163,38 +207,11 @@ impl GamepadConfig {
         ];
         for (a, x, b, y) in pairs {
             if x.is_some() && x == y {
-                return bad(format!(
+                return Err(ConfigError(format!(
                     "gamepad.{a} and gamepad.{b} must be different buttons"
-                ));
+                )));
             }
         }
-        let initial_mode = MODES
-            .iter()
-            .find(|(n, _)| *n == self.initial_mode)
-            .map(|(_, m)| *m)
-            .ok_or_else(|| {
-                let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
-                ConfigError(format!(
-                    "gamepad.initial_mode: unknown mode {:?}; modes are {}",
-                    self.initial_mode,
-                    names.join(", ")
-                ))
-            })?;
-        Ok(TeleopConfig {
-            deadman,
-            mode_button,
-            estop_button,
-            rate_hz: self.rate_hz,
-            shaping: Shaping {
-                deadzone: self.deadzone,
-                expo: self.expo,
-            },
-            limits: Limits {
-                max_speed: self.max_speed,
-                max_yaw_rate: self.max_yaw_rate,
-                max_scale_rate: self.max_scale_rate,
-            },
-            initial_mode,
-        })
+        Ok((deadman, mode_button, estop_button))
     }
 }

@@ -47,7 +47,10 @@ impl Default for TeleopConfig {
 }
 
 impl TeleopConfig {
-    fn period(&self) -> Duration {
+    /// Time between steady publishes: one over [`TeleopConfig::rate_hz`],
+    /// or that of 20 Hz when the rate is not a positive number, so the
+    /// station's teleop clock and the pads' own rate check agree.
+    pub fn period(&self) -> Duration {
         let hz = if self.rate_hz.is_finite() && self.rate_hz > 0.0 {
             self.rate_hz
         } else {
@@ -66,6 +69,32 @@ struct RawAxes {
     right_y: f64,
     left_trigger: f64,
     right_trigger: f64,
+}
+
+impl RawAxes {
+    fn set(&mut self, axis: PadAxis, v: f64) {
+        let slot = match axis {
+            PadAxis::LeftStickX => &mut self.left_x,
+            PadAxis::LeftStickY => &mut self.left_y,
+            PadAxis::RightStickX => &mut self.right_x,
+            PadAxis::RightStickY => &mut self.right_y,
+            PadAxis::LeftTrigger => &mut self.left_trigger,
+            PadAxis::RightTrigger => &mut self.right_trigger,
+        };
+        *slot = v;
+    }
+
+    /// Every axis through the stick shaping; triggers never go negative.
+    fn shaped(&self, s: &Shaping) -> Sticks {
+        Sticks {
+            left_x: s.apply(self.left_x),
+            left_y: s.apply(self.left_y),
+            right_x: s.apply(self.right_x),
+            right_y: s.apply(self.right_y),
+            left_trigger: s.apply(self.left_trigger).max(0.0),
+            right_trigger: s.apply(self.right_trigger).max(0.0),
+        }
+    }
 }
 
 /// What one pad is doing, for display and for the publish logic.
@@ -87,6 +116,22 @@ pub struct PadState {
 }
 
 impl PadState {
+    /// A pad just plugged in: sticks centred, nothing published yet,
+    /// enabled at once only when no dead-man is configured.
+    fn new(id: PadId, name: &str, config: &TeleopConfig) -> PadState {
+        PadState {
+            id,
+            name: name.to_string(),
+            mode: config.initial_mode,
+            enabled: config.deadman.is_none(),
+            sticks: Sticks::default(),
+            last: None,
+            raw: RawAxes::default(),
+            last_sent: None,
+            last_heading: 0.0,
+        }
+    }
+
     /// The channel this pad publishes on.
     pub fn channel(&self) -> String {
         self.id.channel()
@@ -147,106 +192,105 @@ impl Teleop {
 
     /// Applies one pad event and returns what to publish now.
     pub fn handle(&mut self, ev: &PadEvent, now: Instant) -> Vec<TeleopOutput> {
-        let mut out = Vec::new();
-        let channel = ev.pad.channel();
         match &ev.kind {
-            PadEventKind::Connected(name) => {
-                if let Some(old) = self.pads.remove(&ev.pad) {
-                    out.push(publish(&channel, Mapped::zero(old.mode)));
-                }
-                self.pads.insert(
-                    ev.pad,
-                    PadState {
-                        id: ev.pad,
-                        name: name.clone(),
-                        mode: self.config.initial_mode,
-                        enabled: self.config.deadman.is_none(),
-                        sticks: Sticks::default(),
-                        last: None,
-                        raw: RawAxes::default(),
-                        last_sent: None,
-                        last_heading: 0.0,
-                    },
-                );
-                out.push(TeleopOutput {
-                    channel,
-                    action: TeleopAction::Connected(name.clone()),
-                });
+            PadEventKind::Connected(name) => self.connect(ev.pad, name),
+            PadEventKind::Disconnected => self.disconnect(ev.pad),
+            PadEventKind::ButtonPressed(b) => self.press(ev.pad, *b, now),
+            PadEventKind::ButtonReleased(b) => self.release(ev.pad, *b, now),
+            PadEventKind::AxisChanged(axis, v) => self.move_axis(ev.pad, *axis, *v, now),
+        }
+    }
+
+    /// A pad (re)appears and owns its channel; one that was already there
+    /// under this id first publishes a stop.
+    fn connect(&mut self, id: PadId, name: &str) -> Vec<TeleopOutput> {
+        let channel = id.channel();
+        let mut out = Vec::new();
+        if let Some(old) = self.pads.remove(&id) {
+            out.push(publish(&channel, Mapped::zero(old.mode)));
+        }
+        self.pads.insert(id, PadState::new(id, name, &self.config));
+        out.push(TeleopOutput {
+            channel,
+            action: TeleopAction::Connected(name.to_string()),
+        });
+        out
+    }
+
+    /// A pad goes away: one stop, then silence.
+    fn disconnect(&mut self, id: PadId) -> Vec<TeleopOutput> {
+        let Some(old) = self.pads.remove(&id) else {
+            return Vec::new();
+        };
+        let channel = id.channel();
+        vec![
+            publish(&channel, Mapped::zero(old.mode)),
+            TeleopOutput {
+                channel,
+                action: TeleopAction::Disconnected,
+            },
+        ]
+    }
+
+    /// The e-stop button (whatever the dead-man), the dead-man, or the mode
+    /// button, which stops the old mode's output before the new one's.
+    fn press(&mut self, id: PadId, b: PadButton, now: Instant) -> Vec<TeleopOutput> {
+        let mut out = Vec::new();
+        let Some(pad) = self.pads.get_mut(&id) else {
+            return out;
+        };
+        let channel = id.channel();
+        if b == self.config.estop_button {
+            out.push(TeleopOutput {
+                channel,
+                action: TeleopAction::EStop,
+            });
+        } else if Some(b) == self.config.deadman {
+            pad.enabled = true;
+            send_mapped(pad, &self.config, now, true, &mut out);
+        } else if b == self.config.mode_button {
+            let old = pad.mode;
+            pad.mode = old.next();
+            out.push(TeleopOutput {
+                channel: channel.clone(),
+                action: TeleopAction::ModeChanged(pad.mode),
+            });
+            if pad.enabled {
+                let zero = Mapped::zero(old);
+                pad.last = Some(zero.clone());
+                out.push(publish(&channel, zero));
+                send_mapped(pad, &self.config, now, true, &mut out);
             }
-            PadEventKind::Disconnected => {
-                if let Some(old) = self.pads.remove(&ev.pad) {
-                    out.push(publish(&channel, Mapped::zero(old.mode)));
-                    out.push(TeleopOutput {
-                        channel,
-                        action: TeleopAction::Disconnected,
-                    });
-                }
-            }
-            PadEventKind::ButtonPressed(b) => {
-                let Some(pad) = self.pads.get_mut(&ev.pad) else {
-                    return out;
-                };
-                if *b == self.config.estop_button {
-                    out.push(TeleopOutput {
-                        channel,
-                        action: TeleopAction::EStop,
-                    });
-                } else if Some(*b) == self.config.deadman {
-                    pad.enabled = true;
-                    send_mapped(pad, &self.config, now, true, &mut out);
-                } else if *b == self.config.mode_button {
-                    let old = pad.mode;
-                    pad.mode = old.next();
-                    out.push(TeleopOutput {
-                        channel: channel.clone(),
-                        action: TeleopAction::ModeChanged(pad.mode),
-                    });
-                    if pad.enabled {
-                        let zero = Mapped::zero(old);
-                        pad.last = Some(zero.clone());
-                        out.push(publish(&channel, zero));
-                        send_mapped(pad, &self.config, now, true, &mut out);
-                    }
-                }
-            }
-            PadEventKind::ButtonReleased(b) => {
-                let Some(pad) = self.pads.get_mut(&ev.pad) else {
-                    return out;
-                };
-                if Some(*b) == self.config.deadman && pad.enabled {
-                    pad.enabled = false;
-                    let zero = Mapped::zero(pad.mode);
-                    pad.last = Some(zero.clone());
-                    pad.last_sent = Some(now);
-                    out.push(publish(&channel, zero));
-                }
-            }
-            PadEventKind::AxisChanged(axis, v) => {
-                let Some(pad) = self.pads.get_mut(&ev.pad) else {
-                    return out;
-                };
-                let slot = match axis {
-                    PadAxis::LeftStickX => &mut pad.raw.left_x,
-                    PadAxis::LeftStickY => &mut pad.raw.left_y,
-                    PadAxis::RightStickX => &mut pad.raw.right_x,
-                    PadAxis::RightStickY => &mut pad.raw.right_y,
-                    PadAxis::LeftTrigger => &mut pad.raw.left_trigger,
-                    PadAxis::RightTrigger => &mut pad.raw.right_trigger,
-                };
-                *slot = *v;
-                let s = &self.config.shaping;
-                pad.sticks = Sticks {
-                    left_x: s.apply(pad.raw.left_x),
-                    left_y: s.apply(pad.raw.left_y),
-                    right_x: s.apply(pad.raw.right_x),
-                    right_y: s.apply(pad.raw.right_y),
-                    left_trigger: s.apply(pad.raw.left_trigger).max(0.0),
-                    right_trigger: s.apply(pad.raw.right_trigger).max(0.0),
-                };
-                if pad.enabled {
-                    send_mapped(pad, &self.config, now, false, &mut out);
-                }
-            }
+        }
+        out
+    }
+
+    /// Letting go of the dead-man publishes one stop.
+    fn release(&mut self, id: PadId, b: PadButton, now: Instant) -> Vec<TeleopOutput> {
+        let Some(pad) = self.pads.get_mut(&id) else {
+            return Vec::new();
+        };
+        if Some(b) != self.config.deadman || !pad.enabled {
+            return Vec::new();
+        }
+        pad.enabled = false;
+        let zero = Mapped::zero(pad.mode);
+        pad.last = Some(zero.clone());
+        pad.last_sent = Some(now);
+        vec![publish(&id.channel(), zero)]
+    }
+
+    /// A stick or trigger moved: reshape, and publish if enabled and the
+    /// output changed.
+    fn move_axis(&mut self, id: PadId, axis: PadAxis, v: f64, now: Instant) -> Vec<TeleopOutput> {
+        let mut out = Vec::new();
+        let Some(pad) = self.pads.get_mut(&id) else {
+            return out;
+        };
+        pad.raw.set(axis, v);
+        pad.sticks = pad.raw.shaped(&self.config.shaping);
+        if pad.enabled {
+            send_mapped(pad, &self.config, now, false, &mut out);
         }
         out
     }

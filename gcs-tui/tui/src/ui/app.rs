@@ -2,20 +2,29 @@
 //! user intent is an [`Action`], and [`App::update`] is the only place state
 //! changes. What must reach the robots is queued as [`Request`]s that the
 //! event loop hands to the GCS core; the App itself does no I/O.
+//!
+//! This file has the state, the actions and requests, and the dispatch;
+//! the larger families of changes have a file each: `prompt` (command
+//! line and waypoint entry), `mouse` (clicks, drags and the wheel
+//! resolved against the layout) and `manual` (keyboard teleop and
+//! gamepads).
 
 use std::collections::{BTreeSet, VecDeque};
 use std::time::Instant;
 
 use mech_proto::{ClusterVelocity, Command, Waypoint};
-use ratatui::layout::{Position, Rect};
+use ratatui::layout::Rect;
 
-use super::fleet::{ArenaBounds, ChannelView, ClusterView, FleetSnapshot, RobotView};
-use super::layout::{Areas, SidePanel};
+use super::layout::{Areas, CARD_HEIGHT, SidePanel};
+use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView};
 use super::viewport::Viewport;
-use crate::gamepad::{
-    DriveKey, KEY_CHANNEL, KeyTeleop, Mapped, PadEvent, PadState, Teleop, TeleopAction,
-    TeleopConfig, TeleopOutput,
-};
+use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
+
+mod manual;
+mod mouse;
+mod prompt;
+
+pub use prompt::parse_waypoint;
 
 /// Channel the UI publishes waypoint missions on.
 pub const WAYPOINT_CHANNEL: &str = "wp/gcs";
@@ -202,12 +211,11 @@ pub enum Request {
         robots: Vec<String>,
         command: Command,
     },
-    /// A cluster velocity from a pad in cluster mode (`channel` is the
-    /// pad's); it goes to the cluster controller on `fleet/<cluster>`.
+    /// A cluster velocity from a pad in cluster mode, for the active
+    /// cluster; it goes to the cluster controller on `fleet/<cluster>`,
+    /// which knows the members.
     ClusterVelocity {
-        channel: String,
         cluster: String,
-        members: Vec<String>,
         velocity: ClusterVelocity,
     },
     DefineCluster {
@@ -230,7 +238,7 @@ pub struct App {
     pub router_addr: String,
     pub robots: Vec<RobotView>,
     pub channels: Vec<ChannelView>,
-    pub clusters: Vec<ClusterView>,
+    pub clusters: Vec<ClusterOnScreen>,
     pub selection: BTreeSet<String>,
     pub arena: Option<ArenaBounds>,
     pub viewport: Viewport,
@@ -362,25 +370,14 @@ impl App {
         }
     }
 
-    /// Applies one action.
+    /// Applies one action: a flat dispatch, one method per kind of change.
     pub fn update(&mut self, action: Action) {
         match action {
             Action::Tick(now) => self.tick(now),
             Action::Resize(w, h) => self.size = (w, h),
-            Action::Quit => {
-                self.running = false;
-                self.outbox.push(Request::Quit);
-            }
-            Action::ToggleHelp => {
-                self.show_help = !self.show_help;
-                self.help_scroll = 0;
-            }
-            Action::HelpScroll(d) => {
-                let rows = super::help::visible_entries(self.size.1);
-                let max = super::help::KEYS.len().saturating_sub(rows);
-                self.help_scroll =
-                    (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
-            }
+            Action::Quit => self.quit(),
+            Action::ToggleHelp => self.toggle_help(),
+            Action::HelpScroll(d) => self.scroll_help(d),
             Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
             Action::Select(s) => self.select(s),
             Action::Click { col, row, add } => self.click(col, row, add),
@@ -393,120 +390,72 @@ impl App {
             Action::FocusNext => self.set_focus(self.focus.next()),
             Action::FocusPrev => self.set_focus(self.focus.prev()),
             Action::MakeCluster => self.make_cluster(),
-            Action::WaypointMode(on) => {
-                self.waypoint_mode = on;
-                if on {
-                    self.set_focus(Focus::Waypoints);
-                }
-            }
+            Action::WaypointMode(on) => self.set_waypoint_mode(on),
             Action::AddWaypoint(w) => self.add_waypoint(w),
             Action::RemoveLastWaypoint => {
                 self.waypoints.pop();
             }
             Action::ClearWaypoints => self.waypoints.clear(),
             Action::SendWaypoints => self.send_waypoints(),
-            Action::OpenCommandLine => {
-                self.prompt = Some(Prompt::Command(String::new()));
-                self.history_pos = None;
-            }
+            Action::OpenCommandLine => self.open_command_line(),
             Action::OpenWaypointEntry => self.prompt = Some(Prompt::Waypoint(String::new())),
-            Action::PromptChar(c) => {
-                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
-                    s.push(c);
-                }
-            }
-            Action::PromptBackspace => {
-                if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
-                    s.pop();
-                }
-            }
+            Action::PromptChar(c) => self.edit_prompt(|s| s.push(c)),
+            Action::PromptBackspace => self.edit_prompt(|s| {
+                s.pop();
+            }),
             Action::PromptSubmit => self.submit_prompt(),
             Action::PromptCancel => self.prompt = None,
             Action::HistoryPrev => self.history_step(-1),
             Action::HistoryNext => self.history_step(1),
-            Action::CommandResult(r) => match r {
-                Ok(text) => {
-                    self.prompt_error = None;
-                    for line in text.lines().filter(|l| !l.is_empty()) {
-                        self.log(LogLevel::Info, line.to_string());
-                    }
-                }
-                Err(e) => {
-                    self.log(LogLevel::Error, format!("{}: {}", e.line, e.message));
-                    self.prompt_error = Some(e);
-                }
-            },
-            Action::RouteCursor(dr, dc) => {
-                let rows = self.robots.len().max(1) as i64;
-                let cols = self.route_columns().len().max(1) as i64;
-                let r = (self.route_cursor.0 as i64 + i64::from(dr)).rem_euclid(rows);
-                let c = (self.route_cursor.1 as i64 + i64::from(dc)).rem_euclid(cols);
-                self.route_cursor = (r as usize, c as usize);
-            }
-            Action::ApplyRouteCursor => {
-                let cols = self.route_columns();
-                if let (Some(r), Some(c)) = (
-                    self.robots.get(self.route_cursor.0),
-                    cols.get(self.route_cursor.1),
-                ) {
-                    let (robot, channel) = (r.name.clone(), c.clone());
-                    self.route(robot, channel);
-                }
-            }
+            Action::CommandResult(r) => self.command_result(r),
+            Action::RouteCursor(dr, dc) => self.move_route_cursor(dr, dc),
+            Action::ApplyRouteCursor => self.apply_route_cursor(),
             Action::Route { robot, channel } => self.route(robot, channel),
-            Action::EStop => {
-                self.estop = true;
-                self.outbox.push(Request::EStop { engage: true });
-                self.log(LogLevel::Warn, "E-STOP engaged");
-            }
-            Action::Release => {
-                self.estop = false;
-                self.outbox.push(Request::EStop { engage: false });
-                self.log(LogLevel::Warn, "e-stop released");
-            }
-            Action::ToggleKeyTeleop => {
-                self.key_teleop_on = !self.key_teleop_on;
-                if !self.key_teleop_on && self.key_teleop.driving() {
-                    let c = self.key_teleop.stop(self.now);
-                    self.publish(KEY_CHANNEL, c);
-                }
-                let state = if self.key_teleop_on { "on" } else { "off" };
-                self.log(
-                    LogLevel::Info,
-                    format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
-                );
-            }
+            Action::EStop => self.set_estop(true),
+            Action::Release => self.set_estop(false),
+            Action::ToggleKeyTeleop => self.toggle_key_teleop(),
             Action::ToggleNav => self.toggle_nav(),
-            Action::Drive(k) => {
-                if let Some(c) = self.key_teleop.press(k, self.now) {
-                    self.publish(KEY_CHANNEL, c);
-                }
-            }
-            Action::DriveStop => {
-                let c = self.key_teleop.stop(self.now);
-                self.publish(KEY_CHANNEL, c);
-            }
-            Action::Pad(ev) => {
-                let out = self.teleop.handle(&ev, self.now);
-                self.teleop_outputs(out);
-            }
+            Action::Drive(k) => self.drive(k),
+            Action::DriveStop => self.drive_stop(),
+            Action::Pad(ev) => self.pad(&ev),
             Action::Log(level, text) => self.log(level, text),
         }
     }
 
-    fn tick(&mut self, now: Instant) {
-        self.now = now;
-        let out = self.teleop.tick(now);
-        self.teleop_outputs(out);
-        if let Some(c) = self.key_teleop.tick(now) {
-            self.publish(KEY_CHANNEL, c);
+    fn quit(&mut self) {
+        self.running = false;
+        self.outbox.push(Request::Quit);
+    }
+
+    fn toggle_help(&mut self) {
+        self.show_help = !self.show_help;
+        self.help_scroll = 0;
+    }
+
+    /// Scrolls the help by `d` entries, keeping the last page full.
+    fn scroll_help(&mut self, d: i32) {
+        let rows = super::help::visible_entries(self.size.1);
+        let max = super::help::KEYS.len().saturating_sub(rows);
+        self.help_scroll = (self.help_scroll as i64 + i64::from(d)).clamp(0, max as i64) as usize;
+    }
+
+    /// Engages (or releases) the fleet e-stop at once on screen and asks the
+    /// core to do the same.
+    fn set_estop(&mut self, engage: bool) {
+        self.estop = engage;
+        self.outbox.push(Request::EStop { engage });
+        if engage {
+            self.log(LogLevel::Warn, "E-STOP engaged");
+        } else {
+            self.log(LogLevel::Warn, "e-stop released");
         }
     }
 
+    /// Takes the core's state as it is: the e-stop, robots, channels and
+    /// (when the source keeps them) clusters; fits the map to the first
+    /// robots seen.
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
-        if s.estop != self.estop {
-            self.estop = s.estop;
-        }
+        self.estop = s.estop;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;
@@ -588,7 +537,7 @@ impl App {
 
     /// Lines one robot card takes.
     pub fn card_height(&self) -> usize {
-        super::cards::CARD_HEIGHT
+        CARD_HEIGHT
     }
 
     fn keep_selection_visible(&mut self) {
@@ -612,12 +561,7 @@ impl App {
     }
 
     fn make_cluster(&mut self) {
-        let members: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|r| self.selection.contains(&r.name))
-            .map(|r| r.name.clone())
-            .collect();
+        let members = self.selected_robots();
         if members.len() < 2 {
             self.log(
                 LogLevel::Warn,
@@ -638,7 +582,7 @@ impl App {
             name: name.clone(),
             members: members.clone(),
         });
-        self.clusters.push(ClusterView {
+        self.clusters.push(ClusterOnScreen {
             name: name.clone(),
             members,
             control: None,
@@ -671,6 +615,13 @@ impl App {
             .collect()
     }
 
+    fn set_waypoint_mode(&mut self, on: bool) {
+        self.waypoint_mode = on;
+        if on {
+            self.set_focus(Focus::Waypoints);
+        }
+    }
+
     fn add_waypoint(&mut self, w: Waypoint) {
         if self.waypoints.len() < mech_proto::MAX_WAYPOINTS {
             self.waypoints.push(w);
@@ -682,12 +633,7 @@ impl App {
             self.log(LogLevel::Warn, "no waypoints to send");
             return;
         }
-        let robots: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|r| self.selection.contains(&r.name))
-            .map(|r| r.name.clone())
-            .collect();
+        let robots = self.selected_robots();
         if robots.is_empty() {
             self.log(
                 LogLevel::Warn,
@@ -709,6 +655,26 @@ impl App {
         });
     }
 
+    /// Moves the routing-table cursor, wrapping around at the edges.
+    fn move_route_cursor(&mut self, dr: i32, dc: i32) {
+        let rows = self.robots.len().max(1) as i64;
+        let cols = self.route_columns().len().max(1) as i64;
+        let r = (self.route_cursor.0 as i64 + i64::from(dr)).rem_euclid(rows);
+        let c = (self.route_cursor.1 as i64 + i64::from(dc)).rem_euclid(cols);
+        self.route_cursor = (r as usize, c as usize);
+    }
+
+    fn apply_route_cursor(&mut self) {
+        let cols = self.route_columns();
+        if let (Some(r), Some(c)) = (
+            self.robots.get(self.route_cursor.0),
+            cols.get(self.route_cursor.1),
+        ) {
+            let (robot, channel) = (r.name.clone(), c.clone());
+            self.route(robot, channel);
+        }
+    }
+
     fn route(&mut self, robot: String, channel: String) {
         if self.robot(&robot).is_none() {
             self.log(LogLevel::Error, format!("no robot named {robot}"));
@@ -721,309 +687,5 @@ impl App {
             r.route.acknowledged = false;
         }
         self.outbox.push(Request::Route { robot, channel });
-    }
-
-    fn submit_prompt(&mut self) {
-        match self.prompt.take() {
-            Some(Prompt::Command(line)) => {
-                let line = line.trim().to_string();
-                if line.is_empty() {
-                    return;
-                }
-                if self.history.last() != Some(&line) {
-                    self.history.push(line.clone());
-                    if self.history.len() > HISTORY_LINES {
-                        self.history.remove(0);
-                    }
-                }
-                self.history_pos = None;
-                self.prompt_error = None;
-                self.outbox.push(Request::Exec(line));
-            }
-            Some(Prompt::Waypoint(text)) => match parse_waypoint(&text) {
-                Ok(w) => {
-                    self.prompt_error = None;
-                    self.add_waypoint(w);
-                }
-                Err((message, column)) => {
-                    self.prompt_error = Some(PromptError {
-                        line: text.clone(),
-                        message,
-                        column: Some(column),
-                    });
-                    self.prompt = Some(Prompt::Waypoint(text));
-                }
-            },
-            None => {}
-        }
-    }
-
-    fn history_step(&mut self, dir: i32) {
-        let Some(Prompt::Command(s)) = &mut self.prompt else {
-            return;
-        };
-        if self.history.is_empty() {
-            return;
-        }
-        let last = self.history.len() - 1;
-        let pos = match (self.history_pos, dir < 0) {
-            (None, true) => Some(last),
-            (None, false) => None,
-            (Some(p), true) => Some(p.saturating_sub(1)),
-            (Some(p), false) => (p < last).then_some(p + 1),
-        };
-        self.history_pos = pos;
-        *s = pos.map(|p| self.history[p].clone()).unwrap_or_default();
-    }
-
-    /// The robot drawn at (or next to) an absolute terminal cell of the map.
-    pub fn robot_at_cell(&self, col: u16, row: u16) -> Option<&RobotView> {
-        let inner = self.areas().map_inner();
-        if !inner.contains(Position::new(col, row)) {
-            return None;
-        }
-        let p = self.viewport.project(inner.width, inner.height);
-        let (cx, cy) = (col - inner.x, row - inner.y);
-        let (wx, wy) = p.cell_to_world(cx, cy);
-        self.robots
-            .iter()
-            .filter_map(|r| {
-                let (rc, rr) = p.world_to_cell(r.pose.x, r.pose.y)?;
-                (rc.abs_diff(cx) <= 1 && rr.abs_diff(cy) <= 1)
-                    .then(|| ((r.pose.x - wx).hypot(r.pose.y - wy), r))
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, r)| r)
-    }
-
-    /// World point (m) under an absolute terminal cell of the map.
-    pub fn map_point(&self, col: u16, row: u16) -> Option<(f64, f64)> {
-        let inner = self.areas().map_inner();
-        if !inner.contains(Position::new(col, row)) {
-            return None;
-        }
-        let p = self.viewport.project(inner.width, inner.height);
-        Some(p.cell_to_world(col - inner.x, row - inner.y))
-    }
-
-    fn click(&mut self, col: u16, row: u16, add: bool) {
-        let areas = self.areas();
-        let pos = Position::new(col, row);
-        if areas.map_inner().contains(pos) {
-            self.focus = Focus::Map;
-            if self.waypoint_mode {
-                if let Some((x, y)) = self.map_point(col, row) {
-                    self.add_waypoint(Waypoint {
-                        x,
-                        y,
-                        z: 0.0,
-                        time: None,
-                    });
-                }
-                return;
-            }
-            match self.robot_at_cell(col, row).map(|r| r.name.clone()) {
-                Some(name) if add => self.select(Select::Toggle(name)),
-                Some(name) => self.select(Select::Only(name)),
-                None if !add => self.drag_from = Some((col, row)),
-                None => {}
-            }
-            return;
-        }
-        if let Some(cards) = areas.cards.filter(|a| a.contains(pos)) {
-            self.focus = Focus::Cards;
-            let inner = super::layout::inner(cards);
-            if row < inner.y {
-                return;
-            }
-            let i = self.cards_scroll + usize::from(row - inner.y) / self.card_height();
-            if let Some(name) = self.robots.get(i).map(|r| r.name.clone()) {
-                self.select(if add {
-                    Select::Toggle(name)
-                } else {
-                    Select::Only(name)
-                });
-            }
-            return;
-        }
-        if areas.waypoints.is_some_and(|a| a.contains(pos)) {
-            self.set_focus(Focus::Waypoints);
-        } else if let Some(routes) = areas.routes.filter(|a| a.contains(pos)) {
-            self.set_focus(Focus::Routes);
-            let inner = super::layout::inner(routes);
-            let cols = self.route_columns().len();
-            let w = super::routes::TableWindow::new(self, inner, cols);
-            if let Some((r, c)) = w.cell_at(inner, col, row) {
-                if r < self.robots.len() && c < cols {
-                    // A click picks the cell; a click on the picked cell routes.
-                    if self.route_cursor == (r, c) {
-                        self.update(Action::ApplyRouteCursor);
-                    } else {
-                        self.route_cursor = (r, c);
-                    }
-                }
-            }
-        }
-    }
-
-    fn drag(&mut self, col: u16, row: u16) {
-        let Some((c0, r0)) = self.drag_from else {
-            return;
-        };
-        let dx = f64::from(c0) - f64::from(col);
-        let dy = f64::from(row) - f64::from(r0);
-        self.viewport.pan_cells(dx, dy);
-        self.drag_from = Some((col, row));
-    }
-
-    fn scroll(&mut self, col: u16, row: u16, steps: i32) {
-        let factor = 1.25f64.powi(steps);
-        match self.map_point(col, row) {
-            Some((x, y)) => self.viewport.zoom_about(factor, x, y),
-            None => {
-                if self
-                    .areas()
-                    .cards
-                    .is_some_and(|a| a.contains(Position::new(col, row)))
-                {
-                    if steps < 0 {
-                        self.cards_scroll =
-                            (self.cards_scroll + 1).min(self.robots.len().saturating_sub(1));
-                    } else {
-                        self.cards_scroll = self.cards_scroll.saturating_sub(1);
-                    }
-                }
-            }
-        }
-    }
-
-    fn publish(&mut self, channel: &str, command: Command) {
-        let robots: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|r| r.route.channel == channel)
-            .map(|r| r.name.clone())
-            .collect();
-        self.outbox.push(Request::Publish {
-            channel: channel.to_string(),
-            robots,
-            command,
-        });
-    }
-
-    fn teleop_outputs(&mut self, out: Vec<TeleopOutput>) {
-        for o in out {
-            match o.action {
-                TeleopAction::Publish(Mapped::Command(c)) => self.publish(&o.channel, c),
-                TeleopAction::Publish(Mapped::Cluster(velocity)) => {
-                    let Some(cluster) = self
-                        .active_cluster
-                        .as_ref()
-                        .and_then(|n| self.clusters.iter().find(|c| &c.name == n))
-                    else {
-                        continue;
-                    };
-                    self.outbox.push(Request::ClusterVelocity {
-                        channel: o.channel,
-                        cluster: cluster.name.clone(),
-                        members: cluster.members.clone(),
-                        velocity,
-                    });
-                }
-                TeleopAction::EStop => self.update(Action::EStop),
-                TeleopAction::Connected(name) => {
-                    self.log(LogLevel::Info, format!("gamepad {name} on {}", o.channel));
-                }
-                TeleopAction::Disconnected => {
-                    self.log(
-                        LogLevel::Warn,
-                        format!("gamepad on {} unplugged", o.channel),
-                    );
-                }
-                TeleopAction::ModeChanged(m) => {
-                    self.log(LogLevel::Info, format!("{} mode {}", o.channel, m.as_str()));
-                }
-            }
-        }
-    }
-}
-
-/// Parses `x,y[,t]` (commas or spaces) into a waypoint; on error, the
-/// message and the byte column of the offending field.
-pub fn parse_waypoint(text: &str) -> Result<Waypoint, (String, usize)> {
-    let mut fields: Vec<(usize, &str)> = Vec::new();
-    let mut start = None;
-    for (i, ch) in text.char_indices() {
-        let sep = ch == ',' || ch.is_whitespace();
-        match (sep, start) {
-            (false, None) => start = Some(i),
-            (true, Some(s)) => {
-                fields.push((s, &text[s..i]));
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(s) = start {
-        fields.push((s, &text[s..]));
-    }
-    if fields.len() < 2 {
-        return Err((
-            "expected x,y[,t] in metres (and seconds)".into(),
-            text.len(),
-        ));
-    }
-    if fields.len() > 3 {
-        return Err(("too many numbers: x,y[,t]".into(), fields[3].0));
-    }
-    let mut nums = [0.0f64; 3];
-    for (k, (col, f)) in fields.iter().enumerate() {
-        let v: f64 = f
-            .parse()
-            .map_err(|_| (format!("{f:?} is not a number"), *col))?;
-        if !v.is_finite() {
-            return Err((format!("{f:?} is not a finite number"), *col));
-        }
-        nums[k] = v;
-    }
-    let time = if fields.len() == 3 {
-        if nums[2] < 0.0 {
-            return Err(("arrival time must not be negative".into(), fields[2].0));
-        }
-        Some(nums[2])
-    } else {
-        None
-    };
-    Ok(Waypoint {
-        x: nums[0],
-        y: nums[1],
-        z: 0.0,
-        time,
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn waypoint_text_parses_with_optional_time() {
-        assert_eq!(
-            parse_waypoint("1.5, -2"),
-            Ok(Waypoint {
-                x: 1.5,
-                y: -2.0,
-                z: 0.0,
-                time: None
-            })
-        );
-        assert_eq!(parse_waypoint("1 2 30").map(|w| w.time), Ok(Some(30.0)));
-    }
-
-    #[test]
-    fn waypoint_errors_point_at_the_field() {
-        assert_eq!(parse_waypoint("1,abc").map_err(|e| e.1), Err(2));
-        assert_eq!(parse_waypoint("1,2,-3").map_err(|e| e.1), Err(4));
-        assert!(parse_waypoint("7").is_err());
     }
 }

@@ -7,12 +7,10 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
-use super::fleet::{LinkState, RobotView, failsafe_str, health_str, link_label, mode_str};
+use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
+use super::view::{LinkState, RobotView, failsafe_str, health_str, link_label, mode_str};
 use mech_proto::{Computation, FailsafeState, Health};
-
-/// Lines per card.
-pub const CARD_HEIGHT: usize = 3;
 
 /// The cards panel.
 #[derive(Debug)]

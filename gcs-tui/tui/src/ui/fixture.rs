@@ -6,7 +6,7 @@ use std::time::Instant;
 use mech_proto::{Computation, ControlMode, FailsafeState, Health, MissionProgress, Velocity};
 
 use super::app::{Action, App};
-use super::fleet::{ArenaBounds, ChannelView, FleetSnapshot, LinkState, RobotView, RouteView};
+use super::view::{ArenaBounds, ChannelView, FleetSnapshot, LinkState, RobotView, RouteView};
 
 const PLATFORMS: [&str; 3] = ["diff-drive", "kiwi", "quadcopter"];
 

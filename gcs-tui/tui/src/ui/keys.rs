@@ -21,87 +21,110 @@ pub fn on_event(app: &App, ev: &Event) -> Vec<Action> {
     }
 }
 
-/// Actions for one key.
+/// Actions for one key. Safety keys come first, so nothing may shadow
+/// them; then the help overlay and an open prompt take every key; then
+/// keyboard teleop, waypoint mode, the focused panel and last the keys that
+/// work everywhere.
 pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
     if key.kind == KeyEventKind::Release {
         return Vec::new();
     }
-    let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
-    // Safety keys first: nothing may shadow them.
-    match key.code {
-        KeyCode::Char('x') | KeyCode::Char('X') if ctrl => return vec![Action::EStop],
-        KeyCode::Char('X') if app.prompt.is_none() => return vec![Action::EStop],
-        KeyCode::Char('r') | KeyCode::Char('R') if ctrl => return vec![Action::Release],
-        KeyCode::Char('c') if ctrl => return vec![Action::Quit],
-        _ => {}
+    if let Some(a) = safety_key(app, key) {
+        return vec![a];
     }
     if app.show_help {
-        return vec![match key.code {
-            KeyCode::Up | KeyCode::Char('k') => Action::HelpScroll(-1),
-            KeyCode::Down | KeyCode::Char('j') => Action::HelpScroll(1),
-            KeyCode::PageUp => Action::HelpScroll(-10),
-            KeyCode::PageDown | KeyCode::Char(' ') => Action::HelpScroll(10),
-            _ => Action::ToggleHelp,
-        }];
+        return vec![help_key(key.code)];
     }
     if app.prompt.is_some() {
         return prompt_key(app, key);
     }
-    if app.key_teleop_on {
-        let drive = match key.code {
-            KeyCode::Up | KeyCode::Char('w') => Some(DriveKey::Forward),
-            KeyCode::Down | KeyCode::Char('s') => Some(DriveKey::Back),
-            KeyCode::Left | KeyCode::Char('a') => Some(DriveKey::TurnLeft),
-            KeyCode::Right | KeyCode::Char('d') => Some(DriveKey::TurnRight),
-            KeyCode::Char('q') => Some(DriveKey::StrafeLeft),
-            KeyCode::Char('e') => Some(DriveKey::StrafeRight),
-            _ => None,
-        };
-        if let Some(d) = drive {
-            return vec![Action::Drive(d)];
-        }
-        match key.code {
-            KeyCode::Char(' ') => return vec![Action::DriveStop],
-            KeyCode::Char('t') | KeyCode::Esc => return vec![Action::ToggleKeyTeleop],
-            _ => {}
-        }
+    teleop_key(app, key.code)
+        .or_else(|| waypoint_mode_key(app, key.code))
+        .or_else(|| panel_key(app, key.code))
+        .or_else(|| global_key(app, key.code))
+        .into_iter()
+        .collect()
+}
+
+/// E-stop (`X`, or `Ctrl+X` even while typing), release and quit.
+fn safety_key(app: &App, key: &KeyEvent) -> Option<Action> {
+    let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
+    match key.code {
+        KeyCode::Char('x') | KeyCode::Char('X') if ctrl => Some(Action::EStop),
+        KeyCode::Char('X') if app.prompt.is_none() => Some(Action::EStop),
+        KeyCode::Char('r') | KeyCode::Char('R') if ctrl => Some(Action::Release),
+        KeyCode::Char('c') if ctrl => Some(Action::Quit),
+        _ => None,
     }
-    if app.waypoint_mode {
-        match key.code {
-            KeyCode::Esc => return vec![Action::WaypointMode(false)],
-            KeyCode::Backspace => return vec![Action::RemoveLastWaypoint],
-            KeyCode::Delete => return vec![Action::ClearWaypoints],
-            KeyCode::Enter | KeyCode::Char('s') => return vec![Action::SendWaypoints],
-            KeyCode::Char('e') => return vec![Action::OpenWaypointEntry],
-            _ => {}
-        }
+}
+
+/// While the help is shown: scroll it, any other key closes it.
+fn help_key(code: KeyCode) -> Action {
+    match code {
+        KeyCode::Up | KeyCode::Char('k') => Action::HelpScroll(-1),
+        KeyCode::Down | KeyCode::Char('j') => Action::HelpScroll(1),
+        KeyCode::PageUp => Action::HelpScroll(-10),
+        KeyCode::PageDown | KeyCode::Char(' ') => Action::HelpScroll(10),
+        _ => Action::ToggleHelp,
     }
-    if app.focus == Focus::Routes {
-        match key.code {
-            KeyCode::Up => return vec![Action::RouteCursor(-1, 0)],
-            KeyCode::Down => return vec![Action::RouteCursor(1, 0)],
-            KeyCode::Left => return vec![Action::RouteCursor(0, -1)],
-            KeyCode::Right => return vec![Action::RouteCursor(0, 1)],
-            KeyCode::Enter => return vec![Action::ApplyRouteCursor],
-            _ => {}
-        }
+}
+
+/// Keyboard teleop, when on: arrows/WASD drive, Q/E strafe, Space stops,
+/// `t` or Esc turns it off.
+fn teleop_key(app: &App, code: KeyCode) -> Option<Action> {
+    if !app.key_teleop_on {
+        return None;
     }
-    if app.focus == Focus::Cards {
-        match key.code {
-            KeyCode::Up => return vec![Action::Select(Select::Prev)],
-            KeyCode::Down => return vec![Action::Select(Select::Next)],
-            _ => {}
-        }
+    let drive = match code {
+        KeyCode::Up | KeyCode::Char('w') => DriveKey::Forward,
+        KeyCode::Down | KeyCode::Char('s') => DriveKey::Back,
+        KeyCode::Left | KeyCode::Char('a') => DriveKey::TurnLeft,
+        KeyCode::Right | KeyCode::Char('d') => DriveKey::TurnRight,
+        KeyCode::Char('q') => DriveKey::StrafeLeft,
+        KeyCode::Char('e') => DriveKey::StrafeRight,
+        KeyCode::Char(' ') => return Some(Action::DriveStop),
+        KeyCode::Char('t') | KeyCode::Esc => return Some(Action::ToggleKeyTeleop),
+        _ => return None,
+    };
+    Some(Action::Drive(drive))
+}
+
+/// Waypoint mode, when on: leave, edit, send or type a waypoint.
+fn waypoint_mode_key(app: &App, code: KeyCode) -> Option<Action> {
+    if !app.waypoint_mode {
+        return None;
     }
-    if app.focus == Focus::Waypoints {
-        match key.code {
-            KeyCode::Backspace => return vec![Action::RemoveLastWaypoint],
-            KeyCode::Delete => return vec![Action::ClearWaypoints],
-            KeyCode::Enter => return vec![Action::SendWaypoints],
-            _ => {}
-        }
+    match code {
+        KeyCode::Esc => Some(Action::WaypointMode(false)),
+        KeyCode::Backspace => Some(Action::RemoveLastWaypoint),
+        KeyCode::Delete => Some(Action::ClearWaypoints),
+        KeyCode::Enter | KeyCode::Char('s') => Some(Action::SendWaypoints),
+        KeyCode::Char('e') => Some(Action::OpenWaypointEntry),
+        _ => None,
     }
-    let a = match key.code {
+}
+
+/// Keys of the focused panel: the routing-table cursor, the card
+/// selection, the waypoint list.
+fn panel_key(app: &App, code: KeyCode) -> Option<Action> {
+    match (app.focus, code) {
+        (Focus::Routes, KeyCode::Up) => Some(Action::RouteCursor(-1, 0)),
+        (Focus::Routes, KeyCode::Down) => Some(Action::RouteCursor(1, 0)),
+        (Focus::Routes, KeyCode::Left) => Some(Action::RouteCursor(0, -1)),
+        (Focus::Routes, KeyCode::Right) => Some(Action::RouteCursor(0, 1)),
+        (Focus::Routes, KeyCode::Enter) => Some(Action::ApplyRouteCursor),
+        (Focus::Cards, KeyCode::Up) => Some(Action::Select(Select::Prev)),
+        (Focus::Cards, KeyCode::Down) => Some(Action::Select(Select::Next)),
+        (Focus::Waypoints, KeyCode::Backspace) => Some(Action::RemoveLastWaypoint),
+        (Focus::Waypoints, KeyCode::Delete) => Some(Action::ClearWaypoints),
+        (Focus::Waypoints, KeyCode::Enter) => Some(Action::SendWaypoints),
+        _ => None,
+    }
+}
+
+/// Keys that work whatever the mode and the focus.
+fn global_key(app: &App, code: KeyCode) -> Option<Action> {
+    let a = match code {
         KeyCode::Char('q') => Action::Quit,
         KeyCode::Char('?') => Action::ToggleHelp,
         KeyCode::Char(':') => Action::OpenCommandLine,
@@ -126,9 +149,9 @@ pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
         KeyCode::Right => Action::Pan(4.0, 0.0),
         KeyCode::Up => Action::Pan(0.0, 2.0),
         KeyCode::Down => Action::Pan(0.0, -2.0),
-        _ => return Vec::new(),
+        _ => return None,
     };
-    vec![a]
+    Some(a)
 }
 
 fn prompt_key(app: &App, key: &KeyEvent) -> Vec<Action> {

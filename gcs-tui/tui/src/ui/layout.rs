@@ -1,11 +1,20 @@
 //! Screen layout as a pure function of the terminal size, shared by the
 //! renderer and by click handling (so a click is resolved against exactly
-//! the rectangles that were drawn).
+//! the rectangles that were drawn): the panel rectangles, the height of a
+//! robot card and the visible window of the routing table.
 
 use ratatui::layout::{Constraint, Layout, Rect};
 
 /// Width and height from which every panel is shown at once.
 pub const WIDE_MIN: (u16, u16) = (120, 36);
+
+/// Lines per robot card, so scrolling and clicks land on the card drawn.
+pub const CARD_HEIGHT: usize = 3;
+
+/// Width of the routing table's robot-name column (a space follows it).
+pub const ROUTE_NAME_W: usize = 9;
+/// Width of one routing-table channel column.
+pub const ROUTE_COL_W: usize = 7;
 
 /// Panels that share the side column on small terminals.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -106,6 +115,47 @@ pub fn inner(r: Rect) -> Rect {
         y: r.y.saturating_add(1),
         width: r.width.saturating_sub(2),
         height: r.height.saturating_sub(2),
+    }
+}
+
+/// Which part of the routing table is visible: the cursor is always in
+/// view. Shared by drawing and click handling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TableWindow {
+    pub first_col: usize,
+    pub cols: usize,
+    pub first_row: usize,
+    pub rows: usize,
+}
+
+impl TableWindow {
+    /// The window for a table of `n_cols` channel columns in `inner`, with
+    /// the cursor at (robot row, channel column) `cursor`.
+    pub fn new(cursor: (usize, usize), inner: Rect, n_cols: usize) -> TableWindow {
+        let cols = (usize::from(inner.width).saturating_sub(ROUTE_NAME_W + 1) / ROUTE_COL_W).max(1);
+        let first_col = cursor
+            .1
+            .saturating_sub(cols - 1)
+            .min(n_cols.saturating_sub(1));
+        let rows = usize::from(inner.height).saturating_sub(1 + 2).max(1);
+        let first_row = cursor.0.saturating_sub(rows - 1);
+        TableWindow {
+            first_col,
+            cols,
+            first_row,
+            rows,
+        }
+    }
+
+    /// The (robot row, channel column) under a cell of `inner`, if any.
+    pub fn cell_at(&self, inner: Rect, col: u16, row: u16) -> Option<(usize, usize)> {
+        let dy = usize::from(row.checked_sub(inner.y)?);
+        let dx = usize::from(col.checked_sub(inner.x)?);
+        if dy == 0 || dy > self.rows || dx < ROUTE_NAME_W + 1 {
+            return None;
+        }
+        let c = (dx - ROUTE_NAME_W - 1) / ROUTE_COL_W;
+        (c < self.cols).then_some((self.first_row + dy - 1, self.first_col + c))
     }
 }
 

@@ -2,6 +2,8 @@
 //! bounds, robots with heading lines and recent paths, selection rings,
 //! clusters joined to their centre, and numbered waypoint flags.
 
+use std::collections::HashMap;
+
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
 use ratatui::style::{Color, Style, Stylize};
@@ -11,8 +13,8 @@ use ratatui::widgets::canvas::{Canvas, Context, Painter, Shape};
 use ratatui::widgets::{Block, Widget};
 
 use super::app::{App, Focus};
-use super::fleet::RobotView;
 use super::theme::Theme;
+use super::view::{ArenaBounds, ClusterControlView, ClusterOnScreen, RobotView};
 use super::viewport::Projection;
 
 /// The map panel.
@@ -67,23 +69,6 @@ impl Shape for Dots<'_> {
     }
 }
 
-/// A robot's recent path, straight from the App's trail buffer.
-struct Trail<'a> {
-    proj: &'a Projection,
-    trail: &'a [(f64, f64)],
-    color: Color,
-}
-
-impl Shape for Trail<'_> {
-    fn draw(&self, painter: &mut Painter) {
-        for &(x, y) in self.trail {
-            if let Some((i, j)) = self.proj.world_to_dot(x, y) {
-                painter.paint(i, j, self.color);
-            }
-        }
-    }
-}
-
 /// A straight segment rasterised on the dot grid (clipped to the view).
 struct Segment<'a> {
     proj: &'a Projection,
@@ -92,6 +77,25 @@ struct Segment<'a> {
     color: Color,
     /// Paint every n-th dot (1 = solid).
     every: usize,
+}
+
+impl<'a> Segment<'a> {
+    /// A heading line `len` metres long from pose `(x, y, heading)`.
+    fn heading(
+        proj: &'a Projection,
+        (x, y, h): (f64, f64, f64),
+        len: f64,
+        color: Color,
+        every: usize,
+    ) -> Segment<'a> {
+        Segment {
+            proj,
+            from: (x, y),
+            to: (x + len * h.cos(), y + len * h.sin()),
+            color,
+            every,
+        }
+    }
 }
 
 impl Shape for Segment<'_> {
@@ -145,12 +149,44 @@ impl Widget for MapPanel<'_> {
     }
 }
 
+/// The map's content, bottom to top: grid, then arena, paths, waypoint
+/// legs, clusters and robots, then the labels.
 fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) {
+    paint_grid(ctx, proj, step, t);
+    ctx.layer();
+    if let Some(a) = app.arena {
+        paint_arena(ctx, proj, a, t);
+    }
+    // Paths of the last seconds.
+    for (i, r) in app.robots.iter().enumerate() {
+        ctx.draw(&Dots {
+            proj,
+            points: &r.trail,
+            color: t.robot(i),
+        });
+    }
+    // Waypoint legs, in mission order.
+    for w in app.waypoints.windows(2) {
+        ctx.draw(&Segment {
+            proj,
+            from: (w[0].x, w[0].y),
+            to: (w[1].x, w[1].y),
+            color: t.waypoint(),
+            every: 3,
+        });
+    }
+    paint_clusters(ctx, app, proj, t);
+    paint_robots(ctx, app, proj, t);
+    // Labels last, so they sit on top.
+    label_waypoints(ctx, app, proj, t);
+    label_robots(ctx, app, proj, t);
+}
+
+/// A small cross at every grid intersection, the axes through the origin
+/// dotted, so the robots stay the brightest thing on the map.
+fn paint_grid(ctx: &mut Context, proj: &Projection, step: f64, t: &Theme) {
     let m = proj.metres_per_dot;
     let (xmin, ymin, xmax, ymax) = proj.world_rect();
-
-    // Grid: a small cross at every intersection, the axes through the
-    // origin dotted, so the robots stay the brightest thing on the map.
     let mut crosses = Vec::new();
     let mut gx = (xmin / step).ceil() * step;
     while gx <= xmax {
@@ -190,139 +226,124 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
             every: 3,
         });
     }
-    ctx.layer();
+}
 
-    if let Some(a) = app.arena {
-        let corners = [
-            (a.min_x, a.min_y),
-            (a.max_x, a.min_y),
-            (a.max_x, a.max_y),
-            (a.min_x, a.max_y),
-        ];
-        for k in 0..4 {
-            ctx.draw(&Segment {
-                proj,
-                from: corners[k],
-                to: corners[(k + 1) % 4],
-                color: t.arena(),
-                every: 1,
-            });
-        }
-    }
-
-    // Paths of the last seconds.
-    for (i, r) in app.robots.iter().enumerate() {
-        ctx.draw(&Trail {
-            proj,
-            trail: &r.trail,
-            color: t.robot(i),
-        });
-    }
-
-    // Waypoint legs, in mission order.
-    for w in app.waypoints.windows(2) {
+fn paint_arena(ctx: &mut Context, proj: &Projection, a: ArenaBounds, t: &Theme) {
+    let corners = [
+        (a.min_x, a.min_y),
+        (a.max_x, a.min_y),
+        (a.max_x, a.max_y),
+        (a.min_x, a.max_y),
+    ];
+    for k in 0..4 {
         ctx.draw(&Segment {
             proj,
-            from: (w[0].x, w[0].y),
-            to: (w[1].x, w[1].y),
-            color: t.waypoint(),
-            every: 3,
+            from: corners[k],
+            to: corners[(k + 1) % 4],
+            color: t.arena(),
+            every: 1,
         });
     }
+}
 
-    // Clusters: members joined to the centre.
-    let by_name: std::collections::HashMap<&str, &RobotView> = if app.clusters.is_empty() {
-        std::collections::HashMap::new()
-    } else {
-        app.robots.iter().map(|r| (r.name.as_str(), r)).collect()
-    };
+/// Clusters: members joined to the centre, and what the controller
+/// reports when it runs the cluster.
+fn paint_clusters(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
+    if app.clusters.is_empty() {
+        return;
+    }
+    let by_name: HashMap<&str, &RobotView> =
+        app.robots.iter().map(|r| (r.name.as_str(), r)).collect();
     for c in &app.clusters {
-        let pos: Vec<(f64, f64)> = c
-            .members
-            .iter()
-            .filter_map(|n| by_name.get(n.as_str()))
-            .map(|r| (r.pose.x, r.pose.y))
-            .collect();
-        if pos.is_empty() {
-            continue;
-        }
-        // The controller's measured cluster pose when it runs the cluster,
-        // else the members' centroid.
-        let control = c.control.as_ref();
-        let (cx, cy) = match control.and_then(|k| k.measured) {
-            Some((x, y, _)) => (x, y),
-            None => (
-                pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64,
-                pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64,
-            ),
-        };
-        if let Some(k) = control {
-            // Slot targets, each joined to its member by a sparse line.
-            for s in &k.slots {
-                if let Some(r) = by_name.get(s.robot.as_str()) {
-                    ctx.draw(&Segment {
-                        proj,
-                        from: (r.pose.x, r.pose.y),
-                        to: (s.x, s.y),
-                        color: t.cluster(),
-                        every: 3,
-                    });
-                }
-                label(ctx, proj, (s.x, s.y), 0, TextLine::from("◇"));
-            }
-            // Desired cluster pose with its heading.
-            if let Some((x, y, h)) = k.desired {
-                let len = 8.0 * proj.metres_per_dot;
-                ctx.draw(&Segment {
-                    proj,
-                    from: (x, y),
-                    to: (x + len * h.cos(), y + len * h.sin()),
-                    color: t.cluster(),
-                    every: 1,
-                });
-                label(ctx, proj, (x, y), 0, TextLine::from("⊕"));
-            }
-            if let Some((x, y, h)) = k.measured {
-                let len = 6.0 * proj.metres_per_dot;
-                ctx.draw(&Segment {
-                    proj,
-                    from: (x, y),
-                    to: (x + len * h.cos(), y + len * h.sin()),
-                    color: t.cluster(),
-                    every: 2,
-                });
-            }
-        }
-        for p in &pos {
+        paint_cluster(ctx, c, &by_name, proj, t);
+    }
+}
+
+fn paint_cluster(
+    ctx: &mut Context,
+    c: &ClusterOnScreen,
+    by_name: &HashMap<&str, &RobotView>,
+    proj: &Projection,
+    t: &Theme,
+) {
+    let pos: Vec<(f64, f64)> = c
+        .members
+        .iter()
+        .filter_map(|n| by_name.get(n.as_str()))
+        .map(|r| (r.pose.x, r.pose.y))
+        .collect();
+    if pos.is_empty() {
+        return;
+    }
+    // The controller's measured cluster pose when it runs the cluster,
+    // else the members' centroid.
+    let control = c.control.as_ref();
+    let (cx, cy) = match control.and_then(|k| k.measured) {
+        Some((x, y, _)) => (x, y),
+        None => (
+            pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64,
+            pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64,
+        ),
+    };
+    if let Some(k) = control {
+        paint_cluster_control(ctx, k, by_name, proj, t);
+    }
+    for p in &pos {
+        ctx.draw(&Segment {
+            proj,
+            from: *p,
+            to: (cx, cy),
+            color: t.cluster(),
+            every: 2,
+        });
+    }
+    label(
+        ctx,
+        proj,
+        (cx, cy),
+        0,
+        TextLine::from(format!("✚{}", c.name)).bold(),
+    );
+}
+
+/// Slot targets, each joined to its member by a sparse line, and the
+/// desired and measured cluster poses with their headings.
+fn paint_cluster_control(
+    ctx: &mut Context,
+    k: &ClusterControlView,
+    by_name: &HashMap<&str, &RobotView>,
+    proj: &Projection,
+    t: &Theme,
+) {
+    for s in &k.slots {
+        if let Some(r) = by_name.get(s.robot.as_str()) {
             ctx.draw(&Segment {
                 proj,
-                from: *p,
-                to: (cx, cy),
+                from: (r.pose.x, r.pose.y),
+                to: (s.x, s.y),
                 color: t.cluster(),
-                every: 2,
+                every: 3,
             });
         }
-        label(
-            ctx,
-            proj,
-            (cx, cy),
-            0,
-            TextLine::from(format!("✚{}", c.name)).bold(),
-        );
+        label(ctx, proj, (s.x, s.y), 0, TextLine::from("◇"));
     }
+    let m = proj.metres_per_dot;
+    if let Some(desired) = k.desired {
+        ctx.draw(&Segment::heading(proj, desired, 8.0 * m, t.cluster(), 1));
+        label(ctx, proj, (desired.0, desired.1), 0, TextLine::from("⊕"));
+    }
+    if let Some(measured) = k.measured {
+        ctx.draw(&Segment::heading(proj, measured, 6.0 * m, t.cluster(), 2));
+    }
+}
 
-    // Robots: heading line, selection ring.
-    let heading_len = 6.0 * m;
+/// Robots: heading line, and a ring round the selected ones.
+fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
+    let m = proj.metres_per_dot;
     for (i, r) in app.robots.iter().enumerate() {
         let (x, y, h) = (r.pose.x, r.pose.y, r.pose.heading);
         let colour = t.robot(i);
-        ctx.draw(&Segment {
-            proj,
-            from: (x, y),
-            to: (x + heading_len * h.cos(), y + heading_len * h.sin()),
-            color: colour,
-            every: 1,
-        });
+        ctx.draw(&Segment::heading(proj, (x, y, h), 6.0 * m, colour, 1));
         if app.selection.contains(&r.name) {
             let ring: Vec<(f64, f64)> = (0..16)
                 .map(|k| {
@@ -337,8 +358,10 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
             });
         }
     }
+}
 
-    // Labels last, so they sit on top.
+/// Numbered flags on the waypoints.
+fn label_waypoints(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     for (k, w) in app.waypoints.iter().enumerate() {
         label(
             ctx,
@@ -348,6 +371,10 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
             TextLine::styled(format!("⚑{}", k + 1), Style::new().fg(t.waypoint()).bold()),
         );
     }
+}
+
+/// Each robot's dot (ringed when selected) and name beside it.
+fn label_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     for (i, r) in app.robots.iter().enumerate() {
         let selected = app.selection.contains(&r.name);
         let mut style = Style::new().fg(t.robot(i));

@@ -9,10 +9,10 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
+use super::layout::{ROUTE_COL_W, ROUTE_NAME_W, TableWindow};
 use super::theme::Theme;
-
-const NAME_W: usize = 9;
-const COL_W: usize = 7;
+use super::view::{ClusterControlView, RouteView};
+use crate::gamepad::KEY_CHANNEL;
 
 /// The routing-table panel.
 #[derive(Debug)]
@@ -31,47 +31,6 @@ fn clip(s: &str, w: usize) -> String {
     }
 }
 
-/// Which part of the table is visible: the cursor is always in view.
-/// Shared by drawing and click handling.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TableWindow {
-    pub first_col: usize,
-    pub cols: usize,
-    pub first_row: usize,
-    pub rows: usize,
-}
-
-impl TableWindow {
-    /// The window for a table of `n_cols` channel columns in `inner`.
-    pub fn new(app: &App, inner: Rect, n_cols: usize) -> TableWindow {
-        let cols = (usize::from(inner.width).saturating_sub(NAME_W + 1) / COL_W).max(1);
-        let first_col = app
-            .route_cursor
-            .1
-            .saturating_sub(cols - 1)
-            .min(n_cols.saturating_sub(1));
-        let rows = usize::from(inner.height).saturating_sub(1 + 2).max(1);
-        let first_row = app.route_cursor.0.saturating_sub(rows - 1);
-        TableWindow {
-            first_col,
-            cols,
-            first_row,
-            rows,
-        }
-    }
-
-    /// The (robot row, channel column) under a cell of `inner`, if any.
-    pub fn cell_at(&self, inner: Rect, col: u16, row: u16) -> Option<(usize, usize)> {
-        let dy = usize::from(row.checked_sub(inner.y)?);
-        let dx = usize::from(col.checked_sub(inner.x)?);
-        if dy == 0 || dy > self.rows || dx < NAME_W + 1 {
-            return None;
-        }
-        let c = (dx - NAME_W - 1) / COL_W;
-        (c < self.cols).then_some((self.first_row + dy - 1, self.first_col + c))
-    }
-}
-
 impl Widget for RoutesPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
@@ -86,118 +45,146 @@ impl Widget for RoutesPanel<'_> {
         let inner = block.inner(area);
         block.render(area, buf);
 
-        let cols = app.route_columns();
-        let w = TableWindow::new(app, inner, cols.len());
-        let (first, fit, first_row, rows_fit) = (w.first_col, w.cols, w.first_row, w.rows);
-        let shown = &cols[first..(first + fit).min(cols.len())];
-
-        let mut lines: Vec<Line> = Vec::new();
-        let mut head = vec![Span::raw(" ".repeat(NAME_W + 1))];
-        for c in shown {
-            let name = if c.is_empty() { "none" } else { c };
-            head.push(Span::styled(clip(name, COL_W), t.title()));
-        }
-        lines.push(Line::from(head));
-        for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
-            let mut spans = vec![Span::styled(
-                format!("{} ", clip(&r.name, NAME_W)),
-                Style::new().fg(t.robot(ri)),
-            )];
-            for (k, c) in shown.iter().enumerate() {
-                let ci = first + k;
-                let active = &r.route.channel == c;
-                let mark = match (active, r.route.acknowledged) {
-                    (true, true) => "●ack",
-                    (true, false) => "◌pend",
-                    _ => "·",
-                };
-                let mut style = if active && r.route.acknowledged {
-                    t.ok()
-                } else if active {
-                    t.warn()
-                } else {
-                    t.dim()
-                };
-                if focused && app.route_cursor == (ri, ci) {
-                    style = style.patch(t.selected());
-                }
-                spans.push(Span::styled(clip(mark, COL_W), style));
-            }
-            lines.push(Line::from(spans));
-        }
-        if app.robots.is_empty() {
-            lines.push(Line::styled("no robots", t.dim()));
-        }
-        if !app.channels.is_empty() {
-            lines.push(Line::styled("live channels", t.title()));
-            for c in &app.channels {
-                lines.push(Line::raw(format!(
-                    " {:<10} {:<8}{:>6.1}Hz",
-                    c.name, c.publisher, c.rate_hz
-                )));
-            }
-        }
-        let pads = app.pads();
-        if !pads.is_empty() || app.key_teleop_on {
-            lines.push(Line::styled("controllers", t.title()));
-            for p in pads {
-                let state = if p.enabled {
-                    Span::styled("driving", t.warn())
-                } else {
-                    Span::styled("hold LB", t.dim())
-                };
-                lines.push(Line::from(vec![
-                    Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.as_str())),
-                    state,
-                    Span::styled(format!(" {}", p.name), t.dim()),
-                ]));
-            }
-            if app.key_teleop_on {
-                lines.push(Line::from(vec![
-                    Span::raw(format!(
-                        " {:<6} {:<8} ",
-                        crate::gamepad::KEY_CHANNEL,
-                        "twist"
-                    )),
-                    Span::styled("keys", t.warn()),
-                ]));
-            }
-        }
-        if !app.clusters.is_empty() {
-            lines.push(Line::styled("clusters", t.title()));
-            for (k, c) in app.clusters.iter().enumerate() {
-                let active = app.active_cluster.as_deref() == Some(c.name.as_str());
-                let style = if active { t.title() } else { Style::new() };
-                let mut spans = vec![Span::styled(format!(" {} {:<4}", k + 1, c.name), style)];
-                match &c.control {
-                    // Per-member slot tracking error, lost and absent members.
-                    Some(ctl) => {
-                        for m in &c.members {
-                            let (text, st) =
-                                if let Some(s) = ctl.slots.iter().find(|s| &s.robot == m) {
-                                    let cm = (s.error * 100.0).round();
-                                    let st = if s.error > 0.15 {
-                                        t.warn()
-                                    } else {
-                                        Style::new()
-                                    };
-                                    (format!("{m} {cm:.0}cm "), st)
-                                } else if ctl.lost.contains(m) {
-                                    (format!("{m} lost "), t.warn())
-                                } else {
-                                    (format!("{m} – "), t.dim())
-                                };
-                            spans.push(Span::styled(text, st));
-                        }
-                    }
-                    None => spans.push(Span::raw(c.members.join(" "))),
-                }
-                lines.push(Line::from(spans));
-            }
-        }
+        let mut lines = table_lines(app, &t, inner, focused);
+        channel_lines(app, &t, &mut lines);
+        controller_lines(app, &t, &mut lines);
+        cluster_lines(app, &t, &mut lines);
         if focused {
             lines.push(Line::styled("↑↓ robot  ←→ channel  Enter route", t.dim()));
         }
         Paragraph::new(lines).render(inner, buf);
     }
+}
+
+/// The visible window of the robots x channels table: a header of channel
+/// names, then one row of route marks per robot, the cursor highlighted
+/// when the panel has focus.
+fn table_lines(app: &App, t: &Theme, inner: Rect, focused: bool) -> Vec<Line<'static>> {
+    let cols = app.route_columns();
+    let w = TableWindow::new(app.route_cursor, inner, cols.len());
+    let (first, fit, first_row, rows_fit) = (w.first_col, w.cols, w.first_row, w.rows);
+    let shown = &cols[first..(first + fit).min(cols.len())];
+
+    let mut lines: Vec<Line> = Vec::new();
+    let mut head = vec![Span::raw(" ".repeat(ROUTE_NAME_W + 1))];
+    for c in shown {
+        let name = if c.is_empty() { "none" } else { c };
+        head.push(Span::styled(clip(name, ROUTE_COL_W), t.title()));
+    }
+    lines.push(Line::from(head));
+    for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
+        let mut spans = vec![Span::styled(
+            format!("{} ", clip(&r.name, ROUTE_NAME_W)),
+            Style::new().fg(t.robot(ri)),
+        )];
+        for (k, c) in shown.iter().enumerate() {
+            let cursor = focused && app.route_cursor == (ri, first + k);
+            spans.push(route_mark(&r.route, c, cursor, t));
+        }
+        lines.push(Line::from(spans));
+    }
+    if app.robots.is_empty() {
+        lines.push(Line::styled("no robots", t.dim()));
+    }
+    lines
+}
+
+/// One cell of the table: whether `route` is on `channel`, and acknowledged.
+fn route_mark(route: &RouteView, channel: &str, cursor: bool, t: &Theme) -> Span<'static> {
+    let active = route.channel == channel;
+    let mark = match (active, route.acknowledged) {
+        (true, true) => "●ack",
+        (true, false) => "◌pend",
+        _ => "·",
+    };
+    let mut style = if active && route.acknowledged {
+        t.ok()
+    } else if active {
+        t.warn()
+    } else {
+        t.dim()
+    };
+    if cursor {
+        style = style.patch(t.selected());
+    }
+    Span::styled(clip(mark, ROUTE_COL_W), style)
+}
+
+/// The live channels, with their last publisher and rate.
+fn channel_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
+    if app.channels.is_empty() {
+        return;
+    }
+    lines.push(Line::styled("live channels", t.title()));
+    for c in &app.channels {
+        lines.push(Line::raw(format!(
+            " {:<10} {:<8}{:>6.1}Hz",
+            c.name, c.publisher, c.rate_hz
+        )));
+    }
+}
+
+/// Connected pads (channel, mode, dead-man) and keyboard teleop when on.
+fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
+    let pads = app.pads();
+    if pads.is_empty() && !app.key_teleop_on {
+        return;
+    }
+    lines.push(Line::styled("controllers", t.title()));
+    for p in pads {
+        let state = if p.enabled {
+            Span::styled("driving", t.warn())
+        } else {
+            Span::styled("hold LB", t.dim())
+        };
+        lines.push(Line::from(vec![
+            Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.as_str())),
+            state,
+            Span::styled(format!(" {}", p.name), t.dim()),
+        ]));
+    }
+    if app.key_teleop_on {
+        lines.push(Line::from(vec![
+            Span::raw(format!(" {:<6} {:<8} ", KEY_CHANNEL, "twist")),
+            Span::styled("keys", t.warn()),
+        ]));
+    }
+}
+
+/// Clusters, numbered for their keys, the active one highlighted, with
+/// each member's slot tracking error once a controller runs the cluster.
+fn cluster_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
+    if app.clusters.is_empty() {
+        return;
+    }
+    lines.push(Line::styled("clusters", t.title()));
+    for (k, c) in app.clusters.iter().enumerate() {
+        let active = app.active_cluster.as_deref() == Some(c.name.as_str());
+        let style = if active { t.title() } else { Style::new() };
+        let mut spans = vec![Span::styled(format!(" {} {:<4}", k + 1, c.name), style)];
+        match &c.control {
+            Some(ctl) => spans.extend(c.members.iter().map(|m| member_mark(m, ctl, t))),
+            None => spans.push(Span::raw(c.members.join(" "))),
+        }
+        lines.push(Line::from(spans));
+    }
+}
+
+/// A member's slot tracking error in cm (warned above 15 cm), or that it
+/// is lost or absent (–).
+fn member_mark(m: &str, ctl: &ClusterControlView, t: &Theme) -> Span<'static> {
+    let (text, style) = if let Some(s) = ctl.slots.iter().find(|s| s.robot == m) {
+        let cm = (s.error * 100.0).round();
+        let style = if s.error > 0.15 {
+            t.warn()
+        } else {
+            Style::new()
+        };
+        (format!("{m} {cm:.0}cm "), style)
+    } else if ctl.lost.iter().any(|l| l == m) {
+        (format!("{m} lost "), t.warn())
+    } else {
+        (format!("{m} – "), t.dim())
+    };
+    Span::styled(text, style)
 }

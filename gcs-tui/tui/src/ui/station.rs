@@ -3,24 +3,25 @@
 //! results, feeds them to [`App::update`], and carries the App's
 //! [`Request`]s to the GCS core (router, fleet model, command language).
 
-use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use crossterm::event::{DisableMouseCapture, EnableMouseCapture, EventStream};
 use crossterm::execute;
 use futures::StreamExt;
-use mech_proto::Mission;
+use mech_proto::{ClusterVelocity, Command, Waypoint};
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
-use super::fleet::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterView, FleetSnapshot, RobotView, RouteView,
+use super::view::{
+    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView,
+    RouteView,
 };
+use crate::gamepad::PadEvent;
 use mech_control::ControlHub;
 use mech_control::lang::Executor;
 use mech_control::lang::exec::SENDER;
 use mech_core::fleet::{Fleet, Robot, Severity};
-use mech_core::router::Publisher;
+use mech_core::router::Publishers;
 use mech_core::{ChannelStatus, Gcs, RouterHandle};
 
 /// Frames per second of the render tick.
@@ -98,20 +99,13 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
         .collect();
     FleetSnapshot {
         robots,
-        channels: channels
-            .into_iter()
-            .map(|c| ChannelView {
-                name: c.name,
-                publisher: c.publisher,
-                rate_hz: c.rate_hz,
-            })
-            .collect(),
+        channels: channel_views(channels),
         estop: fleet.estop.engaged,
         clusters: Some(
             fleet
                 .clusters
                 .values()
-                .map(|c| ClusterView {
+                .map(|c| ClusterOnScreen {
                     name: c.name.clone(),
                     members: c.members.clone(),
                     control: None,
@@ -173,25 +167,9 @@ async fn event_loop(
     executor: Executor,
     options: &RunOptions,
 ) -> std::io::Result<()> {
-    let router = gcs.router().clone();
-    let mut app = App::new(router.udp_addr().to_string(), Instant::now());
-    app.mouse = options.mouse;
-    app.monochrome = options.monochrome;
-    app.arena = options.arena;
-    app.teleop = crate::gamepad::Teleop::new(options.teleop.clone());
     let size = terminal.size()?;
-    app.update(Action::Resize(size.width, size.height));
-    app.update(Action::FitFleet);
-
-    // Gamepads: a thread polls gilrs and forwards events.
-    let (pad_tx, mut pad_rx) = mpsc::unbounded_channel();
-    if options.gamepads {
-        if let Err(e) = crate::gamepad::spawn_pump(pad_tx) {
-            app.log(LogLevel::Warn, format!("gamepads disabled: {e}"));
-        }
-    } else {
-        drop(pad_tx);
-    }
+    let mut app = station_app(gcs.router(), options, (size.width, size.height));
+    let mut pad_rx = pad_events(options, &mut app);
 
     // The command language runs in its own task: a line may wait.
     let (line_tx, line_rx) = mpsc::unbounded_channel::<String>();
@@ -204,35 +182,17 @@ async fn event_loop(
     }
 
     let mut events = EventStream::new();
-    let mut tick = tokio::time::interval(Duration::from_millis(1000 / FPS));
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut tick = steady_interval(Duration::from_millis(1000 / FPS));
     let mut link = CoreLink::new(gcs.clone(), line_tx.clone(), control);
     // Teleop publishes on its own clock so its rate does not depend on the
     // frame rate.
-    let rate = if options.teleop.rate_hz.is_finite() && options.teleop.rate_hz > 0.0 {
-        options.teleop.rate_hz
-    } else {
-        20.0
-    };
-    let mut teleop_tick = tokio::time::interval(Duration::from_secs_f64(1.0 / rate));
-    teleop_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut teleop_tick = steady_interval(options.teleop.period());
     let mut log_last = 0;
 
     while app.running {
         tokio::select! {
             _ = tick.tick() => {
-                let (snap, new_log) = gcs.with_fleet(|f| {
-                    let lines = new_log_lines(f, &mut log_last);
-                    (snapshot(f, Vec::new()), lines)
-                });
-                let mut snap = snap;
-                snap.channels = snapshot_channels(&router);
-                apply_control(&mut snap, &link.control().snapshot());
-                for (level, text) in new_log {
-                    app.update(Action::Log(level, text));
-                }
-                app.update(Action::Tick(Instant::now()));
-                app.update(Action::Fleet(snap));
+                refresh(&mut app, &gcs, link.control(), &mut log_last);
                 terminal.draw(|f| f.render_widget(&app, f.area()))?;
             }
             ev = events.next() => match ev {
@@ -258,9 +218,63 @@ async fn event_loop(
     Ok(())
 }
 
+/// The App as the station starts it: the run options applied, sized to
+/// the terminal (`size`, columns and rows) and the view fitted.
+fn station_app(router: &RouterHandle, options: &RunOptions, size: (u16, u16)) -> App {
+    let mut app = App::new(router.udp_addr().to_string(), Instant::now());
+    app.mouse = options.mouse;
+    app.monochrome = options.monochrome;
+    app.arena = options.arena;
+    app.teleop = crate::gamepad::Teleop::new(options.teleop.clone());
+    app.update(Action::Resize(size.0, size.1));
+    app.update(Action::FitFleet);
+    app
+}
+
+/// Gamepad events, from a thread that polls gilrs. Without gamepads (or
+/// when the thread cannot start, which is logged on the App) the channel
+/// stays empty and closed.
+fn pad_events(options: &RunOptions, app: &mut App) -> mpsc::UnboundedReceiver<PadEvent> {
+    let (pad_tx, pad_rx) = mpsc::unbounded_channel();
+    if options.gamepads {
+        if let Err(e) = crate::gamepad::spawn_pump(pad_tx) {
+            app.log(LogLevel::Warn, format!("gamepads disabled: {e}"));
+        }
+    }
+    pad_rx
+}
+
+/// A timer ticking every `period` that skips the ticks it missed rather
+/// than bursting to catch up.
+fn steady_interval(period: Duration) -> tokio::time::Interval {
+    let mut interval = tokio::time::interval(period);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    interval
+}
+
+/// One frame's worth of core state into the App: the fleet log lines since
+/// `log_last`, the time, and a fresh snapshot with the router's channels
+/// and the controllers' reports (each read outside the fleet lock).
+fn refresh(app: &mut App, gcs: &Gcs, control: &ControlHub, log_last: &mut u64) {
+    let (mut snap, new_log) = gcs.with_fleet(|f| {
+        let lines = new_log_lines(f, log_last);
+        (snapshot(f, Vec::new()), lines)
+    });
+    snap.channels = snapshot_channels(gcs.router());
+    apply_control(&mut snap, &control.snapshot());
+    for (level, text) in new_log {
+        app.update(Action::Log(level, text));
+    }
+    app.update(Action::Tick(Instant::now()));
+    app.update(Action::Fleet(snap));
+}
+
 fn snapshot_channels(router: &RouterHandle) -> Vec<ChannelView> {
-    router
-        .channels()
+    channel_views(router.channels())
+}
+
+fn channel_views(channels: Vec<ChannelStatus>) -> Vec<ChannelView> {
+    channels
         .into_iter()
         .map(|c| ChannelView {
             name: c.name,
@@ -328,7 +342,7 @@ pub struct CoreLink {
     gcs: Gcs,
     /// One in-process publisher per channel, so sequence numbers and the
     /// router's per-channel rate are those of one steady publisher.
-    publishers: HashMap<String, Publisher>,
+    publishers: Publishers,
     lines: mpsc::UnboundedSender<String>,
     /// The controllers the command line's executor runs too, so a cluster
     /// moved by a pad and by `:cluster-move` is one and the same.
@@ -340,8 +354,8 @@ impl CoreLink {
     /// `control` is that executor's [`ControlHub`] ([`Executor::control`]).
     pub fn new(gcs: Gcs, lines: mpsc::UnboundedSender<String>, control: ControlHub) -> CoreLink {
         CoreLink {
+            publishers: gcs.router().publishers(SENDER),
             gcs,
-            publishers: HashMap::new(),
             lines,
             control,
         }
@@ -354,123 +368,134 @@ impl CoreLink {
 
     /// Carries one request; failures are logged on the App.
     pub async fn carry(&mut self, req: Request, app: &mut App) {
-        carry(self, req, app).await;
+        match req {
+            Request::Route { robot, channel } => self.route(&robot, &channel, app).await,
+            Request::Mission { robots, waypoints } => self.mission(robots, &waypoints, app).await,
+            Request::EStop { engage } => {
+                self.estop(engage).await;
+            }
+            Request::Publish {
+                channel,
+                robots,
+                command,
+            } => self.publish(&channel, robots, &command, app).await,
+            Request::ClusterVelocity { cluster, velocity } => {
+                self.drive_cluster(&cluster, velocity, app);
+            }
+            Request::ToggleNav { robots } => self.toggle_nav(robots),
+            Request::DefineCluster { name, members } => {
+                self.gcs.update_fleet(|f| f.set_cluster(&name, members));
+            }
+            Request::Exec(line) => self.exec(line, app).await,
+            Request::Quit => {}
+        }
     }
-}
 
-async fn carry(link: &mut CoreLink, req: Request, app: &mut App) {
-    let gcs = &link.gcs;
-    let publishers = &mut link.publishers;
-    let lines = &link.lines;
-    let router = gcs.router();
-    match req {
-        Request::Route { robot, channel } => {
-            let ch = (!channel.is_empty()).then_some(channel.as_str());
-            if let Err(e) = router.set_route(&robot, ch).await {
+    /// Routes `robot` to `channel` (empty: to none).
+    async fn route(&self, robot: &str, channel: &str, app: &mut App) {
+        let ch = (!channel.is_empty()).then_some(channel);
+        if let Err(e) = self.gcs.router().set_route(robot, ch).await {
+            app.log(LogLevel::Error, e.to_string());
+        }
+    }
+
+    /// Sends `waypoints` to each robot as a mission on [`WAYPOINT_CHANNEL`],
+    /// keeping them as the robot's draft in the fleet model.
+    async fn mission(&self, robots: Vec<String>, waypoints: &[Waypoint], app: &mut App) {
+        for robot in robots {
+            self.gcs.update_fleet(|f| {
+                if let Some(r) = f.robot_mut(&robot) {
+                    r.waypoints.draft = waypoints.to_vec();
+                }
+            });
+            let sent = self
+                .gcs
+                .send_waypoints(SENDER, &robot, WAYPOINT_CHANNEL, waypoints.to_vec(), false)
+                .await;
+            if let Err(e) = sent {
                 app.log(LogLevel::Error, e.to_string());
             }
         }
-        Request::Mission { robots, waypoints } => {
-            let radius = gcs.config().fleet.arrival_radius;
-            for robot in robots {
-                gcs.update_fleet(|f| {
-                    if let Some(r) = f.robot_mut(&robot) {
-                        r.waypoints.draft.clone_from(&waypoints);
-                    }
-                });
-                let mission = Mission {
-                    id: 0,
-                    waypoints: waypoints.clone(),
-                    looped: false,
-                    arrival_radius: radius,
-                    start_index: 0,
+    }
+
+    /// Engages or releases the fleet e-stop; returns the router's id for it.
+    async fn estop(&self, engage: bool) -> u32 {
+        let router = self.gcs.router();
+        if engage {
+            router.estop().await
+        } else {
+            router.release().await
+        }
+    }
+
+    /// Publishes a teleop command on `channel` for each of `robots`.
+    async fn publish(
+        &mut self,
+        channel: &str,
+        robots: Vec<String>,
+        command: &Command,
+        app: &mut App,
+    ) {
+        let p = self.publishers.on(channel);
+        for robot in robots {
+            if let Err(e) = p.send(&robot, command.clone()).await {
+                app.log(LogLevel::Error, e.to_string());
+            }
+        }
+    }
+
+    /// Hands a pad's velocity to the cluster controller. It lapses unless
+    /// the pad refreshes it, so a pad that stops publishing leaves the
+    /// cluster holding.
+    fn drive_cluster(&self, cluster: &str, velocity: ClusterVelocity, app: &mut App) {
+        if let Err(e) = self.control.drive_cluster(cluster, velocity) {
+            app.log(LogLevel::Error, format!("{cluster}: {e}"));
+        }
+    }
+
+    /// Switches each robot's waypoint navigation onboard <-> offboard.
+    /// Handing navigation back onboard waits for the agent's mission
+    /// acknowledgement: it runs beside the event loop and reports in the
+    /// fleet log.
+    fn toggle_nav(&self, robots: Vec<String>) {
+        for robot in robots {
+            let hub = self.control.clone();
+            tokio::spawn(async move {
+                let (severity, text) = match hub.toggle_nav(&robot).await {
+                    Ok(text) => (Severity::Info, text),
+                    Err(e) => (Severity::Error, format!("nav {robot}: {e}")),
                 };
-                if let Err(e) = router
-                    .send_mission(SENDER, &robot, WAYPOINT_CHANNEL, mission)
-                    .await
-                {
-                    app.log(LogLevel::Error, e.to_string());
-                }
-            }
+                hub.gcs().update_fleet(|f| f.log(severity, text));
+            });
         }
-        Request::EStop { engage: true } => {
-            router.estop().await;
+    }
+
+    /// Queues a command-language line for the executor. `estop` and
+    /// `release` typed at the prompt act at once: the queue of typed lines
+    /// may be busy with a `wait` or a `sleep`.
+    async fn exec(&self, line: String, app: &mut App) {
+        if let Some(engage) = typed_estop(&line) {
+            let id = self.estop(engage).await;
+            let what = if engage {
+                "E-STOP engaged"
+            } else {
+                "e-stop released"
+            };
+            app.log(LogLevel::Warn, format!("{what} (id {id})"));
+            return;
         }
-        Request::EStop { engage: false } => {
-            router.release().await;
+        if self.lines.send(line).is_err() {
+            app.log(LogLevel::Error, "the command language has stopped");
         }
-        Request::Publish {
-            channel,
-            robots,
-            command,
-        } => {
-            let p = publishers
-                .entry(channel.clone())
-                .or_insert_with(|| router.publisher(SENDER, &channel));
-            for robot in robots {
-                if let Err(e) = p.send(&robot, command.clone()).await {
-                    app.log(LogLevel::Error, e.to_string());
-                }
-            }
-        }
-        Request::ClusterVelocity {
-            channel: _,
-            cluster,
-            members: _,
-            velocity,
-        } => {
-            // A pad velocity lapses unless the pad refreshes it, so a pad
-            // that stops publishing leaves the cluster holding.
-            if let Err(e) = link.control.drive_cluster(&cluster, velocity) {
-                app.log(LogLevel::Error, format!("{cluster}: {e}"));
-            }
-        }
-        Request::ToggleNav { robots } => {
-            // Handing navigation back onboard waits for the agent's mission
-            // acknowledgement: run it beside the event loop and report in the
-            // fleet log.
-            for robot in robots {
-                let hub = link.control.clone();
-                tokio::spawn(async move {
-                    let (severity, text) = match hub.toggle_nav(&robot).await {
-                        Ok(text) => (Severity::Info, text),
-                        Err(e) => (Severity::Error, format!("nav {robot}: {e}")),
-                    };
-                    hub.gcs().update_fleet(|f| f.log(severity, text));
-                });
-            }
-        }
-        Request::DefineCluster { name, members } => {
-            gcs.update_fleet(|f| f.set_cluster(&name, members));
-        }
-        Request::Exec(line) => {
-            // `estop` and `release` typed at the prompt act at once: the
-            // queue of typed lines may be busy with a `wait` or a `sleep`.
-            if let Ok(Some(statement)) = mech_control::lang::parse_line(&line) {
-                let engage = match statement.command {
-                    mech_control::lang::Command::EStop => Some(true),
-                    mech_control::lang::Command::Release => Some(false),
-                    _ => None,
-                };
-                if let Some(engage) = engage {
-                    let id = if engage {
-                        router.estop().await
-                    } else {
-                        router.release().await
-                    };
-                    let what = if engage {
-                        "E-STOP engaged"
-                    } else {
-                        "e-stop released"
-                    };
-                    app.log(LogLevel::Warn, format!("{what} (id {id})"));
-                    return;
-                }
-            }
-            if lines.send(line).is_err() {
-                app.log(LogLevel::Error, "the command language has stopped");
-            }
-        }
-        Request::Quit => {}
+    }
+}
+
+/// `Some(true)` for a line that is `estop`, `Some(false)` for `release`.
+fn typed_estop(line: &str) -> Option<bool> {
+    let statement = mech_control::lang::parse_line(line).ok().flatten()?;
+    match statement.command {
+        mech_control::lang::Command::EStop => Some(true),
+        mech_control::lang::Command::Release => Some(false),
+        _ => None,
     }
 }

@@ -8,8 +8,8 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Clear, Paragraph, Widget};
 
 use super::app::{App, Prompt, PromptError};
-use super::fleet::LinkState;
 use super::theme::Theme;
+use super::view::LinkState;
 
 /// Top line.
 #[derive(Debug)]

@@ -1,5 +1,6 @@
-//! What the UI shows about the fleet: a plain snapshot of robots, channels
-//! and clusters, refreshed from the GCS core's fleet model and router.
+//! The view model: what the UI shows about the fleet, as a plain snapshot
+//! of robots, channels and clusters refreshed from the GCS core's fleet
+//! model (`mech_core::fleet`) and router.
 //!
 //! The UI never derives link state, routes or failsafes itself; it copies
 //! them from the core, so screens and tests can be built from fixed values.
@@ -101,9 +102,12 @@ pub struct ChannelView {
     pub rate_hz: f64,
 }
 
-/// A named group of robots driven together.
+/// A named group of robots driven together, as the map and the routes
+/// panel show it: its members from the fleet model and, once a cluster
+/// controller runs it, what that controller reports (not to be confused
+/// with [`mech_control::ClusterView`], the controller's own account).
 #[derive(Debug, Clone, PartialEq)]
-pub struct ClusterView {
+pub struct ClusterOnScreen {
     pub name: String,
     pub members: Vec<String>,
     /// What the cluster controller reports, once it runs this cluster.
@@ -111,7 +115,7 @@ pub struct ClusterView {
 }
 
 /// A cluster controller's last period, as the map and the routes panel
-/// show it (copied from [`crate::control::ControlHub::snapshot`]).
+/// show it (copied from [`mech_control::ControlHub::snapshot`]).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ClusterControlView {
     /// Cluster pose being tracked (x, y, heading).
@@ -177,7 +181,7 @@ pub struct FleetSnapshot {
     /// E-stop engaged (latched) fleet-wide.
     pub estop: bool,
     /// Clusters, when the source keeps them (`None` leaves the UI's own).
-    pub clusters: Option<Vec<ClusterView>>,
+    pub clusters: Option<Vec<ClusterOnScreen>>,
 }
 
 /// Human-readable names for protocol enums.

@@ -1,0 +1,132 @@
+//! The mouse on the App: a click, drag or wheel resolved against the same
+//! layout the screen was drawn with (map, cards, waypoints, routing table).
+
+use mech_proto::Waypoint;
+use ratatui::layout::Position;
+
+use super::{App, Focus, Select};
+use crate::ui::layout::{TableWindow, inner};
+use crate::ui::view::RobotView;
+
+impl App {
+    /// The robot drawn at (or next to) an absolute terminal cell of the map.
+    pub fn robot_at_cell(&self, col: u16, row: u16) -> Option<&RobotView> {
+        let inner = self.areas().map_inner();
+        if !inner.contains(Position::new(col, row)) {
+            return None;
+        }
+        let p = self.viewport.project(inner.width, inner.height);
+        let (cx, cy) = (col - inner.x, row - inner.y);
+        let (wx, wy) = p.cell_to_world(cx, cy);
+        self.robots
+            .iter()
+            .filter_map(|r| {
+                let (rc, rr) = p.world_to_cell(r.pose.x, r.pose.y)?;
+                (rc.abs_diff(cx) <= 1 && rr.abs_diff(cy) <= 1)
+                    .then(|| ((r.pose.x - wx).hypot(r.pose.y - wy), r))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, r)| r)
+    }
+
+    /// World point (m) under an absolute terminal cell of the map.
+    pub fn map_point(&self, col: u16, row: u16) -> Option<(f64, f64)> {
+        let inner = self.areas().map_inner();
+        if !inner.contains(Position::new(col, row)) {
+            return None;
+        }
+        let p = self.viewport.project(inner.width, inner.height);
+        Some(p.cell_to_world(col - inner.x, row - inner.y))
+    }
+
+    pub(super) fn click(&mut self, col: u16, row: u16, add: bool) {
+        let areas = self.areas();
+        let pos = Position::new(col, row);
+        if areas.map_inner().contains(pos) {
+            self.focus = Focus::Map;
+            if self.waypoint_mode {
+                if let Some((x, y)) = self.map_point(col, row) {
+                    self.add_waypoint(Waypoint {
+                        x,
+                        y,
+                        z: 0.0,
+                        time: None,
+                    });
+                }
+                return;
+            }
+            match self.robot_at_cell(col, row).map(|r| r.name.clone()) {
+                Some(name) if add => self.select(Select::Toggle(name)),
+                Some(name) => self.select(Select::Only(name)),
+                None if !add => self.drag_from = Some((col, row)),
+                None => {}
+            }
+            return;
+        }
+        if let Some(cards) = areas.cards.filter(|a| a.contains(pos)) {
+            self.focus = Focus::Cards;
+            let inner = inner(cards);
+            if row < inner.y {
+                return;
+            }
+            let i = self.cards_scroll + usize::from(row - inner.y) / self.card_height();
+            if let Some(name) = self.robots.get(i).map(|r| r.name.clone()) {
+                self.select(if add {
+                    Select::Toggle(name)
+                } else {
+                    Select::Only(name)
+                });
+            }
+            return;
+        }
+        if areas.waypoints.is_some_and(|a| a.contains(pos)) {
+            self.set_focus(Focus::Waypoints);
+        } else if let Some(routes) = areas.routes.filter(|a| a.contains(pos)) {
+            self.set_focus(Focus::Routes);
+            let inner = inner(routes);
+            let cols = self.route_columns().len();
+            let w = TableWindow::new(self.route_cursor, inner, cols);
+            if let Some((r, c)) = w.cell_at(inner, col, row) {
+                if r < self.robots.len() && c < cols {
+                    // A click picks the cell; a click on the picked cell routes.
+                    if self.route_cursor == (r, c) {
+                        self.apply_route_cursor();
+                    } else {
+                        self.route_cursor = (r, c);
+                    }
+                }
+            }
+        }
+    }
+
+    pub(super) fn drag(&mut self, col: u16, row: u16) {
+        let Some((c0, r0)) = self.drag_from else {
+            return;
+        };
+        let dx = f64::from(c0) - f64::from(col);
+        let dy = f64::from(row) - f64::from(r0);
+        self.viewport.pan_cells(dx, dy);
+        self.drag_from = Some((col, row));
+    }
+
+    pub(super) fn scroll(&mut self, col: u16, row: u16, steps: i32) {
+        let factor = 1.25f64.powi(steps);
+        match self.map_point(col, row) {
+            Some((x, y)) => self.viewport.zoom_about(factor, x, y),
+            None => {
+                if self
+                    .areas()
+                    .cards
+                    .is_some_and(|a| a.contains(Position::new(col, row)))
+                {
+                    if steps < 0 {
+                        self.cards_scroll =
+                            (self.cards_scroll + 1).min(self.robots.len().saturating_sub(1));
+                    } else {
+                        self.cards_scroll = self.cards_scroll.saturating_sub(1);
+                    }
+                }
+            }
+        }
+    }
+}
