@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Installs the system packages MECH needs on a fresh Debian/Ubuntu machine:
-# libudev-dev + pkg-config (gilrs, serialport), socat (serial-link tests over a
-# pseudo-terminal pair), tmux (the end-to-end TUI test). Does nothing when
+# Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
+# pkg-config (gilrs, serialport), socat (serial-link tests over a
+# pseudo-terminal pair), tmux (the end-to-end TUI test), and Python's msgpack
+# (the documented Python controller is run by the tests). Does nothing when
 # they are already there.
 set -euo pipefail
 need=()
@@ -14,4 +15,10 @@ if [ ${#need[@]} -gt 0 ]; then
     [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
     $sudo_cmd apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${need[@]}" >/dev/null
+fi
+# Python's msgpack: the documented Python controller runs in the tests.
+if command -v python3 >/dev/null && ! python3 -c 'import msgpack' 2>/dev/null; then
+    echo "installing: python msgpack"
+    python3 -m pip install --quiet --disable-pip-version-check msgpack 2>/dev/null \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages msgpack
 fi

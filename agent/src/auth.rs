@@ -36,7 +36,8 @@ pub struct RobotRejections {
     /// Not newer than the router's last message, or before the robot knew
     /// station time.
     pub replay: u64,
-    /// Signed for this robot but not from the router.
+    /// Signed with this robot's key, but not by the router: one of the
+    /// robot's own messages sent back to it (a reflection).
     pub not_router: u64,
 }
 
@@ -98,7 +99,10 @@ impl RobotAuth {
     }
 
     /// Checks a received message whose decoded form is `sender` + `body`,
-    /// when the robot's clock reads `local_us`.
+    /// when the robot's clock reads `local_us`. The sender may be a
+    /// controller whose command the router forwards; what matters is that
+    /// the router signed it for this robot. The router's own messages (the
+    /// time answer among them) name the router as sender.
     pub fn check(&mut self, bytes: &[u8], sender: &str, body: &Body, local_us: u64) -> Checked {
         let tag = match split(bytes) {
             Ok((region, Some(tag))) if self.key.verify(region, &tag) => tag,
@@ -107,12 +111,12 @@ impl RobotAuth {
                 return Checked::Reject;
             }
         };
-        if sender != self.router {
+        if !tag.from_router() {
             self.rejected.not_router += 1;
             return Checked::Reject;
         }
         if let Body::Time(t) = body {
-            if self.asked == Some(t.nonce) {
+            if sender == self.router && self.asked == Some(t.nonce) {
                 self.asked = None;
                 self.stamper.sync(t.station_us, local_us);
                 self.router_stream = Some(Stream::starting_at(tag.stamp_us));
@@ -134,6 +138,7 @@ impl RobotAuth {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mech_proto::auth::FROM_ROUTER;
     use mech_proto::{Envelope, Header, Time};
 
     fn router_msg(key: &Key, body: Body, stamp: u64) -> (Vec<u8>, Body) {
@@ -146,7 +151,7 @@ mod tests {
             body.clone(),
         );
         let mut b = mech_proto::encode(&env).unwrap();
-        key.seal(&mut b, 0, stamp).unwrap();
+        key.seal(&mut b, FROM_ROUTER, stamp).unwrap();
         (b, body)
     }
 
@@ -193,11 +198,19 @@ mod tests {
             Checked::Reject,
             "wrong key"
         );
-        let (b, body) = router_msg(&key, hb, 1_700_000_000_000_010);
+        let (b, body) = router_msg(&key, hb.clone(), 1_700_000_000_000_010);
         assert_eq!(
             auth.check(&b, "matlab", &body, 200),
+            Checked::Accept,
+            "a controller's command the router forwarded"
+        );
+        // The robot's own message, sent back to it.
+        let mut mine = mech_proto::encode(&Envelope::new(Header::default(), hb.clone())).unwrap();
+        auth.seal(&mut mine, 300).unwrap();
+        assert_eq!(
+            auth.check(&mine, "router", &hb, 300),
             Checked::Reject,
-            "not the router"
+            "reflected"
         );
         assert_eq!(
             auth.rejected,

@@ -87,6 +87,11 @@ pub struct SimFleetOptions {
     /// Failsafe settings of every agent.
     pub failsafe: crate::failsafe::FailsafeConfig,
     pub noise_model: UwbNoiseModel,
+    /// Keys of robots that sign (by robot name); a robot without one runs
+    /// unsigned.
+    pub secrets: std::collections::BTreeMap<String, [u8; mech_proto::auth::KEY_LEN]>,
+    /// The router's sender name, which signing robots check.
+    pub router_name: String,
 }
 
 impl Default for SimFleetOptions {
@@ -104,6 +109,8 @@ impl Default for SimFleetOptions {
             ],
             failsafe: crate::failsafe::FailsafeConfig::default(),
             noise_model: UwbNoiseModel::default(),
+            secrets: std::collections::BTreeMap::new(),
+            router_name: mech_proto::ROUTER.to_string(),
         }
     }
 }
@@ -159,7 +166,12 @@ impl SimFleet {
                 .noise
                 .then(|| UwbNoise::new(options.noise_model, options.seed.wrapping_add(i as u64)));
             let spec = &platforms[i % platforms.len()];
-            let sim = SimAgent::new(settings, spec, arena.start_pose(i, n), noise, stamp_origin);
+            let mut sim =
+                SimAgent::new(settings, spec, arena.start_pose(i, n), noise, stamp_origin);
+            if let Some(secret) = options.secrets.get(&name) {
+                let key = mech_proto::auth::Key::new(secret);
+                sim.agent = sim.agent.with_key(key, &options.router_name);
+            }
             let socket = UdpSocket::bind("127.0.0.1:0").await?;
             addrs.push(socket.local_addr()?);
             let ticker = Ticker::Shared(tick_rxs[i % phases].clone());

@@ -14,8 +14,11 @@
 //! - `key_id` names the key, so a receiver holding several (old and new,
 //!   during a rotation) knows which one to check with. It is derived from
 //!   the key itself ([`Key::id`]): the first four bytes of SHA-256(key);
-//! - `link` numbers the sender's links (UDP, a radio...) so each link is
-//!   its own stream;
+//! - `link`: bit 7 is the direction, set ([`FROM_ROUTER`]) on what the
+//!   router signs and clear on what robots, controllers and operators sign,
+//!   so a message cannot be reflected back to the one who signed it (a
+//!   robot shares its key with the router only); bits 0-6 number the
+//!   sender's links (UDP, a radio...) so each link is its own stream;
 //! - `stamp_us` is the sender's station time in microseconds since the Unix
 //!   epoch, strictly increasing on each stream (key, sender, link). A
 //!   receiver accepts a stamp only if it is newer than the last one it
@@ -40,6 +43,9 @@ pub const MAC_LEN: usize = 16;
 
 /// Bytes of a key (256 bits).
 pub const KEY_LEN: usize = 32;
+
+/// The direction bit of a tag's `link`: set on everything the router signs.
+pub const FROM_ROUTER: u8 = 0x80;
 
 /// A shared secret and its id, ready to sign and verify. Keying HMAC is done
 /// once here; each message then costs one clone of the keyed state.
@@ -128,6 +134,11 @@ pub struct Tag {
 }
 
 impl Tag {
+    /// Whether the router signed it (the direction bit of `link`).
+    pub fn from_router(&self) -> bool {
+        self.link & FROM_ROUTER != 0
+    }
+
     /// Reads a tag from the `auth` element's payload.
     pub fn parse(payload: &[u8]) -> Result<Tag, AuthError> {
         let bytes: [u8; TAG_LEN] = payload

@@ -3,4 +3,5 @@
 mod cli;
 mod cluster_script;
 mod script;
+mod signed;
 mod tui;

@@ -168,6 +168,17 @@ fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError
     v
 }
 
+/// Rejections by reason, and their total.
+fn rejected_json(r: &mech_core::counters::Rejections) -> Value {
+    let mut v = json!({"total": r.total()});
+    if let Value::Object(m) = &mut v {
+        for (reason, n) in r.by_reason() {
+            m.insert(reason.as_str().into(), json!(n));
+        }
+    }
+    v
+}
+
 /// Runs `source` against `gcs` with `executor`, writing JSON lines to `sink`.
 pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -> ScriptOutcome {
     let statements = match parse_script(source) {
@@ -242,6 +253,8 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
             "connected_robots": robots,
             "received": counters.received, "forwarded": counters.forwarded,
             "bad_packets": counters.dropped.bad_packet,
+            "authenticated": gcs.router().authenticated(),
+            "rejected": rejected_json(&counters.rejected),
         }),
     );
     outcome

@@ -381,6 +381,12 @@ impl Keyring {
                 format!("key {:08x} (sender {sender:?}) is not listed", tag.key_id),
             )
         })?;
+        if tag.from_router() {
+            return Err(reject(
+                AuthError::BadTag,
+                format!("{sender:?} sent a message the router signed (reflected)"),
+            ));
+        }
         if !identity.key.verify(region, &tag) {
             return Err(reject(
                 AuthError::BadTag,

@@ -78,6 +78,8 @@ struct Shared {
     /// Set once by [`Router::shutdown`]: every task watches it and stops,
     /// and nothing is routed any more, from any peer or handle.
     stop: watch::Sender<bool>,
+    /// The router's sender name.
+    name: String,
 }
 
 impl Shared {
@@ -220,6 +222,7 @@ impl Router {
         };
         let workers = config.udp_workers;
         let tick = config.tick;
+        let name = config.name.clone();
         let shared = Arc::new(Shared {
             subscriber_queue: config.subscriber_queue,
             tables: Mutex::new(Tables::new(config, auth)),
@@ -231,6 +234,7 @@ impl Router {
             udp_order: Mutex::new(()),
             next_conn: AtomicU64::new(1),
             stop: watch::Sender::new(false),
+            name,
         });
         tracing::info!(udp = %udp_addr, tcp = ?tcp_addr, "router started");
         shared.bus.emit(Event::Listening {
@@ -430,6 +434,11 @@ impl RouterHandle {
     /// Live channels with their publisher, rate and routed robots.
     pub fn channels(&self) -> Vec<ChannelStatus> {
         lock(&self.shared.tables).channel_status(Instant::now())
+    }
+
+    /// The router's sender name (agents check it on what they obey).
+    pub fn name(&self) -> &str {
+        &self.shared.name
     }
 
     /// Whether the router checks and signs messages (the authenticated

@@ -567,3 +567,19 @@ async fn ten_thousand_forged_or_replayed_messages_are_all_refused() {
         .await;
     assert_eq!(last.body, Body::Command(twist(0.222)));
 }
+
+#[tokio::test]
+async fn what_the_router_signed_cannot_be_sent_back_to_it() {
+    let s = station().await;
+    let robot = s.robot("robot_1", "ext/matlab").await;
+    // A heartbeat the router signed for robot_1, reflected to the router.
+    let mut buf = vec![0u8; 2048];
+    let (n, _) = tokio::time::timeout(Duration::from_secs(2), robot.sock.recv_from(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    let attacker = Peer::new("x", s.gcs.router().udp_addr()).await;
+    attacker.send_raw(&buf[..n]).await;
+    assert!(s.rejections_reach(1).await);
+    assert_eq!(s.rejected().bad_tag, 1);
+}

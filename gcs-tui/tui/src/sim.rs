@@ -4,6 +4,9 @@
 //! depend on the simulator.
 
 use mech_control::lang::SimSpawner;
+use mech_core::RouterHandle;
+use mech_core::auth::{Identity, Role};
+use mech_proto::auth::Key;
 
 /// Simulated agents (`mech_agent::sim`) for `spawn` and `--demo`: the same
 /// agent core as on a robot, with simulated platforms and UWB-like position
@@ -34,6 +37,7 @@ impl SimSpawner for SimulatedFleet {
         &mut self,
         count: usize,
         router: std::net::SocketAddr,
+        station: RouterHandle,
     ) -> futures::future::BoxFuture<'_, Result<Vec<String>, String>> {
         Box::pin(async move {
             if let Some(f) = &self.fleet {
@@ -42,10 +46,22 @@ impl SimSpawner for SimulatedFleet {
                     f.names().len()
                 ));
             }
-            let fleet =
-                mech_agent::sim::SimFleet::spawn(count, router, self.arena, self.options.clone())
-                    .await
-                    .map_err(|e| e.to_string())?;
+            let mut options = self.options.clone();
+            if station.authenticated() {
+                // Each simulated robot gets a key of its own, known to this
+                // station only, so it registers like a real robot.
+                options.router_name = station.name().to_string();
+                for i in 1..=count {
+                    let name = format!("robot_{i}");
+                    let secret: [u8; 32] = rand::random();
+                    let key = Key::new(&secret);
+                    station.add_key(Identity::new(Role::Robot, &name, key, Vec::new()));
+                    options.secrets.insert(name, secret);
+                }
+            }
+            let fleet = mech_agent::sim::SimFleet::spawn(count, router, self.arena, options)
+                .await
+                .map_err(|e| e.to_string())?;
             let names = fleet.names();
             tracing::info!(count, %router, "simulated agents started");
             self.fleet = Some(fleet);

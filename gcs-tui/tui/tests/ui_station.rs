@@ -46,7 +46,7 @@ async fn app_requests_reach_simulated_robots() {
     let gcs = Gcs::start(config).await.expect("router starts");
     let mut spawner = mech_gcs::sim::simulator();
     let names = spawner
-        .spawn(2, gcs.router().udp_addr())
+        .spawn(2, gcs.router().udp_addr(), gcs.router().clone())
         .await
         .expect("simulated agents start");
     assert_eq!(names, ["robot_1", "robot_2"]);
@@ -153,7 +153,7 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
     let gcs = Gcs::start(config).await.expect("router starts");
     let mut spawner = mech_gcs::sim::simulator();
     spawner
-        .spawn(1, gcs.router().udp_addr())
+        .spawn(1, gcs.router().udp_addr(), gcs.router().clone())
         .await
         .expect("simulated agent starts");
     let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
@@ -242,7 +242,7 @@ async fn station(
     let gcs = Gcs::start(config).await.expect("router starts");
     let mut spawner = mech_gcs::sim::simulator();
     spawner
-        .spawn(n, gcs.router().udp_addr())
+        .spawn(n, gcs.router().udp_addr(), gcs.router().clone())
         .await
         .expect("simulated agents start");
     let executor = mech_control::lang::Executor::new(gcs.clone());

@@ -10,7 +10,7 @@ use super::LangError;
 use super::args::Target;
 use crate::hub::ControlHub;
 use mech_core::Gcs;
-use mech_core::router::Publishers;
+use mech_core::router::{Publishers, RouterHandle};
 
 /// Sender name of everything the command language publishes.
 pub const SENDER: &str = "gcs";
@@ -18,12 +18,14 @@ pub const SENDER: &str = "gcs";
 /// Starts and stops simulated agents for `spawn` and `--demo`. The GCS core
 /// does not depend on the simulator; the binary plugs one in.
 pub trait SimSpawner: Send + std::fmt::Debug {
-    /// Starts `count` simulated agents registering with the router at
-    /// `router`; returns their names.
+    /// Starts `count` simulated agents registering with `router` at
+    /// `addr` (when the router authenticates, the spawner gives it a key
+    /// for each agent); returns their names.
     fn spawn(
         &mut self,
         count: usize,
-        router: SocketAddr,
+        addr: SocketAddr,
+        router: RouterHandle,
     ) -> BoxFuture<'_, Result<Vec<String>, String>>;
     /// Stops every agent this spawner started.
     fn shutdown(&mut self) -> BoxFuture<'_, ()>;

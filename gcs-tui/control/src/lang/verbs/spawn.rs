@@ -38,7 +38,7 @@ impl Spawn {
             LangError::new(at, "simulated agents are not available in this build")
         })?;
         let names = spawner
-            .spawn(self.count, router)
+            .spawn(self.count, router, ctx.gcs.router().clone())
             .await
             .map_err(|e| LangError::new(at, format!("cannot spawn simulated agents: {e}")))?;
         Ok(Outcome::new(format!("spawned {}", names.join(", "))))

@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use mech_proto::auth::{Tag, split};
+use mech_proto::auth::{FROM_ROUTER, Tag, split};
 use mech_proto::{Body, Time, TimeRequest};
 use tokio::time::Instant;
 use tracing::warn;
@@ -178,7 +178,7 @@ impl Tables {
             return None;
         };
         let stamp = self.stamper.next(mech_proto::unix_micros());
-        if let Err(e) = key.seal(&mut bytes, 0, stamp) {
+        if let Err(e) = key.seal(&mut bytes, FROM_ROUTER, stamp) {
             warn!(error = %e, "cannot sign");
             return None;
         }

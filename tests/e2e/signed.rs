@@ -1,0 +1,145 @@
+//! The authenticated control plane end to end: a station that requires
+//! keys, a simulated robot registering with its own key, and the Python
+//! controller from docs/protocol.md signing its commands. A controller with
+//! a key the station does not list moves nothing; the listed one drives the
+//! robot.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A free UDP port on loopback (the router binds it right after).
+fn free_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+fn keygen(name: &str, file: &Path) {
+    let out = Command::new(mech_e2e::binary("mech-gcs"))
+        .args(["keygen", name, "--out"])
+        .arg(file)
+        .output()
+        .expect("mech-gcs keygen runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Runs the documented Python controller with `key` for `seconds`.
+fn python_controller(key: &Path, port: u16, seconds: f64) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples/controller.py");
+    let status = Command::new("python3")
+        .arg(script)
+        .arg(key)
+        .arg(format!("127.0.0.1:{port}"))
+        .arg(seconds.to_string())
+        .status()
+        .expect("python3 runs (scripts/deps.sh installs msgpack)");
+    assert!(status.success(), "the Python controller failed");
+}
+
+/// `(x, y)` from a `status` result line (`... at (x, y) heading ...`).
+fn position(line: &str) -> (f64, f64) {
+    let at = line.find(" at (").expect("a position in the status line") + 5;
+    let end = at + line[at..].find(')').expect("closing parenthesis");
+    let mut xy = line[at..end]
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().unwrap());
+    (xy.next().unwrap(), xy.next().unwrap())
+}
+
+#[test]
+fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let (listed, intruder) = (
+        dir.path().join("python.key"),
+        dir.path().join("intruder.key"),
+    );
+    keygen("python", &listed);
+    keygen("python", &intruder);
+    let port = free_port();
+    let config = dir.path().join("gcs.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[router]\nudp = \"127.0.0.1:{port}\"\ntcp = \"127.0.0.1:0\"\n\
+             [auth]\nmode = \"required\"\n\
+             [[auth.keys]]\nrole = \"controller\"\nname = \"python\"\nfile = \"python.key\"\n\
+             channels = [\"ext/python\"]\n"
+        ),
+    )
+    .unwrap();
+    let mut gcs = Command::new(mech_e2e::binary("mech-gcs"))
+        .arg("--config")
+        .arg(&config)
+        .args(["--script", "-"])
+        .env("XDG_STATE_HOME", dir.path())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mech-gcs starts");
+    let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
+                  wait route robot_1 ext/python 5s\nsleep 500ms\nstatus robot_1\nlog intruder\n\
+                  sleep 2s\nstatus robot_1\nlog listed\nsleep 4s\nstatus robot_1\n";
+    gcs.stdin
+        .take()
+        .unwrap()
+        .write_all(script.as_bytes())
+        .unwrap();
+    let mut lines = BufReader::new(gcs.stdout.take().unwrap()).lines();
+    let mut all = Vec::new();
+    let mut next_until = |marker: &str, all: &mut Vec<String>| {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        for line in lines.by_ref() {
+            let line = line.unwrap();
+            all.push(line.clone());
+            if line.contains(marker) {
+                return;
+            }
+            assert!(Instant::now() < deadline, "no {marker:?}: {all:#?}");
+        }
+        panic!("mech-gcs ended before {marker:?}: {all:#?}");
+    };
+    next_until("\"summary\":\"intruder\"", &mut all);
+    python_controller(&intruder, port, 1.5);
+    next_until("\"summary\":\"listed\"", &mut all);
+    python_controller(&listed, port, 3.0);
+    next_until("\"type\":\"summary\"", &mut all);
+    let status = gcs.wait_with_output().unwrap();
+    let statuses: Vec<&String> = all
+        .iter()
+        .filter(|l| l.contains("\"command\":\"status robot_1\""))
+        .collect();
+    assert_eq!(statuses.len(), 3, "{all:#?}");
+    let (start, after_intruder, end) = (
+        position(statuses[0]),
+        position(statuses[1]),
+        position(statuses[2]),
+    );
+    let moved = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
+    assert!(
+        moved(start, after_intruder) < 0.05,
+        "the intruder's key moved the robot {start:?} -> {after_intruder:?}"
+    );
+    assert!(
+        moved(after_intruder, end) > 0.3,
+        "the listed controller moved the robot only {after_intruder:?} -> {end:?}"
+    );
+    let summary = all.last().unwrap();
+    assert!(summary.contains("\"authenticated\":true"), "{summary}");
+    assert!(
+        !summary.contains("\"unknown-key\":0"),
+        "the intruder's messages are counted: {summary}"
+    );
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+}
