@@ -42,6 +42,29 @@ pub enum AuthMode {
     Off,
 }
 
+/// How exposed a running station is, for the status bar and `status`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Security {
+    /// Every message from the network must be signed by a listed key.
+    #[default]
+    Authenticated,
+    /// Unsigned, but listening on loopback only (the demo).
+    LoopbackOnly,
+    /// Unsigned and reachable from the network (`auth.mode = "off"`):
+    /// anyone who reaches the router can drive the robots.
+    Unauthenticated,
+}
+
+impl Security {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Security::Authenticated => "authenticated",
+            Security::LoopbackOnly => "unsigned (loopback only)",
+            Security::Unauthenticated => "UNAUTHENTICATED",
+        }
+    }
+}
+
 /// What a key may do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
 #[serde(rename_all = "lowercase")]

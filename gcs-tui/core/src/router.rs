@@ -33,8 +33,8 @@ pub use bus::Subscription;
 pub use config::RouterConfig;
 pub use tables::Delivery;
 
-use crate::auth::{Identity, Keyring};
-use crate::counters::{ChannelStatus, Counters, DropReason};
+use crate::auth::{Identity, Keyring, Security};
+use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};
 use crate::event::{Event, EventSink};
 use crate::sync::lock;
 use bus::EventBus;
@@ -445,6 +445,23 @@ impl RouterHandle {
     /// control plane); `false` means anyone who reaches it can drive robots.
     pub fn authenticated(&self) -> bool {
         lock(&self.shared.tables).auth_on()
+    }
+
+    /// How exposed the router is: authenticated, unsigned on loopback only,
+    /// or unauthenticated on the network.
+    pub fn security(&self) -> Security {
+        let loopback = self.shared.udp_addr.ip().is_loopback()
+            && self.shared.tcp_addr.is_none_or(|a| a.ip().is_loopback());
+        match (self.authenticated(), loopback) {
+            (true, _) => Security::Authenticated,
+            (false, true) => Security::LoopbackOnly,
+            (false, false) => Security::Unauthenticated,
+        }
+    }
+
+    /// Messages refused by the authenticated control plane, by reason.
+    pub fn rejections(&self) -> Rejections {
+        lock(&self.shared.tables).rejections()
     }
 
     /// Adds a key while running (simulated robots get theirs this way). Does

@@ -376,6 +376,10 @@ impl Tables {
         }
     }
 
+    pub(crate) fn rejections(&self) -> Rejections {
+        self.rejected
+    }
+
     pub(crate) fn count_send_failure(&mut self, fanout: bool) {
         if fanout {
             self.fanout_dropped += 1;

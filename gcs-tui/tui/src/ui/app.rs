@@ -16,7 +16,7 @@ use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::Rect;
 
 use super::layout::{Areas, CARD_HEIGHT, SidePanel};
-use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView};
+use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView, Security};
 use super::viewport::Viewport;
 use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
 
@@ -258,6 +258,10 @@ pub struct App {
     history_pos: Option<usize>,
     /// Fleet-wide e-stop engaged (requested here or reported by the core).
     pub estop: bool,
+    /// Whether the station checks signatures (shown in the status bar).
+    pub security: Security,
+    /// Messages the station refused, as last reported.
+    pub rejected: u64,
     pub log: VecDeque<LogLine>,
     /// Routing-table cursor: robot row, channel column.
     pub route_cursor: (usize, usize),
@@ -299,6 +303,8 @@ impl App {
             history: Vec::new(),
             history_pos: None,
             estop: false,
+            security: Security::default(),
+            rejected: 0,
             log: VecDeque::new(),
             route_cursor: (0, 0),
             cards_scroll: 0,
@@ -456,6 +462,8 @@ impl App {
     /// robots seen.
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
         self.estop = s.estop;
+        self.security = s.security;
+        self.rejected = s.rejected;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;

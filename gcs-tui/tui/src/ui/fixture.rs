@@ -6,7 +6,9 @@ use std::time::Instant;
 use mech_proto::{Computation, ControlMode, FailsafeState, Health, MissionProgress, Velocity};
 
 use super::app::{Action, App};
-use super::view::{ArenaBounds, ChannelView, FleetSnapshot, LinkState, RobotView, RouteView};
+use super::view::{
+    ArenaBounds, ChannelView, FleetSnapshot, LinkState, RobotView, RouteView, Security,
+};
 
 const PLATFORMS: [&str; 3] = ["diff-drive", "kiwi", "quadcopter"];
 
@@ -70,6 +72,8 @@ pub fn fleet(n: usize) -> FleetSnapshot {
     }
     FleetSnapshot {
         robots,
+        security: Security::Authenticated,
+        rejected: 0,
         channels: vec![
             ChannelView {
                 name: "joy/0".into(),

@@ -14,7 +14,7 @@ use tokio::sync::mpsc;
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
 use super::view::{
     ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView,
-    RouteView,
+    RouteView, Security,
 };
 use crate::gamepad::PadEvent;
 use mech_control::ControlHub;
@@ -101,6 +101,8 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
         robots,
         channels: channel_views(channels),
         estop: fleet.estop.engaged,
+        security: Security::default(),
+        rejected: 0,
         clusters: Some(
             fleet
                 .clusters
@@ -261,6 +263,8 @@ fn refresh(app: &mut App, gcs: &Gcs, control: &ControlHub, log_last: &mut u64) {
         (snapshot(f, Vec::new()), lines)
     });
     snap.channels = snapshot_channels(gcs.router());
+    snap.security = gcs.router().security();
+    snap.rejected = gcs.router().rejections().total();
     apply_control(&mut snap, &control.snapshot());
     for (level, text) in new_log {
         app.update(Action::Log(level, text));

@@ -9,7 +9,7 @@ use ratatui::widgets::{Block, Clear, Paragraph, Widget};
 
 use super::app::{App, Prompt, PromptError};
 use super::theme::Theme;
-use super::view::LinkState;
+use super::view::{LinkState, Security};
 
 /// Top line.
 #[derive(Debug)]
@@ -27,6 +27,18 @@ impl Widget for StatusBar<'_> {
             Span::styled(" E-STOP ENGAGED ", t.alarm())
         } else {
             Span::raw(" e-stop off ")
+        };
+        // Unsigned on the network is an alarm; the loopback demo is said
+        // plainly; refusals are counted.
+        let security = match app.security {
+            Security::Authenticated => Span::raw(""),
+            Security::LoopbackOnly => Span::raw(" unsigned, loopback │"),
+            Security::Unauthenticated => Span::styled(" UNAUTHENTICATED ", t.alarm()),
+        };
+        let rejected = if app.rejected > 0 {
+            Span::styled(format!(" rejected {} ", app.rejected), t.warn())
+        } else {
+            Span::raw("")
         };
         let pads = app.pads();
         let teleop = if app.key_teleop_on {
@@ -49,11 +61,15 @@ impl Widget for StatusBar<'_> {
                     teleop,
                 )),
                 estop,
+                security,
+                rejected,
                 Span::raw("│ ? help"),
             ])
         } else {
             Line::from(vec![
                 estop,
+                security,
+                rejected,
                 Span::raw(format!(
                     "│ {} │ {}/{} ok │ sel {} │ pads {} │ {} │ ? help",
                     app.router_addr,

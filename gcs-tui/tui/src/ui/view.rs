@@ -12,6 +12,7 @@ use mech_proto::{
 /// Link to a robot as the router judges it from its timeouts (the core's
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
+pub use mech_core::auth::Security;
 
 /// How a card spells a link state.
 pub fn link_label(link: LinkState) -> &'static str {
@@ -182,6 +183,10 @@ pub struct FleetSnapshot {
     pub estop: bool,
     /// Clusters, when the source keeps them (`None` leaves the UI's own).
     pub clusters: Option<Vec<ClusterOnScreen>>,
+    /// Whether the station checks signatures (and how exposed it is if not).
+    pub security: Security,
+    /// Messages the station refused (bad tag, replay, not permitted...).
+    pub rejected: u64,
 }
 
 /// Human-readable names for protocol enums.

@@ -1,5 +1,6 @@
 //! `status [TARGET]`: one line per robot (link, pose, speed, mode, route,
-//! failsafe), for every robot when no target is given.
+//! failsafe), for every robot when no target is given, after a summary that
+//! says whether the station authenticates and what it refused.
 
 use mech_core::fleet::Robot;
 
@@ -37,8 +38,25 @@ impl Status {
                 .map(status_line)
                 .collect::<Vec<_>>()
         });
+        let router = ctx.gcs.router();
+        let rejected = router.rejections();
+        let refused = if rejected.total() == 0 {
+            String::new()
+        } else {
+            let by: Vec<String> = rejected
+                .by_reason()
+                .iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(reason, n)| format!("{n} {}", reason.as_str()))
+                .collect();
+            format!("; rejected {}", by.join(", "))
+        };
         Ok(Outcome {
-            summary: format!("{} robots", details.len()),
+            summary: format!(
+                "{} robots; station {}{refused}",
+                details.len(),
+                router.security().as_str()
+            ),
             details,
         })
     }
