@@ -200,3 +200,44 @@ fn floats_may_arrive_as_float32_or_integers() {
         }))
     );
 }
+
+/// The published test key of docs/protocol.md: secret bytes 0x00..0x1f.
+/// Never use it for a real robot.
+const TEST_SECRET: [u8; 32] = [
+    0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08, 0x09, 0x0a, 0x0b, 0x0c, 0x0d, 0x0e, 0x0f,
+    0x10, 0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18, 0x19, 0x1a, 0x1b, 0x1c, 0x1d, 0x1e, 0x1f,
+];
+
+/// The tag that replaces TWIST's final nil when `gcs` signs it with the
+/// test key on link 0 at station time 1_700_000_000_000_000 µs (the MAC was
+/// computed independently with Python's hmac and hashlib).
+#[rustfmt::skip]
+const TWIST_TAG: &[u8] = &[
+    0xc4, 0x1d,                               // auth: bin 8, 29 bytes
+    0x63, 0x0d, 0xcd, 0x29,                   //   key id: SHA-256(key)[0..4]
+    0x00,                                     //   link 0, from a peer (bit 7 clear)
+    0x00, 0x06, 0x0a, 0x24, 0x18, 0x1e, 0x40, 0x00, // stamp_us 1_700_000_000_000_000
+    0x6b, 0x31, 0x24, 0xbf, 0xaf, 0x0d, 0x4c, 0x91, // MAC: HMAC-SHA-256(key,
+    0x43, 0x2e, 0x88, 0xac, 0xb7, 0xe5, 0x43, 0x86, //   region || id || link || stamp)[0..16]
+];
+
+#[test]
+fn the_signed_twist_matches_the_documented_bytes() {
+    use mech_proto::auth::{Key, split};
+    let key = Key::new(&TEST_SECRET);
+    assert_eq!(key.id(), 0x630d_cd29);
+    let mut signed = TWIST.to_vec();
+    key.seal(&mut signed, 0, 1_700_000_000_000_000).unwrap();
+    let mut expected = TWIST[..TWIST.len() - 1].to_vec();
+    expected.extend_from_slice(TWIST_TAG);
+    assert_eq!(signed, expected);
+    let (region, tag) = split(&signed).unwrap();
+    assert!(key.verify(region, &tag.unwrap()));
+    // A signed message still decodes to the same envelope, with its tag.
+    let env = decode(&signed).unwrap();
+    assert_eq!((env.header, env.body), (twist().header, twist().body));
+    assert_eq!(
+        env.auth.map(|a| a.into_vec()),
+        Some(TWIST_TAG[2..].to_vec())
+    );
+}

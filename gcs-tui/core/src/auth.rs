@@ -315,7 +315,9 @@ type StreamId = (u32, String, u8);
 #[derive(Debug)]
 pub struct Keyring {
     by_id: HashMap<u32, Identity>,
-    /// Newest key of each name, for signing what the router sends it.
+    /// The key each name last signed with (or, before that, the one listed
+    /// last): the router signs what it sends a peer with it, so a key
+    /// rotation works whichever key the peer holds.
     by_name: HashMap<String, u32>,
     streams: HashMap<StreamId, Stream>,
     freshness: Freshness,
@@ -347,8 +349,8 @@ impl Keyring {
         ring
     }
 
-    /// Adds a key (a later key of the same name is the one the router signs
-    /// with; both verify).
+    /// Adds a key. Both of a name's keys verify; the router signs with the
+    /// one its holder last used, or the one added last.
     pub fn add(&mut self, identity: Identity) {
         let id = identity.key.id();
         self.by_name.insert(identity.name.clone(), id);
@@ -457,7 +459,73 @@ impl Keyring {
                 }
             }
         }
+        if self.by_name.get(sender) != Some(&tag.key_id) {
+            self.by_name.insert(sender.to_string(), tag.key_id);
+        }
         let identity = &self.by_id[&tag.key_id];
         Ok(Verified { identity, tag })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ring(keys: &[(&str, u8)]) -> Keyring {
+        let ids = keys
+            .iter()
+            .map(|(n, b)| Identity::new(Role::Controller, n, Key::new(&[*b; 32]), vec!["*".into()]))
+            .collect();
+        Keyring::new(ids, Duration::from_secs(10), 1_000)
+    }
+
+    fn signed(key: &Key, stamp: u64) -> (Vec<u8>, Tag) {
+        let mut b = vec![0x91, 0x01, 0xc0];
+        key.seal(&mut b, 0, stamp).unwrap();
+        let (_, tag) = mech_proto::auth::split(&b).unwrap();
+        (b[..2].to_vec(), tag.unwrap())
+    }
+
+    #[test]
+    fn during_a_rotation_the_router_signs_with_the_key_the_holder_uses() {
+        let (old, new) = (Key::new(&[1; 32]), Key::new(&[2; 32]));
+        let mut r = ring(&[("matlab", 1), ("matlab", 2)]);
+        assert_eq!(r.key_for("matlab").unwrap().id(), new.id(), "listed last");
+        let (region, tag) = signed(&old, 5_000_000);
+        r.verify(&region, Some(tag), "matlab", 5_000_000, true)
+            .unwrap();
+        assert_eq!(
+            r.key_for("matlab").unwrap().id(),
+            old.id(),
+            "the one in use"
+        );
+        let (region, tag) = signed(&new, 5_000_001);
+        r.verify(&region, Some(tag), "matlab", 5_000_001, true)
+            .unwrap();
+        assert_eq!(r.key_for("matlab").unwrap().id(), new.id());
+    }
+
+    #[test]
+    fn new_streams_must_be_near_the_clock_and_after_the_start() {
+        let k = Key::new(&[1; 32]);
+        let mut r = ring(&[("matlab", 1)]);
+        let hour = 3_600_000_000;
+        let (region, tag) = signed(&k, 2 * hour);
+        let e = r
+            .verify(&region, Some(tag), "matlab", 3 * hour, true)
+            .unwrap_err();
+        assert_eq!(e.reason, RejectReason::Replay, "an hour old");
+        let (region, tag) = signed(&k, 500);
+        let e = r
+            .verify(&region, Some(tag), "matlab", 600, true)
+            .unwrap_err();
+        assert_eq!(e.reason, RejectReason::Replay, "before the router started");
+        let (region, tag) = signed(&k, 3 * hour - 1);
+        r.verify(&region, Some(tag), "matlab", 3 * hour, true)
+            .unwrap();
+        let e = r
+            .verify(&region, Some(tag), "matlab", 3 * hour, true)
+            .unwrap_err();
+        assert_eq!(e.reason, RejectReason::Replay, "the same message again");
     }
 }
