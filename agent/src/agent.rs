@@ -20,6 +20,7 @@ use crate::control::{Controller, Gains, MissionRun, Mode};
 use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::filter::MedianFilter;
 use crate::hal::PositionSample;
+use crate::order::{CommandOrder, is_older};
 use crate::platform::Platform;
 
 /// Settings of the agent core (the parts of the robot config it uses).
@@ -76,6 +77,13 @@ pub struct Counters {
     pub ignored_estopped: u64,
     /// E-stops and releases older than one already obeyed (delayed resends).
     pub stale_estops: u64,
+    /// Commands older than one already obeyed from the same sender on the
+    /// same channel (overtaken on the way).
+    pub stale_commands: u64,
+    /// Routes with an epoch older than the one in force.
+    pub stale_routes: u64,
+    /// Missions with an id older than the one held for their channel.
+    pub stale_missions: u64,
     /// Messages addressed to another robot.
     pub not_for_me: u64,
     /// Bytes that did not decode as a message.
@@ -115,6 +123,8 @@ pub struct Agent {
     last_estop_id: Option<u32>,
     /// Stored missions, by the channel that sent them.
     missions: HashMap<String, MissionRun>,
+    /// Newest command obeyed from each sender on each channel.
+    order: CommandOrder,
     seq: u32,
     /// Unix time (µs) at agent time zero, for message stamps.
     stamp_origin_us: u64,
@@ -158,6 +168,7 @@ impl Agent {
             routed_once: false,
             last_estop_id: None,
             missions: HashMap::new(),
+            order: CommandOrder::default(),
             seq: 0,
             stamp_origin_us,
             next_hello: Duration::ZERO,
@@ -347,30 +358,41 @@ impl Agent {
             self.counters.not_for_me += 1;
             return out;
         }
-        let channel = env.header.channel;
-        let sender = env.header.sender;
+        let Header {
+            channel,
+            sender,
+            seq,
+            stamp_us,
+            ..
+        } = env.header;
+        let stamp = (seq, stamp_us);
         match env.body {
             Body::Welcome(w) => {
                 if !self.registered {
                     tracing::info!(robot = %self.settings.name, route = %w.route.channel, "registered with the router");
-                    // A (possibly restarted) router numbers e-stops afresh.
+                    // A (possibly restarted) router numbers e-stops, route
+                    // epochs and missions afresh.
                     self.last_estop_id = None;
+                    self.order.clear();
                 }
                 self.registered = true;
                 self.next_heartbeat = now;
                 self.apply_route(w.route, now, &mut out);
             }
             Body::Route(r) => {
-                if r.robot == self.settings.name {
-                    self.apply_route(r, now, &mut out);
-                } else {
+                if r.robot != self.settings.name {
                     self.counters.not_for_me += 1;
+                } else if self.routed_once && is_older(r.epoch, self.route.epoch) {
+                    // A delayed resend of a route already replaced.
+                    self.counters.stale_routes += 1;
+                } else {
+                    self.apply_route(r, now, &mut out);
                 }
             }
-            Body::Command(cmd) => self.command(&channel, &sender, &cmd, now, &mut out),
+            Body::Command(cmd) => self.command(&channel, &sender, stamp, &cmd, now, &mut out),
             Body::FleetCommand(f) => {
                 if let Some(part) = f.parts.into_iter().find(|p| p.robot == self.settings.name) {
-                    self.command(&channel, &sender, &part.command, now, &mut out);
+                    self.command(&channel, &sender, stamp, &part.command, now, &mut out);
                 }
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
@@ -543,7 +565,15 @@ impl Agent {
                 .missions
                 .get(&self.route.channel)
                 .map(MissionRun::progress),
+            stale: self.stale_total(),
         }
+    }
+
+    /// Messages ignored as stale, for telemetry.
+    fn stale_total(&self) -> u32 {
+        let c = &self.counters;
+        let n = c.stale_commands + c.stale_estops + c.stale_routes + c.stale_missions;
+        u32::try_from(n).unwrap_or(u32::MAX)
     }
 
     /// The `Bye` sent when the agent shuts down.
@@ -572,6 +602,7 @@ impl Agent {
         if changed {
             tracing::info!(robot = %self.settings.name, channel = %route.channel, epoch = route.epoch, "route");
             self.routed_once = true;
+            self.order.clear();
             self.controller.idle();
             self.failsafe.channel_heard(now);
             self.route.channel = route.channel;
@@ -609,10 +640,14 @@ impl Agent {
         }
     }
 
+    /// Obeys a command if it comes on the routed channel, the robot is not
+    /// e-stopped, and it is not older than one already obeyed from its
+    /// sender (`stamp` = its header's sequence number and stamp).
     fn command(
         &mut self,
         channel: &str,
         sender: &str,
+        stamp: (u32, u64),
         cmd: &Command,
         now: Duration,
         out: &mut Vec<Envelope>,
@@ -639,6 +674,14 @@ impl Agent {
                 });
                 out.push(self.envelope(sender, notice, now));
             }
+            return;
+        }
+        let restart_after = self.settings.failsafe.channel_timeout;
+        if !self
+            .order
+            .admit(sender, channel, stamp.0, stamp.1, now, restart_after)
+        {
+            self.counters.stale_commands += 1;
             return;
         }
         if matches!(cmd, Command::Stop(_)) {
@@ -699,6 +742,16 @@ impl Agent {
                 reason: reason.to_string(),
             });
             out.push(self.envelope(mech_proto::ROUTER, ack, now));
+            return;
+        }
+        if self
+            .missions
+            .get(channel)
+            .is_some_and(|run| is_older(id, run.mission.id))
+        {
+            // A delayed copy of a mission already replaced on this channel:
+            // not acknowledged (the router stopped retrying it long ago).
+            self.counters.stale_missions += 1;
             return;
         }
         let paused = match self.missions.get_mut(channel) {
@@ -1291,9 +1344,13 @@ mod loss_tests {
         let period = Duration::from_millis(20);
         for run in 0..20u64 {
             let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
-            let env = |channel: &str, body: Body| {
+            // The controller numbers its messages, as every sender does.
+            let mut seq = 0u32;
+            let mut env = |channel: &str, body: Body| {
+                seq += 1;
                 Envelope::new(
                     Header {
+                        seq,
                         destination: "r1".into(),
                         channel: channel.into(),
                         ..Header::default()

@@ -56,6 +56,7 @@ fn bench(c: &mut Criterion) {
                 next: 2,
                 total: 5,
             }),
+            stale: 0,
         }),
     );
     for (name, env) in [("command", &command), ("telemetry", &telemetry)] {

@@ -162,6 +162,12 @@ pub struct Telemetry {
     /// Last outputs written to the actuators, each in `[-1, 1]`.
     pub actuators: Vec<f64>,
     pub mission: Option<MissionProgress>,
+    /// Messages the robot ignored because one newer from the same source
+    /// was already obeyed (commands, routes, missions, e-stops), since it
+    /// started. Added to version 1 at the end: a telemetry array of 11
+    /// elements reads as 0 here.
+    #[serde(default)]
+    pub stale: u32,
 }
 
 /// One point of a [`Mission`]: position in metres and an optional arrival time

@@ -83,6 +83,7 @@ fn samples() -> Vec<Envelope> {
                 position_quality: 1.0,
                 actuators: vec![0.1, -0.1],
                 mission: None,
+                stale: 0,
             }),
         ),
         Envelope::new(

@@ -106,6 +106,7 @@ fn body() -> impl Strategy<Value = Body> {
         fraction(),
         vec(unit(), 0..8),
         proptest::option::of((any::<u32>(), any::<u32>(), any::<u32>())),
+        any::<u32>(),
     )
         .prop_map(
             |(
@@ -118,6 +119,7 @@ fn body() -> impl Strategy<Value = Body> {
                 q,
                 actuators,
                 mission,
+                stale,
             )| {
                 Body::Telemetry(Telemetry {
                     pose,
@@ -149,6 +151,7 @@ fn body() -> impl Strategy<Value = Body> {
                     position_quality: q,
                     actuators,
                     mission: mission.map(|(id, next, total)| MissionProgress { id, next, total }),
+                    stale,
                 })
             },
         );
@@ -465,4 +468,43 @@ fn every_known_kind_round_trips_through_each_framing() {
             env.body.name()
         );
     }
+}
+
+#[test]
+fn telemetry_from_before_the_stale_count_still_decodes() {
+    // Telemetry as version 1 first defined it: 11 fields, no stale count.
+    let mut env = Envelope::new(
+        Header {
+            sender: "robot_1".into(),
+            ..Header::default()
+        },
+        Body::Telemetry(Telemetry {
+            pose: Pose::default(),
+            velocity: Velocity::default(),
+            mode: ControlMode::Idle,
+            channel: String::new(),
+            computation: Computation::Onboard,
+            failsafe: FailsafeState::Ok,
+            health: Health::Ok,
+            battery: None,
+            position_quality: 1.0,
+            actuators: vec![],
+            mission: None,
+            stale: 7,
+        }),
+    );
+    let bytes = encode(&env).unwrap();
+    // Body: [pose .. mission, stale] -> drop the last field and fix the
+    // array length (0x9c = 12 elements -> 0x9b = 11).
+    let at = bytes.iter().position(|b| *b == 0x9c).unwrap();
+    let mut old = bytes.clone();
+    old[at] = 0x9b;
+    let stale_at = old.len() - 2; // [..., stale 0x07, auth nil]
+    assert_eq!(old[stale_at], 0x07);
+    old.remove(stale_at);
+    let Body::Telemetry(t) = &mut env.body else {
+        unreachable!()
+    };
+    t.stale = 0;
+    assert_eq!(decode(&old).unwrap(), env);
 }

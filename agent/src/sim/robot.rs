@@ -181,6 +181,7 @@ impl SimRobot {
             position_quality: 1.0,
             actuators: self.outputs.clone(),
             mission: self.mission.as_ref().map(MissionRun::progress),
+            stale: 0,
         }
     }
 

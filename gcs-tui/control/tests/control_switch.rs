@@ -79,6 +79,7 @@ async fn bare_agent(router: SocketAddr, seen: mpsc::UnboundedSender<(Instant, En
                     position_quality: 1.0,
                     actuators: vec![0.0; 3],
                     mission: mission.filter(|_| channel == "wp/gcs"),
+                    stale: 0,
                 };
                 let _ = socket.send_to(&send(Body::Telemetry(t)), router).await;
             }

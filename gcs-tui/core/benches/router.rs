@@ -86,6 +86,7 @@ fn telemetry(name: &str, x: f64) -> Vec<u8> {
         position_quality: 1.0,
         actuators: vec![0.1, 0.1],
         mission: None,
+        stale: 0,
     };
     env(name, "router", "", 0, Body::Telemetry(t))
 }

@@ -532,6 +532,7 @@ mod tests {
             position_quality: 1.0,
             actuators: vec![0.1, 0.2],
             mission,
+            stale: 0,
         }
     }
 

@@ -77,6 +77,7 @@ pub fn telemetry(x: f64, y: f64, channel: &str, mission: Option<MissionProgress>
         position_quality: 1.0,
         actuators: vec![0.0, 0.0],
         mission,
+        stale: 0,
     }
 }
 
