@@ -20,7 +20,7 @@
 //! formation) drive the cluster controller too.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, MutexGuard, Weak};
 use std::time::Duration;
 
 use mech_proto::{
@@ -40,7 +40,8 @@ use crate::offboard::{NavConfig, OffboardNavigator};
 use crate::spec::{ClusterSpec, DEFAULT_SPACING, SpecError};
 use crate::{ControlEvent, MemberState, PlatformLimits};
 use mech_core::fleet::{Fleet, Severity};
-use mech_core::router::{Delivery, Publisher, RouterError, Subscription};
+use mech_core::router::{Delivery, Publishers, RouterError, Subscription};
+use mech_core::sync::lock;
 use mech_core::{Event, Gcs};
 
 /// Sender name of everything the controllers publish.
@@ -251,10 +252,6 @@ impl Drop for Shared {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
 /// The ground station's fleet and offboard controllers; cheap to clone, all
 /// clones share the controllers. The control task starts with the first
 /// request and stops when the last clone is dropped.
@@ -333,8 +330,9 @@ impl ControlHub {
         }
         let weak = Arc::downgrade(&self.shared);
         let events = self.shared.gcs.router().subscribe(256, false);
+        let publishers = self.shared.gcs.router().publishers(SENDER);
         let period = Duration::from_secs_f64(1.0 / self.shared.config.rate_hz.clamp(1.0, 200.0));
-        *task = Some(tokio::spawn(run(weak, events, period)));
+        *task = Some(tokio::spawn(run(weak, events, publishers, period)));
     }
 
     /// Runs a control period now instead of at the next tick.
@@ -971,8 +969,12 @@ fn member_states(f: &Fleet) -> Vec<MemberState> {
 
 /// The control task: a period at every tick or kick, publishing through
 /// per-channel publishers (so sequence numbers run on per channel).
-async fn run(shared: Weak<Shared>, mut events: Subscription, period: Duration) {
-    let mut publishers: HashMap<String, Publisher> = HashMap::new();
+async fn run(
+    shared: Weak<Shared>,
+    mut events: Subscription,
+    mut publishers: Publishers,
+    period: Duration,
+) {
     let mut ticker = tokio::time::interval(period);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -998,14 +1000,10 @@ async fn run(shared: Weak<Shared>, mut events: Subscription, period: Duration) {
         let Some(s) = shared.upgrade() else { return };
         let hub = ControlHub { shared: s };
         let (outgoing, log) = hub.period();
-        let router = hub.shared.gcs.router().clone();
         for o in outgoing {
             match o {
                 Outgoing::Fleet { channel, parts } => {
-                    let p = publishers
-                        .entry(channel.clone())
-                        .or_insert_with(|| router.publisher(SENDER, &channel));
-                    if let Err(e) = p.send_fleet(parts).await {
+                    if let Err(e) = publishers.on(&channel).send_fleet(parts).await {
                         tracing::warn!(%channel, error = %e, "fleet command not published");
                     }
                 }
@@ -1013,18 +1011,13 @@ async fn run(shared: Weak<Shared>, mut events: Subscription, period: Duration) {
                     channel,
                     robot,
                     command,
-                } => {
-                    let p = publishers
-                        .entry(channel.clone())
-                        .or_insert_with(|| router.publisher(SENDER, &channel));
-                    match p.send(&robot, command).await {
-                        Ok(Delivery::Forwarded(_)) => hub.forwarded(&robot),
-                        Ok(_) => {}
-                        Err(e) => {
-                            tracing::warn!(%channel, error = %e, "offboard command not published")
-                        }
+                } => match publishers.on(&channel).send(&robot, command).await {
+                    Ok(Delivery::Forwarded(_)) => hub.forwarded(&robot),
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(%channel, error = %e, "offboard command not published")
                     }
-                }
+                },
             }
         }
         if !log.is_empty() {
