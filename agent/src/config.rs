@@ -5,6 +5,7 @@
 //! the `toml` crate's spans.
 
 use std::net::SocketAddr;
+use std::ops::Range;
 use std::path::Path;
 use std::time::Duration;
 
@@ -249,7 +250,7 @@ impl RobotConfig {
 
     /// Parses and checks config text; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<RobotConfig, ConfigError> {
-        let invalid = |span: Option<std::ops::Range<usize>>, message: String| {
+        let invalid = |span: Option<Range<usize>>, message: String| {
             let (line, column) = span.map_or((1, 1), |s| {
                 line_column(text, refine(text, s.start, &message))
             });
@@ -270,21 +271,18 @@ impl RobotConfig {
 
     /// Semantic checks serde cannot express; errors carry the span of the
     /// offending value (or its table).
-    fn validate(&self) -> Result<(), (Option<std::ops::Range<usize>>, String)> {
-        let at = |s: std::ops::Range<usize>| (!s.is_empty()).then_some(s);
-        let name = self.name.get_ref();
-        if name.is_empty()
-            || name.len() > mech_proto::MAX_NAME_LEN
-            || name.chars().any(|c| c.is_whitespace() || c.is_control())
-        {
-            return Err((
-                at(self.name.span()),
-                format!(
-                    "name {name:?}: expected 1 to {} characters without spaces",
-                    mech_proto::MAX_NAME_LEN
-                ),
-            ));
-        }
+    fn validate(&self) -> Result<(), Problem> {
+        check_name(self.name.get_ref()).map_err(|m| (at(self.name.span()), m))?;
+        self.validate_rates()?;
+        self.platform()
+            .validate()
+            .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
+        self.validate_failsafe()?;
+        self.validate_filter()?;
+        self.validate_actuators()
+    }
+
+    fn validate_rates(&self) -> Result<(), Problem> {
         for (rate, what) in [
             (&self.control_rate_hz, "control_rate_hz"),
             (&self.telemetry_rate_hz, "telemetry_rate_hz"),
@@ -297,9 +295,10 @@ impl RobotConfig {
                 ));
             }
         }
-        self.platform()
-            .validate()
-            .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
+        Ok(())
+    }
+
+    fn validate_failsafe(&self) -> Result<(), Problem> {
         let f = self.failsafe.get_ref();
         for (v, what) in [
             (f.channel_timeout, "channel_timeout"),
@@ -312,6 +311,10 @@ impl RobotConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    fn validate_filter(&self) -> Result<(), Problem> {
         let window = self.filter.get_ref().window;
         if !(1..=255).contains(&window) {
             return Err((
@@ -319,38 +322,41 @@ impl RobotConfig {
                 format!("[filter] `window` = {window}: expected 1 to 255 samples"),
             ));
         }
-        if let ActuatorConfig::L298 {
+        Ok(())
+    }
+
+    /// An L298 driver needs one channel per motor of the platform, and duty
+    /// and PWM settings it can use.
+    fn validate_actuators(&self) -> Result<(), Problem> {
+        let ActuatorConfig::L298 {
             channels,
             pwm_frequency,
             min_duty,
             max_duty,
             deadband,
         } = self.actuators()
-        {
-            let motors = self.platform().build().motors();
-            if channels.len() != motors {
-                return Err((
-                    at(self.actuators.span()),
-                    format!(
-                        "[actuators] {} L298 channels for a platform with {motors} motors",
-                        channels.len()
-                    ),
-                ));
-            }
-            let ok = |v: f64| v.is_finite() && (0.0..=1.0).contains(&v);
-            if !(ok(*min_duty) && ok(*max_duty) && ok(*deadband) && min_duty <= max_duty) {
-                return Err((
-                    at(self.actuators.span()),
-                    "[actuators] expected 0 <= min_duty <= max_duty <= 1 and 0 <= deadband <= 1"
-                        .to_string(),
-                ));
-            }
-            if !(pwm_frequency.is_finite() && *pwm_frequency > 0.0) {
-                return Err((
-                    at(self.actuators.span()),
-                    "[actuators] pwm_frequency: expected a positive frequency in Hz".to_string(),
-                ));
-            }
+        else {
+            return Ok(());
+        };
+        let problem = |message: String| (at(self.actuators.span()), message);
+        let motors = self.platform().build().motors();
+        if channels.len() != motors {
+            return Err(problem(format!(
+                "[actuators] {} L298 channels for a platform with {motors} motors",
+                channels.len()
+            )));
+        }
+        let ok = |v: f64| v.is_finite() && (0.0..=1.0).contains(&v);
+        if !(ok(*min_duty) && ok(*max_duty) && ok(*deadband) && min_duty <= max_duty) {
+            return Err(problem(
+                "[actuators] expected 0 <= min_duty <= max_duty <= 1 and 0 <= deadband <= 1"
+                    .to_string(),
+            ));
+        }
+        if !(pwm_frequency.is_finite() && *pwm_frequency > 0.0) {
+            return Err(problem(
+                "[actuators] pwm_frequency: expected a positive frequency in Hz".to_string(),
+            ));
         }
         Ok(())
     }
@@ -437,6 +443,15 @@ impl<'de, T: serde::de::DeserializeOwned> Deserialize<'de> for Kind<T> {
             .map(Kind)
             .map_err(|e| D::Error::custom(e.to_string().trim().replace('\n', " ")))
     }
+}
+
+/// A problem [`RobotConfig::validate`] found: where in the file (the value,
+/// or its table; `None` for a defaulted one) and what is wrong.
+type Problem = (Option<Range<usize>>, String);
+
+/// The span of a value in the file; a defaulted value has an empty one.
+fn at(span: Range<usize>) -> Option<Range<usize>> {
+    (!span.is_empty()).then_some(span)
 }
 
 /// Checks a robot name (from the file or `--name`).

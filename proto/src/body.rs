@@ -512,147 +512,198 @@ fn pose(p: &Pose) -> Result<(), Error> {
     finite(p.heading, "pose heading")
 }
 
+/// A robot name and the channel it is (or is to be) routed to; an empty
+/// channel is routed to none.
+fn robot_on_channel(robot: &str, channel: &str) -> Result<(), Error> {
+    nonempty_name(robot, "robot name")?;
+    name(channel, "channel")
+}
+
 impl Body {
     /// Checks every field against the protocol's ranges and limits: names,
     /// counts, finite numbers, fractions. Called by [`crate::encode`] and
     /// [`crate::decode`], so no invalid message is ever sent or accepted.
     pub fn validate(&self) -> Result<(), Error> {
         match self {
-            Body::Hello(h) => {
-                nonempty_name(&h.name, "robot name")?;
-                nonempty_name(&h.platform, "platform")?;
-                count(
-                    h.capabilities.len(),
-                    CommandKind::ALL.len() * 4,
-                    "capabilities",
-                )?;
-                count(h.motors as usize, crate::MAX_MOTORS, "motors")?;
-                finite(h.max_speed, "max speed")?;
-                finite(h.max_yaw_rate, "max yaw rate")?;
-                text(&h.agent_version, "agent version")
-            }
-            Body::Welcome(w) => {
-                route(&w.route)?;
-                text(&w.router_version, "router version")
-            }
+            Body::Hello(h) => h.validate(),
+            Body::Welcome(w) => w.validate(),
             Body::Heartbeat(_) | Body::ChannelsRequest(_) | Body::Subscribe(_) => Ok(()),
-            Body::Telemetry(t) => {
-                pose(&t.pose)?;
-                finite(t.velocity.vx, "velocity vx")?;
-                finite(t.velocity.vy, "velocity vy")?;
-                finite(t.velocity.vz, "velocity vz")?;
-                finite(t.velocity.wz, "velocity wz")?;
-                name(&t.channel, "channel")?;
-                if let Some(b) = t.battery {
-                    fraction(b, "battery")?;
-                }
-                fraction(t.position_quality, "position quality")?;
-                count(t.actuators.len(), crate::MAX_MOTORS, "actuator outputs")?;
-                for a in &t.actuators {
-                    finite(*a, "actuator output")?;
-                }
-                Ok(())
-            }
+            Body::Telemetry(t) => t.validate(),
             Body::Command(c) => c.validate(),
-            Body::FleetCommand(f) => {
-                count(f.parts.len(), MAX_FLEET_PARTS, "fleet command parts")?;
-                for p in &f.parts {
-                    nonempty_name(&p.robot, "robot name")?;
-                    p.command.validate()?;
-                }
-                Ok(())
-            }
-            Body::Mission(m) => {
-                count(m.waypoints.len(), MAX_WAYPOINTS, "waypoints")?;
-                for w in &m.waypoints {
-                    finite(w.x, "waypoint x")?;
-                    finite(w.y, "waypoint y")?;
-                    finite(w.z, "waypoint z")?;
-                    if let Some(t) = w.time {
-                        finite(t, "waypoint time")?;
-                        if t < 0.0 {
-                            return Err(Error::invalid(format!("waypoint time {t} is negative")));
-                        }
-                    }
-                }
-                finite(m.arrival_radius, "arrival radius")?;
-                if m.arrival_radius <= 0.0 {
-                    return Err(Error::invalid("arrival radius must be positive"));
-                }
-                if m.start_index as usize > m.waypoints.len() {
-                    return Err(Error::invalid(format!(
-                        "start index {} is past the {} waypoints",
-                        m.start_index,
-                        m.waypoints.len()
-                    )));
-                }
-                Ok(())
-            }
+            Body::FleetCommand(f) => f.validate(),
+            Body::Mission(m) => m.validate(),
             Body::MissionAck(a) => text(&a.reason, "mission ack reason"),
-            Body::Route(r) => route(r),
-            Body::RouteAck(r) => {
-                nonempty_name(&r.robot, "robot name")?;
-                name(&r.channel, "channel")
-            }
+            Body::Route(r) => robot_on_channel(&r.robot, &r.channel),
+            Body::RouteAck(r) => robot_on_channel(&r.robot, &r.channel),
             Body::EStop(_) | Body::EStopAck(_) => Ok(()),
-            Body::Channels(c) => {
-                count(c.channels.len(), MAX_FLEET_PARTS, "channels")?;
-                for ch in &c.channels {
-                    nonempty_name(&ch.name, "channel")?;
-                    name(&ch.publisher, "publisher")?;
-                    finite(ch.rate_hz, "channel rate")?;
-                    count(ch.robots.len(), MAX_FLEET_PARTS, "robots on a channel")?;
-                    for r in &ch.robots {
-                        nonempty_name(r, "robot name")?;
-                    }
-                }
-                Ok(())
-            }
-            Body::Cluster(c) => {
-                nonempty_name(&c.cluster, "cluster name")?;
-                count(c.members.len(), MAX_FLEET_PARTS, "cluster members")?;
-                for m in &c.members {
-                    nonempty_name(m, "robot name")?;
-                }
-                match &c.goal {
-                    ClusterGoal::Velocity(v) => {
-                        finite(v.vx, "cluster vx")?;
-                        finite(v.vy, "cluster vy")?;
-                        finite(v.wz, "cluster wz")?;
-                        finite(v.scale_rate, "cluster scale rate")?;
-                    }
-                    ClusterGoal::Pose(p) => {
-                        finite(p.x, "cluster x")?;
-                        finite(p.y, "cluster y")?;
-                        finite(p.heading, "cluster heading")?;
-                        finite(p.scale, "cluster scale")?;
-                    }
-                }
-                if let Some(f) = &c.formation {
-                    finite(f.spacing, "formation spacing")?;
-                    count(f.offsets.len(), MAX_FLEET_PARTS, "formation offsets")?;
-                    for o in &f.offsets {
-                        finite(o.x, "offset x")?;
-                        finite(o.y, "offset y")?;
-                    }
-                }
-                Ok(())
-            }
+            Body::Channels(c) => c.validate(),
+            Body::Cluster(c) => c.validate(),
             Body::Notice(n) => text(&n.text, "notice text"),
-            Body::PositionFix(p) => {
-                nonempty_name(&p.robot, "robot name")?;
-                pose(&p.pose)?;
-                fraction(p.quality, "fix quality")
-            }
+            Body::PositionFix(p) => p.validate(),
             Body::Bye(b) => text(&b.reason, "bye reason"),
             Body::TimeRequest(_) | Body::Time(_) => Ok(()),
         }
     }
 }
 
-fn route(r: &Route) -> Result<(), Error> {
-    nonempty_name(&r.robot, "robot name")?;
-    name(&r.channel, "channel")
+impl Hello {
+    fn validate(&self) -> Result<(), Error> {
+        nonempty_name(&self.name, "robot name")?;
+        nonempty_name(&self.platform, "platform")?;
+        count(
+            self.capabilities.len(),
+            CommandKind::ALL.len() * 4,
+            "capabilities",
+        )?;
+        count(self.motors as usize, crate::MAX_MOTORS, "motors")?;
+        finite(self.max_speed, "max speed")?;
+        finite(self.max_yaw_rate, "max yaw rate")?;
+        text(&self.agent_version, "agent version")
+    }
+}
+
+impl Welcome {
+    fn validate(&self) -> Result<(), Error> {
+        robot_on_channel(&self.route.robot, &self.route.channel)?;
+        text(&self.router_version, "router version")
+    }
+}
+
+impl Telemetry {
+    fn validate(&self) -> Result<(), Error> {
+        pose(&self.pose)?;
+        finite(self.velocity.vx, "velocity vx")?;
+        finite(self.velocity.vy, "velocity vy")?;
+        finite(self.velocity.vz, "velocity vz")?;
+        finite(self.velocity.wz, "velocity wz")?;
+        name(&self.channel, "channel")?;
+        if let Some(b) = self.battery {
+            fraction(b, "battery")?;
+        }
+        fraction(self.position_quality, "position quality")?;
+        count(self.actuators.len(), crate::MAX_MOTORS, "actuator outputs")?;
+        for a in &self.actuators {
+            finite(*a, "actuator output")?;
+        }
+        Ok(())
+    }
+}
+
+impl FleetCommand {
+    fn validate(&self) -> Result<(), Error> {
+        count(self.parts.len(), MAX_FLEET_PARTS, "fleet command parts")?;
+        for p in &self.parts {
+            nonempty_name(&p.robot, "robot name")?;
+            p.command.validate()?;
+        }
+        Ok(())
+    }
+}
+
+impl Mission {
+    fn validate(&self) -> Result<(), Error> {
+        count(self.waypoints.len(), MAX_WAYPOINTS, "waypoints")?;
+        for w in &self.waypoints {
+            w.validate()?;
+        }
+        finite(self.arrival_radius, "arrival radius")?;
+        if self.arrival_radius <= 0.0 {
+            return Err(Error::invalid("arrival radius must be positive"));
+        }
+        if self.start_index as usize > self.waypoints.len() {
+            return Err(Error::invalid(format!(
+                "start index {} is past the {} waypoints",
+                self.start_index,
+                self.waypoints.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Waypoint {
+    fn validate(&self) -> Result<(), Error> {
+        finite(self.x, "waypoint x")?;
+        finite(self.y, "waypoint y")?;
+        finite(self.z, "waypoint z")?;
+        if let Some(t) = self.time {
+            finite(t, "waypoint time")?;
+            if t < 0.0 {
+                return Err(Error::invalid(format!("waypoint time {t} is negative")));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Channels {
+    fn validate(&self) -> Result<(), Error> {
+        count(self.channels.len(), MAX_FLEET_PARTS, "channels")?;
+        for ch in &self.channels {
+            nonempty_name(&ch.name, "channel")?;
+            name(&ch.publisher, "publisher")?;
+            finite(ch.rate_hz, "channel rate")?;
+            count(ch.robots.len(), MAX_FLEET_PARTS, "robots on a channel")?;
+            for r in &ch.robots {
+                nonempty_name(r, "robot name")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ClusterCommand {
+    fn validate(&self) -> Result<(), Error> {
+        nonempty_name(&self.cluster, "cluster name")?;
+        count(self.members.len(), MAX_FLEET_PARTS, "cluster members")?;
+        for m in &self.members {
+            nonempty_name(m, "robot name")?;
+        }
+        self.goal.validate()?;
+        if let Some(f) = &self.formation {
+            f.validate()?;
+        }
+        Ok(())
+    }
+}
+
+impl ClusterGoal {
+    fn validate(&self) -> Result<(), Error> {
+        match self {
+            ClusterGoal::Velocity(v) => {
+                finite(v.vx, "cluster vx")?;
+                finite(v.vy, "cluster vy")?;
+                finite(v.wz, "cluster wz")?;
+                finite(v.scale_rate, "cluster scale rate")
+            }
+            ClusterGoal::Pose(p) => {
+                finite(p.x, "cluster x")?;
+                finite(p.y, "cluster y")?;
+                finite(p.heading, "cluster heading")?;
+                finite(p.scale, "cluster scale")
+            }
+        }
+    }
+}
+
+impl Formation {
+    fn validate(&self) -> Result<(), Error> {
+        finite(self.spacing, "formation spacing")?;
+        count(self.offsets.len(), MAX_FLEET_PARTS, "formation offsets")?;
+        for o in &self.offsets {
+            finite(o.x, "offset x")?;
+            finite(o.y, "offset y")?;
+        }
+        Ok(())
+    }
+}
+
+impl PositionFix {
+    fn validate(&self) -> Result<(), Error> {
+        nonempty_name(&self.robot, "robot name")?;
+        pose(&self.pose)?;
+        fraction(self.quality, "fix quality")
+    }
 }
 
 impl Route {

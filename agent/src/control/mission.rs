@@ -3,10 +3,10 @@
 
 use std::time::Duration;
 
-use mech_proto::{Mission, MissionProgress, Pose, Twist};
+use mech_proto::{Mission, MissionProgress, Pose, Twist, Waypoint};
 
 use super::{Gains, drive_factor};
-use crate::platform::Platform;
+use crate::platform::{Limits, Platform};
 use mech_proto::wrap_angle;
 
 /// A mission being flown or driven, with its progress.
@@ -56,60 +56,22 @@ impl MissionRun {
         platform: &dyn Platform,
         gains: &Gains,
     ) -> Twist {
+        // Arrival times of this period count from when the mission (or its
+        // lap) had started before any waypoint was passed in it.
         let started = *self.started.get_or_insert(now);
         self.leg_start.get_or_insert(now);
         let flies = platform.flies();
-        // At most one lap of advances per period: a looped mission whose
-        // waypoints all lie inside the radius must not spin here forever.
-        for _ in 0..=self.mission.waypoints.len() {
-            let Some(wp) = self.mission.waypoints.get(self.next) else {
-                return Twist::default();
-            };
-            let (dx, dy) = (wp.x - pose.x, wp.y - pose.y);
-            let dz = if flies { wp.z - pose.z } else { 0.0 };
-            let dist = (dx * dx + dy * dy + dz * dz).sqrt();
-            if dist > self.mission.arrival_radius || self.paused {
-                break;
-            }
-            self.next += 1;
-            self.leg_start = Some(now);
-            if self.finished() && self.mission.looped && !self.mission.waypoints.is_empty() {
-                self.next = 0;
-                self.started = Some(now);
-            }
-            if self.finished() {
-                return Twist::default();
-            }
-        }
-        if self.paused {
+        if !self.pass_reached(pose, now, flies) || self.paused {
             return Twist::default();
         }
         let Some(wp) = self.mission.waypoints.get(self.next) else {
             return Twist::default();
         };
         let limits = platform.limits();
-        let (dx, dy) = (wp.x - pose.x, wp.y - pose.y);
-        let dz = if flies { wp.z - pose.z } else { 0.0 };
+        let (dx, dy, dz) = offset_to(wp, pose, flies);
         let horizontal = dx.hypot(dy);
         let dist = (horizontal * horizontal + dz * dz).sqrt();
-
-        let cruise = limits.max_speed * gains.cruise_fraction;
-        let mut speed = match wp.time {
-            // Meet the arrival time: remaining distance over remaining time.
-            Some(t) => {
-                let due = started + Duration::from_secs_f64(t);
-                let left = due.saturating_sub(now).as_secs_f64();
-                if left > 1e-3 {
-                    dist / left
-                } else {
-                    limits.max_speed
-                }
-            }
-            None => cruise,
-        };
-        // Slow down near the waypoint so it is not overshot.
-        speed = speed.min(gains.position * dist).min(limits.max_speed);
-
+        let speed = leg_speed(wp, dist, started, now, &limits, gains);
         let bearing = dy.atan2(dx);
         if platform.holonomic() {
             let (s, c) = (bearing - pose.heading).sin_cos();
@@ -135,6 +97,67 @@ impl MissionRun {
             }
         }
     }
+
+    /// Moves `next` past every waypoint already within the arrival radius
+    /// (none while paused); `false` once no waypoint is left to approach.
+    fn pass_reached(&mut self, pose: &Pose, now: Duration, flies: bool) -> bool {
+        // At most one lap of advances per period: a looped mission whose
+        // waypoints all lie inside the radius must not spin here forever.
+        for _ in 0..=self.mission.waypoints.len() {
+            let Some(wp) = self.mission.waypoints.get(self.next) else {
+                return false;
+            };
+            let (dx, dy, dz) = offset_to(wp, pose, flies);
+            let dist = (dx * dx + dy * dy + dz * dz).sqrt();
+            if dist > self.mission.arrival_radius || self.paused {
+                break;
+            }
+            self.next += 1;
+            self.leg_start = Some(now);
+            if self.finished() && self.mission.looped && !self.mission.waypoints.is_empty() {
+                self.next = 0;
+                self.started = Some(now);
+            }
+            if self.finished() {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// From the robot to the waypoint, m, world frame; no height for a robot
+/// that does not fly.
+fn offset_to(wp: &Waypoint, pose: &Pose, flies: bool) -> (f64, f64, f64) {
+    let dz = if flies { wp.z - pose.z } else { 0.0 };
+    (wp.x - pose.x, wp.y - pose.y, dz)
+}
+
+/// Speed toward `wp`, `dist` away, at `now`: cruise, or the remaining
+/// distance over the time left until `wp`'s arrival time (counted from
+/// `started`); slowing down near the waypoint so it is not overshot.
+fn leg_speed(
+    wp: &Waypoint,
+    dist: f64,
+    started: Duration,
+    now: Duration,
+    limits: &Limits,
+    gains: &Gains,
+) -> f64 {
+    let cruise = limits.max_speed * gains.cruise_fraction;
+    let speed = match wp.time {
+        Some(t) => {
+            let due = started + Duration::from_secs_f64(t);
+            let left = due.saturating_sub(now).as_secs_f64();
+            if left > 1e-3 {
+                dist / left
+            } else {
+                limits.max_speed
+            }
+        }
+        None => cruise,
+    };
+    speed.min(gains.position * dist).min(limits.max_speed)
 }
 
 #[cfg(test)]

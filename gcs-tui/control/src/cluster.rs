@@ -40,7 +40,7 @@ use super::assignment::assign_slots;
 use super::formation::{FormationError, slot_offsets};
 use super::geometry::{norm, rotate, wrap_angle};
 use super::tracking::{Reference, TrackingGains, track};
-use super::{ControlEvent, Kinematics, MemberState};
+use super::{ControlEvent, Kinematics, MemberState, StepClock, note_staleness};
 
 /// One cluster waypoint: centroid position (m) and, optionally, the cluster
 /// heading to reach there (rad); without one the heading is kept.
@@ -197,10 +197,20 @@ pub struct ClusterController {
     assignment: BTreeMap<String, usize>,
     reassign: bool,
     lost: BTreeSet<String>,
-    last_now: Option<f64>,
+    clock: StepClock,
     /// The desired pose has been set or moved by the operator; from then on
     /// membership changes no longer re-centre it.
     anchored: bool,
+}
+
+/// The members of one step, as its input has them.
+struct Roster<'a> {
+    /// Members in the input, sorted by name: slots are laid out for them.
+    present: Vec<&'a MemberState>,
+    /// Present members with fresh telemetry, sorted by name: the commanded ones.
+    fresh: Vec<&'a MemberState>,
+    /// Members not in the input, in member order.
+    absent: Vec<String>,
 }
 
 const ZERO_VELOCITY: ClusterVelocity = ClusterVelocity {
@@ -235,7 +245,7 @@ impl ClusterController {
             assignment: BTreeMap::new(),
             reassign: true,
             lost: BTreeSet::new(),
-            last_now: None,
+            clock: StepClock::default(),
             anchored: false,
         })
     }
@@ -315,143 +325,176 @@ impl ClusterController {
     /// States of robots that are not members are ignored; members without a
     /// state are absent and get no command.
     pub fn step(&mut self, now: f64, states: &[MemberState]) -> ClusterOutput {
-        let dt = match self.last_now {
-            Some(t) if now > t => (now - t).min(0.5),
-            _ => 0.0,
-        };
-        self.last_now = Some(now);
+        let dt = self.clock.interval(now);
         let mut events = Vec::new();
-
-        let mut absent = Vec::new();
-        let mut present: Vec<&MemberState> = Vec::new();
-        let mut fresh: Vec<&MemberState> = Vec::new();
-        for robot in &self.members {
-            let state = states.iter().find(|s| &s.robot == robot);
-            if let Some(s) = state {
-                present.push(s);
+        let roster = self.classify(now, states, &mut events);
+        self.watch_membership(&roster.present);
+        self.place_until_anchored(&roster.fresh);
+        let (commands, slots, measured) = match self.update_reference(dt, &roster) {
+            Some(desired) => {
+                let (commands, slots) = self.slot_commands(&desired, &roster.fresh);
+                let measured = self.measure(&desired, &roster.fresh);
+                self.check_arrival(measured.as_ref(), &mut events);
+                (commands, slots, measured)
             }
-            match state {
-                None => {
-                    absent.push(robot.clone());
-                    self.lost.remove(robot);
-                }
-                Some(s) if s.is_stale(now, self.config.telemetry_timeout) => {
-                    if self.lost.insert(robot.clone()) {
-                        events.push(ControlEvent::MemberLost {
-                            robot: robot.clone(),
-                        });
-                    }
-                }
-                Some(s) => {
-                    if self.lost.remove(robot) {
-                        events.push(ControlEvent::MemberRecovered {
-                            robot: robot.clone(),
-                        });
-                    }
-                    fresh.push(s);
-                }
+            None => (Vec::new(), Vec::new(), None),
+        };
+        ClusterOutput {
+            commands,
+            status: self.status(measured, slots, roster.absent),
+            events,
+        }
+    }
+
+    /// Sorts the members into present, fresh and absent ones, and reports the
+    /// members whose telemetry went stale or came back. An absent member is
+    /// not lost: it is simply not this controller's to command.
+    fn classify<'a>(
+        &mut self,
+        now: f64,
+        states: &'a [MemberState],
+        events: &mut Vec<ControlEvent>,
+    ) -> Roster<'a> {
+        let mut roster = Roster {
+            present: Vec::new(),
+            fresh: Vec::new(),
+            absent: Vec::new(),
+        };
+        for robot in &self.members {
+            let Some(s) = states.iter().find(|s| &s.robot == robot) else {
+                roster.absent.push(robot.clone());
+                self.lost.remove(robot);
+                continue;
+            };
+            roster.present.push(s);
+            let stale = s.is_stale(now, self.config.telemetry_timeout);
+            note_staleness(&mut self.lost, robot, stale, events);
+            if !stale {
+                roster.fresh.push(s);
             }
         }
-        fresh.sort_by(|a, b| a.robot.cmp(&b.robot));
-        present.sort_by(|a, b| a.robot.cmp(&b.robot));
+        roster.fresh.sort_by(|a, b| a.robot.cmp(&b.robot));
+        roster.present.sort_by(|a, b| a.robot.cmp(&b.robot));
+        roster
+    }
+
+    /// Asks for a new slot assignment when the set of present members changed.
+    fn watch_membership(&mut self, present: &[&MemberState]) {
         let active: Vec<String> = present.iter().map(|s| s.robot.clone()).collect();
         if active != self.active {
             self.active = active;
             self.reassign = true;
         }
+    }
 
-        // Until the cluster is first told to move (or placed), its pose is
-        // wherever its members are: members joining one by one (routed in
-        // turn) re-centre it instead of gathering round the first to report.
+    /// Until the cluster is first told to move (or placed), its pose is
+    /// wherever its members are: members joining one by one (routed in turn)
+    /// re-centre it instead of gathering round the first to report.
+    fn place_until_anchored(&mut self, fresh: &[&MemberState]) {
         if (self.desired.is_none() || (!self.anchored && self.reassign)) && !fresh.is_empty() {
-            self.desired = Some(initial_pose(&fresh));
+            self.desired = Some(initial_pose(fresh));
         }
+    }
 
+    /// Moves the desired cluster pose on by `dt`, re-assigning slots first if
+    /// the members or the formation changed; `None` while the pose is not
+    /// known yet (no member has reported).
+    fn update_reference(&mut self, dt: f64, roster: &Roster) -> Option<ClusterPose> {
+        let mut desired = self.desired?;
+        if self.reassign && !roster.present.is_empty() {
+            self.assign(&desired, &roster.present);
+        }
+        let max_offset = self
+            .slots
+            .iter()
+            .map(|o| norm(o.x, o.y))
+            .fold(0.0, f64::max);
+        let speed_limit = self.slot_speed_limit(&desired, &roster.fresh);
+        self.velocity = self.advance(&mut desired, dt, max_offset, speed_limit);
+        self.desired = Some(desired);
+        Some(desired)
+    }
+
+    /// How fast slots may move by feed-forward: a margin of the slowest fresh
+    /// member's top speed (the cruise speed without one), throttled down to
+    /// nothing as the worst member falls from `lag_free` to `lag_stop` behind
+    /// its slot (formation feedback, see the module docs).
+    fn slot_speed_limit(&self, desired: &ClusterPose, fresh: &[&MemberState]) -> f64 {
+        let member_speed = fresh
+            .iter()
+            .map(|s| s.platform.max_speed)
+            .fold(f64::INFINITY, f64::min);
+        let speed_limit = if member_speed.is_finite() {
+            member_speed * self.config.speed_margin
+        } else {
+            self.config.cruise_speed
+        };
+        let lag = self.worst_lag(desired, fresh);
+        let span = (self.config.lag_stop - self.config.lag_free).max(1e-6);
+        let throttle = ((self.config.lag_stop - lag) / span).clamp(0.0, 1.0);
+        speed_limit * throttle
+    }
+
+    /// Each fresh member's command toward its slot at the desired pose and
+    /// velocity, with the slot target it tracks.
+    fn slot_commands(
+        &self,
+        desired: &ClusterPose,
+        fresh: &[&MemberState],
+    ) -> (Vec<RobotCommand>, Vec<SlotTarget>) {
         let mut commands = Vec::new();
         let mut slots = Vec::new();
-        let mut measured = None;
-        if let Some(mut desired) = self.desired {
-            if self.reassign && !present.is_empty() {
-                self.assign(&desired, &present);
-            }
-            let max_offset = self
-                .slots
-                .iter()
-                .map(|o| norm(o.x, o.y))
-                .fold(0.0, f64::max);
-            let member_speed = fresh
-                .iter()
-                .map(|s| s.platform.max_speed)
-                .fold(f64::INFINITY, f64::min);
-            let speed_limit = if member_speed.is_finite() {
-                member_speed * self.config.speed_margin
-            } else {
-                self.config.cruise_speed
+        for s in fresh {
+            let Some((slot, o)) = self.assigned_slot(&s.robot) else {
+                continue;
             };
-            let lag = self.worst_lag(&desired, &fresh);
-            let span = (self.config.lag_stop - self.config.lag_free).max(1e-6);
-            let throttle = ((self.config.lag_stop - lag) / span).clamp(0.0, 1.0);
-            self.velocity = self.advance(&mut desired, dt, max_offset, speed_limit * throttle);
-            self.desired = Some(desired);
-
-            let v = self.velocity;
-            let (vwx, vwy) = rotate(v.vx, v.vy, desired.heading);
-            for s in &fresh {
-                let Some(&slot) = self.assignment.get(&s.robot) else {
-                    continue;
-                };
-                let Some(o) = self.slots.get(slot) else {
-                    continue;
-                };
-                let (ox, oy) = rotate(o.x, o.y, desired.heading);
-                let (rx, ry) = (desired.scale * ox, desired.scale * oy);
-                let reference = Reference {
-                    x: desired.x + rx,
-                    y: desired.y + ry,
-                    heading: desired.heading,
-                    vx: vwx - v.wz * ry + v.scale_rate * ox,
-                    vy: vwy + v.wz * rx + v.scale_rate * oy,
-                    wz: v.wz,
-                };
-                commands.push(RobotCommand {
-                    robot: s.robot.clone(),
-                    command: track(s, &reference, &self.config.gains),
-                });
-                slots.push(SlotTarget {
-                    robot: s.robot.clone(),
-                    slot,
-                    x: reference.x,
-                    y: reference.y,
-                    heading: match s.platform.kinematics {
-                        Kinematics::Holonomic => desired.heading,
-                        Kinematics::NonHolonomic => s.pose.heading,
-                    },
-                    error: reference.position_error(s),
-                });
-            }
-            measured = self.measure(&desired, &fresh);
-            self.check_arrival(measured.as_ref(), &mut events);
+            let reference = slot_reference(desired, &self.velocity, o);
+            commands.push(RobotCommand {
+                robot: s.robot.clone(),
+                command: track(s, &reference, &self.config.gains),
+            });
+            slots.push(SlotTarget {
+                robot: s.robot.clone(),
+                slot,
+                x: reference.x,
+                y: reference.y,
+                heading: match s.platform.kinematics {
+                    Kinematics::Holonomic => desired.heading,
+                    Kinematics::NonHolonomic => s.pose.heading,
+                },
+                error: reference.position_error(s),
+            });
         }
+        (commands, slots)
+    }
 
+    fn status(
+        &self,
+        measured: Option<ClusterPose>,
+        slots: Vec<SlotTarget>,
+        absent: Vec<String>,
+    ) -> ClusterStatus {
         let waypoint = match &self.motion {
             ClusterMotion::Waypoints { list, next, .. } => Some((*next, list.len())),
             _ => None,
         };
-        ClusterOutput {
-            commands,
-            status: ClusterStatus {
-                cluster: self.name.clone(),
-                formation: self.formation.clone(),
-                desired: self.desired,
-                measured,
-                velocity: self.velocity,
-                slots,
-                lost: self.lost.iter().cloned().collect(),
-                absent,
-                waypoint,
-            },
-            events,
+        ClusterStatus {
+            cluster: self.name.clone(),
+            formation: self.formation.clone(),
+            desired: self.desired,
+            measured,
+            velocity: self.velocity,
+            slots,
+            lost: self.lost.iter().cloned().collect(),
+            absent,
+            waypoint,
         }
+    }
+
+    /// The slot assigned to `robot`: its index and offset.
+    fn assigned_slot(&self, robot: &str) -> Option<(usize, &Offset)> {
+        let &slot = self.assignment.get(robot)?;
+        Some((slot, self.slots.get(slot)?))
     }
 
     /// Lays out slots for the commanded members and gives each the slot that
@@ -473,13 +516,7 @@ impl ClusterController {
                 Err(_) => return,
             },
         };
-        let world: Vec<(f64, f64)> = offsets
-            .iter()
-            .map(|o| {
-                let (x, y) = rotate(o.x, o.y, desired.heading);
-                (desired.x + desired.scale * x, desired.y + desired.scale * y)
-            })
-            .collect();
+        let world: Vec<(f64, f64)> = offsets.iter().map(|o| slot_position(desired, o)).collect();
         let positions: Vec<(f64, f64)> = fresh.iter().map(|s| (s.pose.x, s.pose.y)).collect();
         let assignment = assign_slots(&positions, &world);
         self.assignment = fresh
@@ -501,92 +538,115 @@ impl ClusterController {
         max_offset: f64,
         speed_limit: f64,
     ) -> ClusterVelocity {
-        let cfg = &self.config;
-        let mut v = match &mut self.motion {
-            ClusterMotion::Hold => ZERO_VELOCITY,
-            ClusterMotion::Velocity(v) => *v,
+        let v = self.motion_velocity(desired, dt);
+        let v = self.limit_slot_speed(v, desired.scale, max_offset, speed_limit);
+        let v = integrate(desired, v, dt, &self.config);
+        self.snap_to_waypoint(desired);
+        v
+    }
+
+    /// The cluster-frame velocity the current motion asks for, before any
+    /// speed limit.
+    fn motion_velocity(&mut self, desired: &ClusterPose, dt: f64) -> ClusterVelocity {
+        let w = match &mut self.motion {
+            ClusterMotion::Hold => return ZERO_VELOCITY,
+            ClusterMotion::Velocity(v) => return *v,
             ClusterMotion::Waypoints { list, next, looped } => {
                 if *next >= list.len() && *looped && !list.is_empty() {
                     *next = 0;
                 }
                 match list.get(*next) {
-                    None => ZERO_VELOCITY,
-                    Some(w) => {
-                        let (dx, dy) = (w.x - desired.x, w.y - desired.y);
-                        let dist = norm(dx, dy);
-                        let reachable = (2.0 * cfg.max_accel * dist).sqrt();
-                        self.path_speed = (self.path_speed + cfg.max_accel * dt)
-                            .min(cfg.cruise_speed)
-                            .min(reachable);
-                        let speed = if dt > 0.0 {
-                            self.path_speed.min(dist / dt)
-                        } else {
-                            0.0
-                        };
-                        let (wx, wy) = if dist > 1e-12 {
-                            (speed * dx / dist, speed * dy / dist)
-                        } else {
-                            (0.0, 0.0)
-                        };
-                        let turn = w.heading.map_or(0.0, |h| wrap_angle(h - desired.heading));
-                        let reachable = (2.0 * cfg.max_yaw_accel * turn.abs()).sqrt();
-                        self.turn_rate = (self.turn_rate + cfg.max_yaw_accel * dt)
-                            .min(cfg.max_yaw_rate)
-                            .min(reachable);
-                        let rate = if dt > 0.0 {
-                            self.turn_rate.min(turn.abs() / dt)
-                        } else {
-                            0.0
-                        };
-                        let (cx, cy) = rotate(wx, wy, -desired.heading);
-                        ClusterVelocity {
-                            vx: cx,
-                            vy: cy,
-                            wz: rate * turn.signum(),
-                            scale_rate: 0.0,
-                        }
-                    }
+                    Some(w) => *w,
+                    None => return ZERO_VELOCITY,
                 }
             }
         };
-        let slot_speed =
-            norm(v.vx, v.vy) + (v.wz.abs() * desired.scale + v.scale_rate.abs()) * max_offset;
+        self.velocity_toward(&w, desired, dt)
+    }
+
+    /// Velocity along the leg to `w`: the centroid and the heading each on a
+    /// trapezoidal profile that arrives without overshoot.
+    fn velocity_toward(
+        &mut self,
+        w: &ClusterWaypoint,
+        desired: &ClusterPose,
+        dt: f64,
+    ) -> ClusterVelocity {
+        let cfg = &self.config;
+        let (dx, dy) = (w.x - desired.x, w.y - desired.y);
+        let dist = norm(dx, dy);
+        let speed = ramp(
+            &mut self.path_speed,
+            cfg.max_accel,
+            cfg.cruise_speed,
+            dist,
+            dt,
+        );
+        let (wx, wy) = if dist > 1e-12 {
+            (speed * dx / dist, speed * dy / dist)
+        } else {
+            (0.0, 0.0)
+        };
+        let turn = w.heading.map_or(0.0, |h| wrap_angle(h - desired.heading));
+        let rate = ramp(
+            &mut self.turn_rate,
+            cfg.max_yaw_accel,
+            cfg.max_yaw_rate,
+            turn.abs(),
+            dt,
+        );
+        let (cx, cy) = rotate(wx, wy, -desired.heading);
+        ClusterVelocity {
+            vx: cx,
+            vy: cy,
+            wz: rate * turn.signum(),
+            scale_rate: 0.0,
+        }
+    }
+
+    /// Scales `v` down so the fastest slot (`max_offset` from the centroid at
+    /// `scale`) moves no faster than `speed_limit`; the leg profiles slow
+    /// down with it, so they resume from the speed really used.
+    fn limit_slot_speed(
+        &mut self,
+        v: ClusterVelocity,
+        scale: f64,
+        max_offset: f64,
+        speed_limit: f64,
+    ) -> ClusterVelocity {
+        let slot_speed = norm(v.vx, v.vy) + (v.wz.abs() * scale + v.scale_rate.abs()) * max_offset;
         if slot_speed > speed_limit && slot_speed > 0.0 {
             let k = (speed_limit / slot_speed).max(0.0);
-            v = ClusterVelocity {
+            self.path_speed *= k;
+            self.turn_rate *= k;
+            return ClusterVelocity {
                 vx: v.vx * k,
                 vy: v.vy * k,
                 wz: v.wz * k,
                 scale_rate: v.scale_rate * k,
             };
-            self.path_speed *= k;
-            self.turn_rate *= k;
-        }
-        let (wx, wy) = rotate(v.vx, v.vy, desired.heading);
-        desired.x += wx * dt;
-        desired.y += wy * dt;
-        desired.heading = wrap_angle(desired.heading + v.wz * dt);
-        let scale = (desired.scale + v.scale_rate * dt).clamp(cfg.min_scale, cfg.max_scale);
-        if scale != desired.scale + v.scale_rate * dt {
-            v.scale_rate = 0.0;
-        }
-        desired.scale = scale;
-        if let ClusterMotion::Waypoints { list, next, .. } = &self.motion {
-            if let Some(w) = list.get(*next) {
-                let at_position = norm(w.x - desired.x, w.y - desired.y) < 1e-9;
-                let at_heading = w
-                    .heading
-                    .is_none_or(|h| wrap_angle(h - desired.heading).abs() < 1e-6);
-                if at_position && at_heading {
-                    desired.x = w.x;
-                    desired.y = w.y;
-                    if let Some(h) = w.heading {
-                        desired.heading = wrap_angle(h);
-                    }
-                }
-            }
         }
         v
+    }
+
+    /// Puts the desired pose exactly on the waypoint once it is there to
+    /// rounding, so arrival can be checked with equality.
+    fn snap_to_waypoint(&self, desired: &mut ClusterPose) {
+        let ClusterMotion::Waypoints { list, next, .. } = &self.motion else {
+            return;
+        };
+        let Some(w) = list.get(*next) else { return };
+        let at_position = norm(w.x - desired.x, w.y - desired.y) < 1e-9;
+        let at_heading = w
+            .heading
+            .is_none_or(|h| wrap_angle(h - desired.heading).abs() < 1e-6);
+        if at_position && at_heading {
+            desired.x = w.x;
+            desired.y = w.y;
+            if let Some(h) = w.heading {
+                desired.heading = wrap_angle(h);
+            }
+        }
     }
 
     /// Largest distance between a commanded member and its slot at the
@@ -595,13 +655,8 @@ impl ClusterController {
         fresh
             .iter()
             .filter_map(|s| {
-                let o = self
-                    .assignment
-                    .get(&s.robot)
-                    .and_then(|&i| self.slots.get(i))?;
-                let (ox, oy) = rotate(o.x, o.y, desired.heading);
-                let x = desired.x + desired.scale * ox;
-                let y = desired.y + desired.scale * oy;
+                let (_, o) = self.assigned_slot(&s.robot)?;
+                let (x, y) = slot_position(desired, o);
                 Some(norm(x - s.pose.x, y - s.pose.y))
             })
             .fold(0.0, f64::max)
@@ -649,10 +704,7 @@ impl ClusterController {
         let pairs: Vec<((f64, f64), (f64, f64))> = fresh
             .iter()
             .filter_map(|s| {
-                let o = self
-                    .assignment
-                    .get(&s.robot)
-                    .and_then(|&i| self.slots.get(i))?;
+                let (_, o) = self.assigned_slot(&s.robot)?;
                 Some((rotate(o.x, o.y, desired.heading), (s.pose.x, s.pose.y)))
             })
             .collect();
@@ -686,6 +738,63 @@ impl ClusterController {
             scale,
         })
     }
+}
+
+/// Where the slot with offset `o` is in the world at the desired pose.
+fn slot_position(desired: &ClusterPose, o: &Offset) -> (f64, f64) {
+    let (x, y) = rotate(o.x, o.y, desired.heading);
+    (desired.x + desired.scale * x, desired.y + desired.scale * y)
+}
+
+/// The slot with offset `o` as a tracking reference: its position, and its
+/// velocity from the inverse cluster kinematics,
+/// `v_slot = v_c + wz x r + scale_rate R o` with `r = scale R(heading) o`.
+fn slot_reference(desired: &ClusterPose, v: &ClusterVelocity, o: &Offset) -> Reference {
+    let (vwx, vwy) = rotate(v.vx, v.vy, desired.heading);
+    let (ox, oy) = rotate(o.x, o.y, desired.heading);
+    let (rx, ry) = (desired.scale * ox, desired.scale * oy);
+    Reference {
+        x: desired.x + rx,
+        y: desired.y + ry,
+        heading: desired.heading,
+        vx: vwx - v.wz * ry + v.scale_rate * ox,
+        vy: vwy + v.wz * rx + v.scale_rate * oy,
+        wz: v.wz,
+    }
+}
+
+/// One step of a trapezoidal profile toward a point `remaining` away:
+/// `speed` (kept between steps) grows by `accel` up to `top`, but no faster
+/// than still stops at the point, and the step never passes the point.
+fn ramp(speed: &mut f64, accel: f64, top: f64, remaining: f64, dt: f64) -> f64 {
+    let reachable = (2.0 * accel * remaining).sqrt();
+    *speed = (*speed + accel * dt).min(top).min(reachable);
+    if dt > 0.0 {
+        speed.min(remaining / dt)
+    } else {
+        0.0
+    }
+}
+
+/// Moves `desired` on by `v` (cluster frame) for `dt`, keeping the scale
+/// within its bounds; a scale rate that hits a bound is not applied and comes
+/// back as zero.
+fn integrate(
+    desired: &mut ClusterPose,
+    mut v: ClusterVelocity,
+    dt: f64,
+    cfg: &ClusterConfig,
+) -> ClusterVelocity {
+    let (wx, wy) = rotate(v.vx, v.vy, desired.heading);
+    desired.x += wx * dt;
+    desired.y += wy * dt;
+    desired.heading = wrap_angle(desired.heading + v.wz * dt);
+    let scale = (desired.scale + v.scale_rate * dt).clamp(cfg.min_scale, cfg.max_scale);
+    if scale != desired.scale + v.scale_rate * dt {
+        v.scale_rate = 0.0;
+    }
+    desired.scale = scale;
+    v
 }
 
 /// Starting cluster pose: centroid and circular-mean heading of the members.

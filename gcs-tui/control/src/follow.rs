@@ -26,7 +26,7 @@ use mech_proto::{Command, FleetCommand, Offset, RobotCommand, Stop};
 
 use super::geometry::{rotate, wrap_angle};
 use super::tracking::{Reference, TrackingGains, track};
-use super::{ControlEvent, MemberState};
+use super::{ControlEvent, MemberState, StepClock, note_staleness};
 
 /// A follower and its offset in the leader's frame, m.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,7 +100,7 @@ pub struct FollowTheLeader {
     leader_motion: Option<LeaderMotion>,
     /// Heading of the formation frame, rad; `None` until the leader reports.
     frame: Option<f64>,
-    last_now: Option<f64>,
+    clock: StepClock,
 }
 
 /// The leader's last pose and its estimated world-frame velocity.
@@ -154,7 +154,7 @@ impl FollowTheLeader {
             lost: BTreeSet::new(),
             leader_motion: None,
             frame: None,
-            last_now: None,
+            clock: StepClock::default(),
         }
     }
 
@@ -185,81 +185,88 @@ impl FollowTheLeader {
 
     /// One step at `now` (s). Followers missing from `states` get no command.
     pub fn step(&mut self, now: f64, states: &[MemberState]) -> FollowOutput {
-        let timeout = self.config.telemetry_timeout;
-        let mut events = Vec::new();
-        let mut freshness = |robot: &str, lost: &mut BTreeSet<String>| -> Option<bool> {
-            let s = states.iter().find(|s| s.robot == robot)?;
-            let stale = s.is_stale(now, timeout);
-            if stale && lost.insert(robot.to_string()) {
-                events.push(ControlEvent::MemberLost {
-                    robot: robot.to_string(),
-                });
-            } else if !stale && lost.remove(robot) {
-                events.push(ControlEvent::MemberRecovered {
-                    robot: robot.to_string(),
-                });
-            }
-            Some(!stale)
+        let reports = Reports {
+            states,
+            now,
+            timeout: self.config.telemetry_timeout,
         };
-        let leader_fresh = freshness(&self.leader, &mut self.lost) == Some(true);
-        let leader = states
-            .iter()
-            .find(|s| s.robot == self.leader)
-            .filter(|_| leader_fresh);
+        let mut events = Vec::new();
+        let leader = reports.fresh(&self.leader, &mut self.lost, &mut events);
         self.leader_motion = leader
             .map(|l| LeaderMotion::update(self.leader_motion, l, self.config.velocity_smoothing));
         let motion = self.leader_motion;
-        let dt = match self.last_now {
-            Some(t) if now > t => (now - t).min(0.5),
-            _ => 0.0,
-        };
-        self.last_now = Some(now);
+        let dt = self.clock.interval(now);
         let frame_rate = match motion {
-            Some(l) => {
-                let reach = self
-                    .followers
-                    .iter()
-                    .map(|f| f.offset.x.hypot(f.offset.y))
-                    .fold(0.0, f64::max);
-                let slowest = self
-                    .followers
-                    .iter()
-                    .filter_map(|f| states.iter().find(|s| s.robot == f.robot))
-                    .map(|s| s.platform.max_speed)
-                    .fold(f64::INFINITY, f64::min);
-                let limit = if reach > 1e-9 && slowest.is_finite() {
-                    self.config.speed_margin * slowest / reach
-                } else {
-                    f64::INFINITY
-                };
-                let frame = self.frame.unwrap_or(l.heading);
-                let turn = wrap_angle(l.heading - frame);
-                let step = if limit.is_finite() {
-                    turn.clamp(-limit * dt, limit * dt)
-                } else {
-                    turn
-                };
-                self.frame = Some(wrap_angle(frame + step));
-                // Feed-forward: the leader's rate once caught up, else the
-                // frame's own (limited) rate.
-                if (turn - step).abs() < 1e-9 {
-                    l.wz.clamp(-limit, limit)
-                } else if dt > 0.0 {
-                    step / dt
-                } else {
-                    0.0
-                }
-            }
+            Some(l) => self.turn_frame(&l, states, dt),
             None => 0.0,
         };
+        let (commands, targets) = self.follower_commands(&reports, motion, frame_rate, &mut events);
+        FollowOutput {
+            commands,
+            targets,
+            lost: self.lost.iter().cloned().collect(),
+            events,
+        }
+    }
+
+    /// Turns the formation frame toward the leader's heading, no faster than
+    /// [`FollowTheLeader::frame_rate_limit`], and returns the frame's rate for
+    /// feed-forward: the leader's own once caught up, else the frame's.
+    fn turn_frame(&mut self, leader: &LeaderMotion, states: &[MemberState], dt: f64) -> f64 {
+        let limit = self.frame_rate_limit(states);
+        let frame = self.frame.unwrap_or(leader.heading);
+        let turn = wrap_angle(leader.heading - frame);
+        let step = if limit.is_finite() {
+            turn.clamp(-limit * dt, limit * dt)
+        } else {
+            turn
+        };
+        self.frame = Some(wrap_angle(frame + step));
+        if (turn - step).abs() < 1e-9 {
+            leader.wz.clamp(-limit, limit)
+        } else if dt > 0.0 {
+            step / dt
+        } else {
+            0.0
+        }
+    }
+
+    /// The fastest the formation frame may turn, rad/s: the rate at which the
+    /// farthest offset moves at the speed margin of the slowest follower
+    /// (unlimited without offsets or reporting followers).
+    fn frame_rate_limit(&self, states: &[MemberState]) -> f64 {
+        let reach = self
+            .followers
+            .iter()
+            .map(|f| f.offset.x.hypot(f.offset.y))
+            .fold(0.0, f64::max);
+        let slowest = self
+            .followers
+            .iter()
+            .filter_map(|f| states.iter().find(|s| s.robot == f.robot))
+            .map(|s| s.platform.max_speed)
+            .fold(f64::INFINITY, f64::min);
+        if reach > 1e-9 && slowest.is_finite() {
+            self.config.speed_margin * slowest / reach
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Each fresh follower's command toward its offset in the formation
+    /// frame, with the target it tracks; an explicit stop without a leader.
+    fn follower_commands(
+        &mut self,
+        reports: &Reports,
+        motion: Option<LeaderMotion>,
+        frame_rate: f64,
+        events: &mut Vec<ControlEvent>,
+    ) -> (Vec<RobotCommand>, Vec<FollowTarget>) {
         let frame = self.frame.unwrap_or_default();
         let mut commands = Vec::new();
         let mut targets = Vec::new();
         for f in &self.followers {
-            if freshness(&f.robot, &mut self.lost) != Some(true) {
-                continue;
-            }
-            let Some(s) = states.iter().find(|s| s.robot == f.robot) else {
+            let Some(s) = reports.fresh(&f.robot, &mut self.lost, events) else {
                 continue;
             };
             let Some(l) = motion else {
@@ -269,15 +276,7 @@ impl FollowTheLeader {
                 });
                 continue;
             };
-            let (ox, oy) = rotate(f.offset.x, f.offset.y, frame);
-            let reference = Reference {
-                x: l.x + ox,
-                y: l.y + oy,
-                heading: frame,
-                vx: l.vx - frame_rate * oy,
-                vy: l.vy + frame_rate * ox,
-                wz: frame_rate,
-            };
+            let reference = offset_reference(&l, &f.offset, frame, frame_rate);
             commands.push(RobotCommand {
                 robot: f.robot.clone(),
                 command: track(s, &reference, &self.config.gains),
@@ -290,11 +289,48 @@ impl FollowTheLeader {
                 error: reference.position_error(s),
             });
         }
-        FollowOutput {
-            commands,
-            targets,
-            lost: self.lost.iter().cloned().collect(),
-            events,
-        }
+        (commands, targets)
+    }
+}
+
+/// The step's input, and the age past which it is stale.
+struct Reports<'a> {
+    states: &'a [MemberState],
+    now: f64,
+    timeout: f64,
+}
+
+impl<'a> Reports<'a> {
+    /// `robot`'s state when its telemetry is fresh. Notes it lost or
+    /// recovered in `lost`; a robot missing from the input stays as it was.
+    fn fresh(
+        &self,
+        robot: &str,
+        lost: &mut BTreeSet<String>,
+        events: &mut Vec<ControlEvent>,
+    ) -> Option<&'a MemberState> {
+        let s = self.states.iter().find(|s| s.robot == robot)?;
+        let stale = s.is_stale(self.now, self.timeout);
+        note_staleness(lost, robot, stale, events);
+        (!stale).then_some(s)
+    }
+}
+
+/// The point at `offset` in the formation frame (heading `frame`, turning at
+/// `frame_rate`) about the leader, moving with the leader plus `wz x offset`.
+fn offset_reference(
+    leader: &LeaderMotion,
+    offset: &Offset,
+    frame: f64,
+    frame_rate: f64,
+) -> Reference {
+    let (ox, oy) = rotate(offset.x, offset.y, frame);
+    Reference {
+        x: leader.x + ox,
+        y: leader.y + oy,
+        heading: frame,
+        vx: leader.vx - frame_rate * oy,
+        vy: leader.vy + frame_rate * ox,
+        wz: frame_rate,
     }
 }

@@ -20,7 +20,7 @@
 //! formation) drive the cluster controller too.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, MutexGuard, Weak};
 use std::time::Duration;
 
 use mech_proto::{
@@ -39,8 +39,9 @@ use crate::formation::FormationError;
 use crate::offboard::{NavConfig, OffboardNavigator};
 use crate::spec::{ClusterSpec, DEFAULT_SPACING, SpecError};
 use crate::{ControlEvent, MemberState, PlatformLimits};
-use mech_core::fleet::{Fleet, Severity};
-use mech_core::router::{Delivery, Publisher, RouterError, Subscription};
+use mech_core::fleet::{Cluster, Fleet, Severity};
+use mech_core::router::{Delivery, Publishers, RouterError, Subscription};
+use mech_core::sync::lock;
 use mech_core::{Event, Gcs};
 
 /// Sender name of everything the controllers publish.
@@ -251,10 +252,6 @@ impl Drop for Shared {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
 /// The ground station's fleet and offboard controllers; cheap to clone, all
 /// clones share the controllers. The control task starts with the first
 /// request and stops when the last clone is dropped.
@@ -333,8 +330,9 @@ impl ControlHub {
         }
         let weak = Arc::downgrade(&self.shared);
         let events = self.shared.gcs.router().subscribe(256, false);
+        let publishers = self.shared.gcs.router().publishers(SENDER);
         let period = Duration::from_secs_f64(1.0 / self.shared.config.rate_hz.clamp(1.0, 200.0));
-        *task = Some(tokio::spawn(run(weak, events, period)));
+        *task = Some(tokio::spawn(run(weak, events, publishers, period)));
     }
 
     /// Runs a control period now instead of at the next tick.
@@ -744,119 +742,93 @@ impl ControlHub {
         }
     }
 
-    /// One control period on the fleet model's telemetry; returns what to
-    /// publish and what to log.
-    fn period(&self) -> (Vec<Outgoing>, Vec<(Severity, String)>) {
+    /// One control period on the fleet model's telemetry: every cluster,
+    /// follow and offboard controller steps once on the robots routed to it.
+    fn period(&self) -> PeriodOutput {
+        let mut inputs = self.period_inputs();
+        let mut output = PeriodOutput::default();
+        let mut state = self.state();
+        state.progress.extend(std::mem::take(&mut inputs.progress));
+        for (name, e) in state.clusters.iter_mut() {
+            e.step(name, &inputs, &mut output);
+        }
+        for (leader, e) in state.follows.iter_mut() {
+            e.step(leader, &inputs, &mut output);
+        }
+        let nav_timeout = self.shared.config.nav.telemetry_timeout;
+        for (robot, e) in state.navs.iter_mut() {
+            e.step(robot, &inputs, nav_timeout, &mut output);
+        }
+        output
+    }
+
+    /// What the controllers read from the fleet model this period.
+    fn period_inputs(&self) -> PeriodInputs {
         let gcs = &self.shared.gcs;
         let now = gcs.router().elapsed().as_secs_f64();
         let idle = {
             let s = self.state();
             s.clusters.is_empty() && s.follows.is_empty() && s.navs.is_empty()
         };
-        let (states, routes, clusters, progress) = gcs.with_fleet(|f| {
-            (
-                if idle { Vec::new() } else { member_states(f) },
-                f.robots
-                    .iter()
-                    .map(|(n, r)| (n.clone(), r.route.requested.clone()))
-                    .collect::<HashMap<String, Option<String>>>(),
-                f.clusters.clone(),
-                f.robots
-                    .iter()
-                    .filter_map(|(n, r)| Some((n.clone(), r.mission?)))
-                    .collect::<Vec<_>>(),
-            )
-        });
-        let routed_to = |robot: &str, channel: &str| {
-            routes.get(robot).and_then(|r| r.as_deref()) == Some(channel)
-        };
-        let mut out = Vec::new();
-        let mut log = Vec::new();
-        let mut state = self.state();
-        state.progress.extend(progress);
+        gcs.with_fleet(|f| PeriodInputs {
+            now,
+            states: if idle { Vec::new() } else { member_states(f) },
+            routes: f
+                .robots
+                .iter()
+                .map(|(n, r)| (n.clone(), r.route.requested.clone()))
+                .collect(),
+            clusters: f.clusters.clone(),
+            progress: f
+                .robots
+                .iter()
+                .filter_map(|(n, r)| Some((n.clone(), r.mission?)))
+                .collect(),
+        })
+    }
 
-        for (name, e) in state.clusters.iter_mut() {
-            let channel = cluster_channel(name);
-            if let Some(def) = clusters.get(name) {
-                if def.members.as_slice() != e.controller.members() {
-                    if let Err(err) = e.controller.set_members(def.members.clone()) {
-                        log.push((
-                            Severity::Warn,
-                            format!("{name}: members not updated: {err}"),
-                        ));
+    /// Publishes what a period decided; the first offboard command the router
+    /// forwards to a robot completes its switch to offboard.
+    async fn publish(&self, publishers: &mut Publishers, outgoing: Vec<Outgoing>) {
+        for o in outgoing {
+            match o {
+                Outgoing::Fleet { channel, parts } => {
+                    if let Err(e) = publishers.on(&channel).send_fleet(parts).await {
+                        tracing::warn!(%channel, error = %e, "fleet command not published");
                     }
                 }
-            }
-            if e.drive_expires.is_some_and(|t| now > t) {
-                e.controller.hold();
-                e.drive_expires = None;
-            }
-            let routed: Vec<MemberState> = states
-                .iter()
-                .filter(|s| routed_to(&s.robot, &channel))
-                .cloned()
-                .collect();
-            let result = e.controller.step(now, &routed);
-            for s in &result.status.slots {
-                e.stats.add(s.error);
-            }
-            for ev in &result.events {
-                if *ev == ControlEvent::Finished {
-                    e.finished = true;
-                }
-                log.push(event_line(name, ev));
-            }
-            e.status = Some(result.status);
-            if !result.commands.is_empty() {
-                out.push(Outgoing::Fleet {
+                Outgoing::Nav {
                     channel,
-                    parts: result.commands,
-                });
-            }
-        }
-
-        for (leader, e) in state.follows.iter_mut() {
-            let channel = follow_channel(leader);
-            let inputs: Vec<MemberState> = states
-                .iter()
-                .filter(|s| &s.robot == leader || routed_to(&s.robot, &channel))
-                .cloned()
-                .collect();
-            let result = e.controller.step(now, &inputs);
-            for ev in &result.events {
-                log.push(event_line(&channel, ev));
-            }
-            e.targets = result.targets;
-            e.lost = result.lost;
-            if !result.commands.is_empty() {
-                out.push(Outgoing::Fleet {
-                    channel,
-                    parts: result.commands,
-                });
-            }
-        }
-
-        for (robot, e) in state.navs.iter_mut() {
-            let channel = offboard_channel(robot);
-            if !routed_to(robot, &channel) {
-                continue;
-            }
-            let s = states.iter().find(|s| &s.robot == robot);
-            let result = e.nav.step(now, s);
-            for ev in &result.events {
-                log.push(event_line(&channel, ev));
-            }
-            e.distance = result.distance;
-            e.lost = s.is_none_or(|s| s.is_stale(now, self.shared.config.nav.telemetry_timeout));
-            if let Some(command) = result.command {
-                out.push(Outgoing::Nav {
-                    channel,
-                    robot: robot.clone(),
+                    robot,
                     command,
-                });
+                } => match publishers.on(&channel).send(&robot, command).await {
+                    Ok(Delivery::Forwarded(_)) => self.forwarded(&robot),
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(%channel, error = %e, "offboard command not published")
+                    }
+                },
             }
         }
-        (out, log)
+    }
+
+    /// Logs a period's controller events, to tracing and the fleet log.
+    fn record(&self, log: Vec<(Severity, String)>) {
+        if log.is_empty() {
+            return;
+        }
+        for (severity, text) in &log {
+            if *severity >= Severity::Warn {
+                tracing::warn!(target: "control", "{text}");
+            } else {
+                tracing::info!(target: "control", "{text}");
+            }
+        }
+        self.shared.gcs.update_fleet(|f| {
+            for (severity, text) in log {
+                f.log(severity, text);
+            }
+        });
     }
 
     /// Records that the first offboard command for `robot` was forwarded.
@@ -901,6 +873,142 @@ impl ControlHub {
                     Severity::Warn,
                     format!("{channel}: cluster command refused: {e}"),
                 )
+            });
+        }
+    }
+}
+
+/// What the controllers read from the fleet model at the start of a period.
+struct PeriodInputs {
+    /// Router time, s.
+    now: f64,
+    /// Every robot with telemetry (none while no controller runs).
+    states: Vec<MemberState>,
+    /// The channel each robot is routed to, as last requested of the router.
+    routes: HashMap<String, Option<String>>,
+    /// Cluster definitions, whose members the controllers follow.
+    clusters: BTreeMap<String, Cluster>,
+    /// Mission progress the robots report now.
+    progress: Vec<(String, MissionProgress)>,
+}
+
+impl PeriodInputs {
+    fn routed_to(&self, robot: &str, channel: &str) -> bool {
+        self.routes.get(robot).and_then(|r| r.as_deref()) == Some(channel)
+    }
+}
+
+/// What one control period decided: what to publish and what to log.
+#[derive(Debug, Default)]
+struct PeriodOutput {
+    outgoing: Vec<Outgoing>,
+    log: Vec<(Severity, String)>,
+}
+
+impl ClusterEntry {
+    /// One period of cluster `name` on the robots routed to `fleet/<name>`.
+    fn step(&mut self, name: &str, inputs: &PeriodInputs, output: &mut PeriodOutput) {
+        let channel = cluster_channel(name);
+        if let Some(def) = inputs.clusters.get(name) {
+            self.follow_definition(name, def, &mut output.log);
+        }
+        if self.drive_expires.is_some_and(|t| inputs.now > t) {
+            self.controller.hold();
+            self.drive_expires = None;
+        }
+        let routed: Vec<MemberState> = inputs
+            .states
+            .iter()
+            .filter(|s| inputs.routed_to(&s.robot, &channel))
+            .cloned()
+            .collect();
+        let result = self.controller.step(inputs.now, &routed);
+        for s in &result.status.slots {
+            self.stats.add(s.error);
+        }
+        for ev in &result.events {
+            if *ev == ControlEvent::Finished {
+                self.finished = true;
+            }
+            output.log.push(event_line(name, ev));
+        }
+        self.status = Some(result.status);
+        if !result.commands.is_empty() {
+            output.outgoing.push(Outgoing::Fleet {
+                channel,
+                parts: result.commands,
+            });
+        }
+    }
+
+    /// Takes the members of the fleet model's cluster definition when they
+    /// changed: clusters are defined there (command language, TUI,
+    /// configuration), not on the controller.
+    fn follow_definition(&mut self, name: &str, def: &Cluster, log: &mut Vec<(Severity, String)>) {
+        if def.members.as_slice() == self.controller.members() {
+            return;
+        }
+        if let Err(err) = self.controller.set_members(def.members.clone()) {
+            log.push((
+                Severity::Warn,
+                format!("{name}: members not updated: {err}"),
+            ));
+        }
+    }
+}
+
+impl FollowEntry {
+    /// One period of the followers of `leader`: the leader wherever it is
+    /// routed, the followers routed to `follow/<leader>`.
+    fn step(&mut self, leader: &str, inputs: &PeriodInputs, output: &mut PeriodOutput) {
+        let channel = follow_channel(leader);
+        let routed: Vec<MemberState> = inputs
+            .states
+            .iter()
+            .filter(|s| s.robot == leader || inputs.routed_to(&s.robot, &channel))
+            .cloned()
+            .collect();
+        let result = self.controller.step(inputs.now, &routed);
+        for ev in &result.events {
+            output.log.push(event_line(&channel, ev));
+        }
+        self.targets = result.targets;
+        self.lost = result.lost;
+        if !result.commands.is_empty() {
+            output.outgoing.push(Outgoing::Fleet {
+                channel,
+                parts: result.commands,
+            });
+        }
+    }
+}
+
+impl NavEntry {
+    /// One period of `robot`'s offboard navigation, while it is routed to
+    /// `offboard/<robot>`; `timeout` is the navigator's telemetry timeout.
+    fn step(
+        &mut self,
+        robot: &str,
+        inputs: &PeriodInputs,
+        timeout: f64,
+        output: &mut PeriodOutput,
+    ) {
+        let channel = offboard_channel(robot);
+        if !inputs.routed_to(robot, &channel) {
+            return;
+        }
+        let s = inputs.states.iter().find(|s| s.robot == robot);
+        let result = self.nav.step(inputs.now, s);
+        for ev in &result.events {
+            output.log.push(event_line(&channel, ev));
+        }
+        self.distance = result.distance;
+        self.lost = s.is_none_or(|s| s.is_stale(inputs.now, timeout));
+        if let Some(command) = result.command {
+            output.outgoing.push(Outgoing::Nav {
+                channel,
+                robot: robot.to_string(),
+                command,
             });
         }
     }
@@ -971,8 +1079,12 @@ fn member_states(f: &Fleet) -> Vec<MemberState> {
 
 /// The control task: a period at every tick or kick, publishing through
 /// per-channel publishers (so sequence numbers run on per channel).
-async fn run(shared: Weak<Shared>, mut events: Subscription, period: Duration) {
-    let mut publishers: HashMap<String, Publisher> = HashMap::new();
+async fn run(
+    shared: Weak<Shared>,
+    mut events: Subscription,
+    mut publishers: Publishers,
+    period: Duration,
+) {
     let mut ticker = tokio::time::interval(period);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -997,49 +1109,8 @@ async fn run(shared: Weak<Shared>, mut events: Subscription, period: Duration) {
         }
         let Some(s) = shared.upgrade() else { return };
         let hub = ControlHub { shared: s };
-        let (outgoing, log) = hub.period();
-        let router = hub.shared.gcs.router().clone();
-        for o in outgoing {
-            match o {
-                Outgoing::Fleet { channel, parts } => {
-                    let p = publishers
-                        .entry(channel.clone())
-                        .or_insert_with(|| router.publisher(SENDER, &channel));
-                    if let Err(e) = p.send_fleet(parts).await {
-                        tracing::warn!(%channel, error = %e, "fleet command not published");
-                    }
-                }
-                Outgoing::Nav {
-                    channel,
-                    robot,
-                    command,
-                } => {
-                    let p = publishers
-                        .entry(channel.clone())
-                        .or_insert_with(|| router.publisher(SENDER, &channel));
-                    match p.send(&robot, command).await {
-                        Ok(Delivery::Forwarded(_)) => hub.forwarded(&robot),
-                        Ok(_) => {}
-                        Err(e) => {
-                            tracing::warn!(%channel, error = %e, "offboard command not published")
-                        }
-                    }
-                }
-            }
-        }
-        if !log.is_empty() {
-            for (severity, text) in &log {
-                if *severity >= Severity::Warn {
-                    tracing::warn!(target: "control", "{text}");
-                } else {
-                    tracing::info!(target: "control", "{text}");
-                }
-            }
-            hub.shared.gcs.update_fleet(|f| {
-                for (severity, text) in log {
-                    f.log(severity, text);
-                }
-            });
-        }
+        let output = hub.period();
+        hub.publish(&mut publishers, output.outgoing).await;
+        hub.record(output.log);
     }
 }

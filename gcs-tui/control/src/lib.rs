@@ -56,6 +56,8 @@ pub use spec::{
 };
 pub use tracking::{Reference, TrackingGains, track};
 
+use std::collections::BTreeSet;
+
 use mech_proto::{CommandKind, Hello, Pose, Velocity};
 
 /// How a platform can move in the plane, which decides the tracking law.
@@ -180,4 +182,46 @@ pub enum ControlEvent {
     WaypointReached { index: usize },
     /// The last waypoint of a non-looped list was reached.
     Finished,
+}
+
+/// The time between a controller's steps, from the `now` each step is given.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct StepClock {
+    last: Option<f64>,
+}
+
+impl StepClock {
+    /// Seconds since the previous step, capped at 0.5 s so a stall does not
+    /// turn into one long integration step; 0 at the first step and when time
+    /// does not move forward.
+    pub(crate) fn interval(&mut self, now: f64) -> f64 {
+        let dt = match self.last {
+            Some(t) if now > t => (now - t).min(0.5),
+            _ => 0.0,
+        };
+        self.last = Some(now);
+        dt
+    }
+}
+
+/// Keeps `lost` (the members with stale telemetry) up to date for `robot`,
+/// with an event when the robot is lost or recovered, so every controller
+/// reports the change once.
+pub(crate) fn note_staleness(
+    lost: &mut BTreeSet<String>,
+    robot: &str,
+    stale: bool,
+    events: &mut Vec<ControlEvent>,
+) {
+    if stale {
+        if lost.insert(robot.to_string()) {
+            events.push(ControlEvent::MemberLost {
+                robot: robot.to_string(),
+            });
+        }
+    } else if lost.remove(robot) {
+        events.push(ControlEvent::MemberRecovered {
+            robot: robot.to_string(),
+        });
+    }
 }

@@ -16,7 +16,9 @@
 //! proportion to `cos(bearing error)` (twist with `vy = 0`, or velocity-heading
 //! for platforms without twist).
 
-use mech_proto::{Command, CommandKind, Mission, MissionProgress, Stop, Twist, VelocityHeading};
+use mech_proto::{
+    Command, CommandKind, Mission, MissionProgress, Stop, Twist, VelocityHeading, Waypoint,
+};
 
 use super::geometry::{norm, rotate, wrap_angle};
 use super::{ControlEvent, Kinematics, MemberState};
@@ -60,6 +62,17 @@ pub struct NavOutput {
     /// without telemetry).
     pub distance: Option<f64>,
     pub events: Vec<ControlEvent>,
+}
+
+/// Where one step leaves the robot in its mission.
+enum Leg {
+    /// Head for this waypoint, this far away (m).
+    Toward(Waypoint, f64),
+    /// Wait at the waypoint being approached, this far away (m), while
+    /// navigation is handed back to the agent.
+    Handover(f64),
+    /// No waypoint left to approach: stop.
+    Finished,
 }
 
 /// A GCS-side waypoint loop for one robot.
@@ -161,14 +174,30 @@ impl OffboardNavigator {
         let mut events = Vec::new();
         let state = state.filter(|s| s.robot == self.robot);
         let fresh = state.filter(|s| !s.is_stale(now, self.config.telemetry_timeout));
+        self.note_telemetry(fresh.is_some(), &mut events);
+        let (command, distance) = match fresh {
+            Some(s) => self.guide(now, s, &mut events),
+            None => (None, None),
+        };
+        NavOutput {
+            command,
+            progress: self.progress(),
+            distance,
+            events,
+        }
+    }
+
+    /// Reports the robot lost when its telemetry goes stale or missing, and
+    /// recovered when fresh telemetry is back.
+    fn note_telemetry(&mut self, fresh: bool, events: &mut Vec<ControlEvent>) {
         match (fresh, self.lost) {
-            (None, false) => {
+            (false, false) => {
                 self.lost = true;
                 events.push(ControlEvent::MemberLost {
                     robot: self.robot.clone(),
                 });
             }
-            (Some(_), true) => {
+            (true, true) => {
                 self.lost = false;
                 events.push(ControlEvent::MemberRecovered {
                     robot: self.robot.clone(),
@@ -176,87 +205,91 @@ impl OffboardNavigator {
             }
             _ => {}
         }
-        let Some(s) = fresh else {
-            return NavOutput {
-                command: None,
-                progress: self.progress(),
-                distance: None,
-                events,
-            };
-        };
+    }
+
+    /// The command for a robot with fresh telemetry, and its distance to the
+    /// waypoint being approached.
+    fn guide(
+        &mut self,
+        now: f64,
+        s: &MemberState,
+        events: &mut Vec<ControlEvent>,
+    ) -> (Option<Command>, Option<f64>) {
         let started = *self.started.get_or_insert(now);
+        match self.leg(s, events) {
+            Leg::Toward(w, distance) => {
+                let speed = self.leg_speed(s, &w, distance, now - started);
+                let command = self.command_toward(s, w.x, w.y, speed);
+                (Some(command), Some(distance))
+            }
+            Leg::Handover(distance) => (Some(Command::Stop(Stop {})), Some(distance)),
+            Leg::Finished => (Some(Command::Stop(Stop {})), None),
+        }
+    }
+
+    /// Where the robot is in its mission: the waypoint to head for, passing
+    /// the one being approached once within the arrival radius.
+    fn leg(&mut self, s: &MemberState, events: &mut Vec<ControlEvent>) -> Leg {
         let total = self.mission.waypoints.len();
         if self.next >= total && self.mission.looped && total > 0 {
             self.next = 0;
         }
-        let Some(mut w) = self.mission.waypoints.get(self.next).copied() else {
-            return NavOutput {
-                command: Some(Command::Stop(Stop {})),
-                progress: self.progress(),
-                distance: None,
-                events,
-            };
+        let Some(w) = self.mission.waypoints.get(self.next).copied() else {
+            return Leg::Finished;
         };
-        let mut distance = norm(w.x - s.pose.x, w.y - s.pose.y);
-        if distance <= self.mission.arrival_radius && self.handover {
-            return NavOutput {
-                command: Some(Command::Stop(Stop {})),
-                progress: self.progress(),
-                distance: Some(distance),
-                events,
-            };
-        }
+        let distance = norm(w.x - s.pose.x, w.y - s.pose.y);
         if distance <= self.mission.arrival_radius {
-            events.push(ControlEvent::WaypointReached { index: self.next });
-            self.next += 1;
-            if self.next >= total {
-                if self.mission.looped {
-                    self.next = 0;
-                } else {
-                    events.push(ControlEvent::Finished);
-                    return NavOutput {
-                        command: Some(Command::Stop(Stop {})),
-                        progress: self.progress(),
-                        distance: None,
-                        events,
-                    };
-                }
+            if self.handover {
+                return Leg::Handover(distance);
             }
-            let Some(n) = self.mission.waypoints.get(self.next).copied() else {
-                return NavOutput {
-                    command: None,
-                    progress: self.progress(),
-                    distance: None,
-                    events,
-                };
-            };
-            w = n;
-            distance = norm(w.x - s.pose.x, w.y - s.pose.y);
+            return self.pass_waypoint(s, events);
         }
-        let top = s
-            .platform
-            .max_speed
-            .min(self.config.cruise_speed.max(self.config.min_speed));
-        let mut speed = match w.time {
+        Leg::Toward(w, distance)
+    }
+
+    /// Counts the waypoint being approached as reached and goes on to the
+    /// next one (the first again when looped).
+    fn pass_waypoint(&mut self, s: &MemberState, events: &mut Vec<ControlEvent>) -> Leg {
+        events.push(ControlEvent::WaypointReached { index: self.next });
+        self.next += 1;
+        if self.next >= self.mission.waypoints.len() {
+            if self.mission.looped {
+                self.next = 0;
+            } else {
+                events.push(ControlEvent::Finished);
+                return Leg::Finished;
+            }
+        }
+        // `next` is a valid index here: it was one before the increment, or
+        // it wrapped round to the first waypoint.
+        match self.mission.waypoints.get(self.next).copied() {
+            Some(w) => Leg::Toward(w, norm(w.x - s.pose.x, w.y - s.pose.y)),
+            None => Leg::Finished,
+        }
+    }
+
+    /// Speed along the leg to `w`, `distance` away, `elapsed` s into the
+    /// mission: cruise within the platform's top speed, or what meets `w`'s
+    /// arrival time; slowing down only for the last waypoint of a non-looped
+    /// mission.
+    fn leg_speed(&self, s: &MemberState, w: &Waypoint, distance: f64, elapsed: f64) -> f64 {
+        let cfg = &self.config;
+        let max_speed = s.platform.max_speed;
+        let speed = match w.time {
             Some(t) => {
-                let remaining = t - (now - started);
+                let remaining = t - elapsed;
                 if remaining > 1e-3 {
-                    (distance / remaining).clamp(self.config.min_speed, s.platform.max_speed)
+                    (distance / remaining).clamp(cfg.min_speed, max_speed)
                 } else {
-                    s.platform.max_speed
+                    max_speed
                 }
             }
-            None => top,
+            None => max_speed.min(cfg.cruise_speed.max(cfg.min_speed)),
         };
-        if self.next + 1 >= total && !self.mission.looped {
-            speed = speed.min((self.config.k_position * distance).max(self.config.min_speed));
-        }
-        let command = self.command_toward(s, w.x, w.y, speed);
-        NavOutput {
-            command: Some(command),
-            progress: self.progress(),
-            distance: Some(distance),
-            events,
+        if self.next + 1 >= self.mission.waypoints.len() && !self.mission.looped {
+            speed.min((cfg.k_position * distance).max(cfg.min_speed))
+        } else {
+            speed
         }
     }
 
