@@ -46,6 +46,26 @@ pub struct RobotConfig {
     pub control: Gains,
     #[serde(default)]
     pub sim: SimConfig,
+    /// `[auth]`: the robot's key (`mech-gcs keygen NAME`); without it the
+    /// robot runs unsigned and only an unauthenticated station accepts it.
+    #[serde(default)]
+    pub auth: Option<AuthConfig>,
+}
+
+/// `[auth]`: signing and checking with the router.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AuthConfig {
+    /// The key file, private to the robot's user (relative paths are from
+    /// the config file's folder).
+    pub key: std::path::PathBuf,
+    /// The router's sender name (its `router.name`).
+    #[serde(default = "default_router_name")]
+    pub router: String,
+}
+
+fn default_router_name() -> String {
+    mech_proto::ROUTER.to_string()
 }
 
 fn default_control_rate() -> Spanned<f64> {
@@ -245,7 +265,38 @@ impl RobotConfig {
             file: file.clone(),
             source,
         })?;
-        RobotConfig::parse(&text, &file)
+        let mut config = RobotConfig::parse(&text, &file)?;
+        if let Some(auth) = config.auth.as_mut().filter(|a| a.key.is_relative()) {
+            let dir = path.parent().unwrap_or(Path::new("."));
+            auth.key = dir.join(&auth.key);
+        }
+        Ok(config)
+    }
+
+    /// The robot's key, read from its file: `None` without `[auth]`. The
+    /// file must be private and hold this robot's key.
+    pub fn key(&self) -> Result<Option<mech_proto::auth::Key>, String> {
+        let Some(auth) = &self.auth else {
+            return Ok(None);
+        };
+        let path = auth.key.display();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let meta = std::fs::metadata(&auth.key).map_err(|e| format!("{path}: {e}"))?;
+            mech_proto::auth::private_mode(meta.permissions().mode())
+                .map_err(|e| format!("{path}: {e}"))?;
+        }
+        let text = std::fs::read_to_string(&auth.key).map_err(|e| format!("{path}: {e}"))?;
+        let k = mech_proto::auth::KeyText::parse(&text).map_err(|e| format!("{path}: {e}"))?;
+        if &k.name != self.name.get_ref() {
+            return Err(format!(
+                "{path} is the key of {:?}, not of this robot ({:?})",
+                k.name,
+                self.name.get_ref()
+            ));
+        }
+        Ok(Some(k.key))
     }
 
     /// Parses and checks config text; `file` names it in errors.

@@ -26,6 +26,8 @@ pub enum LaunchError {
     Actuators(String),
     #[error("this build has no {feature} support; rebuild with `--features {feature}`")]
     Feature { feature: &'static str },
+    #[error("key: {0}")]
+    Key(String),
 }
 
 /// Command-line overrides of the config.
@@ -44,6 +46,11 @@ pub async fn run(
     overrides: Overrides,
     shutdown: watch::Receiver<bool>,
 ) -> Result<(), LaunchError> {
+    let key = config.key().map_err(LaunchError::Key)?;
+    let router_name = config
+        .auth
+        .as_ref()
+        .map_or(mech_proto::ROUTER.to_string(), |a| a.router.clone());
     let origin = Instant::now();
     let stamp_origin = mech_proto::unix_micros();
     let simulated = overrides.sim || matches!(config.position(), PositionConfig::Sim);
@@ -67,10 +74,16 @@ pub async fn run(
             z: s.z,
             heading: s.heading,
         };
-        let sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
+        let mut sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
+        if let Some(key) = key {
+            sim.agent = sim.agent.with_key(key, &router_name);
+        }
         runtime::drive(sim, io, ticker, origin, shutdown).await;
     } else {
-        let agent = Agent::new(settings, config.platform().build(), stamp_origin);
+        let mut agent = Agent::new(settings, config.platform().build(), stamp_origin);
+        if let Some(key) = key {
+            agent = agent.with_key(key, &router_name);
+        }
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
         runtime::drive(

@@ -74,6 +74,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         })
         .transpose()?;
     if cli.check {
+        config
+            .key()
+            .map_err(|e| anyhow::anyhow!("[auth] key: {e}"))?;
         println!(
             "{}: ok",
             cli.config

@@ -160,3 +160,95 @@ fn the_protocol_page_shows_the_tested_controller() {
         "docs/protocol.md and controller.py differ"
     );
 }
+
+#[test]
+fn a_robot_with_its_key_registers_and_one_without_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    keygen("rover", &dir.path().join("rover.key"));
+    let port = free_port();
+    let config = dir.path().join("gcs.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[router]\nudp = \"127.0.0.1:{port}\"\ntcp = \"127.0.0.1:0\"\n\
+             [[auth.keys]]\nrole = \"robot\"\nname = \"rover\"\nfile = \"rover.key\"\n"
+        ),
+    )
+    .unwrap();
+    let agent_config = |name: &str, auth: &str| {
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "name = \"{name}\"\n[platform]\nkind = \"kiwi\"\nradius = 0.1\n\
+                 max_wheel_speed = 0.5\n[position]\nkind = \"sim\"\n\
+                 [link]\nkind = \"udp\"\nrouter = \"127.0.0.1:{port}\"\n{auth}"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let keyed = agent_config("rover", "[auth]\nkey = \"rover.key\"\n");
+    let unkeyed = agent_config("stray", "");
+    let check = Command::new(mech_e2e::binary("mech-agent"))
+        .args(["--check", "--config"])
+        .arg(&keyed)
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    let gcs = Command::new(mech_e2e::binary("mech-gcs"))
+        .arg("--config")
+        .arg(&config)
+        .args(["--script", "-"])
+        .env("XDG_STATE_HOME", dir.path())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let agents: Vec<_> = [&keyed, &unkeyed]
+        .iter()
+        .map(|c| {
+            Command::new(mech_e2e::binary("mech-agent"))
+                .arg("--config")
+                .arg(c)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    let mut gcs = gcs;
+    gcs.stdin
+        .take()
+        .unwrap()
+        .write_all(b"wait connected rover 10s\nsleep 1500ms\nstatus\n")
+        .unwrap();
+    let out = gcs.wait_with_output().unwrap();
+    for mut a in agents {
+        let _ = a.kill();
+        let _ = a.wait();
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let status = text
+        .lines()
+        .find(|l| l.contains("\"command\":\"status\""))
+        .unwrap();
+    assert!(
+        status.contains("rover #") && !status.contains("stray #"),
+        "{status}"
+    );
+    assert!(
+        status.contains("rejected") && status.contains("unsigned"),
+        "{status}"
+    );
+}
