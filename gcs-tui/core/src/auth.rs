@@ -197,7 +197,22 @@ impl AuthConfig {
         self.keys
             .iter()
             .map(|e| {
-                let file = KeyFile::load(&e.file).map_err(|err| ConfigError(err.to_string()))?;
+                let file = KeyFile::load(&e.file).map_err(|err| match err {
+                    KeyFileError::Read { source, .. }
+                        if source.kind() == std::io::ErrorKind::NotFound =>
+                    {
+                        ConfigError(format!(
+                            "the key file {} of {} {:?} does not exist; make it with \
+                             `mech-gcs keygen {} --out {}`",
+                            e.file.display(),
+                            e.role.as_str(),
+                            e.name,
+                            e.name,
+                            e.file.display()
+                        ))
+                    }
+                    other => ConfigError(other.to_string()),
+                })?;
                 if file.name != e.name {
                     return Err(ConfigError(format!(
                         "{} is the key of {:?}, but auth.keys lists it for {:?}",
