@@ -63,16 +63,14 @@ pub fn event_json(s: &Stamped) -> Value {
             json!({"udp": udp.to_string(), "tcp": tcp.map(|t| t.to_string())})
         }
         Event::Registered {
-            robot,
+            hello,
             id,
             addr,
-            platform,
-            capabilities,
             known,
-            ..
         } => json!({
-            "robot": robot, "id": id, "addr": addr.to_string(), "platform": platform,
-            "capabilities": capabilities.iter().map(|c| c.as_str()).collect::<Vec<_>>(), "known": known,
+            "robot": hello.name, "id": id, "addr": addr.to_string(), "platform": hello.platform,
+            "capabilities": hello.capabilities.iter().map(|c| c.as_str()).collect::<Vec<_>>(),
+            "known": known,
         }),
         Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
         Event::Telemetry {

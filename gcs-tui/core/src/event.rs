@@ -8,7 +8,7 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{ClusterCommand, CommandKind, Notice, Telemetry, Waypoint};
+use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
 
 use crate::counters::RejectReason;
 
@@ -52,14 +52,11 @@ pub enum Event {
     /// A robot's `Hello` was accepted (first time, or again after a restart
     /// or from a new address: `known` says which).
     Registered {
-        robot: String,
+        /// The registration as the robot sent it: its name, platform,
+        /// capabilities and limits.
+        hello: Hello,
         id: u16,
         addr: SocketAddr,
-        platform: String,
-        capabilities: Vec<CommandKind>,
-        motors: u8,
-        max_speed: f64,
-        max_yaw_rate: f64,
         known: bool,
     },
     /// A robot's link state changed.

@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{CommandKind, Notice, Telemetry, Waypoint};
+use mech_proto::{Hello, Notice, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
@@ -172,28 +172,11 @@ impl Fleet {
         match &stamped.event {
             Event::Listening { udp, tcp } => self.listening(*udp, *tcp),
             Event::Registered {
-                robot,
+                hello,
                 id,
                 addr,
-                platform,
-                capabilities,
-                motors,
-                max_speed,
-                max_yaw_rate,
                 known,
-            } => self.registered(
-                robot,
-                *id,
-                *addr,
-                Platform {
-                    name: platform,
-                    capabilities,
-                    motors: *motors,
-                    max_speed: *max_speed,
-                    max_yaw_rate: *max_yaw_rate,
-                },
-                *known,
-            ),
+            } => self.registered(hello, *id, *addr, *known),
             Event::Link { robot, state } => self.link(robot, *state),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
             Event::RouteChanged {
@@ -254,29 +237,23 @@ impl Fleet {
         );
     }
 
-    fn registered(
-        &mut self,
-        robot: &str,
-        id: u16,
-        addr: SocketAddr,
-        platform: Platform<'_>,
-        known: bool,
-    ) {
+    fn registered(&mut self, hello: &Hello, id: u16, addr: SocketAddr, known: bool) {
+        let robot = &hello.name;
         let r = self
             .robots
-            .entry(robot.to_string())
+            .entry(robot.clone())
             .or_insert_with(|| Robot::new(robot, id, addr));
         let moved = r.addr != addr;
         r.id = id;
         r.addr = addr;
-        r.platform = platform.name.to_string();
-        r.capabilities = platform.capabilities.to_vec();
-        r.motors = platform.motors;
-        r.max_speed = platform.max_speed;
-        r.max_yaw_rate = platform.max_yaw_rate;
+        r.platform = hello.platform.clone();
+        r.capabilities = hello.capabilities.clone();
+        r.motors = hello.motors;
+        r.max_speed = hello.max_speed;
+        r.max_yaw_rate = hello.max_yaw_rate;
         r.link = LinkState::Connected;
         let text = match (known, moved) {
-            (false, _) => format!("{robot} ({}) connected from {addr}", platform.name),
+            (false, _) => format!("{robot} ({}) connected from {addr}", hello.platform),
             (true, true) => format!("{robot} re-registered from new address {addr}"),
             (true, false) => format!("{robot} re-registered"),
         };
@@ -461,15 +438,6 @@ impl Fleet {
     }
 }
 
-/// What a registration says about a robot's platform.
-struct Platform<'a> {
-    name: &'a str,
-    capabilities: &'a [CommandKind],
-    motors: u8,
-    max_speed: f64,
-    max_yaw_rate: f64,
-}
-
 /// The fleet model behind its lock is where the router delivers events.
 impl EventSink for std::sync::Mutex<Fleet> {
     fn apply(&self, event: &Stamped) {
@@ -497,14 +465,17 @@ mod tests {
 
     fn registered(name: &str) -> Event {
         Event::Registered {
-            robot: name.into(),
+            hello: mech_proto::Hello {
+                name: name.into(),
+                platform: "diff-drive".into(),
+                capabilities: vec![mech_proto::CommandKind::Twist],
+                motors: 2,
+                max_speed: 1.0,
+                max_yaw_rate: 2.0,
+                agent_version: "t".into(),
+            },
             id: 1,
             addr: "127.0.0.1:9000".parse().unwrap(),
-            platform: "diff-drive".into(),
-            capabilities: vec![CommandKind::Twist],
-            motors: 2,
-            max_speed: 1.0,
-            max_yaw_rate: 2.0,
             known: false,
         }
     }

@@ -62,15 +62,11 @@ impl Tables {
             channel: entry.route.clone().unwrap_or_default(),
             epoch: entry.epoch,
         };
+        let name = hello.name.clone();
         events.push(Event::Registered {
-            robot: hello.name.clone(),
+            hello,
             id,
             addr,
-            platform: hello.platform.clone(),
-            capabilities: hello.capabilities.clone(),
-            motors: hello.motors,
-            max_speed: hello.max_speed,
-            max_yaw_rate: hello.max_yaw_rate,
             known,
         });
         let welcome = Body::Welcome(Welcome {
@@ -78,10 +74,10 @@ impl Tables {
             route,
             router_version: env!("CARGO_PKG_VERSION").into(),
         });
-        if let Some(b) = self.make(&hello.name, welcome) {
+        if let Some(b) = self.make(&name, welcome) {
             out.owned.push((Peer::Udp(addr), b));
         }
-        self.estop_newcomer(&hello.name, addr, now, out);
+        self.estop_newcomer(&name, addr, now, out);
     }
 
     /// A robot's first registration: a new id, and the configured default
