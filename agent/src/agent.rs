@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use mech_proto::{
-    Body, Bye, Command, CommandKind, Computation, EStopAck, Envelope, FailsafeState, Header,
+    Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope, FailsafeState, Header,
     Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
     Telemetry, Velocity,
 };
@@ -367,28 +367,8 @@ impl Agent {
         } = env.header;
         let stamp = (seq, stamp_us);
         match env.body {
-            Body::Welcome(w) => {
-                if !self.registered {
-                    tracing::info!(robot = %self.settings.name, route = %w.route.channel, "registered with the router");
-                    // A (possibly restarted) router numbers e-stops, route
-                    // epochs and missions afresh.
-                    self.last_estop_id = None;
-                    self.order.clear();
-                }
-                self.registered = true;
-                self.next_heartbeat = now;
-                self.apply_route(w.route, now, &mut out);
-            }
-            Body::Route(r) => {
-                if r.robot != self.settings.name {
-                    self.counters.not_for_me += 1;
-                } else if self.routed_once && is_older(r.epoch, self.route.epoch) {
-                    // A delayed resend of a route already replaced.
-                    self.counters.stale_routes += 1;
-                } else {
-                    self.apply_route(r, now, &mut out);
-                }
-            }
+            Body::Welcome(w) => self.welcomed(w.route, now, &mut out),
+            Body::Route(r) => self.route_received(r, now, &mut out),
             Body::Command(cmd) => self.command(&channel, &sender, stamp, &cmd, now, &mut out),
             Body::FleetCommand(f) => {
                 if let Some(part) = f.parts.into_iter().find(|p| p.robot == self.settings.name) {
@@ -396,28 +376,7 @@ impl Agent {
                 }
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
-            Body::EStop(e) => {
-                let stale = self
-                    .last_estop_id
-                    .is_some_and(|last| (e.id.wrapping_sub(last) as i32) < 0);
-                if stale {
-                    self.counters.stale_estops += 1;
-                    return out;
-                }
-                self.last_estop_id = Some(e.id);
-                if e.engage {
-                    self.failsafe.engage_estop(e.id);
-                    self.controller.idle();
-                    self.missions.values_mut().for_each(|m| m.paused = true);
-                } else if self.failsafe.estopped() {
-                    self.failsafe.release_estop();
-                }
-                let ack = Body::EStopAck(EStopAck {
-                    engage: e.engage,
-                    id: e.id,
-                });
-                out.push(self.envelope(mech_proto::ROUTER, ack, now));
-            }
+            Body::EStop(e) => self.estop_received(e, now, &mut out),
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -433,12 +392,76 @@ impl Agent {
         out
     }
 
+    /// Registered (again): the Welcome's route is applied whatever its
+    /// epoch, since a (possibly restarted) router numbers e-stops, route
+    /// epochs and missions afresh.
+    fn welcomed(&mut self, route: Route, now: Duration, out: &mut Vec<Envelope>) {
+        if !self.registered {
+            tracing::info!(robot = %self.settings.name, route = %route.channel, "registered with the router");
+            self.last_estop_id = None;
+            self.order.clear();
+        }
+        self.registered = true;
+        self.next_heartbeat = now;
+        self.apply_route(route, now, out);
+    }
+
+    /// A route change, unless it is a delayed resend of one already
+    /// replaced (an older epoch).
+    fn route_received(&mut self, r: Route, now: Duration, out: &mut Vec<Envelope>) {
+        if r.robot != self.settings.name {
+            self.counters.not_for_me += 1;
+        } else if self.routed_once && is_older(r.epoch, self.route.epoch) {
+            self.counters.stale_routes += 1;
+        } else {
+            self.apply_route(r, now, out);
+        }
+    }
+
+    /// E-stop or release, unless older than the last one obeyed (a delayed
+    /// resend of a release must never undo a newer e-stop); acknowledged.
+    fn estop_received(&mut self, e: EStop, now: Duration, out: &mut Vec<Envelope>) {
+        if self.last_estop_id.is_some_and(|last| is_older(e.id, last)) {
+            self.counters.stale_estops += 1;
+            return;
+        }
+        self.last_estop_id = Some(e.id);
+        if e.engage {
+            self.failsafe.engage_estop(e.id);
+            self.controller.idle();
+            self.missions.values_mut().for_each(|m| m.paused = true);
+        } else if self.failsafe.estopped() {
+            self.failsafe.release_estop();
+        }
+        let ack = Body::EStopAck(EStopAck {
+            engage: e.engage,
+            id: e.id,
+        });
+        out.push(self.envelope(mech_proto::ROUTER, ack, now));
+    }
+
     /// One control period: failsafe, controller, actuator outputs, and the
     /// periodic messages that are due (Hello, Heartbeat, Telemetry).
     pub fn tick(&mut self, now: Duration) -> Tick {
         let mut outgoing = Vec::new();
+        self.register(now, &mut outgoing);
+        let drive = self.judge_failsafe(now);
+        self.control(drive, now);
+        if self.registered {
+            self.report(now, &mut outgoing);
+        }
+        Tick {
+            outputs: self.outputs.clone(),
+            outgoing,
+        }
+    }
+
+    /// Registration: after the router is lost, register again (it may have
+    /// restarted, or the robot moved); while unregistered, Hello every
+    /// `hello_period` (with a key, ask the station's time first: signed
+    /// stamps need it).
+    fn register(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if self.registered && self.failsafe.router_lost(now) {
-            // Register again: the router may have restarted, or we moved.
             self.registered = false;
             self.next_hello = now;
             if let Some(auth) = self.auth.as_mut() {
@@ -447,14 +470,17 @@ impl Agent {
         }
         if !self.registered && now >= self.next_hello {
             self.next_hello = now + self.settings.hello_period;
-            // With a key, station time first: signed stamps need it.
             let body = match self.auth.as_mut() {
                 Some(auth) if !auth.synced() => Body::TimeRequest(auth.time_request()),
                 _ => Body::Hello(self.hello()),
             };
             outgoing.push(self.envelope(mech_proto::ROUTER, body, now));
         }
+    }
 
+    /// The failsafe's verdict for this period: whether the robot may drive.
+    /// Counts trips and idles the controller when it may not.
+    fn judge_failsafe(&mut self, now: Duration) -> bool {
         let mission_running = self.mission_running();
         let state = self.failsafe_state(now);
         let drive = self.failsafe.may_drive(state, mission_running);
@@ -470,51 +496,45 @@ impl Agent {
             self.controller.idle();
         }
         self.last_state = state;
+        drive
+    }
 
+    /// This period's actuator outputs: the controller's, or zeros when the
+    /// robot may not drive or lacks the position its mode needs.
+    fn control(&mut self, drive: bool, now: Duration) {
         self.outputs.clear();
-        if drive {
-            let needs_position = matches!(
-                self.controller.mode(),
-                Mode::VelocityHeading(_) | Mode::Waypoints
-            );
-            match (self.estimate, needs_position) {
-                (None, true) => self
-                    .outputs
-                    .resize(self.controller.platform().motors(), 0.0),
-                (estimate, _) => {
-                    let pose = estimate.map(|e| e.pose).unwrap_or_default();
-                    let mission = self
-                        .missions
-                        .get_mut(&self.route.channel)
-                        .filter(|m| !m.paused);
-                    let out = self.controller.update(&pose, now, mission);
-                    self.outputs.extend_from_slice(out);
-                }
-            }
-        } else {
-            self.outputs
-                .resize(self.controller.platform().motors(), 0.0);
+        let motors = self.controller.platform().motors();
+        let needs_position = matches!(
+            self.controller.mode(),
+            Mode::VelocityHeading(_) | Mode::Waypoints
+        );
+        if !drive || (needs_position && self.estimate.is_none()) {
+            self.outputs.resize(motors, 0.0);
+            return;
         }
+        let pose = self.estimate.map(|e| e.pose).unwrap_or_default();
+        let mission = self
+            .missions
+            .get_mut(&self.route.channel)
+            .filter(|m| !m.paused);
+        let out = self.controller.update(&pose, now, mission);
+        self.outputs.extend_from_slice(out);
+    }
 
-        if self.registered {
-            if now >= self.next_heartbeat {
-                self.next_heartbeat = now + self.settings.hello_period;
-                let hb = Body::Heartbeat(Heartbeat {
-                    uptime_ms: now.as_millis() as u64,
-                });
-                outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
-            }
-            if now >= self.next_telemetry {
-                // Stay on the grid so the rate does not drift with jitter.
-                self.next_telemetry =
-                    (self.next_telemetry + self.settings.telemetry_period).max(now);
-                let t = Body::Telemetry(self.telemetry(now));
-                outgoing.push(self.envelope(mech_proto::ROUTER, t, now));
-            }
+    /// The heartbeat and telemetry that are due.
+    fn report(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
+        if now >= self.next_heartbeat {
+            self.next_heartbeat = now + self.settings.hello_period;
+            let hb = Body::Heartbeat(Heartbeat {
+                uptime_ms: now.as_millis() as u64,
+            });
+            outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
         }
-        Tick {
-            outputs: self.outputs.clone(),
-            outgoing,
+        if now >= self.next_telemetry {
+            // Stay on the grid so the rate does not drift with jitter.
+            self.next_telemetry = (self.next_telemetry + self.settings.telemetry_period).max(now);
+            let t = Body::Telemetry(self.telemetry(now));
+            outgoing.push(self.envelope(mech_proto::ROUTER, t, now));
         }
     }
 

@@ -405,6 +405,20 @@ impl Keyring {
         now_us: u64,
         fresh: bool,
     ) -> Result<Verified<'_>, Rejection> {
+        let tag = self.check_tag(region, tag, sender)?;
+        if fresh {
+            self.check_fresh(&tag, sender, now_us)?;
+        }
+        if self.by_name.get(sender) != Some(&tag.key_id) {
+            self.by_name.insert(sender.to_string(), tag.key_id);
+        }
+        let identity = &self.by_id[&tag.key_id];
+        Ok(Verified { identity, tag })
+    }
+
+    /// A tag of a listed key, made by a peer (not the router), that checks
+    /// over `region`, from the key's own name.
+    fn check_tag(&self, region: &[u8], tag: Option<Tag>, sender: &str) -> Result<Tag, Rejection> {
         let reject = |e: AuthError, detail: String| Rejection {
             reason: reason_of(e),
             detail,
@@ -447,38 +461,35 @@ impl Keyring {
                 ),
             });
         }
-        if fresh {
-            let id = (tag.key_id, sender.to_string(), tag.link);
-            match self.streams.get_mut(&id) {
-                Some(stream) => stream.accept(tag.stamp_us).map_err(|e| {
-                    reject(
-                        e,
-                        format!(
-                            "{sender:?} stamp {} is not newer than {} (replay?)",
-                            tag.stamp_us,
-                            stream.last_us()
-                        ),
-                    )
-                })?,
-                None => {
-                    if !self.freshness.admits(tag.stamp_us, now_us) {
-                        return Err(reject(
-                            AuthError::Replay,
-                            format!(
-                                "{sender:?} stamp is {:.1} s from the station's clock (replay, or its clock is off: ask the router for the time)",
-                                (tag.stamp_us as f64 - now_us as f64) / 1e6
-                            ),
-                        ));
-                    }
-                    self.streams.insert(id, Stream::starting_at(tag.stamp_us));
-                }
-            }
+        Ok(tag)
+    }
+
+    /// The tag's stamp is newer than its stream's last (recorded), or
+    /// starts a stream within the window of the clock.
+    fn check_fresh(&mut self, tag: &Tag, sender: &str, now_us: u64) -> Result<(), Rejection> {
+        let replay = |detail: String| Rejection {
+            reason: RejectReason::Replay,
+            detail,
+        };
+        let id = (tag.key_id, sender.to_string(), tag.link);
+        if let Some(stream) = self.streams.get_mut(&id) {
+            let last = stream.last_us();
+            return stream.accept(tag.stamp_us).map_err(|_| {
+                replay(format!(
+                    "{sender:?} stamp {} is not newer than {last} (replay?)",
+                    tag.stamp_us
+                ))
+            });
         }
-        if self.by_name.get(sender) != Some(&tag.key_id) {
-            self.by_name.insert(sender.to_string(), tag.key_id);
+        if !self.freshness.admits(tag.stamp_us, now_us) {
+            return Err(replay(format!(
+                "{sender:?} stamp is {:.1} s from the station's clock (replay, or its clock \
+                 is off: ask the router for the time)",
+                (tag.stamp_us as f64 - now_us as f64) / 1e6
+            )));
         }
-        let identity = &self.by_id[&tag.key_id];
-        Ok(Verified { identity, tag })
+        self.streams.insert(id, Stream::starting_at(tag.stamp_us));
+        Ok(())
     }
 }
 
