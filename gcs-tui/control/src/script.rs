@@ -44,9 +44,7 @@ impl ScriptOutcome {
 pub type Sink = Arc<Mutex<Box<dyn Write + Send>>>;
 
 fn emit(sink: &Sink, value: &Value) {
-    let mut w = sink
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut w = mech_core::sync::lock(sink);
     // Output is best effort: a closed stdout must not stop the robots' script.
     let _ = writeln!(w, "{value}");
     let _ = w.flush();
