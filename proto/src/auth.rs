@@ -21,10 +21,10 @@
 //!   sender's links (UDP, a radio...) so each link is its own stream;
 //! - `stamp_us` is the sender's station time in microseconds since the Unix
 //!   epoch, strictly increasing on each stream (key, sender, link). A
-//!   receiver accepts a stamp only if it is newer than the last one it
-//!   accepted on that stream ([`Stream`]); a stream it has no record of is
-//!   accepted only if the stamp is within a window of its own clock and not
-//!   from before it started ([`Freshness`]). A robot without a real-time
+//!   receiver accepts each stamp once, and only if it is not far behind the
+//!   newest it accepted on that stream ([`Stream`]); a stream it has no
+//!   record of is accepted only if the stamp is within a window of its own
+//!   clock and not from before it started ([`Freshness`]). A robot without a real-time
 //!   clock asks the router for station time first (`TimeRequest` with a
 //!   random nonce; the router's signed `Time` answer echoes it).
 //!
@@ -210,31 +210,65 @@ impl AuthError {
     }
 }
 
-/// The last stamp accepted on one stream.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Messages a stream may deliver out of order: a stamp older than the
+/// newest is still accepted if it is among the last this many and not a
+/// repeat (the anti-replay window of IPsec and DTLS, over stamps).
+pub const REORDER_WINDOW: usize = 64;
+
+/// How much older than the newest stamp a late message may be, µs.
+pub const REORDER_SPAN_US: u64 = 1_000_000;
+
+/// What a receiver remembers of one stream: where it started, the newest
+/// stamp, and the stamps accepted most recently. A stamp is accepted once:
+/// never a repeat, never from before the stream started, never more than
+/// [`REORDER_WINDOW`] messages or [`REORDER_SPAN_US`] behind the newest. So
+/// a captured message replayed later is refused, while a datagram the
+/// network (or the router's own parallel paths) delivered a little late is
+/// not lost.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Stream {
-    last_us: u64,
+    start_us: u64,
+    newest_us: u64,
+    recent: [u64; REORDER_WINDOW],
+    len: usize,
 }
 
 impl Stream {
     /// A stream whose first accepted stamp was `stamp_us`.
     pub fn starting_at(stamp_us: u64) -> Stream {
-        Stream { last_us: stamp_us }
+        let mut recent = [0; REORDER_WINDOW];
+        recent[0] = stamp_us;
+        Stream {
+            start_us: stamp_us,
+            newest_us: stamp_us,
+            recent,
+            len: 1,
+        }
     }
 
-    /// Accepts `stamp_us` only if it is newer than every stamp accepted so
-    /// far: a replayed or duplicated message (and one overtaken by a newer
-    /// one) is refused.
+    /// Accepts `stamp_us` if it is new to this stream and recent enough.
     pub fn accept(&mut self, stamp_us: u64) -> Result<(), AuthError> {
-        if stamp_us <= self.last_us {
+        let recent = &self.recent[..self.len];
+        let oldest = recent.iter().copied().min().unwrap_or(self.start_us);
+        let too_old = stamp_us < self.start_us
+            || stamp_us.saturating_add(REORDER_SPAN_US) < self.newest_us
+            || (self.len == REORDER_WINDOW && stamp_us <= oldest);
+        if too_old || recent.contains(&stamp_us) {
             return Err(AuthError::Replay);
         }
-        self.last_us = stamp_us;
+        if self.len < REORDER_WINDOW {
+            self.recent[self.len] = stamp_us;
+            self.len += 1;
+        } else if let Some(slot) = self.recent.iter_mut().find(|s| **s == oldest) {
+            *slot = stamp_us;
+        }
+        self.newest_us = self.newest_us.max(stamp_us);
         Ok(())
     }
 
+    /// The newest stamp accepted.
     pub fn last_us(&self) -> u64 {
-        self.last_us
+        self.newest_us
     }
 }
 
@@ -418,12 +452,22 @@ mod tests {
     }
 
     #[test]
-    fn streams_take_only_newer_stamps() {
+    fn streams_take_each_stamp_once_and_tolerate_a_little_reordering() {
         let mut s = Stream::starting_at(100);
-        assert_eq!(s.accept(100), Err(AuthError::Replay));
-        assert_eq!(s.accept(99), Err(AuthError::Replay));
-        assert_eq!(s.accept(101), Ok(()));
-        assert_eq!(s.accept(101), Err(AuthError::Replay));
+        assert_eq!(s.accept(100), Err(AuthError::Replay), "repeat");
+        assert_eq!(s.accept(99), Err(AuthError::Replay), "before the start");
+        assert_eq!(s.accept(105), Ok(()));
+        assert_eq!(s.accept(103), Ok(()), "late, but new");
+        assert_eq!(s.accept(103), Err(AuthError::Replay), "repeat");
+        assert_eq!(s.last_us(), 105);
+        // More than a second behind the newest: refused.
+        assert_eq!(s.accept(2_000_105), Ok(()));
+        assert_eq!(s.accept(1_000_104), Err(AuthError::Replay));
+        // More than the window of messages behind: refused.
+        for i in 1..=REORDER_WINDOW as u64 {
+            assert_eq!(s.accept(3_000_000 + i), Ok(()));
+        }
+        assert_eq!(s.accept(3_000_000), Err(AuthError::Replay));
         let f = Freshness {
             window_us: 10,
             not_before_us: 50,
