@@ -11,6 +11,7 @@
 //! publishers ([`Publisher`]) go through exactly the same decision code as
 //! UDP and TCP peers.
 
+mod batch;
 mod bus;
 mod config;
 mod net;
@@ -37,8 +38,11 @@ use crate::auth::{Identity, Keyring, Security};
 use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};
 use crate::event::{Event, EventSink};
 use crate::sync::lock;
+use batch::{RecvBatch, SendBatch};
 use bus::EventBus;
+use std::os::fd::AsRawFd;
 use tables::{Outbox, Peer, Tables};
+use tokio::io::Interest;
 
 /// Why a router call failed.
 #[derive(Debug, thiserror::Error)]
@@ -62,17 +66,14 @@ pub enum RouterError {
 struct Shared {
     tables: Mutex<Tables>,
     bus: EventBus,
+    /// The socket that the timers, TCP peers and in-process publishers send
+    /// from (the first of the UDP workers' group; every one has the same
+    /// address).
     udp: Arc<UdpSocket>,
     udp_addr: SocketAddr,
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
     tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
-    /// Held by a UDP worker from taking a datagram off the socket until the
-    /// tables have decided on it, so datagrams are decided in the order they
-    /// arrived whatever the number of workers: a command sent before a route
-    /// change is never judged by the new route because another worker ran
-    /// first. Only the sends run in parallel.
-    udp_order: Mutex<()>,
     next_conn: AtomicU64,
     subscriber_queue: usize,
     /// Set once by [`Router::shutdown`]: every task watches it and stops,
@@ -164,17 +165,109 @@ impl Shared {
                     lock(&self.tables).count_send_failure(false);
                 }
             }
-            Peer::Tcp(conn) => {
-                let tx = lock(&self.tcp_peers).get(&conn).cloned();
-                let Some(tx) = tx else { return };
-                let mut frame = Vec::with_capacity(bytes.len() + 4);
-                frame.extend_from_slice(&(bytes.len() as u32).to_be_bytes());
-                frame.extend_from_slice(bytes);
-                if tx.try_send(frame).is_err() {
-                    lock(&self.tables).count_send_failure(true);
+            other => self.send_other(other, bytes),
+        }
+    }
+
+    /// Sends to a peer that is not a UDP address: a TCP peer gets a
+    /// length-prefixed frame through its bounded queue (a full queue drops
+    /// and counts, never waits); in-process publishers get nothing.
+    fn send_other(&self, peer: Peer, bytes: &[u8]) {
+        let Peer::Tcp(conn) = peer else { return };
+        let tx = lock(&self.tcp_peers).get(&conn).cloned();
+        let Some(tx) = tx else { return };
+        let mut frame = Vec::with_capacity(bytes.len() + 4);
+        frame.extend_from_slice(&(bytes.len() as u32).to_be_bytes());
+        frame.extend_from_slice(bytes);
+        if tx.try_send(frame).is_err() {
+            lock(&self.tables).count_send_failure(true);
+        }
+    }
+
+    /// Decides a batch of received datagrams under one hold of the tables'
+    /// lock, in the order they arrived, emitting their events in that
+    /// order; what to send is left in `decided`.
+    fn decide_batch(&self, batch: &RecvBatch, n: usize, decided: &mut Decided) {
+        decided.clear();
+        if self.stopped() {
+            return;
+        }
+        let now = Instant::now();
+        let mut tables = lock(&self.tables);
+        for i in 0..n {
+            let (bytes, from) = batch.datagram(i);
+            tables.handle(
+                bytes,
+                Peer::Udp(from),
+                now,
+                &mut decided.out,
+                &mut decided.events,
+            );
+            for peer in decided.out.raw.drain(..) {
+                decided.sends.push((peer, Payload::Received(i)));
+            }
+            for (peer, bytes) in decided.out.owned.drain(..) {
+                decided
+                    .sends
+                    .push((peer, Payload::Owned(decided.owned.len())));
+                decided.owned.push(bytes);
+            }
+            for e in decided.events.drain(..) {
+                self.bus.emit(e);
+            }
+        }
+    }
+
+    /// Sends what a batch decided, in order: UDP datagrams from `socket` in
+    /// batches (waiting for room when its buffer is full, never dropping or
+    /// reordering), frames to TCP peers through their queues.
+    async fn send_decided(
+        &self,
+        socket: &UdpSocket,
+        sender: &mut SendBatch,
+        batch: &RecvBatch,
+        decided: &mut Decided,
+    ) {
+        if decided.sends.is_empty() || self.stopped() {
+            return;
+        }
+        let bytes = |p: &Payload| match *p {
+            Payload::Received(i) => batch.datagram(i).0,
+            Payload::Owned(i) => decided.owned[i].as_slice(),
+        };
+        let mut udp: Vec<(SocketAddr, &[u8])> = Vec::with_capacity(decided.sends.len());
+        for (peer, payload) in &decided.sends {
+            match peer {
+                Peer::Udp(addr) => udp.push((*addr, bytes(payload))),
+                other => self.send_other(*other, bytes(payload)),
+            }
+        }
+        let mut from = 0;
+        while from < udp.len() {
+            let done = socket.try_io(Interest::WRITABLE, || {
+                let sent = sender.send(socket.as_raw_fd(), &udp[from..]);
+                if sent.sent + sent.failed == 0 {
+                    Err(std::io::ErrorKind::WouldBlock.into())
+                } else {
+                    Ok(sent)
+                }
+            });
+            match done {
+                Ok(sent) => {
+                    if sent.failed > 0 {
+                        let mut tables = lock(&self.tables);
+                        for _ in 0..sent.failed {
+                            tables.count_send_failure(false);
+                        }
+                    }
+                    from += sent.sent + sent.failed;
+                }
+                Err(_) => {
+                    if socket.writable().await.is_err() {
+                        return;
+                    }
                 }
             }
-            Peer::Local => {}
         }
     }
 
@@ -198,6 +291,32 @@ impl Shared {
     }
 }
 
+/// What a UDP worker's batch decided to send: each target with the bytes it
+/// gets, either a received datagram passed on unchanged or a message the
+/// tables made. Kept between batches so its allocations are reused.
+#[derive(Debug, Default)]
+pub(super) struct Decided {
+    sends: Vec<(Peer, Payload)>,
+    owned: Vec<Vec<u8>>,
+    out: Outbox,
+    events: Vec<Event>,
+}
+
+impl Decided {
+    fn clear(&mut self) {
+        self.sends.clear();
+        self.owned.clear();
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Payload {
+    /// Datagram `i` of the batch, as received.
+    Received(usize),
+    /// `Decided::owned[i]`.
+    Owned(usize),
+}
+
 /// A running router: its tasks and a handle to it. Dropping it without
 /// [`Router::shutdown`] leaves the tasks running until the runtime stops.
 #[derive(Debug)]
@@ -214,8 +333,8 @@ impl Router {
         auth: Option<Keyring>,
         sink: Arc<dyn EventSink>,
     ) -> Result<Router, RouterError> {
-        let (udp, tcp) = bind(&config).await?;
-        let udp_addr = local_addr("UDP", config.udp, udp.local_addr())?;
+        let (mut udp, tcp) = bind(&config).await?;
+        let udp_addr = local_addr("UDP", config.udp, udp[0].local_addr())?;
         let tcp_addr = match (&tcp, config.tcp) {
             (Some(l), Some(asked)) => Some(local_addr("TCP", asked, l.local_addr())?),
             _ => None,
@@ -227,11 +346,10 @@ impl Router {
             subscriber_queue: config.subscriber_queue,
             tables: Mutex::new(Tables::new(config, auth)),
             bus: EventBus::new(Instant::now(), sink),
-            udp: Arc::new(udp),
+            udp: udp[0].clone(),
             udp_addr,
             tcp_addr,
             tcp_peers: Mutex::new(HashMap::new()),
-            udp_order: Mutex::new(()),
             next_conn: AtomicU64::new(1),
             stop: watch::Sender::new(false),
             name,
@@ -242,8 +360,9 @@ impl Router {
             tcp: tcp_addr,
         });
         let mut tasks = Vec::new();
-        for _ in 0..workers {
-            tasks.push(tokio::spawn(net::udp_worker(shared.clone())));
+        debug_assert_eq!(udp.len(), workers);
+        for socket in udp.drain(..) {
+            tasks.push(tokio::spawn(net::udp_worker(shared.clone(), socket)));
         }
         tasks.push(tokio::spawn(net::timers(shared.clone(), tick)));
         if let Some(listener) = tcp {
@@ -278,15 +397,24 @@ impl Router {
     }
 }
 
-/// Binds the configured endpoints.
+/// Binds the configured endpoints: one UDP socket per worker, all on the
+/// same address (`SO_REUSEPORT`), and the TCP listener.
 async fn bind(
     config: &RouterConfig,
-) -> Result<(UdpSocket, Option<tokio::net::TcpListener>), RouterError> {
-    let udp = bind_udp(config.udp, config.socket_buffer).map_err(|source| RouterError::Bind {
+) -> Result<(Vec<Arc<UdpSocket>>, Option<tokio::net::TcpListener>), RouterError> {
+    let bind_err = |addr, source| RouterError::Bind {
         what: "UDP",
-        addr: config.udp,
+        addr,
         source,
-    })?;
+    };
+    let first = bind_udp(config.udp, config.socket_buffer).map_err(|e| bind_err(config.udp, e))?;
+    // Port 0 picks a port once; the rest of the group joins that one.
+    let addr = first.local_addr().map_err(|e| bind_err(config.udp, e))?;
+    let mut udp = vec![Arc::new(first)];
+    for _ in 1..config.udp_workers.max(1) {
+        let s = bind_udp(addr, config.socket_buffer).map_err(|e| bind_err(addr, e))?;
+        udp.push(Arc::new(s));
+    }
     let tcp = match config.tcp {
         Some(addr) => Some(
             tokio::net::TcpListener::bind(addr)
@@ -315,11 +443,14 @@ fn local_addr(
     })
 }
 
-/// Binds the router's UDP socket with large kernel buffers (best effort: a
-/// smaller system limit is logged, not fatal).
+/// Binds one of the router's UDP sockets, with `SO_REUSEPORT` (the kernel
+/// spreads senders over the group, each sender always to the same socket)
+/// and large kernel buffers (best effort: a smaller system limit is logged,
+/// not fatal).
 fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
     use socket2::{Domain, Protocol, Socket, Type};
     let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
+    socket.set_reuse_port(true)?;
     if let Err(e) = socket.set_recv_buffer_size(buffer) {
         tracing::warn!(error = %e, buffer, "cannot enlarge the UDP receive buffer");
     }

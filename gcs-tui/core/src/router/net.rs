@@ -1,4 +1,4 @@
-//! The router's tasks: UDP receive loops, the TCP acceptor with a reader and
+//! The router's tasks: UDP workers, the TCP acceptor with a reader and
 //! a writer task per peer, and the timer task (heartbeats, link states,
 //! retries). Each hands bytes to [`super::Shared::dispatch`]. Every task
 //! watches the router's stop signal and ends on it; the acceptor waits for
@@ -16,28 +16,39 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tracing::{debug, info, warn};
 
-use super::Shared;
+use std::os::fd::AsRawFd;
+
+use tokio::io::Interest;
+use tokio::net::UdpSocket;
+
+use super::batch::{BATCH, RecvBatch, SendBatch};
 use super::tables::{Outbox, Peer};
+use super::{Decided, Shared};
 use crate::sync::lock;
 
-/// Most datagrams handled per wake-up before the task lets others run.
-const RECEIVE_BATCH: usize = 64;
+/// Rounds of [`BATCH`] datagrams a worker handles per wake-up before it
+/// lets the timers and TCP peers run.
+const ROUNDS: usize = 8;
 
-/// Receives datagrams and routes them. After each readiness notification it
-/// drains the socket with non-blocking receives (up to [`RECEIVE_BATCH`]),
-/// so under load a datagram costs one receive and one send syscall and no
-/// trip through the scheduler or epoll. Several workers may share the
-/// socket: each takes a datagram and has it decided under
-/// `Shared::udp_order`, so decisions follow arrival order; their sends
-/// overlap.
-pub(super) async fn udp_worker(shared: Arc<Shared>) {
-    let mut buf = vec![0u8; 65_536];
-    let mut out = Outbox::default();
-    let mut events = Vec::new();
+/// One UDP worker: owns one socket of the router's `SO_REUSEPORT` group, so
+/// the kernel hands it every datagram of the senders hashed to it. A
+/// sender's datagrams are therefore received, decided and sent on by one
+/// worker, in the order they arrived, whatever the number of workers, and
+/// workers never contend for a socket.
+///
+/// On each wake-up it takes the waiting datagrams in batches (one
+/// `recvmmsg` each), decides a batch under one hold of the tables' lock,
+/// and sends what the batch decided (one `sendmmsg` per batch). At low
+/// rates a batch is the one datagram that woke it: nothing waits to fill
+/// one.
+pub(super) async fn udp_worker(shared: Arc<Shared>, socket: Arc<UdpSocket>) {
+    let mut received = RecvBatch::new();
+    let mut sender = SendBatch::new();
+    let mut decided = Decided::default();
     let mut stop = shared.stop.subscribe();
     loop {
         let ready = tokio::select! {
-            r = shared.udp.readable() => r,
+            r = socket.readable() => r,
             _ = stop.wait_for(|s| *s) => return,
         };
         if let Err(e) = ready {
@@ -45,30 +56,30 @@ pub(super) async fn udp_worker(shared: Arc<Shared>) {
             tokio::task::yield_now().await;
             continue;
         }
-        let mut handled = 0;
-        while handled < RECEIVE_BATCH {
-            handled += 1;
-            let received = {
-                let _order = lock(&shared.udp_order);
-                shared.udp.try_recv_from(&mut buf).map(|(n, addr)| {
-                    let from = Peer::Udp(addr);
-                    shared.decide(&buf[..n], from, Instant::now(), &mut out, &mut events);
-                    n
-                })
-            };
-            match received {
-                Ok(n) => shared.flush(&buf[..n], &mut out).await,
+        let mut full = 0;
+        for _ in 0..ROUNDS {
+            let n = match socket.try_io(Interest::READABLE, || received.recv(socket.as_raw_fd())) {
+                Ok(n) => n,
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
                 Err(e) => {
-                    // ICMP errors from earlier sends surface here on some
-                    // systems; they concern one peer, never the router.
+                    // ICMP errors from earlier sends surface here; they
+                    // concern one peer, never the router.
                     debug!(error = %e, "UDP receive error");
-                    break;
+                    continue;
                 }
+            };
+            shared.decide_batch(&received, n, &mut decided);
+            shared
+                .send_decided(&socket, &mut sender, &received, &mut decided)
+                .await;
+            if n < BATCH {
+                break;
             }
+            full += 1;
         }
-        if handled == RECEIVE_BATCH {
-            // A full batch: let the timers and TCP peers run before the next.
+        if full == ROUNDS {
+            // Still busy after several full batches: let the timers and TCP
+            // peers run before the next (a quiet socket costs no yield).
             tokio::task::yield_now().await;
         }
     }

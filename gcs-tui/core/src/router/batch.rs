@@ -1,0 +1,188 @@
+//! Datagrams in batches: one `recvmmsg(2)` takes up to [`BATCH`] waiting
+//! datagrams off a socket and one `sendmmsg(2)` sends up to [`BATCH`], so
+//! under load a datagram costs a fraction of a system call. Nothing waits to
+//! fill a batch: at low rates a batch is the one datagram that woke the
+//! worker, sent on at once.
+//!
+//! The system calls go through `nix`'s safe wrappers; this module owns the
+//! receive buffers, so the hot path allocates per batch, never per
+//! datagram (the wrappers' headers are made per call: they hold raw
+//! pointers, and a worker's future must stay `Send`).
+
+use std::io::{IoSlice, IoSliceMut};
+use std::net::{SocketAddr, SocketAddrV4, SocketAddrV6};
+use std::os::fd::RawFd;
+
+use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, sendmmsg};
+
+/// Most datagrams moved by one system call.
+pub(super) const BATCH: usize = 32;
+
+/// Receive buffers and the datagrams the last [`RecvBatch::recv`] took.
+pub(super) struct RecvBatch {
+    /// One buffer per datagram, one byte longer than the largest message,
+    /// so an oversized datagram shows as such instead of as a truncated one.
+    bufs: Vec<Vec<u8>>,
+    /// Length and source of each datagram received.
+    got: Vec<(usize, SocketAddr)>,
+}
+
+impl std::fmt::Debug for RecvBatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RecvBatch")
+            .field("got", &self.got.len())
+            .finish()
+    }
+}
+
+impl RecvBatch {
+    pub(super) fn new() -> RecvBatch {
+        RecvBatch {
+            bufs: (0..BATCH)
+                .map(|_| vec![0; mech_proto::MAX_MESSAGE_LEN + 1])
+                .collect(),
+            got: Vec::with_capacity(BATCH),
+        }
+    }
+
+    /// Takes the datagrams waiting on `fd` (at most [`BATCH`]) without
+    /// blocking; `WouldBlock` when there are none.
+    pub(super) fn recv(&mut self, fd: RawFd) -> std::io::Result<usize> {
+        self.got.clear();
+        let mut iovs: Vec<[IoSliceMut<'_>; 1]> =
+            self.bufs.iter_mut().map(|b| [IoSliceMut::new(b)]).collect();
+        let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(BATCH, None);
+        let results = recvmmsg(
+            fd,
+            &mut headers,
+            iovs.iter_mut(),
+            MsgFlags::MSG_DONTWAIT,
+            None,
+        )
+        .map_err(std::io::Error::from)?;
+        for m in results {
+            // A datagram without an IP source cannot be answered or judged.
+            if let Some(from) = m.address.as_ref().and_then(std_addr) {
+                self.got.push((m.bytes, from));
+            } else {
+                self.got.push((0, SocketAddr::from(([0, 0, 0, 0], 0))));
+            }
+        }
+        Ok(self.got.len())
+    }
+
+    /// Datagram `i` of the last receive: its bytes and source.
+    pub(super) fn datagram(&self, i: usize) -> (&[u8], SocketAddr) {
+        let (len, from) = self.got[i];
+        (&self.bufs[i][..len], from)
+    }
+}
+
+fn std_addr(a: &SockaddrStorage) -> Option<SocketAddr> {
+    if let Some(v4) = a.as_sockaddr_in() {
+        return Some(SocketAddr::V4(SocketAddrV4::from(*v4)));
+    }
+    a.as_sockaddr_in6()
+        .map(|v6| SocketAddr::V6(SocketAddrV6::from(*v6)))
+}
+
+/// Sends batches with `sendmmsg`.
+#[derive(Debug, Default)]
+pub(super) struct SendBatch;
+
+/// How sending a batch went.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Sent {
+    /// Datagrams handed to the kernel.
+    pub(super) sent: usize,
+    /// Datagrams the kernel refused (an unreachable peer, say): counted and
+    /// skipped, never retried.
+    pub(super) failed: usize,
+}
+
+impl SendBatch {
+    pub(super) fn new() -> SendBatch {
+        SendBatch
+    }
+
+    /// Sends `msgs` in order from `fd`, [`BATCH`] per system call. Returns
+    /// what was sent when the socket's buffer fills (`sent + failed <
+    /// msgs.len()`): the caller waits until it is writable and sends the
+    /// rest, so nothing is reordered.
+    pub(super) fn send(&mut self, fd: RawFd, msgs: &[(SocketAddr, &[u8])]) -> Sent {
+        let mut done = Sent::default();
+        while done.sent + done.failed < msgs.len() {
+            let rest = &msgs[done.sent + done.failed..];
+            let chunk = &rest[..rest.len().min(BATCH)];
+            let iovs: Vec<[IoSlice<'_>; 1]> =
+                chunk.iter().map(|(_, b)| [IoSlice::new(b)]).collect();
+            let addrs: Vec<Option<SockaddrStorage>> = chunk
+                .iter()
+                .map(|(a, _)| Some(SockaddrStorage::from(*a)))
+                .collect();
+            let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(chunk.len(), None);
+            match sendmmsg(fd, &mut headers, &iovs, &addrs, [], MsgFlags::MSG_DONTWAIT) {
+                Ok(results) => {
+                    let n = results.count();
+                    if n == 0 {
+                        return done;
+                    }
+                    done.sent += n;
+                }
+                Err(nix::errno::Errno::EAGAIN) => return done,
+                Err(e) => {
+                    // The first message of the chunk failed (sendmmsg reports
+                    // an error only when none was sent): skip it.
+                    tracing::debug!(to = %chunk[0].0, error = %e, "UDP send failed");
+                    done.failed += 1;
+                }
+            }
+        }
+        done
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nix::sys::socket::SockaddrLike;
+    use std::os::fd::AsRawFd;
+
+    /// Whether `addr` survives the trip through the wrappers' addresses.
+    fn round_trips(addr: SocketAddr) -> bool {
+        let s = SockaddrStorage::from(addr);
+        std_addr(&s) == Some(addr) && s.len() > 0
+    }
+
+    #[test]
+    fn a_batch_goes_out_and_comes_back_in_order() {
+        let rx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let tx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let to = rx.local_addr().unwrap();
+        let payloads: Vec<Vec<u8>> = (0..70u8).map(|i| vec![i; 1 + i as usize]).collect();
+        let msgs: Vec<(SocketAddr, &[u8])> = payloads.iter().map(|p| (to, p.as_slice())).collect();
+        let sent = SendBatch::new().send(tx.as_raw_fd(), &msgs);
+        assert_eq!(
+            sent,
+            Sent {
+                sent: 70,
+                failed: 0
+            }
+        );
+        let mut batch = RecvBatch::new();
+        let mut got = Vec::new();
+        while got.len() < 70 {
+            let n = batch.recv(rx.as_raw_fd()).unwrap();
+            assert!(n <= BATCH);
+            for i in 0..n {
+                let (bytes, from) = batch.datagram(i);
+                assert_eq!(from, tx.local_addr().unwrap());
+                got.push(bytes.to_vec());
+            }
+        }
+        assert_eq!(got, payloads);
+        let e = batch.recv(rx.as_raw_fd()).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock);
+        assert!(round_trips("[::1]:7400".parse().unwrap()));
+    }
+}
