@@ -1,10 +1,13 @@
-//! Router benchmarks on loopback with real sockets (`cargo bench -p mech-gcs
+//! Router benchmarks on loopback with real sockets (`cargo bench -p mech-core
 //! --bench router`). Prints numbers; asserts nothing about time.
 //!
 //! (a) latency the router adds (controller -> router -> agent) against a
 //!     direct controller -> agent baseline in the same run, p50/p99/p99.9;
 //! (b) sustained forwarded messages per second with zero loss (a bounded
 //!     number of messages in flight, so kernel buffers never overflow);
+//!     (a) and (b) run twice: unauthenticated, then with every message
+//!     signed (the controller signs each command, the router checks it and
+//!     signs it again for the robot);
 //! (c) switch latency: route change to the first forwarded message of the
 //!     new channel;
 //! (d) telemetry fan-out: 1,000 robots at 50 Hz into the router, fleet model
@@ -18,11 +21,44 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use mech_core::Event;
+use mech_core::auth::{AuthMode, KeyEntry, KeyFile, Role};
 use mech_core::{CoreConfig, Gcs};
+use mech_proto::auth::{Key, Stamper};
 use mech_proto::{
     Body, Command, CommandKind, Computation, ControlMode, Envelope, FailsafeState, Header, Health,
     Hello, Pose, RouteAck, Telemetry, Twist, Velocity,
 };
+
+/// Signs what a bench peer sends, when the run authenticates.
+struct Signer {
+    key: Key,
+    stamper: Stamper,
+}
+
+/// `bytes` as sent: signed with a fresh stamp by `signer`, if any.
+fn sealed(signer: &mut Option<Signer>, mut bytes: Vec<u8>) -> Vec<u8> {
+    if let Some(s) = signer {
+        let stamp = s.stamper.next(mech_proto::unix_micros());
+        s.key.seal(&mut bytes, 0, stamp).unwrap();
+    }
+    bytes
+}
+
+/// A controller's command stream: the same Twist, signed afresh each time
+/// when the run authenticates (a replayed tag is refused).
+struct Commands {
+    signer: Option<Signer>,
+    unsigned: Vec<u8>,
+}
+
+impl Commands {
+    fn next(&mut self) -> std::borrow::Cow<'_, [u8]> {
+        match self.signer {
+            None => std::borrow::Cow::Borrowed(&self.unsigned),
+            Some(_) => std::borrow::Cow::Owned(sealed(&mut self.signer, self.unsigned.clone())),
+        }
+    }
+}
 
 fn env(sender: &str, dest: &str, channel: &str, seq: u32, body: Body) -> Vec<u8> {
     let header = Header {
@@ -106,7 +142,7 @@ fn recv_command(sock: &UdpSocket, buf: &mut [u8]) -> Option<(u32, String)> {
 }
 
 /// A blocking agent: registers, acknowledges the Welcome route.
-fn agent(name: &str, router: SocketAddr) -> UdpSocket {
+fn agent(name: &str, router: SocketAddr, signer: &mut Option<Signer>) -> UdpSocket {
     // Not connected: the latency baseline sends to it directly. A large
     // receive buffer, so the throughput run's window fits in it.
     let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::DGRAM, None).unwrap();
@@ -115,7 +151,7 @@ fn agent(name: &str, router: SocketAddr) -> UdpSocket {
         .unwrap();
     let sock: UdpSocket = sock.into();
     sock.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
-    sock.send_to(&hello(name), router).unwrap();
+    sock.send_to(&sealed(signer, hello(name)), router).unwrap();
     let mut buf = [0u8; 2048];
     loop {
         let n = sock.recv(&mut buf).unwrap();
@@ -129,14 +165,19 @@ fn agent(name: &str, router: SocketAddr) -> UdpSocket {
                 channel: w.route.channel,
                 epoch: w.route.epoch,
             };
-            sock.send_to(&env(name, "router", "", 0, Body::RouteAck(ack)), router)
-                .unwrap();
+            let ack = sealed(signer, env(name, "router", "", 0, Body::RouteAck(ack)));
+            sock.send_to(&ack, router).unwrap();
             return sock;
         }
     }
 }
 
-fn acknowledge_routes(sock: &UdpSocket, name: &str, router: SocketAddr) {
+fn acknowledge_routes(
+    sock: &UdpSocket,
+    name: &str,
+    router: SocketAddr,
+    signer: &mut Option<Signer>,
+) {
     let mut buf = [0u8; 2048];
     let _ = sock.set_read_timeout(Some(Duration::from_millis(50)));
     while let Ok(n) = sock.recv(&mut buf) {
@@ -150,8 +191,8 @@ fn acknowledge_routes(sock: &UdpSocket, name: &str, router: SocketAddr) {
                 channel: r.channel,
                 epoch: r.epoch,
             };
-            sock.send_to(&env(name, "router", "", 0, Body::RouteAck(ack)), router)
-                .unwrap();
+            let ack = sealed(signer, env(name, "router", "", 0, Body::RouteAck(ack)));
+            sock.send_to(&ack, router).unwrap();
         }
     }
     let _ = sock.set_read_timeout(Some(Duration::from_secs(2)));
@@ -185,7 +226,8 @@ fn thread_cpu() -> f64 {
 /// apart from the benchmark's own senders and receivers.
 const ROUTER_THREAD: &str = "mech-router";
 
-/// CPU time of every router thread together, seconds.
+/// CPU time of every router thread together (its tokio threads and its
+/// UDP worker threads), seconds.
 fn router_cpu() -> f64 {
     let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
         return 0.0;
@@ -194,7 +236,7 @@ fn router_cpu() -> f64 {
         .flatten()
         .filter(|t| {
             std::fs::read_to_string(t.path().join("comm"))
-                .is_ok_and(|c| c.trim_end() == ROUTER_THREAD)
+                .is_ok_and(|c| c.trim_end() == ROUTER_THREAD || c.starts_with("mech-udp-"))
         })
         .map(|t| stat_cpu(&std::fs::read_to_string(t.path().join("stat")).unwrap_or_default()))
         .sum()
@@ -320,7 +362,7 @@ fn offer(
     router: SocketAddr,
     robot: SocketAddr,
     counter: &CommandCounter,
-    msg: &[u8],
+    commands: &mut Commands,
     rate: f64,
     run: Duration,
 ) -> (u64, u64, f64, f64, Lost) {
@@ -333,7 +375,7 @@ fn offer(
     while t.elapsed() < run {
         let due = (t.elapsed().as_secs_f64() * rate) as u64;
         while sent < due {
-            if controller.send_to(msg, router).is_ok() {
+            if controller.send_to(&commands.next(), router).is_ok() {
                 sent += 1;
             }
         }
@@ -397,33 +439,34 @@ fn main() {
         .enable_all()
         .build()
         .unwrap();
-    let gcs = rt.block_on(Gcs::start(config())).unwrap();
-    let router = gcs.router().clone();
-    let addr = router.udp_addr();
     println!(
-        "mech-gcs router benchmark, loopback UDP, router on 2 tokio worker threads, {} UDP receive tasks, {} CPUs",
+        "mech-core router benchmark, loopback UDP, router with {} UDP worker threads and 2 tokio threads, {} CPUs",
         config().router.udp_workers,
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
-
-    // (a) latency
-    let robot = agent("robot_1", addr);
+    for authenticated in [false, true] {
+        if !phase('a') && !phase('b') {
+            break;
+        }
+        println!(
+            "== {}",
+            if authenticated {
+                "authenticated: every message signed (HMAC-SHA-256), checked and signed again"
+            } else {
+                "unauthenticated"
+            }
+        );
+        forwarding(&rt, authenticated);
+    }
+    let gcs = rt.block_on(Gcs::start(config())).unwrap();
+    let router = gcs.router().clone();
+    let addr = router.udp_addr();
+    let robot = agent("robot_1", addr, &mut None);
     rt.block_on(router.set_route("robot_1", Some("joy/0")))
         .unwrap();
-    acknowledge_routes(&robot, "robot_1", addr);
+    acknowledge_routes(&robot, "robot_1", addr, &mut None);
     let controller = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot_addr = robot.local_addr().unwrap();
     let mut buf = vec![0u8; 65_536];
-    if phase('a') {
-        let stolen = steal_jiffies();
-        latency(&controller, &robot, robot_addr, addr, &mut buf);
-        report_steal(stolen);
-    }
-    if phase('b') {
-        let stolen = steal_jiffies();
-        throughput(&router, &controller, &robot, addr);
-        report_steal(stolen);
-    }
     if phase('p') {
         let stolen = steal_jiffies();
         in_process(&rt, &router, &robot);
@@ -443,6 +486,74 @@ fn main() {
     }
 }
 
+/// (a) and (b) on a router of their own, with or without authentication.
+fn forwarding(rt: &tokio::runtime::Runtime, authenticated: bool) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config();
+    let (mut robot_signer, controller_signer) = if authenticated {
+        let mut keys = Vec::new();
+        for (role, name) in [(Role::Robot, "robot_1"), (Role::Controller, "pad")] {
+            let file = dir.path().join(format!("{name}.key"));
+            let k = KeyFile::generate(name, &file).unwrap();
+            cfg.auth.keys.push(KeyEntry {
+                role,
+                name: name.into(),
+                file,
+                channels: if role == Role::Controller {
+                    vec!["*".into()]
+                } else {
+                    vec![]
+                },
+            });
+            keys.push(Signer {
+                key: k.key,
+                stamper: Stamper::default(),
+            });
+        }
+        cfg.auth.mode = Some(AuthMode::Required);
+        let controller = keys.pop();
+        (keys.pop(), controller)
+    } else {
+        (None, None)
+    };
+    let gcs = rt.block_on(Gcs::start(cfg)).unwrap();
+    let router = gcs.router().clone();
+    let addr = router.udp_addr();
+    let robot = agent("robot_1", addr, &mut robot_signer);
+    rt.block_on(router.set_route("robot_1", Some("joy/0")))
+        .unwrap();
+    acknowledge_routes(&robot, "robot_1", addr, &mut robot_signer);
+    let controller = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot_addr = robot.local_addr().unwrap();
+    let mut buf = vec![0u8; 65_536];
+    let mut commands = Commands {
+        signer: controller_signer,
+        unsigned: command("pad", "robot_1", "joy/0", 1),
+    };
+    if phase('a') {
+        let stolen = steal_jiffies();
+        latency(
+            &controller,
+            &robot,
+            robot_addr,
+            addr,
+            &mut buf,
+            &mut commands.signer,
+        );
+        report_steal(stolen);
+    }
+    if phase('b') {
+        let stolen = steal_jiffies();
+        throughput(&router, &controller, &robot, addr, &mut commands);
+        report_steal(stolen);
+    }
+    let rejected = router.rejections().total();
+    if authenticated {
+        println!("  messages the router refused: {rejected} (must be 0)");
+    }
+    rt.block_on(gcs.shutdown());
+}
+
 /// (a) one-way latency with and without the router.
 fn latency(
     controller: &UdpSocket,
@@ -450,16 +561,18 @@ fn latency(
     robot_addr: SocketAddr,
     addr: SocketAddr,
     buf: &mut [u8],
+    signer: &mut Option<Signer>,
 ) {
     const SAMPLES: u32 = 20_000;
     let warm = 1000;
     let (mut direct, mut routed) = (Vec::new(), Vec::new());
     for i in 0..SAMPLES + warm {
-        let msg = command("pad", "robot_1", "joy/0", i);
+        let msg = sealed(signer, command("pad", "robot_1", "joy/0", i));
         let t = Instant::now();
         controller.send_to(&msg, robot_addr).unwrap();
         recv_command(robot, buf).unwrap();
         let d = t.elapsed();
+        let msg = sealed(signer, command("pad", "robot_1", "joy/0", i));
         let t = Instant::now();
         controller.send_to(&msg, addr).unwrap();
         let (seq, _) = recv_command(robot, buf).unwrap();
@@ -488,9 +601,9 @@ fn throughput(
     controller: &UdpSocket,
     robot: &UdpSocket,
     addr: SocketAddr,
+    commands: &mut Commands,
 ) {
     let counter = CommandCounter::start(robot);
-    let msg = command("pad", "robot_1", "joy/0", 1);
     const WINDOW: u64 = 1024;
     let run = Duration::from_secs(3);
     let before = router.counters();
@@ -499,7 +612,7 @@ fn throughput(
     let mut sent = 0u64;
     while t.elapsed() < run {
         if sent - counter.get() < WINDOW {
-            controller.send_to(&msg, addr).unwrap();
+            controller.send_to(&commands.next(), addr).unwrap();
             sent += 1;
         } else {
             std::thread::yield_now();
@@ -537,7 +650,7 @@ fn throughput(
             addr,
             robot.local_addr().unwrap(),
             &counter,
-            &msg,
+            commands,
             rate,
             Duration::from_secs(2),
         );

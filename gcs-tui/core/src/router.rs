@@ -20,12 +20,13 @@ mod tables;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
+use std::os::fd::{AsRawFd, RawFd};
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use mech_proto::{Body, Command, Envelope, FleetCommand, Header, Mission, RobotCommand};
-use tokio::net::UdpSocket;
+use nix::sys::socket::{MsgFlags, SockaddrStorage, sendto};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
@@ -40,9 +41,7 @@ use crate::event::{Event, EventSink};
 use crate::sync::lock;
 use batch::{RecvBatch, SendBatch};
 use bus::EventBus;
-use std::os::fd::AsRawFd;
 use tables::{Outbox, Peer, Tables};
-use tokio::io::Interest;
 
 /// Why a router call failed.
 #[derive(Debug, thiserror::Error)]
@@ -69,7 +68,7 @@ struct Shared {
     /// The socket that the timers, TCP peers and in-process publishers send
     /// from (the first of the UDP workers' group; every one has the same
     /// address).
-    udp: Arc<UdpSocket>,
+    udp: Arc<std::net::UdpSocket>,
     udp_addr: SocketAddr,
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
@@ -150,23 +149,25 @@ impl Shared {
     }
 
     async fn send(&self, peer: Peer, bytes: &[u8]) {
-        match peer {
-            Peer::Udp(addr) => {
-                // The common case: the socket has room, one syscall and no
-                // readiness future; only a full send buffer waits.
-                let sent = match self.udp.try_send_to(bytes, addr) {
-                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                        self.udp.send_to(bytes, addr).await
-                    }
-                    other => other,
-                };
-                if let Err(e) = sent {
+        let Peer::Udp(addr) = peer else {
+            return self.send_other(peer, bytes);
+        };
+        // The worker threads own blocking sockets; this path must not block
+        // a tokio thread, so it sends without waiting and, in the rare case
+        // of a full buffer, tries again after yielding.
+        let to = SockaddrStorage::from(addr);
+        let fd = self.udp.as_raw_fd();
+        for _ in 0..FULL_BUFFER_TRIES {
+            match sendto(fd, bytes, &to, MsgFlags::MSG_DONTWAIT) {
+                Ok(_) => return,
+                Err(nix::errno::Errno::EAGAIN) => tokio::task::yield_now().await,
+                Err(e) => {
                     tracing::debug!(%addr, error = %e, "UDP send failed");
-                    lock(&self.tables).count_send_failure(false);
+                    break;
                 }
             }
-            other => self.send_other(other, bytes),
         }
+        lock(&self.tables).count_send_failure(false);
     }
 
     /// Sends to a peer that is not a UDP address: a TCP peer gets a
@@ -218,12 +219,13 @@ impl Shared {
         }
     }
 
-    /// Sends what a batch decided, in order: UDP datagrams from `socket` in
-    /// batches (waiting for room when its buffer is full, never dropping or
-    /// reordering), frames to TCP peers through their queues.
-    async fn send_decided(
+    /// Sends what a batch decided, in order, from a worker's thread: UDP
+    /// datagrams from its socket `fd` in batches (waiting for room when the
+    /// socket's buffer is full: never dropped or reordered), frames to TCP
+    /// peers through their queues.
+    fn send_decided(
         &self,
-        socket: &UdpSocket,
+        fd: RawFd,
         sender: &mut SendBatch,
         batch: &RecvBatch,
         decided: &mut Decided,
@@ -242,31 +244,11 @@ impl Shared {
                 other => self.send_other(*other, bytes(payload)),
             }
         }
-        let mut from = 0;
-        while from < udp.len() {
-            let done = socket.try_io(Interest::WRITABLE, || {
-                let sent = sender.send(socket.as_raw_fd(), &udp[from..]);
-                if sent.sent + sent.failed == 0 {
-                    Err(std::io::ErrorKind::WouldBlock.into())
-                } else {
-                    Ok(sent)
-                }
-            });
-            match done {
-                Ok(sent) => {
-                    if sent.failed > 0 {
-                        let mut tables = lock(&self.tables);
-                        for _ in 0..sent.failed {
-                            tables.count_send_failure(false);
-                        }
-                    }
-                    from += sent.sent + sent.failed;
-                }
-                Err(_) => {
-                    if socket.writable().await.is_err() {
-                        return;
-                    }
-                }
+        let sent = sender.send(fd, &udp, MsgFlags::empty());
+        if sent.failed > 0 {
+            let mut tables = lock(&self.tables);
+            for _ in 0..sent.failed {
+                tables.count_send_failure(false);
             }
         }
     }
@@ -290,6 +272,10 @@ impl Shared {
         r
     }
 }
+
+/// Times a send from a tokio task retries a full socket buffer before the
+/// datagram counts as a send failure.
+const FULL_BUFFER_TRIES: usize = 1000;
 
 /// What a UDP worker's batch decided to send: each target with the bytes it
 /// gets, either a received datagram passed on unchanged or a message the
@@ -323,6 +309,9 @@ enum Payload {
 pub struct Router {
     handle: RouterHandle,
     tasks: Vec<JoinHandle<()>>,
+    /// The UDP workers' threads and their sockets (shut down for reading
+    /// to wake them when the router stops).
+    workers: Vec<(std::thread::JoinHandle<()>, Arc<std::net::UdpSocket>)>,
 }
 
 impl Router {
@@ -361,8 +350,18 @@ impl Router {
         });
         let mut tasks = Vec::new();
         debug_assert_eq!(udp.len(), workers);
-        for socket in udp.drain(..) {
-            tasks.push(tokio::spawn(net::udp_worker(shared.clone(), socket)));
+        let mut threads = Vec::new();
+        for (i, socket) in udp.drain(..).enumerate() {
+            let (s, sock) = (shared.clone(), socket.clone());
+            let thread = std::thread::Builder::new()
+                .name(format!("mech-udp-{i}"))
+                .spawn(move || net::udp_worker(s, sock))
+                .map_err(|source| RouterError::Bind {
+                    what: "UDP worker",
+                    addr: udp_addr,
+                    source,
+                })?;
+            threads.push((thread, socket));
         }
         tasks.push(tokio::spawn(net::timers(shared.clone(), tick)));
         if let Some(listener) = tcp {
@@ -371,6 +370,7 @@ impl Router {
         Ok(Router {
             handle: RouterHandle { shared },
             tasks,
+            workers: threads,
         })
     }
 
@@ -386,6 +386,17 @@ impl Router {
     pub async fn shutdown(self) {
         let shared = &self.handle.shared;
         shared.stop.send_replace(true);
+        for (thread, socket) in self.workers {
+            // Wakes the worker out of its receive at once.
+            let _ =
+                nix::sys::socket::shutdown(socket.as_raw_fd(), nix::sys::socket::Shutdown::Read);
+            if tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .is_err()
+            {
+                tracing::warn!("a UDP worker ended abnormally");
+            }
+        }
         for t in self.tasks {
             if let Err(e) = t.await {
                 tracing::warn!(error = %e, "a router task ended abnormally");
@@ -401,7 +412,13 @@ impl Router {
 /// same address (`SO_REUSEPORT`), and the TCP listener.
 async fn bind(
     config: &RouterConfig,
-) -> Result<(Vec<Arc<UdpSocket>>, Option<tokio::net::TcpListener>), RouterError> {
+) -> Result<
+    (
+        Vec<Arc<std::net::UdpSocket>>,
+        Option<tokio::net::TcpListener>,
+    ),
+    RouterError,
+> {
     let bind_err = |addr, source| RouterError::Bind {
         what: "UDP",
         addr,
@@ -447,7 +464,7 @@ fn local_addr(
 /// spreads senders over the group, each sender always to the same socket)
 /// and large kernel buffers (best effort: a smaller system limit is logged,
 /// not fatal).
-fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
+fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<std::net::UdpSocket> {
     use socket2::{Domain, Protocol, Socket, Type};
     let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
     socket.set_reuse_port(true)?;
@@ -457,9 +474,10 @@ fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<UdpSocket> {
     if let Err(e) = socket.set_send_buffer_size(buffer) {
         tracing::warn!(error = %e, buffer, "cannot enlarge the UDP send buffer");
     }
-    socket.set_nonblocking(true)?;
+    // Blocking, read by its worker thread with no timeout (a timed wait
+    // costs a timer per datagram); shutdown wakes it.
     socket.bind(&addr.into())?;
-    UdpSocket::from_std(socket.into())
+    Ok(socket.into())
 }
 
 /// A cheap, cloneable handle to a running router: publish, route, send

@@ -1,8 +1,11 @@
 //! Datagrams in batches: one `recvmmsg(2)` takes up to [`BATCH`] waiting
 //! datagrams off a socket and one `sendmmsg(2)` sends up to [`BATCH`], so
-//! under load a datagram costs a fraction of a system call. Nothing waits to
-//! fill a batch: at low rates a batch is the one datagram that woke the
-//! worker, sent on at once.
+//! under load a datagram costs a fraction of a system call. Consecutive
+//! datagrams of one size to one peer (a controller's command stream to its
+//! robot) go out as one UDP segmentation offload send (`UDP_SEGMENT`): the
+//! kernel's send path runs once for all of them. Nothing waits to fill a
+//! batch: at low rates a batch is the one datagram that woke the worker,
+//! sent on at once.
 //!
 //! The system calls go through `nix`'s safe wrappers; this module owns the
 //! receive buffers, so the hot path allocates per batch, never per
@@ -13,7 +16,9 @@ use std::io::{IoSlice, IoSliceMut};
 use std::net::{SocketAddr, SocketAddrV4, SocketAddrV6};
 use std::os::fd::RawFd;
 
-use nix::sys::socket::{MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, sendmmsg};
+use nix::sys::socket::{
+    ControlMessage, MsgFlags, MultiHeaders, SockaddrStorage, recvmmsg, sendmmsg, sendmsg,
+};
 
 /// Most datagrams moved by one system call.
 pub(super) const BATCH: usize = 32;
@@ -45,21 +50,18 @@ impl RecvBatch {
         }
     }
 
-    /// Takes the datagrams waiting on `fd` (at most [`BATCH`]) without
-    /// blocking; `WouldBlock` when there are none.
-    pub(super) fn recv(&mut self, fd: RawFd) -> std::io::Result<usize> {
+    /// Takes datagrams from `fd`, at most [`BATCH`]: with
+    /// `MSG_WAITFORONE` it blocks until one arrives (up to the socket's
+    /// receive timeout) and takes what else is waiting; with `MSG_DONTWAIT`
+    /// it never blocks (`WouldBlock` when nothing is waiting). 0 once the
+    /// socket is shut down for reading.
+    pub(super) fn recv(&mut self, fd: RawFd, flags: MsgFlags) -> std::io::Result<usize> {
         self.got.clear();
         let mut iovs: Vec<[IoSliceMut<'_>; 1]> =
             self.bufs.iter_mut().map(|b| [IoSliceMut::new(b)]).collect();
         let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(BATCH, None);
-        let results = recvmmsg(
-            fd,
-            &mut headers,
-            iovs.iter_mut(),
-            MsgFlags::MSG_DONTWAIT,
-            None,
-        )
-        .map_err(std::io::Error::from)?;
+        let results = recvmmsg(fd, &mut headers, iovs.iter_mut(), flags, None)
+            .map_err(std::io::Error::from)?;
         for m in results {
             // A datagram without an IP source cannot be answered or judged.
             if let Some(from) = m.address.as_ref().and_then(std_addr) {
@@ -86,9 +88,17 @@ fn std_addr(a: &SockaddrStorage) -> Option<SocketAddr> {
         .map(|v6| SocketAddr::V6(SocketAddrV6::from(*v6)))
 }
 
-/// Sends batches with `sendmmsg`.
-#[derive(Debug, Default)]
-pub(super) struct SendBatch;
+/// Sends batches with `sendmmsg`, and runs of equal datagrams to one peer
+/// with segmentation offload while the kernel allows it.
+#[derive(Debug)]
+pub(super) struct SendBatch {
+    /// Segmentation offload works (cleared the first time the kernel
+    /// refuses it; everything then goes through `sendmmsg`).
+    gso: bool,
+}
+
+/// Most segments in one offloaded send (the kernel's limit is 64 or more).
+const GSO_SEGMENTS: usize = 64;
 
 /// How sending a batch went.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -102,18 +112,42 @@ pub(super) struct Sent {
 
 impl SendBatch {
     pub(super) fn new() -> SendBatch {
-        SendBatch
+        SendBatch { gso: true }
     }
 
-    /// Sends `msgs` in order from `fd`, [`BATCH`] per system call. Returns
-    /// what was sent when the socket's buffer fills (`sent + failed <
-    /// msgs.len()`): the caller waits until it is writable and sends the
-    /// rest, so nothing is reordered.
-    pub(super) fn send(&mut self, fd: RawFd, msgs: &[(SocketAddr, &[u8])]) -> Sent {
+    /// Sends `msgs` in order from `fd`, [`BATCH`] per system call. With
+    /// `MSG_DONTWAIT` it returns what was sent when the socket's buffer
+    /// fills (`sent + failed < msgs.len()`), and the caller sends the rest
+    /// when it can, so nothing is reordered; without, it waits for room.
+    pub(super) fn send(
+        &mut self,
+        fd: RawFd,
+        msgs: &[(SocketAddr, &[u8])],
+        flags: MsgFlags,
+    ) -> Sent {
         let mut done = Sent::default();
         while done.sent + done.failed < msgs.len() {
             let rest = &msgs[done.sent + done.failed..];
-            let chunk = &rest[..rest.len().min(BATCH)];
+            let run = same_peer_and_size(rest);
+            if self.gso && run >= 2 {
+                match self.send_segments(fd, &rest[..run], flags) {
+                    Some(Ok(())) => {
+                        done.sent += run;
+                        continue;
+                    }
+                    Some(Err(())) => return done,
+                    None => {} // offload refused: send them one by one
+                }
+            }
+            // Up to the next run worth offloading.
+            let singles = if self.gso {
+                (1..rest.len())
+                    .find(|&i| same_peer_and_size(&rest[i..]) >= 2)
+                    .unwrap_or(rest.len())
+            } else {
+                rest.len()
+            };
+            let chunk = &rest[..singles.min(BATCH)];
             let iovs: Vec<[IoSlice<'_>; 1]> =
                 chunk.iter().map(|(_, b)| [IoSlice::new(b)]).collect();
             let addrs: Vec<Option<SockaddrStorage>> = chunk
@@ -121,7 +155,7 @@ impl SendBatch {
                 .map(|(a, _)| Some(SockaddrStorage::from(*a)))
                 .collect();
             let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(chunk.len(), None);
-            match sendmmsg(fd, &mut headers, &iovs, &addrs, [], MsgFlags::MSG_DONTWAIT) {
+            match sendmmsg(fd, &mut headers, &iovs, &addrs, [], flags) {
                 Ok(results) => {
                     let n = results.count();
                     if n == 0 {
@@ -140,6 +174,45 @@ impl SendBatch {
         }
         done
     }
+
+    /// Sends equal datagrams to one peer as one offloaded send. `None` if
+    /// the kernel refuses offload (it is then off for good); `Some(Err)` if
+    /// the socket's buffer is full.
+    fn send_segments(
+        &mut self,
+        fd: RawFd,
+        run: &[(SocketAddr, &[u8])],
+        flags: MsgFlags,
+    ) -> Option<Result<(), ()>> {
+        let iovs: Vec<IoSlice<'_>> = run.iter().map(|(_, b)| IoSlice::new(b)).collect();
+        let size = run[0].1.len() as u16;
+        let cmsg = [ControlMessage::UdpGsoSegments(&size)];
+        let to = SockaddrStorage::from(run[0].0);
+        match sendmsg(fd, &iovs, &cmsg, flags, Some(&to)) {
+            Ok(_) => Some(Ok(())),
+            Err(nix::errno::Errno::EAGAIN) => Some(Err(())),
+            Err(e) => {
+                tracing::info!(error = %e, "UDP segmentation offload unavailable; sending datagrams one by one");
+                self.gso = false;
+                None
+            }
+        }
+    }
+}
+
+/// How many datagrams at the start of `msgs` go to the same peer with the
+/// same size (at most [`GSO_SEGMENTS`], and only sizes offload can carry).
+fn same_peer_and_size(msgs: &[(SocketAddr, &[u8])]) -> usize {
+    let Some((to, first)) = msgs.first() else {
+        return 0;
+    };
+    if first.is_empty() || first.len() > 1400 {
+        return 1;
+    }
+    msgs.iter()
+        .take(GSO_SEGMENTS)
+        .take_while(|(a, b)| a == to && b.len() == first.len())
+        .count()
 }
 
 #[cfg(test)]
@@ -159,9 +232,13 @@ mod tests {
         let rx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         let tx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         let to = rx.local_addr().unwrap();
-        let payloads: Vec<Vec<u8>> = (0..70u8).map(|i| vec![i; 1 + i as usize]).collect();
+        // Runs of equal datagrams (offloaded) between datagrams of other
+        // sizes (sent one by one), all in order.
+        let payloads: Vec<Vec<u8>> = (0..70u8)
+            .map(|i| vec![i; if i % 10 < 6 { 50 } else { 1 + i as usize }])
+            .collect();
         let msgs: Vec<(SocketAddr, &[u8])> = payloads.iter().map(|p| (to, p.as_slice())).collect();
-        let sent = SendBatch::new().send(tx.as_raw_fd(), &msgs);
+        let sent = SendBatch::new().send(tx.as_raw_fd(), &msgs, MsgFlags::empty());
         assert_eq!(
             sent,
             Sent {
@@ -172,7 +249,7 @@ mod tests {
         let mut batch = RecvBatch::new();
         let mut got = Vec::new();
         while got.len() < 70 {
-            let n = batch.recv(rx.as_raw_fd()).unwrap();
+            let n = batch.recv(rx.as_raw_fd(), MsgFlags::MSG_DONTWAIT).unwrap();
             assert!(n <= BATCH);
             for i in 0..n {
                 let (bytes, from) = batch.datagram(i);
@@ -181,7 +258,9 @@ mod tests {
             }
         }
         assert_eq!(got, payloads);
-        let e = batch.recv(rx.as_raw_fd()).unwrap_err();
+        let e = batch
+            .recv(rx.as_raw_fd(), MsgFlags::MSG_DONTWAIT)
+            .unwrap_err();
         assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock);
         assert!(round_trips("[::1]:7400".parse().unwrap()));
     }

@@ -58,7 +58,9 @@ pub struct RouterConfig {
     /// Route given to a robot that registers for the first time; `None`
     /// (the default) routes it to none, so it holds still.
     pub default_route: Option<String>,
-    /// Number of tasks receiving on the UDP socket.
+    /// UDP workers: threads, each with its own socket on the UDP endpoint
+    /// (the kernel spreads senders over them; one sender always reaches the
+    /// same worker, so its messages stay in order).
     pub udp_workers: usize,
     /// Kernel receive and send buffer of the UDP socket, bytes (capped by
     /// the system's `net.core.rmem_max`). Large, so that a burst of

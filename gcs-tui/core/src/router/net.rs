@@ -1,8 +1,8 @@
-//! The router's tasks: UDP workers, the TCP acceptor with a reader and
-//! a writer task per peer, and the timer task (heartbeats, link states,
-//! retries). Each hands bytes to [`super::Shared::dispatch`]. Every task
-//! watches the router's stop signal and ends on it; the acceptor waits for
-//! its peers, so [`super::Router::shutdown`] waits for them all.
+//! The router's tasks: UDP worker threads, the TCP acceptor with a reader
+//! and a writer task per peer, and the timer task (heartbeats, link states,
+//! retries). Each hands bytes to the tables through [`super::Shared`].
+//! Every task watches the router's stop signal and ends on it; the acceptor
+//! waits for its peers, so [`super::Router::shutdown`] waits for them all.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -18,70 +18,55 @@ use tracing::{debug, info, warn};
 
 use std::os::fd::AsRawFd;
 
-use tokio::io::Interest;
-use tokio::net::UdpSocket;
+use nix::sys::socket::MsgFlags;
 
-use super::batch::{BATCH, RecvBatch, SendBatch};
+use super::batch::{RecvBatch, SendBatch};
 use super::tables::{Outbox, Peer};
 use super::{Decided, Shared};
 use crate::sync::lock;
 
-/// Rounds of [`BATCH`] datagrams a worker handles per wake-up before it
-/// lets the timers and TCP peers run.
-const ROUNDS: usize = 8;
-
-/// One UDP worker: owns one socket of the router's `SO_REUSEPORT` group, so
-/// the kernel hands it every datagram of the senders hashed to it. A
-/// sender's datagrams are therefore received, decided and sent on by one
-/// worker, in the order they arrived, whatever the number of workers, and
-/// workers never contend for a socket.
+/// One UDP worker, a thread of its own: owns one socket of the router's
+/// `SO_REUSEPORT` group, so the kernel hands it every datagram of the
+/// senders hashed to it. A sender's datagrams are therefore received,
+/// decided and sent on by one worker, in the order they arrived, whatever
+/// the number of workers, and workers never contend for a socket.
 ///
-/// On each wake-up it takes the waiting datagrams in batches (one
-/// `recvmmsg` each), decides a batch under one hold of the tables' lock,
-/// and sends what the batch decided (one `sendmmsg` per batch). At low
-/// rates a batch is the one datagram that woke it: nothing waits to fill
-/// one.
-pub(super) async fn udp_worker(shared: Arc<Shared>, socket: Arc<UdpSocket>) {
+/// It blocks in `recvmmsg` until a datagram arrives (the kernel wakes this
+/// thread directly: no event loop between), takes what else is waiting in
+/// the same call, decides the batch under one hold of the tables' lock, and
+/// sends what it decided with `sendmmsg`. At low rates a batch is the one
+/// datagram that woke it: nothing waits to fill one.
+pub(super) fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>) {
     let mut received = RecvBatch::new();
     let mut sender = SendBatch::new();
     let mut decided = Decided::default();
-    let mut stop = shared.stop.subscribe();
-    loop {
-        let ready = tokio::select! {
-            r = socket.readable() => r,
-            _ = stop.wait_for(|s| *s) => return,
-        };
-        if let Err(e) = ready {
-            debug!(error = %e, "UDP readiness error");
-            tokio::task::yield_now().await;
-            continue;
-        }
-        let mut full = 0;
-        for _ in 0..ROUNDS {
-            let n = match socket.try_io(Interest::READABLE, || received.recv(socket.as_raw_fd())) {
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                Err(e) => {
-                    // ICMP errors from earlier sends surface here; they
-                    // concern one peer, never the router.
-                    debug!(error = %e, "UDP receive error");
-                    continue;
-                }
-            };
-            shared.decide_batch(&received, n, &mut decided);
-            shared
-                .send_decided(&socket, &mut sender, &received, &mut decided)
-                .await;
-            if n < BATCH {
-                break;
+    let fd = socket.as_raw_fd();
+    while !shared.stopped() {
+        let n = match received.recv(fd, MsgFlags::MSG_WAITFORONE) {
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                continue;
             }
-            full += 1;
+            Err(e) => {
+                // ICMP errors from earlier sends surface here; they concern
+                // one peer, never the router. Anything else is logged and
+                // the worker carries on.
+                debug!(error = %e, "UDP receive error");
+                continue;
+            }
+        };
+        if n == 0 {
+            continue; // shut down for reading: the stop signal is set
         }
-        if full == ROUNDS {
-            // Still busy after several full batches: let the timers and TCP
-            // peers run before the next (a quiet socket costs no yield).
-            tokio::task::yield_now().await;
-        }
+        shared.decide_batch(&received, n, &mut decided);
+        shared.send_decided(fd, &mut sender, &received, &mut decided);
     }
 }
 

@@ -411,3 +411,158 @@ impl Tables {
         self.robots.get(robot).map(|r| r.addr)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The timing rules, with injected time: exact thresholds that the
+    //! socket-level tests (real time, real threads) can only bound.
+    use std::time::Duration;
+
+    use mech_proto::{Body, Envelope, Header, Hello, Mission, Waypoint};
+
+    use super::*;
+
+    fn bytes(sender: &str, destination: &str, channel: &str, body: Body) -> Vec<u8> {
+        let header = Header {
+            sender: sender.into(),
+            destination: destination.into(),
+            channel: channel.into(),
+            ..Header::default()
+        };
+        mech_proto::encode(&Envelope::new(header, body)).unwrap()
+    }
+
+    fn hello(name: &str) -> Vec<u8> {
+        let h = Hello {
+            name: name.into(),
+            platform: "diff-drive".into(),
+            capabilities: vec![],
+            motors: 2,
+            max_speed: 1.0,
+            max_yaw_rate: 2.0,
+            agent_version: "t".into(),
+        };
+        bytes(name, "router", "", Body::Hello(h))
+    }
+
+    fn registered(t0: Instant) -> (Tables, Peer) {
+        let mut t = Tables::new(RouterConfig::default(), None);
+        let robot = Peer::Udp("127.0.0.1:9000".parse().unwrap());
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        t.handle(&hello("robot_1"), robot, t0, &mut out, &mut ev);
+        (t, robot)
+    }
+
+    fn links(ev: &[Event]) -> Vec<LinkState> {
+        ev.iter()
+            .filter_map(|e| match e {
+                Event::Link { state, .. } => Some(*state),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_silent_robot_is_stale_at_half_a_second_and_lost_at_one() {
+        let t0 = Instant::now();
+        let (mut t, _) = registered(t0);
+        let ms = |v| t0 + Duration::from_millis(v);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        t.tick(ms(499), &mut out, &mut ev);
+        assert!(links(&ev).is_empty());
+        t.tick(ms(500), &mut out, &mut ev);
+        assert_eq!(links(&ev), vec![LinkState::Stale]);
+        t.tick(ms(999), &mut out, &mut ev);
+        t.tick(ms(1000), &mut out, &mut ev);
+        assert_eq!(links(&ev), vec![LinkState::Stale, LinkState::Lost]);
+    }
+
+    #[test]
+    fn heartbeats_go_out_every_quarter_second() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let beats = |out: &Outbox| {
+            out.owned
+                .iter()
+                .filter(|(p, b)| {
+                    *p == robot && matches!(mech_proto::decode(b).unwrap().body, Body::Heartbeat(_))
+                })
+                .count()
+        };
+        let mut out = Outbox::default();
+        let mut ev = Vec::new();
+        for ms in (20..=1000).step_by(20) {
+            t.tick(t0 + Duration::from_millis(ms), &mut out, &mut ev);
+        }
+        // A quarter second after the last, on the 20 ms timer grid: at
+        // 0.26, 0.52 and 0.78 s (the next is due at 1.03 s).
+        assert_eq!(beats(&out), 3);
+    }
+
+    #[test]
+    fn a_mission_is_resent_every_200_ms_and_given_up_after_5_s() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let mission = Body::Mission(Mission {
+            id: 7,
+            waypoints: vec![Waypoint {
+                x: 1.0,
+                y: 0.0,
+                z: 0.0,
+                time: None,
+            }],
+            looped: false,
+            arrival_radius: 0.1,
+            start_index: 0,
+        });
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        t.handle(
+            &bytes("gcs", "robot_1", "wp/gcs", mission),
+            Peer::Local,
+            t0,
+            &mut out,
+            &mut ev,
+        );
+        let sends = |out: &Outbox| {
+            out.owned
+                .iter()
+                .filter(|(p, b)| {
+                    *p == robot && matches!(mech_proto::decode(b).unwrap().body, Body::Mission(_))
+                })
+                .count()
+        };
+        assert_eq!(sends(&out), 1);
+        let mut out = Outbox::default();
+        t.tick(t0 + Duration::from_millis(199), &mut out, &mut ev);
+        assert_eq!(sends(&out), 0);
+        t.tick(t0 + Duration::from_millis(200), &mut out, &mut ev);
+        assert_eq!(sends(&out), 1);
+        t.tick(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
+        assert!(!ev.iter().any(|e| matches!(e, Event::MissionFailed { .. })));
+        t.tick(t0 + Duration::from_millis(5_000), &mut out, &mut ev);
+        assert!(
+            ev.iter()
+                .any(|e| matches!(e, Event::MissionFailed { id: 7, .. }))
+        );
+    }
+
+    #[test]
+    fn a_subscription_lapses_after_five_seconds_unless_renewed() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let tool = Peer::Udp("127.0.0.1:9100".parse().unwrap());
+        let sub = bytes(
+            "plotter",
+            "router",
+            "",
+            Body::Subscribe(mech_proto::Subscribe { telemetry: true }),
+        );
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        t.handle(&sub, tool, t0, &mut out, &mut ev);
+        t.tick(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
+        assert!(t.subscribers.contains_key(&tool));
+        t.tick(t0 + Duration::from_millis(5_001), &mut out, &mut ev);
+        assert!(!t.subscribers.contains_key(&tool), "lapsed");
+        let _ = robot;
+    }
+}
