@@ -289,6 +289,7 @@ impl Fleet {
         r.position_quality = t.position_quality;
         r.actuators.clone_from(&t.actuators);
         r.mission = t.mission;
+        r.stale = t.stale;
         let far = r
             .path
             .back()

@@ -116,6 +116,8 @@ pub struct Robot {
     pub traffic: Traffic,
     /// Id of the last e-stop or release this robot acknowledged.
     pub estop_ack: Option<(bool, u32)>,
+    /// Messages the robot reports it ignored as stale (telemetry).
+    pub stale: u32,
 }
 
 impl Robot {
@@ -148,6 +150,7 @@ impl Robot {
             gcs_mode: None,
             traffic: Traffic::default(),
             estop_ack: None,
+            stale: 0,
         }
     }
 

@@ -81,5 +81,9 @@ fn status_line(r: &Robot) -> String {
             ""
         },
         failsafe_name(r.failsafe),
-    )
+    ) + &if r.stale > 0 {
+        format!(" ignored-stale {}", r.stale)
+    } else {
+        String::new()
+    }
 }
