@@ -377,6 +377,7 @@ impl Agent {
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
             Body::EStop(e) => self.estop_received(e, now, &mut out),
+            Body::Bye(bye) if sender == mech_proto::ROUTER => self.router_left(&bye.reason),
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -390,6 +391,14 @@ impl Agent {
             _ => {}
         }
         out
+    }
+
+    /// The router said it is stopping: it is lost now, not after the
+    /// router timeout (the failsafe acts on the next tick, and the robot
+    /// registers again once a router answers).
+    fn router_left(&mut self, reason: &str) {
+        tracing::warn!(robot = %self.settings.name, reason = %truncate(reason), "the router is stopping");
+        self.failsafe.router_gone();
     }
 
     /// Registered (again): the Welcome's route is applied whatever its
@@ -1027,6 +1036,35 @@ mod tests {
         assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
         assert!(!a.registered());
         assert!(stopped.unwrap() <= ms(100) + ms(500) + PERIOD);
+    }
+
+    #[test]
+    fn a_router_bye_stops_at_once_and_registers_again() {
+        let mut a = routed("joy/0");
+        let now = ms(100);
+        a.handle(msg("joy/0", twist(0.2)), now);
+        assert!(moving(&a.tick(now).outputs));
+        // A Bye from anyone but the router is not the router leaving.
+        let bye = |sender: &str| {
+            let mut m = msg(
+                "",
+                Body::Bye(Bye {
+                    reason: "stopping".into(),
+                }),
+            );
+            m.header.sender = sender.into();
+            m
+        };
+        a.handle(bye("ctl"), now);
+        assert_ne!(a.failsafe_state(now), FailsafeState::RouterLost);
+        a.handle(bye(mech_proto::ROUTER), now);
+        assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
+        let t = a.tick(now + PERIOD);
+        assert!(!moving(&t.outputs), "stops on the next tick");
+        assert!(
+            t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+            "asks to register again at once"
+        );
     }
 
     #[test]

@@ -16,6 +16,7 @@ use std::sync::{Arc, Mutex};
 use serde_json::{Value, json};
 
 use crate::lang::{Executor, LangError, Outcome, Statement, parse_script};
+use mech_core::router::Subscription;
 use mech_core::{Event, Gcs, LinkState, Stamped};
 
 /// How a script run ended.
@@ -50,7 +51,8 @@ fn emit(sink: &Sink, value: &Value) {
     let _ = w.flush();
 }
 
-fn secs(d: std::time::Duration) -> f64 {
+/// Seconds, rounded to the microsecond, as the JSON lines print them.
+pub fn secs(d: std::time::Duration) -> f64 {
     (d.as_secs_f64() * 1e6).round() / 1e6
 }
 
@@ -141,9 +143,14 @@ pub fn event_json(s: &Stamped) -> Value {
 }
 
 fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
+    result_json_at(secs(gcs.router().elapsed()), stmt, outcome)
+}
+
+/// The JSON line of a command's result at `t` seconds of station time.
+pub fn result_json_at(t: f64, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
     let mut v = json!({
         "type": "result",
-        "t": secs(gcs.router().elapsed()),
+        "t": t,
         "line": stmt.span.line,
         "command": stmt.text,
         "ok": outcome.is_ok(),
@@ -162,6 +169,32 @@ fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError
         }
     }
     v
+}
+
+/// Runs `stmt`, handing `on_event` every event of `events` that arrives
+/// meanwhile and then those it caused synchronously (route changes,
+/// e-stops), so they come before its result.
+pub async fn execute_with_events(
+    executor: &mut Executor,
+    stmt: &Statement,
+    events: &mut Subscription,
+    mut on_event: impl FnMut(&Stamped),
+) -> Result<Outcome, LangError> {
+    let result = {
+        let run = executor.execute(stmt);
+        tokio::pin!(run);
+        loop {
+            tokio::select! {
+                biased;
+                r = &mut run => break r,
+                Some(ev) = events.recv() => on_event(&ev),
+            }
+        }
+    };
+    while let Some(ev) = events.try_recv() {
+        on_event(&ev);
+    }
+    result
 }
 
 /// Rejections by reason, and their total.
@@ -202,22 +235,10 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         commands: statements.len(),
     };
     for (i, stmt) in statements.iter().enumerate() {
-        // Events are printed while the command runs, and those it caused
-        // synchronously (route changes, e-stops) before its result.
-        let result = {
-            let run = executor.execute(stmt);
-            tokio::pin!(run);
-            loop {
-                tokio::select! {
-                    biased;
-                    r = &mut run => break r,
-                    Some(ev) = events.recv() => emit(&sink, &event_json(&ev)),
-                }
-            }
-        };
-        while let Some(ev) = events.try_recv() {
-            emit(&sink, &event_json(&ev));
-        }
+        let result = execute_with_events(executor, stmt, &mut events, |ev| {
+            emit(&sink, &event_json(ev))
+        })
+        .await;
         emit(&sink, &result_json(gcs, stmt, result.as_ref()));
         if let Err(error) = result {
             outcome = ScriptOutcome::Failed {

@@ -43,7 +43,8 @@ pub enum AuthMode {
 }
 
 /// How exposed a running station is, for the status bar and `status`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Security {
     /// Every message from the network must be signed by a listed key.
     #[default]

@@ -13,7 +13,10 @@ use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
 use crate::counters::RejectReason;
 
 /// How recently the router heard from a robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum LinkState {
     /// Heard within `stale_after`.
     #[default]

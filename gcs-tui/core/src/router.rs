@@ -381,10 +381,12 @@ impl Router {
     /// Stops routing and waits until every router task has ended: the UDP
     /// workers, the timers, the TCP acceptor and every TCP peer (their
     /// connections are closed), then closes subscriptions. From then on
-    /// nothing is forwarded, from any peer or handle. Agents see the router
-    /// lost (their failsafe stops them) within their router timeout.
+    /// nothing is forwarded, from any peer or handle. Every registered robot
+    /// is told first (`Bye`), so its failsafe stops it at once rather than
+    /// after its router timeout.
     pub async fn shutdown(self) {
         let shared = &self.handle.shared;
+        shared.apply(|t, _, out, _| t.farewell(out)).await;
         shared.stop.send_replace(true);
         for (thread, socket) in self.workers {
             // Wakes the worker out of its receive at once.
@@ -617,6 +619,13 @@ impl RouterHandle {
     /// nothing when the router runs unauthenticated.
     pub fn add_key(&self, identity: Identity) {
         lock(&self.shared.tables).add_key(identity);
+    }
+
+    /// The identity a key id belongs to (`None` when unknown or when the
+    /// router runs unauthenticated): the station checks an attaching
+    /// operator's key with it.
+    pub fn identity(&self, key_id: u32) -> Option<Identity> {
+        lock(&self.shared.tables).identity(key_id)
     }
 
     /// A copy of every counter.

@@ -10,7 +10,7 @@ use crate::spec::ClusterSpec;
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
 
-pub use super::context::{SENDER, SimSpawner};
+pub use super::context::{SENDER, SharedSpawner, SimSpawner};
 
 /// Executes command-language statements. Holds the publishers it created
 /// (one per channel, so sequence numbers continue), the controllers its
@@ -35,6 +35,24 @@ impl Executor {
                 .gcs
                 .update_fleet(|f| f.log(Severity::Error, e.to_string()));
         }
+        self
+    }
+
+    /// Runs fleet and offboard controllers in `control` instead of a hub
+    /// of its own: every executor of a station shares one, so a cluster
+    /// started from one operator's command line is the same cluster for
+    /// all.
+    pub fn with_control(mut self, control: ControlHub) -> Executor {
+        self.ctx.control = control;
+        self
+    }
+
+    /// Publishes and sends missions as `sender` (an operator's name)
+    /// instead of [`SENDER`], so the router and the robots see who
+    /// commanded them.
+    pub fn with_sender(mut self, sender: &str) -> Executor {
+        self.ctx.publishers = self.ctx.gcs.router().publishers(sender);
+        self.ctx.sender = sender.to_string();
         self
     }
 

@@ -211,7 +211,7 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "nav",
-        usage: "nav ROBOT offboard|onboard",
+        usage: "nav ROBOT offboard|onboard|toggle",
         help: "switch waypoint navigation between the GCS loop and the robot, keeping progress",
         parse: |a| nav::Nav::parse(a).map(Command::Nav),
     },
@@ -461,7 +461,7 @@ mod tests {
         assert_eq!(e.span.column, 14);
         assert!(e.message.contains("unknown formation"));
         let e = parse_line("nav robot_1 sideways").unwrap_err();
-        assert!(e.message.contains("offboard or onboard"));
+        assert!(e.message.contains("onboard or toggle"));
         let e = parse_line("cluster-waypoint c1 1").unwrap_err();
         assert!(e.message.contains("cluster waypoint"));
         assert!(parse_line("cluster-move c1 0.1").is_err());

@@ -406,6 +406,11 @@ impl Tables {
         }
     }
 
+    /// The identity of a key id, when authenticating.
+    pub(crate) fn identity(&self, key_id: u32) -> Option<crate::auth::Identity> {
+        self.auth.as_ref()?.identity(key_id).cloned()
+    }
+
     /// Address of a registered robot.
     pub(crate) fn robot_addr(&self, robot: &str) -> Option<SocketAddr> {
         self.robots.get(robot).map(|r| r.addr)
@@ -475,6 +480,22 @@ mod tests {
         t.tick(ms(999), &mut out, &mut ev);
         t.tick(ms(1000), &mut out, &mut ev);
         assert_eq!(links(&ev), vec![LinkState::Stale, LinkState::Lost]);
+    }
+
+    #[test]
+    fn a_stopping_router_says_bye_to_every_robot() {
+        let (mut t, robot) = registered(Instant::now());
+        let mut out = Outbox::default();
+        t.farewell(&mut out);
+        let byes: Vec<_> = out
+            .owned
+            .iter()
+            .map(|(p, b)| (*p, mech_proto::decode(b).unwrap()))
+            .filter(|(_, m)| matches!(m.body, Body::Bye(_)))
+            .collect();
+        assert_eq!(byes.len(), 1);
+        assert_eq!(byes[0].0, robot);
+        assert_eq!(byes[0].1.header.destination, "robot_1");
     }
 
     #[test]

@@ -207,4 +207,22 @@ impl Tables {
             }
         }
     }
+
+    /// `Bye` to every registered robot: the station is stopping, so each
+    /// knows now instead of after its router timeout.
+    pub(crate) fn farewell(&mut self, out: &mut Outbox) {
+        let robots: Vec<_> = self
+            .robots
+            .iter()
+            .map(|(n, r)| (n.clone(), r.addr))
+            .collect();
+        for (name, addr) in robots {
+            let body = Body::Bye(Bye {
+                reason: "station stopping".into(),
+            });
+            if let Some(b) = self.make(&name, body) {
+                out.owned.push((Peer::Udp(addr), b));
+            }
+        }
+    }
 }
