@@ -426,6 +426,13 @@ async fn bind(
         addr,
         source,
     };
+    if config.udp.port() != 0 {
+        // The group's sockets share their port with any socket that asks
+        // (`SO_REUSEPORT`), a second station's included, which would then
+        // receive part of this one's traffic. A plain socket binds only a
+        // free port: if it cannot, another program (or station) has it.
+        drop(std::net::UdpSocket::bind(config.udp).map_err(|e| bind_err(config.udp, e))?);
+    }
     let first = bind_udp(config.udp, config.socket_buffer).map_err(|e| bind_err(config.udp, e))?;
     // Port 0 picks a port once; the rest of the group joins that one.
     let addr = first.local_addr().map_err(|e| bind_err(config.udp, e))?;

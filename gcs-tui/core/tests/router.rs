@@ -938,3 +938,35 @@ async fn after_shutdown_a_connected_tcp_controller_reaches_no_robot() {
         "commands after shutdown reached the robot: {late:?}"
     );
 }
+
+#[tokio::test]
+async fn a_second_station_cannot_share_the_port_of_a_running_one() {
+    let first = gcs().await;
+    let addr = first.router().udp_addr();
+    let mut c = config();
+    c.router.udp = addr;
+    let second = Gcs::start(c).await;
+    let err = second.expect_err("the port is the first station's");
+    assert!(err.to_string().contains(&addr.to_string()), "{err}");
+    // Once the first one has stopped and gone, the port is free again.
+    first.shutdown().await;
+    drop(first);
+    let mut c = config();
+    c.router.udp = addr;
+    let third = Gcs::start(c).await.unwrap();
+    third.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_stopping_station_says_bye_to_its_robots() {
+    let gcs = gcs().await;
+    let mut robot = Peer::new("robot_1", gcs.router().udp_addr()).await;
+    robot.register().await;
+    gcs.shutdown().await;
+    let bye = tokio::time::timeout(
+        Duration::from_secs(5),
+        robot.recv_matching(|m| matches!(m.body, Body::Bye(_))),
+    )
+    .await;
+    assert!(bye.is_ok(), "the robot was told");
+}

@@ -1,6 +1,6 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
 //! sections each layer owns: `[router]`, `[fleet]` and `[auth]` (mech-core),
-//! `[[cluster]]` (mech-control), `[log]` and `[gamepad]` (this binary).
+//! `[[cluster]]` (mech-control), `[log]`, `[gamepad]` and `[station]` (this binary).
 //! Every field has a default, so an empty file (or none) gives a working
 //! ground station on port 7400.
 
@@ -13,6 +13,7 @@ use serde::Deserialize;
 
 use crate::gamepad::GamepadConfig;
 use crate::logging::LogConfig;
+use crate::station::StationConfig;
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -45,6 +46,8 @@ pub struct GcsConfig {
     pub cluster: Vec<ClusterSpec>,
     /// Gamepad teleop: shaping, dead-man and other buttons, rate, limits.
     pub gamepad: GamepadConfig,
+    /// Where a served station listens for TUIs and scripts.
+    pub station: StationConfig,
 }
 
 impl GcsConfig {
@@ -96,6 +99,7 @@ impl GcsConfig {
                 .map_err(|e| mech_core::ConfigError(format!("cluster {:?}: {e}", c.name)))?;
         }
         self.gamepad.teleop()?;
+        self.station.validate()?;
         Ok(())
     }
 }

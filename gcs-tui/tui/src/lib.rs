@@ -4,10 +4,12 @@
 //! language (`mech-control`).
 //!
 //! - [`ui`]: robot cards, braille map, waypoints, routing table, events;
+//! - [`view`]: the fleet as the screen shows it (what a station sends);
 //! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
 //! - [`config`]: `gcs.toml`, assembled from each layer's section;
 //! - [`logging`]: rolling log files;
-//! - [`sim`]: simulated agents for `spawn` and `--demo`.
+//! - [`sim`]: simulated agents for `spawn` and `--demo`;
+//! - [`station`]: `mech-gcs serve`, the attach protocol, attaching.
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
@@ -15,6 +17,8 @@ pub mod config;
 pub mod gamepad;
 pub mod logging;
 pub mod sim;
+pub mod station;
 pub mod ui;
+pub mod view;
 
 pub use config::GcsConfig;

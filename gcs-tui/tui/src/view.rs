@@ -8,11 +8,15 @@
 use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
 };
+use serde::{Deserialize, Serialize};
 
 /// Link to a robot as the router judges it from its timeouts (the core's
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
 pub use mech_core::auth::Security;
+
+/// How long a robot's path stays on the map.
+pub const TRAIL_SECONDS: f64 = 10.0;
 
 /// How a card spells a link state.
 pub fn link_label(link: LinkState) -> &'static str {
@@ -25,7 +29,7 @@ pub fn link_label(link: LinkState) -> &'static str {
 
 /// Route of a robot: the channel the router forwards, and whether the agent
 /// has acknowledged it yet.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct RouteView {
     /// Empty = routed to none.
     pub channel: String,
@@ -33,7 +37,7 @@ pub struct RouteView {
 }
 
 /// One robot, as the cards and the map show it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RobotView {
     pub name: String,
     /// Router-assigned id.
@@ -50,7 +54,7 @@ pub struct RobotView {
     /// Fraction `[0, 1]`.
     pub battery: Option<f64>,
     pub mission: Option<MissionProgress>,
-    /// Where the robot went in the last [`super::app::TRAIL_SECONDS`],
+    /// Where the robot went in the last [`TRAIL_SECONDS`],
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
     pub trail: Vec<(f64, f64)>,
@@ -95,7 +99,7 @@ impl RobotView {
 }
 
 /// A live controller channel seen by the router.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ChannelView {
     pub name: String,
     /// Last publisher's sender name.
@@ -107,7 +111,7 @@ pub struct ChannelView {
 /// panel show it: its members from the fleet model and, once a cluster
 /// controller runs it, what that controller reports (not to be confused
 /// with [`mech_control::ClusterView`], the controller's own account).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ClusterOnScreen {
     pub name: String,
     pub members: Vec<String>,
@@ -117,7 +121,7 @@ pub struct ClusterOnScreen {
 
 /// A cluster controller's last period, as the map and the routes panel
 /// show it (copied from [`mech_control::ControlHub::snapshot`]).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct ClusterControlView {
     /// Cluster pose being tracked (x, y, heading).
     pub desired: Option<(f64, f64, f64)>,
@@ -132,7 +136,7 @@ pub struct ClusterControlView {
 }
 
 /// One member's slot in the formation.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlotView {
     pub robot: String,
     /// Slot position, m.
@@ -166,7 +170,7 @@ impl ClusterControlView {
 }
 
 /// The arena rectangle from the config, metres.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ArenaBounds {
     pub min_x: f64,
     pub min_y: f64,
@@ -175,7 +179,7 @@ pub struct ArenaBounds {
 }
 
 /// Everything the core reports in one refresh.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct FleetSnapshot {
     pub robots: Vec<RobotView>,
     pub channels: Vec<ChannelView>,
