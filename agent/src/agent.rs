@@ -256,9 +256,12 @@ impl Agent {
 
     /// The failsafe state now.
     pub fn failsafe_state(&self, now: Duration) -> FailsafeState {
-        let state =
-            self.failsafe
-                .state(now, !self.route.channel.is_empty(), self.mission_running());
+        // A mission on the routed channel is the robot's controller, running
+        // or done: silence on that channel is not a fault.
+        let mission_controls = self.mission_running() || self.mission_done_on_route();
+        let state = self
+            .failsafe
+            .state(now, !self.route.channel.is_empty(), mission_controls);
         let faulted = self.actuator_fault_until.is_some_and(|t| now < t);
         if faulted && state != FailsafeState::EStopped {
             FailsafeState::Fault
@@ -622,6 +625,14 @@ impl Agent {
                 .missions
                 .get(&self.route.channel)
                 .is_some_and(|m| !m.paused && !m.finished())
+    }
+
+    /// The routed channel's mission is finished: the robot holds at its
+    /// last waypoint, as told.
+    fn mission_done_on_route(&self) -> bool {
+        self.missions
+            .get(&self.route.channel)
+            .is_some_and(|m| !m.paused && m.finished())
     }
 
     fn apply_route(&mut self, route: Route, now: Duration, out: &mut Vec<Envelope>) {
@@ -1166,6 +1177,27 @@ mod tests {
             Some((1, 0, 1))
         );
         assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    #[test]
+    fn a_finished_mission_holds_without_reading_as_channel_silence() {
+        let mut a = routed("wp/gcs");
+        // The robot is at the origin: a waypoint there is reached at once.
+        a.handle(msg("wp/gcs", Body::Mission(mission_to(1, 0.0))), ms(10));
+        let mut now = ms(10);
+        while now < ms(2000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(!moving(&a.tick(now).outputs), "holds at the waypoint");
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(tel.mission.map(|m| (m.next, m.total)), Some((1, 1)));
+        assert_eq!(tel.failsafe, FailsafeState::Ok, "done, not silent");
+        // A controller that goes quiet on a channel without a mission still
+        // reads as silent.
+        let mut b = routed("joy/0");
+        router_heartbeat(&mut b, ms(2000));
+        assert_eq!(b.failsafe_state(ms(2000)), FailsafeState::ChannelSilent);
     }
 
     #[test]

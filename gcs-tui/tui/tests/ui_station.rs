@@ -159,6 +159,19 @@ async fn app_requests_reach_simulated_robots() {
         rig.app.log
     );
 
+    // A typed command's result comes after what it logged.
+    rig.link.exec("route robot_2 joy/7".into());
+    rig.wait_for("robot_2's route result", Duration::from_secs(5), |a| {
+        a.log.iter().any(|l| l.text == "robot_2 routed to joy/7")
+    })
+    .await;
+    let at = |text: &str| rig.app.log.iter().position(|l| l.text == text);
+    let (logged, result) = (
+        at("robot_2 routed to joy/7 (pending)"),
+        at("robot_2 routed to joy/7"),
+    );
+    assert!(logged.is_some() && logged < result, "{:?}", rig.app.log);
+
     // E-stop from the App latches every robot.
     rig.app.update(Action::EStop);
     rig.carry_all();

@@ -1,9 +1,10 @@
-//! What every attached TUI is sent, made once for all of them: the fleet
-//! snapshot, serialized at the snapshot rate and at once after any event
-//! other than telemetry (a route change reaches every screen without
-//! waiting for the next period), and the event log's new lines. A session
-//! forwards the newest snapshot only, so a slow client skips snapshots
-//! instead of queueing them.
+//! What every attached TUI is sent: the fleet snapshot, made and
+//! serialized once for all of them at the snapshot rate and at once after
+//! any event other than telemetry (a route change reaches every screen
+//! without waiting for the next period), and the event log, which each
+//! session reads from the fleet model after its own cursor ([`LogCursor`])
+//! when the feed says it grew. A session forwards the newest snapshot
+//! only, so a slow client skips snapshots instead of queueing them.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -12,7 +13,7 @@ use mech_control::ControlHub;
 use mech_core::ChannelStatus;
 use mech_core::Gcs;
 use mech_core::fleet::{Fleet, LogEntry, Robot, Severity};
-use tokio::sync::{broadcast, watch};
+use tokio::sync::watch;
 
 use super::wire::{FromStation, LogLevel, to_line};
 use crate::view::{
@@ -20,28 +21,17 @@ use crate::view::{
     Security, TRAIL_SECONDS,
 };
 
-/// Log lines kept for a session that falls behind before it is told it
-/// missed some.
-const LOG_QUEUE: usize = 1024;
-
 /// Recent log lines a client gets when it attaches.
 pub(super) const LOG_HISTORY: usize = 50;
 
 /// Shortest time between two snapshots (an event storm is coalesced).
 const MIN_GAP: Duration = Duration::from_millis(10);
 
-/// A log line ready to send: its sequence number and its wire line.
-#[derive(Debug, Clone)]
-pub(super) struct LogItem {
-    pub seq: u64,
-    pub line: Arc<str>,
-}
-
 /// The shared feed: subscribe to snapshots and log lines.
 #[derive(Debug)]
 pub(super) struct Feed {
     snapshots: watch::Sender<Arc<str>>,
-    log: broadcast::Sender<LogItem>,
+    log_seq: watch::Sender<u64>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -50,19 +40,18 @@ impl Feed {
     /// watches) and after every event.
     pub fn start(gcs: Gcs, control: ControlHub, rate: f64) -> Feed {
         let (snapshots, _) = watch::channel(Arc::<str>::from(""));
-        let (log, _) = broadcast::channel(LOG_QUEUE);
+        let (log_seq, _) = watch::channel(0);
         let maker = Maker {
             gcs,
             control,
             snapshots: snapshots.clone(),
-            log: log.clone(),
+            log_seq: log_seq.clone(),
             seq: 0,
-            log_last: 0,
         };
         let task = tokio::spawn(maker.run(Duration::from_secs_f64(1.0 / rate)));
         Feed {
             snapshots,
-            log,
+            log_seq,
             task,
         }
     }
@@ -72,9 +61,9 @@ impl Feed {
         self.snapshots.subscribe()
     }
 
-    /// Log lines from now on.
-    pub fn log(&self) -> broadcast::Receiver<LogItem> {
-        self.log.subscribe()
+    /// The newest event-log line's sequence number, changed when it grows.
+    pub fn log_seq(&self) -> watch::Receiver<u64> {
+        self.log_seq.subscribe()
     }
 
     pub fn stop(&self) {
@@ -87,9 +76,8 @@ struct Maker {
     gcs: Gcs,
     control: ControlHub,
     snapshots: watch::Sender<Arc<str>>,
-    log: broadcast::Sender<LogItem>,
+    log_seq: watch::Sender<u64>,
     seq: u64,
-    log_last: u64,
 }
 
 impl Maker {
@@ -115,82 +103,99 @@ impl Maker {
         }
     }
 
-    /// New log lines, then a snapshot if anyone is watching.
+    /// Says how far the log has grown, then makes a snapshot if anyone
+    /// is watching.
     fn publish(&mut self) {
         let wanted = self.snapshots.receiver_count() > 0;
-        let (snap, lines) = {
-            // Channels and the controllers' reports lock the router's
-            // tables: read them before the fleet (the lock order).
-            let channels = wanted.then(|| self.gcs.router().channels());
-            let control = wanted.then(|| self.control.snapshot());
-            let (fleet, lines) = self.gcs.with_fleet(|f| {
-                let lines = log_after(f, &mut self.log_last);
-                (channels.map(|c| snapshot(f, c)), lines)
-            });
-            (
-                fleet.map(|mut s| {
-                    if let Some(c) = &control {
-                        apply_control(&mut s, c);
-                    }
-                    s
-                }),
-                lines,
-            )
+        // Channels and the controllers' reports lock the router's tables:
+        // read them before the fleet (the lock order).
+        let channels = wanted.then(|| self.gcs.router().channels());
+        let control = wanted.then(|| self.control.snapshot());
+        let (snap, newest) = self.gcs.with_fleet(|f| {
+            let newest = f.log.back().map_or(0, |e| e.seq);
+            (channels.map(|c| snapshot(f, c)), newest)
+        });
+        self.log_seq.send_if_modified(|seq| {
+            let grew = *seq != newest;
+            *seq = newest;
+            grew
+        });
+        let Some(mut fleet) = snap else {
+            return;
         };
-        for item in lines {
-            // Nobody listening is fine: new clients read the history.
-            let _ = self.log.send(item);
+        if let Some(c) = &control {
+            apply_control(&mut fleet, c);
         }
-        if let Some(mut fleet) = snap {
-            let router = self.gcs.router();
-            fleet.security = router.security();
-            fleet.rejected = router.rejections().total();
-            self.seq += 1;
-            let line = to_line(&FromStation::Snapshot {
-                seq: self.seq,
-                fleet,
-            });
-            self.snapshots.send_replace(line.into());
-        }
+        let router = self.gcs.router();
+        fleet.security = router.security();
+        fleet.rejected = router.rejections().total();
+        self.seq += 1;
+        let line = to_line(&FromStation::Snapshot {
+            seq: self.seq,
+            fleet,
+        });
+        self.snapshots.send_replace(line.into());
     }
 }
 
-/// The fleet log's lines after `last` (moving `last` on), as wire lines.
-fn log_after(f: &Fleet, last: &mut u64) -> Vec<LogItem> {
-    let mut out = Vec::new();
-    for e in f.log_after(*last) {
-        *last = e.seq;
-        if let Some(item) = log_item(e) {
-            out.push(item);
-        }
+/// Where a session is in the event log: it sends each line once, in
+/// order, and says so when lines it had not sent yet fell out of the log.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct LogCursor {
+    last: u64,
+}
+
+impl LogCursor {
+    /// Starting with the newest `n` lines (debug lines left out).
+    pub fn recent(f: &Fleet, n: usize) -> LogCursor {
+        let shown: Vec<u64> = f
+            .log
+            .iter()
+            .rev()
+            .filter(|e| e.severity != Severity::Debug)
+            .take(n)
+            .map(|e| e.seq)
+            .collect();
+        let last = shown
+            .last()
+            .map_or_else(|| f.log.back().map_or(0, |e| e.seq), |s| s - 1);
+        LogCursor { last }
     }
-    out
+
+    /// The wire lines of the log after the cursor, moving it on.
+    pub fn take(&mut self, f: &Fleet) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(first) = f.log.front() {
+            if first.seq > self.last + 1 {
+                let n = first.seq - self.last - 1;
+                out.push(to_line(&FromStation::Refused {
+                    reason: format!("{n} event-log lines were missed: this client read too slowly"),
+                }));
+            }
+        }
+        for e in f.log_after(self.last) {
+            self.last = e.seq;
+            if let Some(line) = log_line(e) {
+                out.push(line);
+            }
+        }
+        out
+    }
 }
 
-/// The newest `n` log lines (debug lines left out), oldest first.
-pub(super) fn log_history(f: &Fleet, n: usize) -> Vec<LogItem> {
-    let mut items: Vec<LogItem> = f.log.iter().rev().filter_map(log_item).take(n).collect();
-    items.reverse();
-    items
-}
-
-fn log_item(e: &LogEntry) -> Option<LogItem> {
+fn log_line(e: &LogEntry) -> Option<String> {
     let level = match e.severity {
         Severity::Debug => return None,
         Severity::Info => LogLevel::Info,
         Severity::Warn => LogLevel::Warn,
         Severity::Error => LogLevel::Error,
     };
-    let line = to_line(&FromStation::Log {
+    Some(to_line(&FromStation::Log {
         seq: e.seq,
         t: mech_control::script::secs(e.at),
         level,
         text: e.text.clone(),
-    });
-    Some(LogItem {
-        seq: e.seq,
-        line: line.into(),
-    })
+    }))
 }
 
 /// Converts the core's fleet model into what the screen shows. Read

@@ -18,9 +18,9 @@ use mech_core::sync::lock;
 use mech_proto::auth::Tag;
 use serde_json::Value;
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader, ReadHalf, WriteHalf};
-use tokio::sync::{broadcast, mpsc, watch};
+use tokio::sync::{mpsc, watch};
 
-use super::feed::{LOG_HISTORY, LogItem, log_history};
+use super::feed::{LOG_HISTORY, LogCursor};
 use super::server::{MAX_SESSIONS, Station, Via};
 use super::wire::{
     FromStation, LineResult, MAX_CLIENT_LINE, PROTOCOL, ReadError, Streams, ToStation, Welcome,
@@ -310,95 +310,86 @@ fn executor(station: &Station, operator: &str) -> Executor {
 
 /// The feeds a client asked for.
 struct Feeds {
+    gcs: mech_core::Gcs,
     snapshots: Option<watch::Receiver<Arc<str>>>,
-    log: Option<broadcast::Receiver<LogItem>>,
-    /// Recent log lines, sent first; later ones only if newer.
-    history: Vec<LogItem>,
+    /// Where the client is in the event log, and the feed's word that it
+    /// grew.
+    log: Option<(LogCursor, watch::Receiver<u64>)>,
+}
+
+impl Feeds {
+    /// Event-log lines the client has not had yet.
+    fn new_log_lines(&mut self) -> Vec<String> {
+        match self.log.as_mut() {
+            Some((cursor, _)) => self.gcs.with_fleet(|f| cursor.take(f)),
+            None => Vec::new(),
+        }
+    }
 }
 
 fn feeds(station: &Station, s: Streams) -> Feeds {
     let feed = &station.inner.feed;
-    // Subscribe before reading the history, so no line falls between.
-    let log = s.log.then(|| feed.log());
-    let history = if s.log {
-        station.gcs().with_fleet(|f| log_history(f, LOG_HISTORY))
-    } else {
-        Vec::new()
-    };
+    let gcs = station.gcs().clone();
+    // Watch first, so no line falls between the cursor and the watch.
+    let log = s.log.then(|| {
+        let grew = feed.log_seq();
+        (gcs.with_fleet(|f| LogCursor::recent(f, LOG_HISTORY)), grew)
+    });
     Feeds {
+        gcs,
         snapshots: s.snapshots.then(|| feed.snapshots()),
         log,
-        history,
     }
 }
 
 /// Writes everything bound for the client until the session ends or the
-/// client stops reading for [`WRITE_TIMEOUT`].
+/// client stops reading for [`WRITE_TIMEOUT`]. Event-log lines go before
+/// whatever comes next, so a command's result follows what it logged.
 async fn write_loop<W: AsyncWrite + Unpin>(
     mut wr: W,
     mut out: mpsc::Receiver<Arc<str>>,
     mut feeds: Feeds,
 ) {
-    let mut last_log = 0;
-    for item in std::mem::take(&mut feeds.history) {
-        last_log = item.seq;
-        if send(&mut wr, &item.line).await.is_err() {
-            return;
-        }
-    }
     loop {
-        let line: Arc<str> = tokio::select! {
+        let next: Option<Arc<str>> = tokio::select! {
             biased;
             m = out.recv() => match m {
-                Some(line) => line,
+                Some(line) => Some(line),
                 None => break,
             },
-            line = next_log(&mut feeds.log, &mut last_log), if feeds.log.is_some() => match line {
-                Some(line) => line,
-                None => continue,
-            },
-            line = next_snapshot(&mut feeds.snapshots), if feeds.snapshots.is_some() => match line {
-                Some(line) if !line.is_empty() => line,
-                _ => continue,
-            },
+            () = log_grew(&mut feeds.log), if feeds.log.is_some() => None,
+            line = next_snapshot(&mut feeds.snapshots), if feeds.snapshots.is_some() => {
+                line.filter(|l| !l.is_empty())
+            }
         };
-        if send(&mut wr, &line).await.is_err() {
-            return;
+        for line in feeds.new_log_lines() {
+            if send(&mut wr, &line).await.is_err() {
+                return;
+            }
+        }
+        if let Some(line) = next {
+            if send(&mut wr, &line).await.is_err() {
+                return;
+            }
         }
     }
     let _ = wr.shutdown().await;
+}
+
+/// Returns when the event log grew (never, once the feed has stopped).
+async fn log_grew(log: &mut Option<(LogCursor, watch::Receiver<u64>)>) {
+    let Some((_, grew)) = log.as_mut() else {
+        return std::future::pending().await;
+    };
+    if grew.changed().await.is_err() {
+        std::future::pending::<()>().await;
+    }
 }
 
 async fn send<W: AsyncWrite + Unpin>(wr: &mut W, line: &str) -> Result<(), ()> {
     match tokio::time::timeout(WRITE_TIMEOUT, write(wr, line)).await {
         Ok(Ok(())) => Ok(()),
         _ => Err(()),
-    }
-}
-
-/// The next log line newer than `last` (moving `last` on); a client that
-/// fell behind is told how many it missed.
-async fn next_log(
-    log: &mut Option<broadcast::Receiver<LogItem>>,
-    last: &mut u64,
-) -> Option<Arc<str>> {
-    let rx = log.as_mut()?;
-    match rx.recv().await {
-        Ok(item) if item.seq > *last => {
-            *last = item.seq;
-            Some(item.line)
-        }
-        Ok(_) => None,
-        Err(broadcast::error::RecvError::Lagged(n)) => Some(
-            to_line(&FromStation::Refused {
-                reason: format!("{n} event-log lines were skipped: this client reads too slowly"),
-            })
-            .into(),
-        ),
-        Err(broadcast::error::RecvError::Closed) => {
-            *log = None;
-            None
-        }
     }
 }
 
