@@ -3,5 +3,7 @@
 mod cli;
 mod cluster_script;
 mod script;
+mod serve;
 mod signed;
+mod tmux;
 mod tui;

@@ -451,3 +451,55 @@ async fn a_typed_estop_acts_at_once_whatever_the_command_queue_is_doing() {
     assert!(!gcs.with_fleet(|f| f.estop.engaged));
     rig.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_route_change_by_one_operator_reaches_the_others_snapshot_at_once() {
+    let rig = Rig::start(2).await;
+    let opts = || AttachOptions {
+        stream: Streams {
+            snapshots: true,
+            log: false,
+            events: false,
+        },
+        ..AttachOptions::default()
+    };
+    let a = attach_stream(rig.station.attach_local(), opts())
+        .await
+        .expect("a attached");
+    let mut b = attach_stream(rig.station.attach_local(), opts())
+        .await
+        .expect("b attached");
+    let mut latencies = Vec::new();
+    for i in 0..40u64 {
+        let channel = format!("joy/flip{}", i % 2);
+        let sent = Instant::now();
+        a.to.send(mech_gcs::station::wire::ToStation::Line {
+            id: i,
+            text: format!("route robot_2 {channel}"),
+        })
+        .expect("sent");
+        loop {
+            let m = tokio::time::timeout(Duration::from_secs(5), b.from.recv())
+                .await
+                .expect("b hears within 5 s")
+                .expect("b attached");
+            if let FromStation::Snapshot { fleet, .. } = m {
+                let r2 = fleet.robots.iter().find(|r| r.name == "robot_2");
+                if r2.is_some_and(|r| r.route.channel == channel) {
+                    latencies.push(sent.elapsed());
+                    break;
+                }
+            }
+        }
+    }
+    latencies.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "route change seen by another client: p50 {:.1} ms, p95 {:.1} ms, max {:.1} ms over {} changes",
+        ms(latencies[latencies.len() / 2]),
+        ms(latencies[latencies.len() * 95 / 100]),
+        ms(latencies[latencies.len() - 1]),
+        latencies.len()
+    );
+    rig.stop().await;
+}

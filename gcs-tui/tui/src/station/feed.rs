@@ -25,7 +25,7 @@ use crate::view::{
 pub(super) const LOG_HISTORY: usize = 50;
 
 /// Shortest time between two snapshots (an event storm is coalesced).
-const MIN_GAP: Duration = Duration::from_millis(10);
+const MIN_GAP: Duration = Duration::from_millis(3);
 
 /// The shared feed: subscribe to snapshots and log lines.
 #[derive(Debug)]

@@ -111,7 +111,14 @@ async fn event_loop(
             _ = teleop_tick.tick() => app.update(Action::Tick(Instant::now())),
             Some(pad) = pad_rx.recv() => app.update(Action::Pad(pad)),
             m = from.recv(), if attached => match m {
-                Some(m) => link.receive(m, &mut app),
+                Some(m) => {
+                    // A fresh fleet is drawn at once, not at the next frame.
+                    let fresh = matches!(m, FromStation::Snapshot { .. });
+                    link.receive(m, &mut app);
+                    if fresh {
+                        terminal.draw(|f| f.render_widget(&app, f.area()))?;
+                    }
+                }
                 None => {
                     attached = false;
                     app.log(LogLevel::Error, "the station closed the connection: nothing you do reaches the robots now (q quits)");
