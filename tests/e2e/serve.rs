@@ -22,6 +22,11 @@ impl Service {
     /// `mech-gcs serve` on loopback with `robots` simulated agents, each
     /// its own `mech-agent --sim` process.
     fn start(tag: &str, robots: usize) -> Service {
+        Service::start_with(tag, robots, &[])
+    }
+
+    /// [`Service::start`] with extra environment for the station.
+    fn start_with(tag: &str, robots: usize, env: &[(&str, &str)]) -> Service {
         let dir = std::env::temp_dir().join(format!("mech-e2e-serve-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("temp dir");
@@ -37,6 +42,7 @@ impl Service {
             ])
             .arg(&socket)
             .env("XDG_STATE_HOME", &dir)
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -327,6 +333,55 @@ fn sigterm_tells_every_robot_and_removes_the_socket() {
         let told = wait_for_text(&log, "router is stopping", Duration::from_secs(5));
         assert!(told, "robot_{i} was told; its log:\n{}", read(&log));
     }
+}
+
+#[test]
+fn systemd_hears_ready_watchdog_and_stopping() {
+    use std::os::unix::net::UnixDatagram;
+    let dir = std::env::temp_dir().join(format!("mech-e2e-notify-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let notify = dir.join("notify.sock");
+    let systemd = UnixDatagram::bind(&notify).expect("a notify socket");
+    systemd
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    let path = notify.to_string_lossy().into_owned();
+    let mut service = Service::start_with(
+        "notify",
+        0,
+        &[
+            ("NOTIFY_SOCKET", path.as_str()),
+            ("WATCHDOG_USEC", "200000"),
+        ],
+    );
+    let mut heard = String::new();
+    let mut buf = [0u8; 4096];
+    let start = Instant::now();
+    while heard.matches("WATCHDOG=1").count() < 3 {
+        let n = systemd.recv(&mut buf).expect("a notification within 10 s");
+        heard.push_str(&String::from_utf8_lossy(&buf[..n]));
+        heard.push('\n');
+        assert!(start.elapsed() < Duration::from_secs(10), "{heard}");
+    }
+    assert!(heard.contains("READY=1"), "{heard}");
+    assert!(heard.contains("STATUS=mech-gcs serving"), "{heard}");
+    let pid = service.station.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("kill")
+            .success()
+    );
+    loop {
+        let n = systemd.recv(&mut buf).expect("STOPPING=1 within 10 s");
+        if String::from_utf8_lossy(&buf[..n]).contains("STOPPING=1") {
+            break;
+        }
+    }
+    let _ = service.station.wait();
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn read(path: &Path) -> String {

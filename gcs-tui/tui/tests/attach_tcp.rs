@@ -246,3 +246,52 @@ async fn garbage_from_a_client_is_refused_and_a_flood_of_it_hangs_up() {
     assert!(bye.contains("bad messages"), "{bye}");
     station.shutdown().await;
 }
+
+/// The documented Python client (docs/examples/attach.py) proves its
+/// operator key over TCP and runs a line; its tag function is the one
+/// docs/control-protocol.md shows.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_documented_python_client_attaches_with_its_key() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let example = root.join("docs/examples/attach.py");
+    let doc = std::fs::read_to_string(root.join("docs/control-protocol.md")).expect("doc");
+    let code = std::fs::read_to_string(&example).expect("example");
+    let snippet = doc
+        .split("```python\n")
+        .nth(1)
+        .and_then(|s| s.split("```").next())
+        .expect("a python block in the doc");
+    let body = snippet.trim_start_matches("import hashlib, hmac, struct\n");
+    assert!(
+        code.contains(body),
+        "docs/control-protocol.md and attach.py differ:\n{body}"
+    );
+    if std::process::Command::new("python3")
+        .arg("-V")
+        .output()
+        .is_err()
+    {
+        println!("skipped: python3 is not installed");
+        return;
+    }
+    let k = Keyed::start().await;
+    let key = k.dir.path().join("ana.key");
+    let addr = k.addr.to_string();
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new("python3")
+            .arg(&example)
+            .args(["--tcp", &addr, "--key"])
+            .arg(&key)
+            .arg("status")
+            .output()
+    })
+    .await
+    .expect("joined")
+    .expect("python3 runs");
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("attached as ana"), "{text}");
+    assert!(text.contains("status: 0 robots"), "{text}");
+    k.station.shutdown().await;
+}
