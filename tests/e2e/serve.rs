@@ -103,6 +103,12 @@ impl Service {
     /// A TUI attached to the station in a new tmux session (the TUI is the
     /// pane's process, so the pane's pid is the TUI's).
     fn tui(&self, name: &str) -> Tmux {
+        self.tui_with(name, "--attach")
+    }
+
+    /// A TUI started with `how` and the station's socket: `--attach`, or
+    /// `--socket` (no --attach: it attaches when a station runs there).
+    fn tui_with(&self, name: &str, how: &str) -> Tmux {
         let tmux = Tmux {
             socket: format!("mech-e2e-serve-{name}-{}", std::process::id()),
             session: name.into(),
@@ -110,7 +116,7 @@ impl Service {
         };
         std::fs::create_dir_all(&tmux.state).expect("tmux state dir");
         let cmd = format!(
-            "exec env XDG_STATE_HOME={} {} --attach {}",
+            "exec env XDG_STATE_HOME={} {} {how} {}",
             tmux.state.display(),
             mech_e2e::binary("mech-gcs").display(),
             self.socket.display()
@@ -246,7 +252,8 @@ fn two_tuis_see_one_fleet_and_a_route_change_in_one_shows_in_the_other() {
     }
     let service = Service::start("two", 2);
     let a = service.tui("a");
-    let b = service.tui("b");
+    // Without --attach, a TUI finds the running station by its socket.
+    let b = service.tui_with("b", "--socket");
     // The line typed first; the clock starts with its Enter.
     a.keys(&["Escape", ":"]);
     a.literal("route robot_2 joy/e2e");
