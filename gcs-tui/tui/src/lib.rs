@@ -7,6 +7,7 @@
 //! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
 //! - [`config`]: `gcs.toml`, assembled from each layer's section;
 //! - [`logging`]: rolling log files;
+//! - [`replay`]: `mech-gcs replay`, a recording read back;
 //! - [`sim`]: simulated agents for `spawn` and `--demo`.
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
@@ -14,6 +15,7 @@
 pub mod config;
 pub mod gamepad;
 pub mod logging;
+pub mod replay;
 pub mod sim;
 pub mod ui;
 

@@ -13,7 +13,7 @@ use clap::{Parser, Subcommand};
 use mech_control::lang::Executor;
 use mech_control::script::{self, Sink};
 use mech_core::Gcs;
-use mech_gcs::{GcsConfig, logging, sim};
+use mech_gcs::{GcsConfig, logging, replay, sim};
 
 /// MECH ground-control station: robot cards, braille map, waypoints, live
 /// controller routing.
@@ -40,6 +40,10 @@ struct Cli {
     /// TCP endpoint of the router (overrides the configuration).
     #[arg(long, value_name = "ADDR")]
     tcp: Option<SocketAddr>,
+    /// Record everything the router sees to this MCAP file (Foxglove and
+    /// Lichtblick open it; `mech-gcs replay` replays it).
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -59,6 +63,17 @@ enum Command {
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
+    /// Replay a recording without a router: nothing is sent to any robot.
+    /// Prints what it holds; with --script, prints it as the JSON lines of
+    /// `--script` (exit code 1 if the file is damaged: what could be read
+    /// is printed first).
+    Replay {
+        /// The recording (`--record`, `record start`, or `serve`'s).
+        file: PathBuf,
+        /// Print the recording as `--script` JSON lines.
+        #[arg(long)]
+        script: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -75,6 +90,9 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     if let Some(Command::Keygen { name, out }) = &cli.command {
         return keygen(name, out.clone());
+    }
+    if let Some(Command::Replay { file, script }) = &cli.command {
+        return replay::run(file, *script, cli.config.as_deref());
     }
     let mut config = match &cli.config {
         Some(path) => GcsConfig::load(path)?,
@@ -102,7 +120,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             .enable_all()
             .build()
             .context("cannot start the async runtime")?;
-        runtime.block_on(run_tui(config, cli.demo, cli.no_mouse))?;
+        runtime.block_on(run_tui(config, cli.demo, cli.no_mouse, cli.record))?;
         return Ok(ExitCode::SUCCESS);
     };
     let source = if script_path.as_os_str() == "-" {
@@ -121,7 +139,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    let code = runtime.block_on(run_script(config, cli.demo, &source))?;
+    let code = runtime.block_on(run_script(config, cli.demo, &source, cli.record))?;
     Ok(ExitCode::from(code))
 }
 
@@ -143,18 +161,19 @@ fn keygen(name: &str, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
 }
 
 /// The interactive station; `--demo N` spawns N simulated robots first.
-async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyhow::Result<()> {
+async fn run_tui(
+    config: GcsConfig,
+    demo: Option<usize>,
+    no_mouse: bool,
+    record: Option<PathBuf>,
+) -> anyhow::Result<()> {
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "mech-gcs starting");
     let teleop = config
         .gamepad
         .teleop()
         .context("invalid [gamepad] configuration")?;
-    let gcs = Gcs::start(config.core())
-        .await
-        .context("cannot start the router")?;
-    let executor = Executor::new(gcs.clone())
-        .with_clusters(&config.cluster)
-        .with_spawner(sim::simulator());
+    let gcs = start(&config, record).await?;
+    let executor = executor(&gcs, &config, "tui");
     let mut options = mech_gcs::ui::RunOptions {
         mouse: !no_mouse,
         teleop,
@@ -170,17 +189,43 @@ async fn run_tui(config: GcsConfig, demo: Option<usize>, no_mouse: bool) -> anyh
     result.context("terminal error")
 }
 
-async fn run_script(config: GcsConfig, demo: Option<usize>, source: &str) -> anyhow::Result<u8> {
+/// Starts the station, recording to `record` if given.
+async fn start(config: &GcsConfig, record: Option<PathBuf>) -> anyhow::Result<Gcs> {
+    let gcs = Gcs::start(config.core())
+        .await
+        .context("cannot start the router")?;
+    if let Some(file) = record {
+        gcs.start_recording(mech_core::RecordTarget::File(file))
+            .context("cannot start recording")?;
+    }
+    Ok(gcs)
+}
+
+/// The command-language executor of a station, naming where its commands
+/// come from (`tui`, `script`) in recordings.
+fn executor(gcs: &Gcs, config: &GcsConfig, source: &str) -> Executor {
+    let mut executor = Executor::new(gcs.clone())
+        .with_clusters(&config.cluster)
+        .with_spawner(sim::simulator())
+        .with_source(source);
+    if let Some(dir) = config.record.dir.clone().or_else(|| config.log.dir.clone()) {
+        executor = executor.with_record_dir(dir);
+    }
+    executor
+}
+
+async fn run_script(
+    config: GcsConfig,
+    demo: Option<usize>,
+    source: &str,
+    record: Option<PathBuf>,
+) -> anyhow::Result<u8> {
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         "mech-gcs starting (script mode)"
     );
-    let gcs = Gcs::start(config.core())
-        .await
-        .context("cannot start the router")?;
-    let mut executor = Executor::new(gcs.clone())
-        .with_clusters(&config.cluster)
-        .with_spawner(sim::simulator());
+    let gcs = start(&config, record).await?;
+    let mut executor = executor(&gcs, &config, "script");
     let sink: Sink = Arc::new(Mutex::new(Box::new(std::io::stdout())));
     let code = async {
         if let Some(n) = demo {

@@ -42,6 +42,8 @@ pub(super) struct Context {
     pub(super) publishers: Publishers,
     /// Fleet and offboard controllers started by this executor's commands.
     pub(super) control: ControlHub,
+    /// Where `record start` without a file records (rotating files).
+    pub(super) record_dir: Option<std::path::PathBuf>,
 }
 
 impl Context {
@@ -51,6 +53,7 @@ impl Context {
             publishers: gcs.router().publishers(SENDER),
             gcs,
             spawner: None,
+            record_dir: None,
         }
     }
 
