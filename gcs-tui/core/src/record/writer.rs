@@ -311,24 +311,13 @@ impl Writer {
         )
     }
 
-    /// Begins a file with the replica as snapshot events at `at` (the
-    /// router's binding keeps its own time, 0: when it happened).
+    /// Begins a file with the replica as snapshot events at `at`.
     fn begin(&mut self, at: Duration) -> Result<(), RecordError> {
         self.last_at = self.last_at.max(at);
         self.log_seq = self.replica.log.back().map_or(0, |e| e.seq);
         for event in snapshot::events(&self.replica) {
-            let when = match event {
-                Event::Listening { .. } => Duration::ZERO,
-                _ => at,
-            };
-            let json = encode::event(&Stamped { at: when, event });
-            self.put(
-                schema::SNAPSHOT,
-                Some(schema::MECH_EVENT),
-                None,
-                when,
-                &json,
-            )?;
+            let json = encode::event(&Stamped { at, event });
+            self.put(schema::SNAPSHOT, Some(schema::MECH_EVENT), None, at, &json)?;
         }
         self.clusters(at, true)?;
         self.last_scene = None;
