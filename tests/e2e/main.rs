@@ -2,6 +2,7 @@
 
 mod cli;
 mod cluster_script;
+mod record;
 mod script;
 mod signed;
 mod tui;

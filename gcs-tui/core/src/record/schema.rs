@@ -347,4 +347,49 @@ mod tests {
             assert_eq!(schema(name)["title"], name);
         }
     }
+
+    #[test]
+    fn events_are_tagged_with_their_names_and_read_back() {
+        use crate::counters::RejectReason;
+        use crate::event::{Event, LinkState};
+        let events = [
+            Event::Link {
+                robot: "r".into(),
+                state: LinkState::Stale,
+            },
+            Event::RouteChanged {
+                robot: "r".into(),
+                channel: None,
+                epoch: 2,
+            },
+            Event::EStop {
+                engage: true,
+                id: 7,
+            },
+            Event::EStopAcked {
+                robot: "r".into(),
+                engage: false,
+                id: 7,
+            },
+            Event::EStopComplete {
+                engage: true,
+                id: 7,
+            },
+            Event::Rejected {
+                from: "udp:1.2.3.4:5".into(),
+                reason: RejectReason::UnknownKey,
+                detail: "x".into(),
+            },
+            Event::BadPacket {
+                from: "gcs".into(),
+                error: "e".into(),
+            },
+        ];
+        for e in events {
+            let v = serde_json::to_value(&e).unwrap();
+            assert_eq!(v["event"], e.name());
+            assert!(EVENT_NAMES.contains(&e.name()));
+            assert_eq!(serde_json::from_value::<Event>(v).unwrap(), e);
+        }
+    }
 }
