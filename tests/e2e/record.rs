@@ -71,7 +71,11 @@ fn scratch(name: &str) -> PathBuf {
 /// installed (`scripts/deps.sh` installs it).
 fn python_reads(file: &Path) -> Option<Value> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_recording.py");
-    let out = Command::new("python3").arg(script).arg(file).output().ok()?;
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(file)
+        .output()
+        .ok()?;
     let stderr = String::from_utf8_lossy(&out.stderr);
     if stderr.contains("No module named 'mcap'") {
         return None;
