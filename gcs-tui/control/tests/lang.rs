@@ -262,13 +262,14 @@ async fn record_starts_reports_and_stops_a_recording_with_the_commands_in_it() {
             _ => None,
         })
         .collect();
-    // The start is in it (recorded once it ran), the stop is not (the
-    // file was finished by then).
+    // The start is in it (recorded once it ran), and the refused second
+    // start; the stop is not (the file was finished by then).
     let start = format!("script record start {}", file.display());
     assert_eq!(
         commands,
         [
             start.as_str(),
+            "script record start other.mcap",
             "script route robot_1 joy/0",
             "script status"
         ]

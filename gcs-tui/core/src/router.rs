@@ -17,7 +17,6 @@ mod config;
 mod net;
 mod rate;
 mod tables;
-mod tap;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -36,8 +35,8 @@ pub use bus::Subscription;
 pub use config::RouterConfig;
 pub use tables::Delivery;
 pub(crate) use tables::Peer;
-pub use tap::OperatorRecord;
-pub(crate) use tap::{Tap, Tapped, TappedMessage};
+pub use tables::tap::OperatorRecord;
+pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
 
 use crate::auth::{Identity, Keyring, Security};
 use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};

@@ -23,6 +23,7 @@ mod gate;
 mod missions;
 mod registration;
 mod routes;
+pub(crate) mod tap;
 mod telemetry;
 
 use mech_proto::{Body, Envelope, Header};
@@ -31,8 +32,9 @@ use tracing::{debug, warn};
 
 use super::config::RouterConfig;
 use super::rate::RateMeter;
-use super::tap::{MessageTap, Tap};
+
 use mech_proto::auth::Stamper;
+use tap::{MessageTap, Tap};
 
 use crate::auth::Keyring;
 use crate::counters::{Counters, DropReason, Drops, Rejections, Traffic};

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use super::tables::{Delivery, Peer};
+use super::{Delivery, Peer};
 use crate::event::Stamped;
 
 /// One message as the router decided it.
