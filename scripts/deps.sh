@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
 # pkg-config (gilrs, serialport), socat (serial-link tests over a
-# pseudo-terminal pair), tmux (the end-to-end TUI test), and Python's msgpack
-# (the documented Python controller is run by the tests). Does nothing when
-# they are already there.
+# pseudo-terminal pair), tmux (the end-to-end TUI test), strace (the replay
+# test checks that a replay opens no socket), Python's msgpack (the
+# documented Python controller is run by the tests) and Python's mcap (the
+# recording test reads recordings with it). Does nothing when they are
+# already there.
 set -euo pipefail
 need=()
-for pkg in libudev-dev pkg-config socat tmux; do
+for pkg in libudev-dev pkg-config socat tmux strace; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then
@@ -21,4 +23,10 @@ if command -v python3 >/dev/null && ! python3 -c 'import msgpack' 2>/dev/null; t
     echo "installing: python msgpack"
     python3 -m pip install --quiet --disable-pip-version-check msgpack 2>/dev/null \
         || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages msgpack
+fi
+# Python's mcap (with its zstd and lz4): an independent reader of recordings.
+if command -v python3 >/dev/null && ! python3 -c 'import mcap' 2>/dev/null; then
+    echo "installing: python mcap"
+    python3 -m pip install --quiet --disable-pip-version-check mcap 2>/dev/null \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages mcap
 fi

@@ -2,6 +2,7 @@
 
 mod cli;
 mod cluster_script;
+mod record;
 mod script;
 mod serve;
 mod signed;

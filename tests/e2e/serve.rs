@@ -334,6 +334,25 @@ fn sigterm_tells_every_robot_and_removes_the_socket() {
     };
     assert!(exit.success(), "a clean stop: {exit:?}");
     assert!(!service.socket.exists(), "the socket is removed");
+    // It recorded, by default, into its log directory; the file replays.
+    let recordings: Vec<PathBuf> = std::fs::read_dir(service.dir.join("mech"))
+        .expect("the log directory")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    assert_eq!(recordings.len(), 1, "{recordings:?}");
+    let replay = Command::new(mech_e2e::binary("mech-gcs"))
+        .arg("replay")
+        .arg(&recordings[0])
+        .arg("--script")
+        .output()
+        .expect("replay runs");
+    let lines = String::from_utf8_lossy(&replay.stdout);
+    assert!(replay.status.success(), "{lines}");
+    assert!(
+        lines.contains(r#""event":"registered""#) && lines.contains("robot_2"),
+        "{lines}"
+    );
     // Each robot heard the station go (not just its silence).
     for i in 1..=2 {
         let log = service.dir.join(format!("robot_{i}.log"));

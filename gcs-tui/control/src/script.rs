@@ -44,7 +44,7 @@ impl ScriptOutcome {
 /// A line-oriented JSON sink shared by the event printer and the runner.
 pub type Sink = Arc<Mutex<Box<dyn Write + Send>>>;
 
-fn emit(sink: &Sink, value: &Value) {
+pub(crate) fn emit(sink: &Sink, value: &Value) {
     let mut w = mech_core::sync::lock(sink);
     // Output is best effort: a closed stdout must not stop the robots' script.
     let _ = writeln!(w, "{value}");
@@ -208,6 +208,14 @@ fn rejected_json(r: &mech_core::counters::Rejections) -> Value {
     v
 }
 
+/// A recording's file and what it lost so far.
+fn recording_json(r: &mech_core::RecordingStatus) -> Value {
+    json!({
+        "file": r.file.display().to_string(), "messages": r.messages,
+        "queued": r.queued, "dropped": r.dropped, "error": r.error,
+    })
+}
+
 /// Runs `source` against `gcs` with `executor`, writing JSON lines to `sink`.
 pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -> ScriptOutcome {
     let statements = match parse_script(source) {
@@ -263,16 +271,17 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
             .count()
     });
     let counters = gcs.router().counters();
-    emit(
-        &sink,
-        &json!({
-            "type": "summary", "ok": ok, "commands": ran, "error": error,
-            "connected_robots": robots,
-            "received": counters.received, "forwarded": counters.forwarded,
-            "bad_packets": counters.dropped.bad_packet,
-            "authenticated": gcs.router().authenticated(),
-            "rejected": rejected_json(&counters.rejected),
-        }),
-    );
+    let mut summary = json!({
+        "type": "summary", "ok": ok, "commands": ran, "error": error,
+        "connected_robots": robots,
+        "received": counters.received, "forwarded": counters.forwarded,
+        "bad_packets": counters.dropped.bad_packet,
+        "authenticated": gcs.router().authenticated(),
+        "rejected": rejected_json(&counters.rejected),
+    });
+    if let (Some(r), Value::Object(m)) = (gcs.recording(), &mut summary) {
+        m.insert("recording".into(), recording_json(&r));
+    }
+    emit(&sink, &summary);
     outcome
 }

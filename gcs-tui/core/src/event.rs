@@ -9,13 +9,12 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
+use serde::{Deserialize, Serialize};
 
 use crate::counters::RejectReason;
 
 /// How recently the router heard from a robot.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LinkState {
     /// Heard within `stale_after`.
@@ -44,8 +43,10 @@ impl LinkState {
 }
 
 /// Something the router did or saw. Subscribers receive them in order, each
-/// wrapped in a [`Stamped`].
-#[derive(Debug, Clone, PartialEq)]
+/// wrapped in a [`Stamped`]. Recordings store them as JSON objects tagged
+/// with [`Event::name`] (a test keeps the two the same).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
     /// The router is bound and running.
     Listening {
@@ -100,14 +101,17 @@ pub enum Event {
         reason: String,
     },
     /// E-stop engaged (`engage`) or released, for every robot.
+    #[serde(rename = "estop")]
     EStop { engage: bool, id: u32 },
     /// One robot acknowledged the e-stop or release `id`.
+    #[serde(rename = "estop_acked")]
     EStopAcked {
         robot: String,
         engage: bool,
         id: u32,
     },
     /// Every robot known when it was sent acknowledged e-stop/release `id`.
+    #[serde(rename = "estop_complete")]
     EStopComplete { engage: bool, id: u32 },
     /// A channel published for the first time, or got a new publisher.
     ChannelPublisher { channel: String, publisher: String },

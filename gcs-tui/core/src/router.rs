@@ -34,6 +34,9 @@ use tokio::time::Instant;
 pub use bus::Subscription;
 pub use config::RouterConfig;
 pub use tables::Delivery;
+pub(crate) use tables::Peer;
+pub use tables::tap::OperatorRecord;
+pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
 
 use crate::auth::{Identity, Keyring, Security};
 use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};
@@ -41,7 +44,7 @@ use crate::event::{Event, EventSink};
 use crate::sync::lock;
 use batch::{RecvBatch, SendBatch};
 use bus::EventBus;
-use tables::{Outbox, Peer, Tables};
+use tables::{Outbox, Tables};
 
 /// Why a router call failed.
 #[derive(Debug, thiserror::Error)]
@@ -121,9 +124,19 @@ impl Shared {
         // in the order the tables made them (a mission is "sent" before
         // its acknowledgement, whichever worker handles the ack).
         for e in events.drain(..) {
-            self.bus.emit(e);
+            self.emit(&tables, e);
         }
         delivery
+    }
+
+    /// Emits an event to the fleet model and subscribers and offers it to
+    /// the recorder's tap; called holding the tables (so the recording has
+    /// messages and events in the order the tables made them).
+    fn emit(&self, tables: &Tables, e: Event) {
+        let stamped = self.bus.emit(e);
+        if let Some(tap) = &tables.tap {
+            tap.offer(Tapped::Event(stamped));
+        }
     }
 
     /// Sends the outbox: `raw` targets get `raw`, `owned` ones their own
@@ -214,7 +227,7 @@ impl Shared {
                 decided.owned.push(bytes);
             }
             for e in decided.events.drain(..) {
-                self.bus.emit(e);
+                self.emit(&tables, e);
             }
         }
     }
@@ -264,7 +277,7 @@ impl Shared {
             let mut tables = lock(&self.tables);
             let r = f(&mut tables, Instant::now(), &mut out, &mut events);
             for e in events {
-                self.bus.emit(e);
+                self.emit(&tables, e);
             }
             r
         };
@@ -643,6 +656,31 @@ impl RouterHandle {
     /// Time since the router started.
     pub fn elapsed(&self) -> Duration {
         self.shared.bus.elapsed()
+    }
+
+    /// When the router started (router time 0).
+    pub(crate) fn started(&self) -> Instant {
+        self.shared.bus.start()
+    }
+
+    /// Puts `tap` on the router (or takes it off with `None`, returning
+    /// the one that was on). `begin` runs holding the tables, just before
+    /// the tap goes on, with the count of messages received so far: what
+    /// it queues comes before every message and event the tap sees.
+    pub(crate) fn set_tap(&self, tap: Option<Tap>, begin: impl FnOnce(u64)) -> Option<Tap> {
+        let mut tables = lock(&self.shared.tables);
+        begin(tables.counters_received());
+        std::mem::replace(&mut tables.tap, tap)
+    }
+
+    /// Records an operator command in the recording, if one is being made
+    /// (in order with the router's messages and events).
+    pub fn record_operator(&self, mut record: OperatorRecord) {
+        let tables = lock(&self.shared.tables);
+        if let Some(tap) = &tables.tap {
+            record.at = self.shared.bus.elapsed();
+            tap.offer(Tapped::Operator(record));
+        }
     }
 
     /// Runs an encoded message through the router as if it had arrived from

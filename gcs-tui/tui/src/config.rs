@@ -1,6 +1,7 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
-//! sections each layer owns: `[router]`, `[fleet]` and `[auth]` (mech-core),
-//! `[[cluster]]` (mech-control), `[log]`, `[gamepad]` and `[station]` (this binary).
+//! sections each layer owns: `[router]`, `[fleet]`, `[auth]` and `[record]`
+//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[gamepad]` and
+//! `[station]` (this binary).
 //! Every field has a default, so an empty file (or none) gives a working
 //! ground station on port 7400.
 
@@ -8,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use mech_control::ClusterSpec;
 use mech_core::auth::AuthConfig;
-use mech_core::{CoreConfig, FleetConfig, RouterConfig};
+use mech_core::{CoreConfig, FleetConfig, RecordConfig, RouterConfig};
 use serde::Deserialize;
 
 use crate::gamepad::GamepadConfig;
@@ -46,6 +47,8 @@ pub struct GcsConfig {
     pub cluster: Vec<ClusterSpec>,
     /// Gamepad teleop: shaping, dead-man and other buttons, rate, limits.
     pub gamepad: GamepadConfig,
+    /// Recordings: directory, file size cap, rotation, queue.
+    pub record: RecordConfig,
     /// Where a served station listens for TUIs and scripts.
     pub station: StationConfig,
 }
@@ -88,6 +91,7 @@ impl GcsConfig {
             router: self.router.clone(),
             fleet: self.fleet.clone(),
             auth: self.auth.clone(),
+            record: self.record.clone(),
         }
     }
 

@@ -8,6 +8,7 @@
 //! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
 //! - [`config`]: `gcs.toml`, assembled from each layer's section;
 //! - [`logging`]: rolling log files;
+//! - [`replay`]: `mech-gcs replay`, a recording read back;
 //! - [`sim`]: simulated agents for `spawn` and `--demo`;
 //! - [`station`]: `mech-gcs serve`, the attach protocol, attaching.
 
@@ -16,6 +17,7 @@
 pub mod config;
 pub mod gamepad;
 pub mod logging;
+pub mod replay;
 pub mod sim;
 pub mod station;
 pub mod ui;

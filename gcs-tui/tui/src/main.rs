@@ -16,7 +16,7 @@ use mech_core::Gcs;
 use mech_gcs::station::Station;
 use mech_gcs::station::client::{self, Address, AttachOptions, attach, attach_stream};
 use mech_gcs::station::wire::Streams;
-use mech_gcs::{GcsConfig, logging, sim};
+use mech_gcs::{GcsConfig, logging, replay, sim};
 
 /// MECH ground-control station: robot cards, braille map, waypoints, live
 /// controller routing.
@@ -60,6 +60,11 @@ struct Cli {
     /// The control socket of the station (overrides [station] socket).
     #[arg(long, value_name = "PATH", global = true)]
     socket: Option<PathBuf>,
+    /// Record everything the router sees to this MCAP file (Foxglove and
+    /// Lichtblick open it; `mech-gcs replay` replays it). `serve` records
+    /// into its log directory by default, in rotating files.
+    #[arg(long, value_name = "FILE.mcap", global = true)]
+    record: Option<PathBuf>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -71,6 +76,17 @@ enum Command {
     /// detach (`mech-gcs` attaches to it). Stops on SIGTERM, telling every
     /// client and robot; ready and watchdog notifications for systemd.
     Serve,
+    /// Replay a recording without a router: nothing is sent to any robot.
+    /// Prints what it holds; with --script, prints it as the JSON lines of
+    /// `--script` (exit code 1 if the file is damaged: what could be read
+    /// is printed first).
+    Replay {
+        /// The recording (`--record`, `record start`, or `serve`'s).
+        file: PathBuf,
+        /// Print the recording as `--script` JSON lines.
+        #[arg(long)]
+        script: bool,
+    },
     /// Make a new key for a robot, controller, operator or e-stop device,
     /// in a file only its owner can read. List it in the station's
     /// `[auth]` section and give the file to its holder (a robot's
@@ -101,6 +117,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     if let Some(Command::Keygen { name, out }) = &cli.command {
         return keygen(name, out.clone());
     }
+    if let Some(Command::Replay { file, script }) = &cli.command {
+        return replay::run(file, *script, cli.config.as_deref());
+    }
     let config = load_config(&cli)?;
     if matches!(cli.command, Some(Command::Serve)) {
         if cli.script.is_some() || cli.attach.is_some() {
@@ -109,7 +128,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             );
         }
         let _log = logging::init(&config.log, Some("info")).context("cannot start logging")?;
-        runtime()?.block_on(mech_gcs::station::serve::serve(config, cli.demo))?;
+        let serve = mech_gcs::station::serve::serve(config, cli.demo, cli.record.clone());
+        runtime()?.block_on(serve)?;
         return Ok(ExitCode::SUCCESS);
     }
     if let Some(path) = &cli.script {
@@ -120,7 +140,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 Some(addr) => {
                     run_attached_script(&addr, attach_options(&cli, true)?, &source).await
                 }
-                None => run_script(config, cli.demo, &source).await,
+                None => run_script(config, cli.demo, &source, cli.record.clone()).await,
             }
         })?;
         return Ok(ExitCode::from(code));
@@ -260,15 +280,14 @@ async fn run_tui(config: GcsConfig, cli: &Cli) -> anyhow::Result<()> {
         options.startup.push(format!("spawn {n}"));
         options.arena = Some(mech_gcs::sim::demo_arena());
     }
-    let gcs = Gcs::start(config.core())
-        .await
-        .context("cannot start the router")?;
+    let gcs = start(&config, cli.record.clone()).await?;
     let station = Station::start(
         gcs,
         &config.cluster,
         Some(sim::simulator()),
         &config.station,
     );
+    station.set_record_dir(record_dir(&config));
     let attached = attach_stream(station.attach_local(), opts).await?;
     let result = mech_gcs::ui::run(attached, options).await;
     station.shutdown().await;
@@ -301,17 +320,48 @@ async fn run_attached_script(
     Ok(outcome.exit_code() as u8)
 }
 
-async fn run_script(config: GcsConfig, demo: Option<usize>, source: &str) -> anyhow::Result<u8> {
+/// Starts the station, recording to `record` if given.
+async fn start(config: &GcsConfig, record: Option<PathBuf>) -> anyhow::Result<Gcs> {
+    let gcs = Gcs::start(config.core())
+        .await
+        .context("cannot start the router")?;
+    if let Some(file) = record {
+        gcs.start_recording(mech_core::RecordTarget::File(file))
+            .context("cannot start recording")?;
+    }
+    Ok(gcs)
+}
+
+/// The command-language executor of a station, naming where its commands
+/// come from (`tui`, `script`) in recordings.
+fn executor(gcs: &Gcs, config: &GcsConfig, source: &str) -> Executor {
+    let mut executor = Executor::new(gcs.clone())
+        .with_clusters(&config.cluster)
+        .with_spawner(sim::simulator())
+        .with_source(source);
+    if let Some(dir) = record_dir(config) {
+        executor = executor.with_record_dir(dir);
+    }
+    executor
+}
+
+/// Where `record start` without a file name records.
+fn record_dir(config: &GcsConfig) -> Option<PathBuf> {
+    config.record.dir.clone().or_else(|| config.log.dir.clone())
+}
+
+async fn run_script(
+    config: GcsConfig,
+    demo: Option<usize>,
+    source: &str,
+    record: Option<PathBuf>,
+) -> anyhow::Result<u8> {
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         "mech-gcs starting (script mode)"
     );
-    let gcs = Gcs::start(config.core())
-        .await
-        .context("cannot start the router")?;
-    let mut executor = Executor::new(gcs.clone())
-        .with_clusters(&config.cluster)
-        .with_spawner(sim::simulator());
+    let gcs = start(&config, record).await?;
+    let mut executor = executor(&gcs, &config, "script");
     let sink: Sink = Arc::new(Mutex::new(Box::new(std::io::stdout())));
     let code = async {
         if let Some(n) = demo {

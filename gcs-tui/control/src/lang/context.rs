@@ -80,6 +80,8 @@ pub(super) struct Context {
     pub(super) publishers: Publishers,
     /// Fleet and offboard controllers started by this executor's commands.
     pub(super) control: ControlHub,
+    /// Where `record start` without a file records (rotating files).
+    pub(super) record_dir: Option<std::path::PathBuf>,
 }
 
 impl Context {
@@ -90,6 +92,7 @@ impl Context {
             sender: SENDER.to_string(),
             gcs,
             spawner: None,
+            record_dir: None,
         }
     }
 

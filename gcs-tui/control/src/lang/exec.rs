@@ -9,6 +9,7 @@ use crate::hub::ControlHub;
 use crate::spec::ClusterSpec;
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
+use mech_core::record::OperatorRecord;
 
 pub use super::context::{SENDER, SharedSpawner, SimSpawner};
 
@@ -18,13 +19,30 @@ pub use super::context::{SENDER, SharedSpawner, SimSpawner};
 #[derive(Debug)]
 pub struct Executor {
     ctx: Context,
+    /// Where commands come from, as recordings name it (`tui`, `script`).
+    source: String,
 }
 
 impl Executor {
     pub fn new(gcs: Gcs) -> Executor {
         Executor {
             ctx: Context::new(gcs),
+            source: "tui".into(),
         }
+    }
+
+    /// Names where this executor's commands come from in recordings
+    /// (`tui` unless told).
+    pub fn with_source(mut self, source: &str) -> Executor {
+        self.source = source.to_string();
+        self
+    }
+
+    /// Where `record start` without a file records (rotating files, with
+    /// the `[record]` size cap): the binary's log directory.
+    pub fn with_record_dir(mut self, dir: std::path::PathBuf) -> Executor {
+        self.ctx.record_dir = Some(dir);
+        self
     }
 
     /// Defines the clusters of the configuration (`[[cluster]]`) and their
@@ -90,8 +108,23 @@ impl Executor {
 
     /// Runs one statement. Errors point at the statement or the argument at
     /// fault.
+    /// Each command and its outcome goes into the recording, if one is
+    /// being made.
     pub async fn execute(&mut self, stmt: &Statement) -> Result<Outcome, LangError> {
-        stmt.command.apply(&mut self.ctx, stmt.span).await
+        let result = stmt.command.apply(&mut self.ctx, stmt.span).await;
+        let summary = match &result {
+            Ok(o) => o.summary.clone(),
+            Err(e) => e.to_string(),
+        };
+        self.ctx.gcs.router().record_operator(OperatorRecord {
+            at: std::time::Duration::ZERO,
+            source: self.source.clone(),
+            line: stmt.span.line,
+            text: stmt.text.clone(),
+            ok: result.is_ok(),
+            summary,
+        });
+        result
     }
 }
 

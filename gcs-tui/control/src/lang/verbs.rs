@@ -22,6 +22,7 @@ pub mod log;
 pub mod mode;
 pub mod nav;
 pub mod nav_wait;
+pub mod record;
 pub mod route;
 pub mod send;
 pub mod sleep;
@@ -222,6 +223,12 @@ pub static VERBS: &[Verb] = &[
         parse: |a| nav_wait::NavWait::parse(a).map(Command::NavWait),
     },
     Verb {
+        name: "record",
+        usage: "record start [FILE] | record stop | record",
+        help: "record everything the router sees to MCAP (no FILE: rotating files in the recording directory); `record` says how it goes",
+        parse: |a| record::Record::parse(a).map(Command::Record),
+    },
+    Verb {
         name: "help",
         usage: "help",
         help: "list commands",
@@ -261,6 +268,7 @@ pub enum Command {
     Follow(follow::Follow),
     Nav(nav::Nav),
     NavWait(nav_wait::NavWait),
+    Record(record::Record),
 }
 
 impl Command {
@@ -295,6 +303,7 @@ impl Command {
             Command::Follow(c) => c.apply(ctx, at).await,
             Command::Nav(c) => c.apply(ctx, at).await,
             Command::NavWait(c) => c.apply(ctx, at).await,
+            Command::Record(c) => c.apply(ctx, at).await,
         }
     }
 }

@@ -23,6 +23,7 @@ mod gate;
 mod missions;
 mod registration;
 mod routes;
+pub(crate) mod tap;
 mod telemetry;
 
 use mech_proto::{Body, Envelope, Header};
@@ -31,7 +32,9 @@ use tracing::{debug, warn};
 
 use super::config::RouterConfig;
 use super::rate::RateMeter;
+
 use mech_proto::auth::Stamper;
+use tap::{MessageTap, Tap};
 
 use crate::auth::Keyring;
 use crate::counters::{Counters, DropReason, Drops, Rejections, Traffic};
@@ -161,6 +164,11 @@ pub(crate) struct Tables {
     reject_logged: HashMap<String, Instant>,
     /// When each key's last time request was answered.
     time_answers: HashMap<u32, Instant>,
+    /// The recorder's tap, while recording.
+    pub(super) tap: Option<Tap>,
+    /// Why the message being decided was refused or unreadable, kept for
+    /// the tap (only while recording).
+    refusal: Option<String>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -206,6 +214,8 @@ impl Tables {
             rejected: Rejections::default(),
             reject_logged: HashMap::new(),
             time_answers: HashMap::new(),
+            tap: None,
+            refusal: None,
         }
     }
 
@@ -233,6 +243,7 @@ impl Tables {
 
     fn bad(&mut self, from: Peer, error: String, events: &mut Vec<Event>) -> Delivery {
         self.dropped.count(DropReason::BadPacket);
+        self.note_refusal(|| error.clone());
         let n = self.dropped.bad_packet;
         // Logged at warn for the 1st, 2nd, 4th, 8th... so a flood of garbage
         // cannot flood the log; every one is counted and reported as an event.
@@ -248,7 +259,15 @@ impl Tables {
         Delivery::Dropped(DropReason::BadPacket)
     }
 
-    /// Decides what to do with one received message.
+    /// Keeps why the message being decided was refused, for the tap.
+    fn note_refusal(&mut self, why: impl FnOnce() -> String) {
+        if self.tap.is_some() {
+            self.refusal = Some(why());
+        }
+    }
+
+    /// Decides what to do with one received message, and offers it with the
+    /// decision to the recorder's tap when recording.
     pub(crate) fn handle(
         &mut self,
         bytes: &[u8],
@@ -258,6 +277,29 @@ impl Tables {
         events: &mut Vec<Event>,
     ) -> Delivery {
         self.received += 1;
+        let delivery = self.decide(bytes, from, now, out, events);
+        if let Some(tap) = &self.tap {
+            tap.message(MessageTap {
+                now,
+                number: self.received,
+                from,
+                bytes,
+                delivery,
+                detail: self.refusal.take(),
+            });
+        }
+        delivery
+    }
+
+    /// The decision for one received message.
+    fn decide(
+        &mut self,
+        bytes: &[u8],
+        from: Peer,
+        now: Instant,
+        out: &mut Outbox,
+        events: &mut Vec<Event>,
+    ) -> Delivery {
         let head = match mech_proto::peek(bytes) {
             Ok(h) => h,
             Err(e) => return self.bad(from, e.to_string(), events),
@@ -374,6 +416,11 @@ impl Tables {
             fanout_dropped: self.fanout_dropped,
             rejected: self.rejected,
         }
+    }
+
+    /// Messages received so far.
+    pub(crate) fn counters_received(&self) -> u64 {
+        self.received
     }
 
     pub(crate) fn rejections(&self) -> Rejections {

@@ -5,11 +5,11 @@
 //! or Ctrl-C says Bye to every client and every robot before it exits.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
-use mech_core::Gcs;
+use mech_core::{Gcs, RecordTarget};
 use sd_notify::NotifyState;
 use tokio::signal::unix::{SignalKind, signal};
 
@@ -19,7 +19,11 @@ use crate::GcsConfig;
 
 /// Starts the station and serves until SIGTERM or SIGINT. `demo`: start
 /// that many simulated robots first.
-pub async fn serve(config: GcsConfig, demo: Option<usize>) -> anyhow::Result<()> {
+pub async fn serve(
+    config: GcsConfig,
+    demo: Option<usize>,
+    record: Option<PathBuf>,
+) -> anyhow::Result<()> {
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         "mech-gcs serve starting"
@@ -36,14 +40,16 @@ pub async fn serve(config: GcsConfig, demo: Option<usize>) -> anyhow::Result<()>
             return Err(e).context("cannot start the router");
         }
     };
+    let recording = start_recording(&gcs, &config, record);
     let station = Station::start(
         gcs,
         &config.cluster,
         Some(crate::sim::simulator()),
         &config.station,
     );
+    station.set_record_dir(config.record.dir.clone().or_else(|| config.log.dir.clone()));
     station.listen_unix(listener);
-    let result = run(&station, &config, &socket, demo).await;
+    let result = run(&station, &config, &socket, demo, &recording).await;
     let _ = sd_notify::notify(&[NotifyState::Stopping]);
     station.shutdown().await;
     let _ = std::fs::remove_file(&socket);
@@ -51,11 +57,31 @@ pub async fn serve(config: GcsConfig, demo: Option<usize>) -> anyhow::Result<()>
     result
 }
 
+/// A served station records by default: to `--record FILE`, or in rotating
+/// files in `[record] dir` (or the log directory). A recording that cannot
+/// start is reported, and the station runs without one.
+fn start_recording(gcs: &Gcs, config: &GcsConfig, file: Option<PathBuf>) -> String {
+    let started = match (file, &config.log.dir) {
+        (Some(f), _) => gcs.start_recording(RecordTarget::File(f)),
+        (None, Some(dir)) => gcs.start_default_recording(dir),
+        (None, None) if config.record.dir.is_some() => gcs.start_default_recording(Path::new(".")),
+        (None, None) => return "not recording (no [log] or [record] directory)".into(),
+    };
+    match started {
+        Ok(path) => format!("recording to {}", path.display()),
+        Err(e) => {
+            tracing::error!(error = %e, "cannot record");
+            format!("NOT recording: {e}")
+        }
+    }
+}
+
 async fn run(
     station: &Station,
     config: &GcsConfig,
     socket: &Path,
     demo: Option<usize>,
+    recording: &str,
 ) -> anyhow::Result<()> {
     let mut stop = Signals::new()?;
     if let Some(addr) = config.station.tcp {
@@ -64,7 +90,7 @@ async fn run(
     if let Some(n) = demo {
         spawn_demo(station, n).await?;
     }
-    let ready = ready_line(station, socket, config);
+    let ready = format!("{}; {recording}", ready_line(station, socket, config));
     tracing::info!("{ready}");
     // stdout may be a terminal that has gone: never fail on it.
     let _ = writeln!(std::io::stdout(), "{ready}");

@@ -60,6 +60,8 @@ pub(super) struct Inner {
     pub spawner: Option<SharedSpawner>,
     pub feed: Feed,
     pub arena: Mutex<Option<ArenaBounds>>,
+    /// Where `record start` without a file records.
+    pub record_dir: Mutex<Option<std::path::PathBuf>>,
     /// Set when the station stops: sessions say Bye and end.
     pub closing: watch::Sender<bool>,
     pub sessions: Mutex<JoinSet<()>>,
@@ -87,6 +89,7 @@ impl Station {
                 spawner: spawner.map(SharedSpawner::new),
                 feed,
                 arena: Mutex::new(None),
+                record_dir: Mutex::new(None),
                 closing: watch::channel(false).0,
                 sessions: Mutex::new(JoinSet::new()),
                 listeners: Mutex::new(Vec::new()),
@@ -97,6 +100,11 @@ impl Station {
     /// The arena outline clients are told about (the demo's).
     pub fn set_arena(&self, arena: Option<ArenaBounds>) {
         *lock(&self.inner.arena) = arena;
+    }
+
+    /// Where `record start` without a file name records.
+    pub fn set_record_dir(&self, dir: Option<std::path::PathBuf>) {
+        *lock(&self.inner.record_dir) = dir;
     }
 
     pub fn gcs(&self) -> &Gcs {

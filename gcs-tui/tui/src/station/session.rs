@@ -297,13 +297,18 @@ where
 }
 
 /// This session's executor: the station's controllers and simulator, and
-/// the operator as the sender of everything it publishes.
+/// the operator as the sender of everything it publishes and the source of
+/// its commands in recordings.
 fn executor(station: &Station, operator: &str) -> Executor {
     let mut e = Executor::new(station.gcs().clone())
         .with_control(station.control().clone())
-        .with_sender(operator);
+        .with_sender(operator)
+        .with_source(operator);
     if let Some(s) = &station.inner.spawner {
         e = e.with_spawner(Box::new(s.clone()));
+    }
+    if let Some(dir) = lock(&station.inner.record_dir).clone() {
+        e = e.with_record_dir(dir);
     }
     e
 }
@@ -562,7 +567,16 @@ impl Reader {
             } else {
                 "e-stop released"
             };
-            let result = Ok(Outcome::new(format!("{what} (id {rid})")));
+            let summary = format!("{what} (id {rid})");
+            router.record_operator(mech_core::router::OperatorRecord {
+                at: std::time::Duration::ZERO,
+                source: op.clone(),
+                line: 0,
+                text: text.trim().to_string(),
+                ok: true,
+                summary: summary.clone(),
+            });
+            let result = Ok(Outcome::new(summary));
             let t = secs(router.elapsed());
             self.send(to_line(&FromStation::Result(line_result(id, t, result))));
             return;

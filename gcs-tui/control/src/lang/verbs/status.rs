@@ -51,9 +51,14 @@ impl Status {
                 .collect();
             format!("; rejected {}", by.join(", "))
         };
+        let recording = ctx
+            .gcs
+            .recording()
+            .map(|r| format!("; {}", super::record::describe(&r)))
+            .unwrap_or_default();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}",
+                "{} robots; station {}{refused}{recording}",
                 details.len(),
                 router.security().as_str()
             ),
