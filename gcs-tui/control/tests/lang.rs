@@ -49,7 +49,7 @@ async fn route_then_wait_for_the_acknowledgement() {
     gcs.shutdown().await;
 }
 
-#[tokio::test(start_paused = true)]
+#[tokio::test]
 async fn wait_times_out_with_the_reason() {
     let (gcs, mut exec, _robot) = setup().await;
     let err = exec
