@@ -12,7 +12,7 @@ use std::time::Duration;
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope, FailsafeState, Header,
     Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
-    Telemetry, Velocity,
+    Telemetry, Velocity, VelocitySource,
 };
 
 use crate::auth::{Checked, RobotAuth};
@@ -586,6 +586,7 @@ impl Agent {
                 .get(&self.route.channel)
                 .map(MissionRun::progress),
             stale: self.stale_total(),
+            velocity_source: VelocitySource::Commanded,
         }
     }
 

@@ -182,6 +182,8 @@ impl SimRobot {
             actuators: self.outputs.clone(),
             mission: self.mission.as_ref().map(MissionRun::progress),
             stale: 0,
+            // The true motion: what ideal encoders would measure.
+            velocity_source: mech_proto::VelocitySource::Measured,
         }
     }
 

@@ -505,6 +505,7 @@ mod tests {
             actuators: vec![0.1, 0.2],
             mission,
             stale: 0,
+            velocity_source: mech_proto::VelocitySource::Commanded,
         }
     }
 
