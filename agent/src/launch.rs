@@ -91,6 +91,7 @@ pub async fn run(
                 agent,
                 actuators,
                 positions,
+                encoders: None,
             },
             io,
             ticker,
