@@ -12,16 +12,19 @@ use std::time::Duration;
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope, FailsafeState, Header,
     Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
-    Telemetry, Velocity,
+    Telemetry, Twist, Velocity, VelocitySource,
 };
+use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use crate::auth::{Checked, RobotAuth};
 use crate::control::{Controller, Gains, MissionRun, Mode};
 use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::filter::MedianFilter;
-use crate::hal::PositionSample;
+use crate::fusion::{FusionCounters, FusionSettings, PoseFusion};
+use crate::hal::{EdgeCount, PositionSample};
 use crate::order::{CommandOrder, is_older};
 use crate::platform::Platform;
+use crate::wheels::{WheelSettings, Wheels};
 
 /// Settings of the agent core (the parts of the robot config it uses).
 #[derive(Debug, Clone, PartialEq)]
@@ -47,6 +50,14 @@ pub struct AgentSettings {
     /// A position older than this marks health `Degraded`.
     pub position_stale_after: Duration,
     pub gains: Gains,
+    /// Wheel encoders (`[encoders]`): measured velocity, closed-loop wheel
+    /// speed, stall detection, and odometry fused with the position source.
+    /// `None`: velocity is reported from the commanded outputs and the
+    /// outputs are open loop.
+    pub wheels: Option<WheelSettings>,
+    /// Noise figures of the odometry + position fusion (used with `wheels`
+    /// and a position source).
+    pub fusion: FusionSettings,
 }
 
 impl AgentSettings {
@@ -62,6 +73,8 @@ impl AgentSettings {
             has_position: true,
             position_stale_after: Duration::from_secs(1),
             gains: Gains::default(),
+            wheels: None,
+            fusion: FusionSettings::default(),
         }
     }
 }
@@ -94,6 +107,9 @@ pub struct Counters {
     pub driver_faults: u64,
     /// Position fixes used.
     pub position_samples: u64,
+    /// Times a wheel stalled (driven without turning) and the outputs were
+    /// zeroed.
+    pub stalls: u64,
 }
 
 /// The result of one control period.
@@ -113,6 +129,13 @@ pub struct Agent {
     failsafe: Failsafe,
     filter: MedianFilter,
     estimate: Option<PositionSample>,
+    /// Encoders: speeds, speed loops, stall watch (with `[encoders]`).
+    wheels: Option<Wheels>,
+    /// Odometry fused with fixes (with encoders and a position source).
+    fusion: Option<PoseFusion>,
+    /// Each wheel's effect on the body displacement (the platform's
+    /// odometry, one column per wheel), for the odometry covariance.
+    wheel_jacobian: Option<DMatrix<f64>>,
     registered: bool,
     route: Route,
     /// Whether a route has been applied at all (epoch 0 is a valid epoch).
@@ -154,8 +177,23 @@ impl Agent {
     ) -> Agent {
         let controller = Controller::new(platform, settings.gains, settings.has_position);
         let motors = controller.platform().motors();
+        let p = controller.platform();
+        let wheels = settings
+            .wheels
+            .zip(p.max_wheel_speed())
+            .map(|(w, max)| Wheels::new(w, motors, max));
+        let fusion = (wheels.is_some() && settings.has_position).then(|| {
+            PoseFusion::new(FusionSettings {
+                restart_after: settings.filter_window,
+                ..settings.fusion
+            })
+        });
+        let wheel_jacobian = wheels.as_ref().and_then(|_| wheel_jacobian(p));
         Agent {
             filter: MedianFilter::new(settings.filter_window),
+            wheels,
+            fusion,
+            wheel_jacobian,
             failsafe: Failsafe::new(settings.failsafe),
             controller,
             estimate: None,
@@ -239,9 +277,21 @@ impl Agent {
         self.controller.mode()
     }
 
-    /// The filtered position estimate.
+    /// The position estimate: the median of the fixes, or, with encoders,
+    /// odometry fused with them (its `stamp` is always the newest fix's).
     pub fn estimate(&self) -> Option<PositionSample> {
         self.estimate
+    }
+
+    /// What the odometry fusion did with the fixes (zero without encoders).
+    pub fn fusion_counters(&self) -> FusionCounters {
+        self.fusion.as_ref().map(|f| f.counters).unwrap_or_default()
+    }
+
+    /// Each wheel's measured rim speed (m/s), while encoder readings are
+    /// fresh.
+    pub fn wheel_speeds(&self, now: Duration) -> Option<Vec<f64>> {
+        self.wheels.as_ref().and_then(|w| w.speeds(now))
     }
 
     /// The outputs of the last tick.
@@ -284,10 +334,52 @@ impl Agent {
         }
     }
 
-    /// A position measurement from the robot's own source.
+    /// A position measurement from the robot's own source: through the
+    /// median filter, and with encoders, into the odometry fusion.
     pub fn observe_position(&mut self, sample: PositionSample) {
         self.counters.position_samples += 1;
-        self.estimate = Some(self.filter.push(sample));
+        let median = self.filter.push(sample);
+        self.estimate = Some(match self.fusion.as_mut() {
+            None => median,
+            Some(fusion) => {
+                fusion.correct(&sample, &median, sample.stamp);
+                fused(fusion, median)
+            }
+        });
+    }
+
+    /// One reading of every wheel encoder (motor order), taken at `now`,
+    /// before this period's [`Agent::tick`]: measured speeds for telemetry
+    /// and the speed loops, odometry for the pose, the stall watch. A
+    /// reading that does not fit the robot is a driver fault (the notice is
+    /// returned).
+    pub fn observe_wheels(&mut self, counts: &[EdgeCount], now: Duration) -> Option<Envelope> {
+        let wheels = self.wheels.as_mut()?;
+        let step = match wheels.observe(counts, &self.outputs, now) {
+            Ok(step) => step,
+            Err(e) => return self.driver_fault(&format!("encoders: {e}"), now),
+        };
+        let sigma = wheels.settings().metres_per_edge() / 2.0;
+        let (Some(fusion), Some(jacobian)) = (self.fusion.as_mut(), &self.wheel_jacobian) else {
+            return None;
+        };
+        // The platform's odometry is linear in the wheel speeds, so it turns
+        // each wheel's travel into the body's displacement too.
+        let d = self.controller.platform().wheel_odometry(&step.travel)?;
+        let relative = self.settings.fusion.odometry_sigma;
+        let variances: Vec<f64> = step
+            .travel
+            .iter()
+            .map(|t| (relative * t.abs() + sigma).powi(2))
+            .collect();
+        let wheel_cov = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(variances));
+        let body = jacobian * wheel_cov * jacobian.transpose();
+        let cov = Matrix3::from_fn(|r, c| body[(r, c)]);
+        fusion.predict(Vector3::new(d.vx, d.vy, d.wz), cov, now);
+        if let Some(e) = self.estimate {
+            self.estimate = Some(fused(fusion, e));
+        }
+        None
     }
 
     /// An actuator or position driver failed; health becomes `Fault` for a
@@ -457,6 +549,7 @@ impl Agent {
     pub fn tick(&mut self, now: Duration) -> Tick {
         let mut outgoing = Vec::new();
         self.register(now, &mut outgoing);
+        self.watch_stall(now, &mut outgoing);
         let drive = self.judge_failsafe(now);
         self.control(drive, now);
         if self.registered {
@@ -488,6 +581,23 @@ impl Agent {
             };
             outgoing.push(self.envelope(mech_proto::ROUTER, body, now));
         }
+    }
+
+    /// A wheel driven without turning for the stall time: outputs held at
+    /// zero as for an actuator fault, and the GCS told which wheel.
+    fn watch_stall(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
+        let Some(stall) = self.wheels.as_mut().and_then(Wheels::take_stall) else {
+            return;
+        };
+        self.counters.stalls += 1;
+        let text = format!(
+            "{} stalled: driven at {:.0}% for {:.2} s without an encoder edge; outputs zeroed",
+            self.controller.platform().motor_name(stall.wheel),
+            stall.output.abs() * 100.0,
+            stall.for_time.as_secs_f64(),
+        );
+        tracing::error!(robot = %self.settings.name, "{text}");
+        outgoing.extend(self.actuator_fault(&text, now));
     }
 
     /// The failsafe's verdict for this period: whether the robot may drive.
@@ -522,6 +632,9 @@ impl Agent {
         );
         if !drive || (needs_position && self.estimate.is_none()) {
             self.outputs.resize(motors, 0.0);
+            if let Some(w) = self.wheels.as_mut() {
+                w.reset_loops();
+            }
             return;
         }
         let pose = self.estimate.map(|e| e.pose).unwrap_or_default();
@@ -530,7 +643,11 @@ impl Agent {
             .get_mut(&self.route.channel)
             .filter(|m| !m.paused);
         let out = self.controller.update(&pose, now, mission);
-        self.outputs.extend_from_slice(out);
+        match self.wheels.as_mut() {
+            // Each output asks for a wheel speed; the speed loops deliver it.
+            Some(w) => self.outputs.extend(w.close_loop(out, now)),
+            None => self.outputs.extend_from_slice(out),
+        }
     }
 
     /// The heartbeat and telemetry that are due.
@@ -550,14 +667,22 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now. `velocity` is the twist the current
-    /// outputs produce (the platform's forward kinematics, which is what a
-    /// robot without wheel encoders knows of its motion), turned from the
-    /// body frame into the world frame by the estimated heading, as the
-    /// protocol specifies.
+    /// The robot's telemetry now. `velocity` is the twist the wheel
+    /// encoders measure while their readings are fresh, otherwise the twist
+    /// the current outputs produce (the platform's forward kinematics, which
+    /// is what a robot without encoders knows of its motion); either is
+    /// turned from the body frame into the world frame by the estimated
+    /// heading, as the protocol specifies, and `velocity_source` says which.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
-        let twist = self.controller.platform().motion(&self.outputs);
+        let platform = self.controller.platform();
+        let (twist, velocity_source) = match self
+            .wheel_speeds(now)
+            .and_then(|speeds| platform.wheel_odometry(&speeds))
+        {
+            Some(measured) => (measured, VelocitySource::Measured),
+            None => (platform.motion(&self.outputs), VelocitySource::Commanded),
+        };
         let stale = self.settings.has_position
             && self
                 .estimate
@@ -598,6 +723,7 @@ impl Agent {
                 .get(&self.route.channel)
                 .map(MissionRun::progress),
             stale: self.stale_total(),
+            velocity_source,
         }
     }
 
@@ -834,6 +960,34 @@ impl Agent {
             body,
         )
     }
+}
+
+/// The estimate with the fused planar pose; height, quality and stamp stay
+/// the median filter's (odometry is planar, and the stamp says how fresh the
+/// fixes are).
+fn fused(fusion: &PoseFusion, mut estimate: PositionSample) -> PositionSample {
+    if let Some(p) = fusion.pose() {
+        estimate.pose = mech_proto::Pose {
+            z: estimate.pose.z,
+            ..p
+        };
+        estimate.has_heading = true;
+    }
+    estimate
+}
+
+/// The platform's odometry as a matrix: column `i` is the body displacement
+/// (forward, left, heading) of one metre of wheel `i`'s travel.
+fn wheel_jacobian(platform: &dyn Platform) -> Option<DMatrix<f64>> {
+    let n = platform.motors();
+    let mut j = DMatrix::zeros(3, n);
+    for i in 0..n {
+        let mut unit = vec![0.0; n];
+        unit[i] = 1.0;
+        let Twist { vx, vy, wz, .. } = platform.wheel_odometry(&unit)?;
+        j.set_column(i, &Vector3::new(vx, vy, wz));
+    }
+    Some(j)
 }
 
 /// Cuts free text to the protocol's limit on a character boundary.
@@ -1395,6 +1549,39 @@ mod tests {
         // Facing +y, driving forward moves the robot along world +y.
         assert!(v.vx.abs() < 1e-9, "vx {}", v.vx);
         assert!(v.vy > 0.1, "vy {}", v.vy);
+    }
+
+    #[test]
+    fn an_encoder_reading_that_does_not_fit_the_robot_is_a_driver_fault() {
+        let mut s = AgentSettings::new("r1");
+        s.wheels = Some(WheelSettings {
+            counting: crate::hal::Counting::Quadrature,
+            counts_per_revolution: 1440.0,
+            wheel_radius: 0.03,
+            speed_loop: None,
+            stall: crate::wheels::StallSettings::default(),
+        });
+        let mut a = Agent::new(s, PlatformSpec::diff_drive().build(), 0);
+        let notice = a.observe_wheels(&[EdgeCount::default()], ms(0)).unwrap();
+        assert!(
+            matches!(&notice.body, Body::Notice(n) if n.code == NoticeCode::DriverFault && n.text.contains("1 encoder readings for 2 wheels"))
+        );
+        assert_eq!(a.counters().driver_faults, 1);
+        // A robot without [encoders] ignores readings.
+        let mut plain = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        assert!(
+            plain
+                .observe_wheels(&[EdgeCount::default()], ms(0))
+                .is_none()
+        );
+        assert_eq!(
+            plain.telemetry(ms(0)).velocity_source,
+            VelocitySource::Commanded
+        );
     }
 
     #[test]

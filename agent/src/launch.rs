@@ -11,9 +11,9 @@ use tokio::time::Instant;
 
 use crate::agent::Agent;
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
-use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
+use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource, WheelEncoders};
 use crate::runtime::{self, HardwareVehicle, Io, Ticker};
-use crate::sim::{SimAgent, UwbNoise, UwbNoiseModel};
+use crate::sim::{SimAgent, SimEncoderModel, UwbNoise, UwbNoiseModel};
 
 /// Why a robot could not be brought up.
 #[derive(Debug, thiserror::Error)]
@@ -24,6 +24,8 @@ pub enum LaunchError {
     Serial { port: String, message: String },
     #[error("actuators: {0}")]
     Actuators(String),
+    #[error("encoders: {0}")]
+    Encoders(String),
     #[error("this build has no {feature} support; rebuild with `--features {feature}`")]
     Feature { feature: &'static str },
     #[error("key: {0}")]
@@ -75,6 +77,17 @@ pub async fn run(
             heading: s.heading,
         };
         let mut sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
+        if let Some(e) = config.encoders() {
+            // The configured encoders' resolution and kind, on simulated
+            // wheels with the simulator's slip and noise.
+            let model = SimEncoderModel {
+                counting: e.kind,
+                counts_per_revolution: e.counts_per_revolution,
+                wheel_radius: e.wheel_radius,
+                ..SimEncoderModel::default()
+            };
+            sim = sim.with_encoders(model, s.seed);
+        }
         if let Some(key) = key {
             sim.agent = sim.agent.with_key(key, &router_name);
         }
@@ -86,11 +99,13 @@ pub async fn run(
         }
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
+        let encoders = open_encoders(&config, origin)?;
         runtime::drive(
             HardwareVehicle {
                 agent,
                 actuators,
                 positions,
+                encoders,
             },
             io,
             ticker,
@@ -163,6 +178,33 @@ fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, Lau
         }
         #[cfg(not(feature = "rpi"))]
         ActuatorConfig::L298 { .. } => Err(LaunchError::Feature { feature: "rpi" }),
+    }
+}
+
+/// Opens the wheel encoders of `[encoders]` (GPIO interrupts on a Pi).
+fn open_encoders(
+    config: &RobotConfig,
+    #[cfg_attr(not(feature = "rpi"), allow(unused_variables))] origin: Instant,
+) -> Result<Option<Box<dyn WheelEncoders + Send>>, LaunchError> {
+    let Some(e) = config.encoders() else {
+        return Ok(None);
+    };
+    #[cfg(feature = "rpi")]
+    {
+        let encoders = crate::drivers::rpi::encoders::open_encoders(
+            &e.channels,
+            e.kind,
+            e.pull_up,
+            origin.into_std(),
+        )
+        .map_err(|err| LaunchError::Encoders(err.to_string()))?;
+        tracing::info!(wheels = e.channels.len(), kind = ?e.kind, "wheel encoders");
+        Ok(Some(Box::new(encoders)))
+    }
+    #[cfg(not(feature = "rpi"))]
+    {
+        let _ = e;
+        Err(LaunchError::Feature { feature: "rpi" })
     }
 }
 

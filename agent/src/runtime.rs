@@ -12,7 +12,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use crate::agent::Agent;
-use crate::hal::{Actuators, PositionSample};
+use crate::hal::{Actuators, PositionSample, WheelEncoders};
 
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
@@ -29,13 +29,15 @@ pub trait Vehicle: Send {
     fn stop(&mut self, now: Duration) -> Envelope;
 }
 
-/// A robot with real actuators and (optionally) a position source read by
-/// its own thread.
+/// A robot with real actuators, (optionally) a position source read by its
+/// own thread, and (optionally) wheel encoders.
 pub struct HardwareVehicle {
     pub agent: Agent,
     pub actuators: Box<dyn Actuators + Send>,
     /// Samples (or driver error texts) from the position thread.
     pub positions: Option<std::sync::mpsc::Receiver<Result<PositionSample, String>>>,
+    /// Wheel encoders, read once per control period.
+    pub encoders: Option<Box<dyn WheelEncoders + Send>>,
 }
 
 impl std::fmt::Debug for HardwareVehicle {
@@ -58,6 +60,17 @@ impl Vehicle for HardwareVehicle {
     }
     fn tick(&mut self, now: Duration) -> Vec<Envelope> {
         let mut extra = Vec::new();
+        // Odometry first: fixes are then compared with the pose at their
+        // own (earlier) time.
+        if let Some(encoders) = self.encoders.as_mut() {
+            match encoders.read_all(now) {
+                Ok(counts) => extra.extend(self.agent.observe_wheels(&counts, now)),
+                Err(e) => {
+                    tracing::warn!(error = %e, "encoders");
+                    extra.extend(self.agent.driver_fault(&format!("encoders: {e}"), now));
+                }
+            }
+        }
         if let Some(rx) = &self.positions {
             while let Ok(sample) = rx.try_recv() {
                 match sample {
@@ -281,6 +294,66 @@ mod tests {
         )
     }
 
+    /// Encoders that count `per_read` edges on each wheel per reading, or
+    /// fail while `broken`.
+    #[derive(Debug, Default)]
+    struct Odometer {
+        edges: i64,
+        broken: bool,
+    }
+
+    impl crate::hal::WheelEncoders for Odometer {
+        fn read_all(&mut self, now: Duration) -> Result<Vec<crate::hal::EdgeCount>, HalError> {
+            if self.broken {
+                return Err(HalError::new(ErrorKind::NotConnected, "cable"));
+            }
+            self.edges += 10;
+            let count = crate::hal::EdgeCount {
+                edges: self.edges,
+                last_edge: Some(now),
+            };
+            Ok(vec![count; 2])
+        }
+    }
+
+    #[test]
+    fn hardware_vehicle_reads_its_encoders_each_period() {
+        let mut settings = AgentSettings::new("r1");
+        settings.wheels = Some(crate::wheels::WheelSettings {
+            counting: crate::hal::Counting::Quadrature,
+            counts_per_revolution: 1000.0,
+            wheel_radius: 0.1 / std::f64::consts::TAU,
+            speed_loop: None,
+            stall: crate::wheels::StallSettings::default(),
+        });
+        let agent = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+        let mut v = HardwareVehicle {
+            agent,
+            actuators: Box::new(Bench::default()),
+            positions: None,
+            encoders: Some(Box::new(Odometer::default())),
+        };
+        let ms = Duration::from_millis;
+        v.tick(ms(0));
+        v.tick(ms(20));
+        // 10 edges of 0.1 mm in 20 ms on both wheels: 0.05 m/s forward.
+        let t = v.agent.telemetry(ms(20));
+        assert_eq!(t.velocity_source, mech_proto::VelocitySource::Measured);
+        assert!((t.velocity.vx - 0.05).abs() < 1e-9, "{:?}", t.velocity);
+        v.encoders = Some(Box::new(Odometer {
+            edges: 0,
+            broken: true,
+        }));
+        let out = v.tick(ms(40));
+        assert!(
+            out.iter()
+                .any(|e| matches!(&e.body, Body::Notice(n) if n.text.contains("encoders")))
+        );
+        // No fresh reading for long: back to the commanded velocity.
+        let t = v.agent.telemetry(ms(1000));
+        assert_eq!(t.velocity_source, mech_proto::VelocitySource::Commanded);
+    }
+
     #[test]
     fn hardware_vehicle_writes_outputs_feeds_positions_and_reports_faults() {
         let bench = Bench::default();
@@ -295,6 +368,7 @@ mod tests {
             agent,
             actuators: Box::new(bench),
             positions: Some(rx),
+            encoders: None,
         };
         let ms = Duration::from_millis;
         let route = Route {

@@ -132,6 +132,19 @@ pub enum Health {
     Fault = 2,
 }
 
+/// Where a robot's reported velocity comes from, so the station can tell a
+/// robot that drives from one whose wheel is stuck.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+#[repr(u8)]
+pub enum VelocitySource {
+    /// The twist the current actuator outputs should produce (the platform's
+    /// forward kinematics): what a robot without wheel encoders knows.
+    #[default]
+    Commanded = 0,
+    /// Measured by wheel encoders.
+    Measured = 1,
+}
+
 /// Progress of the mission the robot holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MissionProgress {
@@ -168,6 +181,11 @@ pub struct Telemetry {
     /// elements reads as 0 here.
     #[serde(default)]
     pub stale: u32,
+    /// Whether `velocity` was measured (wheel encoders) or follows from the
+    /// commanded outputs. Added to version 1 at the end: telemetry without
+    /// it reads as commanded.
+    #[serde(default)]
+    pub velocity_source: VelocitySource,
 }
 
 /// One point of a [`Mission`]: position in metres and an optional arrival time

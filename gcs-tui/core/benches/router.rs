@@ -126,6 +126,7 @@ fn telemetry(name: &str, x: f64) -> Vec<u8> {
         actuators: vec![0.1, 0.1],
         mission: None,
         stale: 0,
+        velocity_source: mech_proto::VelocitySource::Commanded,
     };
     env(name, "router", "", 0, Body::Telemetry(t))
 }

@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{Hello, Notice, Telemetry, Waypoint};
+use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
@@ -290,6 +290,10 @@ impl Fleet {
         r.actuators.clone_from(&t.actuators);
         r.mission = t.mission;
         r.stale = t.stale;
+        r.velocity_source = t.velocity_source;
+        if t.health != Health::Fault && t.failsafe != FailsafeState::Fault {
+            r.fault = None;
+        }
         let far = r
             .path
             .back()
@@ -429,6 +433,11 @@ impl Fleet {
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {
+        if notice.code == NoticeCode::DriverFault {
+            if let Some(r) = self.robots.get_mut(from) {
+                r.fault = Some(notice.text.clone());
+            }
+        }
         let severity = match notice.level {
             mech_proto::Level::Debug => Severity::Debug,
             mech_proto::Level::Info => Severity::Info,
@@ -505,7 +514,62 @@ mod tests {
             actuators: vec![0.1, 0.2],
             mission,
             stale: 0,
+            velocity_source: mech_proto::VelocitySource::Commanded,
         }
+    }
+
+    #[test]
+    fn a_driver_fault_text_is_kept_while_telemetry_reports_the_fault() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let faulted = Telemetry {
+            failsafe: FailsafeState::Fault,
+            health: Health::Fault,
+            velocity_source: mech_proto::VelocitySource::Measured,
+            ..telemetry(0.0, None)
+        };
+        let telemetry_event = |t: &Telemetry| Event::Telemetry {
+            robot: "robot_1".into(),
+            telemetry: t.clone(),
+        };
+        f.apply(&at(1, telemetry_event(&faulted)));
+        f.apply(&at(
+            2,
+            Event::Notice {
+                from: "robot_1".into(),
+                notice: Notice {
+                    level: mech_proto::Level::Error,
+                    code: NoticeCode::DriverFault,
+                    text: "left wheel stalled: driven at 60% for 0.50 s".into(),
+                },
+            },
+        ));
+        f.apply(&at(3, telemetry_event(&faulted)));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(
+            r.fault.as_deref(),
+            Some("left wheel stalled: driven at 60% for 0.50 s")
+        );
+        assert_eq!(r.velocity_source, mech_proto::VelocitySource::Measured);
+        // Other notices are only logged.
+        f.apply(&at(
+            4,
+            Event::Notice {
+                from: "robot_1".into(),
+                notice: Notice {
+                    level: mech_proto::Level::Warn,
+                    code: NoticeCode::NotRouted,
+                    text: "not routed".into(),
+                },
+            },
+        ));
+        assert!(f.robot("robot_1").unwrap().fault.is_some());
+        f.apply(&at(5, telemetry_event(&telemetry(0.0, None))));
+        assert_eq!(
+            f.robot("robot_1").unwrap().fault,
+            None,
+            "cleared with the fault"
+        );
     }
 
     #[test]

@@ -7,6 +7,7 @@
 
 use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+    VelocitySource,
 };
 use serde::{Deserialize, Serialize};
 
@@ -45,12 +46,16 @@ pub struct RobotView {
     pub platform: String,
     pub pose: Pose,
     pub velocity: Velocity,
+    /// Measured by wheel encoders, or following from the commands.
+    pub velocity_source: VelocitySource,
     pub mode: ControlMode,
     pub route: RouteView,
     pub computation: Computation,
     pub link: LinkState,
     pub failsafe: FailsafeState,
     pub health: Health,
+    /// The robot's driver fault text while it reports the fault.
+    pub fault: Option<String>,
     /// Fraction `[0, 1]`.
     pub battery: Option<f64>,
     pub mission: Option<MissionProgress>,
@@ -85,12 +90,14 @@ impl RobotView {
                 heading,
             },
             velocity: Velocity::default(),
+            velocity_source: VelocitySource::Commanded,
             mode: ControlMode::Idle,
             route: RouteView::default(),
             computation: Computation::Onboard,
             link: LinkState::Connected,
             failsafe: FailsafeState::Ok,
             health: Health::Ok,
+            fault: None,
             battery: None,
             mission: None,
             trail: Vec::new(),
@@ -213,6 +220,15 @@ pub fn failsafe_str(f: FailsafeState) -> &'static str {
         FailsafeState::RouterLost => "router-lost",
         FailsafeState::EStopped => "E-STOPPED",
         FailsafeState::Fault => "fault",
+    }
+}
+
+/// How a card tags a speed: measured by encoders or following from the
+/// commands (a stuck wheel shows as a commanded speed with no measured one).
+pub fn velocity_source_str(v: VelocitySource) -> &'static str {
+    match v {
+        VelocitySource::Measured => "meas",
+        VelocitySource::Commanded => "cmd",
     }
 }
 

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use mech_proto::{
     CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    Waypoint,
+    VelocitySource, Waypoint,
 };
 
 use crate::counters::Traffic;
@@ -118,6 +118,12 @@ pub struct Robot {
     pub estop_ack: Option<(bool, u32)>,
     /// Messages the robot reports it ignored as stale (telemetry).
     pub stale: u32,
+    /// Whether `velocity` was measured by wheel encoders or follows from
+    /// the commanded outputs (telemetry).
+    pub velocity_source: VelocitySource,
+    /// The robot's last driver fault notice ("left wheel stalled: ..."),
+    /// kept while its telemetry reports the fault.
+    pub fault: Option<String>,
 }
 
 impl Robot {
@@ -151,6 +157,8 @@ impl Robot {
             traffic: Traffic::default(),
             estop_ack: None,
             stale: 0,
+            velocity_source: VelocitySource::Commanded,
+            fault: None,
         }
     }
 

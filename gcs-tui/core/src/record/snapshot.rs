@@ -125,5 +125,6 @@ fn telemetry(r: &Robot) -> Telemetry {
         actuators: r.actuators.clone(),
         mission: r.mission,
         stale: r.stale,
+        velocity_source: r.velocity_source,
     }
 }

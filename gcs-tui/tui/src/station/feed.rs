@@ -212,6 +212,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             platform: r.platform.clone(),
             pose: r.pose,
             velocity: r.velocity,
+            velocity_source: r.velocity_source,
             mode: r.mode,
             route: RouteView {
                 channel: r.route.requested.clone().unwrap_or_default(),
@@ -221,6 +222,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             link: r.link,
             failsafe: r.failsafe,
             health: r.health,
+            fault: r.fault.clone(),
             battery: r.battery,
             mission: r.mission,
             trail: recent_path(r),
