@@ -4,6 +4,7 @@
 //! [`VERBS`] that the parser and `help` read, the [`Command`] enum with its
 //! dispatch, and the poll loop of the waiting verbs.
 
+pub mod autopilot;
 pub mod channels;
 pub mod cluster;
 pub mod cluster_expect;
@@ -222,6 +223,12 @@ pub static VERBS: &[Verb] = &[
         parse: |a| nav_wait::NavWait::parse(a).map(Command::NavWait),
     },
     Verb {
+        name: "autopilot",
+        usage: "autopilot TARGET arm|disarm|offboard|hold|land | autopilot TARGET takeoff ALTITUDE",
+        help: "ask robots' autopilots (PX4, ArduPilot) to arm, disarm, change mode, land or take off",
+        parse: |a| autopilot::Autopilot::parse(a).map(Command::Autopilot),
+    },
+    Verb {
         name: "help",
         usage: "help",
         help: "list commands",
@@ -261,6 +268,7 @@ pub enum Command {
     Follow(follow::Follow),
     Nav(nav::Nav),
     NavWait(nav_wait::NavWait),
+    Autopilot(autopilot::Autopilot),
 }
 
 impl Command {
@@ -295,6 +303,7 @@ impl Command {
             Command::Follow(c) => c.apply(ctx, at).await,
             Command::Nav(c) => c.apply(ctx, at).await,
             Command::NavWait(c) => c.apply(ctx, at).await,
+            Command::Autopilot(c) => c.apply(ctx, at).await,
         }
     }
 }
