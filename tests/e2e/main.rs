@@ -2,6 +2,8 @@
 
 mod cli;
 mod cluster_script;
+mod python;
 mod script;
 mod signed;
+mod station;
 mod tui;
