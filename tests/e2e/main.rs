@@ -2,6 +2,7 @@
 
 mod cli;
 mod cluster_script;
+mod octave;
 mod python;
 mod script;
 mod signed;
