@@ -332,3 +332,36 @@ fn leader_follower_keeps_the_follower_behind_the_leader() {
     );
     assert!(report.contains("\"mean_error\""), "{report}");
 }
+
+/// A mission and channel discovery through the package's own calls.
+const MISSION_AND_CHANNELS: &str = r#"
+import json, sys
+from mech_client import Client, Waypoint
+with Client("py_planner", sys.argv[1]) as mech:
+    ack = mech.send_mission("robot_1", "wp/python", [Waypoint(2.6, 0.8), Waypoint(1.0, 2.0)],
+                            arrival_radius=0.1)
+    channels = {c.name: c.robots for c in mech.channels()}
+    t = mech.wait_telemetry("robot_1")
+    print(json.dumps({"accepted": ack.accepted, "channels": channels, "mode": t.mode.name}))
+"#;
+
+#[test]
+fn a_python_client_sends_a_mission_and_discovers_the_channel() {
+    let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 wp/python\n\
+                  wait route robot_1 wp/python 5s\nlog go\n\
+                  wait near robot_1 1.0,2.0 0.15 60s\nstatus robot_1\n";
+    let mut station = Station::start(script, &[]);
+    station.until("\"summary\":\"go\"");
+    let mut c = python();
+    c.args(["-c", MISSION_AND_CHANNELS, &station.router()]);
+    let out = run_ok(c, "python3 with mech_client");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(report.contains("\"accepted\": true"), "{report}");
+    assert!(
+        report.contains("\"wp/python\": [\"robot_1\"]"),
+        "the channel lists its robot: {report}"
+    );
+    assert!(report.contains("\"mode\": \"WAYPOINTS\""), "{report}");
+    let (lines, ok) = station.finish();
+    assert!(ok, "robot_1 did not reach the last waypoint: {lines:#?}");
+}
