@@ -50,6 +50,10 @@ pub struct RobotConfig {
     /// robot runs unsigned and only an unauthenticated station accepts it.
     #[serde(default)]
     pub auth: Option<AuthConfig>,
+    /// `[autopilot]`: a PX4 or ArduPilot autopilot flies the vehicle
+    /// (`docs/autopilots.md`); it then also gives the position.
+    #[serde(default)]
+    pub autopilot: Option<Spanned<crate::autopilot::AutopilotConfig>>,
 }
 
 /// `[auth]`: signing and checking with the router.
@@ -330,7 +334,33 @@ impl RobotConfig {
             .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
         self.validate_failsafe()?;
         self.validate_filter()?;
-        self.validate_actuators()
+        self.validate_actuators()?;
+        self.validate_autopilot()
+    }
+
+    /// An autopilot gives the position and takes the place of actuators.
+    fn validate_autopilot(&self) -> Result<(), Problem> {
+        let Some(autopilot) = &self.autopilot else {
+            return Ok(());
+        };
+        let problem = |message: String| (at(autopilot.span()), message);
+        autopilot.get_ref().validate().map_err(problem)?;
+        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
+            return Err(problem(
+                "[autopilot] gives the position: leave out [position]".to_string(),
+            ));
+        }
+        if !matches!(self.actuators(), ActuatorConfig::None) {
+            return Err(problem(
+                "[autopilot] flies the vehicle: leave out [actuators]".to_string(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `[autopilot]` section, if any.
+    pub fn autopilot(&self) -> Option<&crate::autopilot::AutopilotConfig> {
+        self.autopilot.as_ref().map(|a| a.get_ref())
     }
 
     fn validate_rates(&self) -> Result<(), Problem> {

@@ -9,6 +9,7 @@
 //!   datagram link); [`drivers`]: L298, UDP and serial links, Pozyx, NMEA
 //!   GPS, external positions.
 //! - [`platform`]: differential drive, kiwi, quadcopter.
+//! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
 //! - [`agent`]: the socket-free core; [`runtime`]: the tokio loop around it.
 //! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
@@ -19,6 +20,7 @@
 
 pub mod agent;
 pub mod auth;
+pub mod autopilot;
 pub mod clock;
 pub mod config;
 pub mod control;
