@@ -1,5 +1,6 @@
 //! End-to-end tests: the real binaries, over real sockets.
 
+mod autopilot;
 mod cli;
 mod cluster_script;
 mod octave;

@@ -178,6 +178,24 @@ pub type Track = std::collections::HashMap<String, Vec<(f64, f64, f64)>>;
 
 /// Subscribes to an unauthenticated router's telemetry until `stop` is set.
 pub fn observe(router: String, stop: std::sync::Arc<std::sync::atomic::AtomicBool>) -> Track {
+    observe_telemetry(router, stop)
+        .into_iter()
+        .map(|(robot, ts)| {
+            let poses = ts
+                .iter()
+                .map(|t| (t.pose.x, t.pose.y, t.pose.heading))
+                .collect();
+            (robot, poses)
+        })
+        .collect()
+}
+
+/// Every telemetry message an unauthenticated router fans out, by robot,
+/// until `stop` is set.
+pub fn observe_telemetry(
+    router: String,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::collections::HashMap<String, Vec<mech_proto::Telemetry>> {
     let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     socket
         .set_read_timeout(Some(Duration::from_millis(100)))
@@ -187,7 +205,7 @@ pub fn observe(router: String, stop: std::sync::Arc<std::sync::atomic::AtomicBoo
         Body::Subscribe(Subscribe { telemetry: true }),
     ))
     .unwrap();
-    let mut track = Track::new();
+    let mut seen = std::collections::HashMap::<String, Vec<mech_proto::Telemetry>>::new();
     let mut renewed = Instant::now() - Duration::from_secs(10);
     let mut buf = vec![0; 65_536];
     while !stop.load(std::sync::atomic::Ordering::SeqCst) {
@@ -198,15 +216,14 @@ pub fn observe(router: String, stop: std::sync::Arc<std::sync::atomic::AtomicBoo
         let Ok(n) = socket.recv(&mut buf) else {
             continue;
         };
-        if let Ok(env) = mech_proto::decode(&buf[..n]) {
-            if let Body::Telemetry(t) = env.body {
-                track.entry(env.header.sender).or_default().push((
-                    t.pose.x,
-                    t.pose.y,
-                    t.pose.heading,
-                ));
-            }
+        if let Ok(mech_proto::Envelope {
+            header,
+            body: Body::Telemetry(t),
+            ..
+        }) = mech_proto::decode(&buf[..n])
+        {
+            seen.entry(header.sender).or_default().push(t);
         }
     }
-    track
+    seen
 }
