@@ -12,8 +12,9 @@
 //! keeps streaming setpoints so the autopilot stays in offboard/guided;
 //! when the agent itself dies the stream stops and the autopilot's own
 //! offboard-loss failsafe (PX4 `COM_OBL_RC_ACT`, ArduPilot's guided
-//! timeout) takes over. It never arms, disarms or switches modes except on
-//! an operator's request.
+//! timeout) takes over. While the autopilot is silent the outputs are held
+//! at zero too (state fault). It never arms, disarms or switches modes
+//! except on an operator's request.
 
 use std::time::Duration;
 
@@ -90,9 +91,10 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
                 }
             }
         }
-        if let Some(lost) = self.session.check_link(now) {
-            out.extend(self.agent.driver_fault("autopilot heartbeat lost", now));
-            reports.push(lost);
+        reports.extend(self.session.check_link(now));
+        if self.session.target().is_some() && !self.session.connected(now) {
+            // Outputs held at zero (state fault) while the autopilot is silent.
+            out.extend(self.agent.actuator_fault("autopilot heartbeat lost", now));
         }
         for r in reports {
             self.report(r, now, out);
@@ -362,6 +364,7 @@ mod tests {
                 uptime_ms: u64::from(t),
             };
             v.handle(msg("", Body::Heartbeat(hb)), t * MS);
+            px4(&mut v, true);
             v.tick(t * MS);
         }
         assert_eq!(
@@ -370,6 +373,7 @@ mod tests {
         );
         assert_eq!(setpoints(&v).last(), Some(&(0.0, 0.0, 0.0, 0.0)));
         // Router lost: hold too.
+        px4(&mut v, true);
         v.tick(3000 * MS);
         assert_eq!(v.agent.failsafe_state(3000 * MS), FailsafeState::RouterLost);
         assert_eq!(setpoints(&v).last(), Some(&(0.0, 0.0, 0.0, 0.0)));
@@ -433,6 +437,46 @@ mod tests {
                 |e| matches!(&e.body, Body::Notice(n) if n.text == "arm sent to the autopilot")
             ),
             "{out:?}"
+        );
+    }
+
+    #[test]
+    fn a_silent_autopilot_is_a_fault_and_the_setpoints_hold() {
+        let mut v = vehicle();
+        px4(&mut v, true);
+        let route = Route {
+            robot: "drone".into(),
+            channel: "joy/0".into(),
+            epoch: 1,
+        };
+        let welcome = Welcome {
+            robot_id: 1,
+            route,
+            router_version: "t".into(),
+        };
+        v.handle(msg("", Body::Welcome(welcome)), Duration::ZERO);
+        v.tick(Duration::ZERO);
+        let mut out = Vec::new();
+        for t in (100..=2500u32).step_by(100) {
+            let forward = Command::Twist(Twist {
+                vx: 0.5,
+                ..Twist::default()
+            });
+            v.handle(msg("joy/0", Body::Command(forward)), t * MS);
+            out.extend(v.tick(t * MS));
+        }
+        assert_eq!(v.agent.failsafe_state(2500 * MS), FailsafeState::Fault);
+        assert_eq!(setpoints(&v).last(), Some(&(0.0, 0.0, 0.0, 0.0)));
+        let lost: Vec<&str> = out
+            .iter()
+            .filter_map(|e| match &e.body {
+                Body::Notice(n) if n.text.contains("autopilot") => Some(n.text.as_str()),
+                _ => None,
+            })
+            .collect();
+        assert!(
+            lost.iter().any(|t| t.starts_with("autopilot lost")),
+            "{lost:?}"
         );
     }
 
