@@ -10,9 +10,9 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use mech_proto::{
-    Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope, FailsafeState, Header,
-    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
-    Telemetry, Twist, Velocity, VelocitySource,
+    AutopilotRequest, Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope,
+    FailsafeState, Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice,
+    NoticeCode, Route, RouteAck, Telemetry, Twist, Velocity, VelocitySource,
 };
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
@@ -58,6 +58,11 @@ pub struct AgentSettings {
     /// Noise figures of the odometry + position fusion (used with `wheels`
     /// and a position source).
     pub fusion: FusionSettings,
+    /// Whether an autopilot (PX4, ArduPilot) flies the vehicle: operators'
+    /// autopilot requests are then queued for it
+    /// ([`Agent::take_autopilot_requests`]); without one they are answered
+    /// as unsupported.
+    pub autopilot: bool,
 }
 
 impl AgentSettings {
@@ -75,6 +80,7 @@ impl AgentSettings {
             gains: Gains::default(),
             wheels: None,
             fusion: FusionSettings::default(),
+            autopilot: false,
         }
     }
 }
@@ -165,6 +171,8 @@ pub struct Agent {
     version: String,
     /// Signing and checking, when the robot has a key.
     auth: Option<RobotAuth>,
+    /// Operators' autopilot requests not yet taken by the vehicle.
+    autopilot_requests: Vec<AutopilotRequest>,
 }
 
 impl Agent {
@@ -220,6 +228,7 @@ impl Agent {
             counters: Counters::default(),
             version: env!("CARGO_PKG_VERSION").to_string(),
             auth: None,
+            autopilot_requests: Vec::new(),
             settings,
         }
     }
@@ -240,10 +249,10 @@ impl Agent {
     /// header's stamp is the robot's clock reading.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
         mech_proto::encode_into(env, out)?;
-        if let Some(auth) = self.auth.as_mut() {
-            if let Err(e) = auth.seal(out, env.header.stamp_us) {
-                return Err(mech_proto::Error::Encode(e.to_string()));
-            }
+        if let Some(auth) = self.auth.as_mut()
+            && let Err(e) = auth.seal(out, env.header.stamp_us)
+        {
+            return Err(mech_proto::Error::Encode(e.to_string()));
         }
         Ok(())
     }
@@ -473,6 +482,7 @@ impl Agent {
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
             Body::EStop(e) => self.estop_received(e, now, &mut out),
             Body::Bye(bye) if sender == mech_proto::ROUTER => self.router_left(&bye.reason),
+            Body::Autopilot(r) => self.autopilot_received(r, now, &mut out),
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -542,6 +552,61 @@ impl Agent {
             id: e.id,
         });
         out.push(self.envelope(mech_proto::ROUTER, ack, now));
+    }
+
+    /// An operator's request to the autopilot: queued for the vehicle,
+    /// unless the robot has no autopilot or is e-stopped and the request
+    /// could start it moving (arm, offboard, take off); a refusal is a
+    /// notice in the station's event log.
+    fn autopilot_received(&mut self, r: AutopilotRequest, now: Duration, out: &mut Vec<Envelope>) {
+        if r.robot != self.settings.name {
+            self.counters.not_for_me += 1;
+            return;
+        }
+        let refusal = if !self.settings.autopilot {
+            Some(format!(
+                "{} has no autopilot: {} refused",
+                self.settings.name,
+                r.action.as_str()
+            ))
+        } else if self.failsafe.estopped() && r.action.starts_motion() {
+            Some(format!(
+                "{} is e-stopped: {} refused until release",
+                self.settings.name,
+                r.action.as_str()
+            ))
+        } else {
+            None
+        };
+        match refusal {
+            Some(text) => {
+                self.counters.refused += 1;
+                out.push(self.notice(Level::Warn, NoticeCode::Unsupported, &text, now));
+            }
+            None => self.autopilot_requests.push(r),
+        }
+    }
+
+    /// The autopilot requests received since the last call, oldest first,
+    /// for the vehicle to carry out.
+    pub fn take_autopilot_requests(&mut self) -> Vec<AutopilotRequest> {
+        std::mem::take(&mut self.autopilot_requests)
+    }
+
+    /// A notice from this robot to the router (the station's event log).
+    pub fn notice(
+        &mut self,
+        level: Level,
+        code: NoticeCode,
+        text: &str,
+        now: Duration,
+    ) -> Envelope {
+        let body = Body::Notice(Notice {
+            level,
+            code,
+            text: truncate(text),
+        });
+        self.envelope(mech_proto::ROUTER, body, now)
     }
 
     /// One control period: failsafe, controller, actuator outputs, and the
@@ -775,10 +840,10 @@ impl Agent {
             self.route.epoch = route.epoch;
             // Re-routing to a channel resumes its paused mission, but not
             // while e-stopped: missions stay paused through a release.
-            if !self.failsafe.estopped() {
-                if let Some(m) = self.missions.get_mut(&self.route.channel) {
-                    m.paused = false;
-                }
+            if !self.failsafe.estopped()
+                && let Some(m) = self.missions.get_mut(&self.route.channel)
+            {
+                m.paused = false;
             }
         }
         self.resume_mission(now);
@@ -1660,10 +1725,13 @@ mod loss_tests {
                 // Router heartbeats every 240 ms and controller commands every
                 // 40 ms (on the 20 ms control grid), each lost with
                 // probability 0.3.
-                if now.as_millis() % 240 == 0 && !rng.random_bool(0.3) {
+                if now.as_millis().is_multiple_of(240) && !rng.random_bool(0.3) {
                     a.handle(env("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
                 }
-                if now < stop_publishing && now.as_millis() % 40 == 0 && !rng.random_bool(0.3) {
+                if now < stop_publishing
+                    && now.as_millis().is_multiple_of(40)
+                    && !rng.random_bool(0.3)
+                {
                     a.handle(
                         env(
                             "joy/0",

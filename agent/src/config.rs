@@ -59,6 +59,10 @@ pub struct RobotConfig {
     /// wheel speed, stall detection and odometry between position fixes.
     #[serde(default)]
     pub encoders: Option<Spanned<EncoderConfig>>,
+    /// `[autopilot]`: a PX4 or ArduPilot autopilot flies the vehicle
+    /// (`docs/autopilots.md`); it then also gives the position.
+    #[serde(default)]
+    pub autopilot: Option<Spanned<crate::autopilot::AutopilotConfig>>,
 }
 
 /// `[auth]`: signing and checking with the router.
@@ -437,7 +441,33 @@ impl RobotConfig {
         self.validate_failsafe()?;
         self.validate_filter()?;
         self.validate_actuators()?;
-        self.validate_encoders()
+        self.validate_encoders()?;
+        self.validate_autopilot()
+    }
+
+    /// An autopilot gives the position and takes the place of actuators.
+    fn validate_autopilot(&self) -> Result<(), Problem> {
+        let Some(autopilot) = &self.autopilot else {
+            return Ok(());
+        };
+        let problem = |message: String| (at(autopilot.span()), message);
+        autopilot.get_ref().validate().map_err(problem)?;
+        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
+            return Err(problem(
+                "[autopilot] gives the position: leave out [position]".to_string(),
+            ));
+        }
+        if !matches!(self.actuators(), ActuatorConfig::None) {
+            return Err(problem(
+                "[autopilot] flies the vehicle: leave out [actuators]".to_string(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `[autopilot]` section, if any.
+    pub fn autopilot(&self) -> Option<&crate::autopilot::AutopilotConfig> {
+        self.autopilot.as_ref().map(|a| a.get_ref())
     }
 
     fn validate_rates(&self) -> Result<(), Problem> {

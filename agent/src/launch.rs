@@ -30,6 +30,8 @@ pub enum LaunchError {
     Feature { feature: &'static str },
     #[error("key: {0}")]
     Key(String),
+    #[error("autopilot: {0}")]
+    Autopilot(String),
 }
 
 /// Command-line overrides of the config.
@@ -93,9 +95,22 @@ pub async fn run(
         }
         runtime::drive(sim, io, ticker, origin, shutdown).await;
     } else {
+        let mut settings = settings;
+        if config.autopilot().is_some() {
+            // The autopilot's estimate is already filtered.
+            settings.autopilot = true;
+            settings.has_position = true;
+            settings.filter_window = 1;
+        }
         let mut agent = Agent::new(settings, config.platform().build(), stamp_origin);
         if let Some(key) = key {
             agent = agent.with_key(key, &router_name);
+        }
+        if let Some(autopilot) = config.autopilot() {
+            let vehicle = open_autopilot(autopilot, agent)?;
+            runtime::drive(vehicle, io, ticker, origin, shutdown).await;
+            tracing::info!("agent stopped");
+            return Ok(());
         }
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
@@ -154,6 +169,29 @@ fn open_serial(port: &str, baud: u32) -> Result<Io, LaunchError> {
 #[cfg(not(feature = "serial"))]
 fn open_serial(_port: &str, _baud: u32) -> Result<Io, LaunchError> {
     Err(LaunchError::Feature { feature: "serial" })
+}
+
+#[cfg(feature = "mavlink")]
+fn open_autopilot(
+    config: &crate::autopilot::AutopilotConfig,
+    agent: Agent,
+) -> Result<
+    crate::autopilot::vehicle::AutopilotVehicle<crate::autopilot::link::MavlinkLink>,
+    LaunchError,
+> {
+    use crate::autopilot::{link::MavlinkLink, session::Session, vehicle::AutopilotVehicle};
+    tracing::info!(link = %config.link, "autopilot link");
+    let link =
+        MavlinkLink::open(&config.link).map_err(|e| LaunchError::Autopilot(e.to_string()))?;
+    Ok(AutopilotVehicle::new(agent, Session::new(config), link))
+}
+
+#[cfg(not(feature = "mavlink"))]
+fn open_autopilot(
+    _config: &crate::autopilot::AutopilotConfig,
+    _agent: Agent,
+) -> Result<HardwareVehicle, LaunchError> {
+    Err(LaunchError::Feature { feature: "mavlink" })
 }
 
 fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, LaunchError> {

@@ -9,6 +9,7 @@
 //!   wheel encoder, datagram link); [`drivers`]: L298, UDP and serial
 //!   links, Pozyx, NMEA GPS, external positions, encoder edge counting.
 //! - [`platform`]: differential drive, kiwi, quadcopter.
+//! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
 //! - [`wheels`], [`fusion`]: wheel encoders (measured speed, closed-loop
 //!   wheel speed, stall detection) and odometry fused with position fixes.
@@ -21,6 +22,7 @@
 
 pub mod agent;
 pub mod auth;
+pub mod autopilot;
 pub mod clock;
 pub mod config;
 pub mod control;

@@ -312,6 +312,19 @@ fn body() -> impl Strategy<Value = Body> {
         any::<u64>().prop_map(|nonce| Body::TimeRequest(TimeRequest { nonce })),
         (any::<u64>(), any::<u64>())
             .prop_map(|(nonce, station_us)| Body::Time(Time { nonce, station_us })),
+        (name(), 0..6usize, 0.1f64..500.0).prop_map(|(robot, action, altitude)| {
+            let action = AutopilotAction::ALL[action];
+            let altitude = if action == AutopilotAction::Takeoff {
+                altitude
+            } else {
+                0.0
+            };
+            Body::Autopilot(AutopilotRequest {
+                robot,
+                action,
+                altitude,
+            })
+        }),
     ]
 }
 

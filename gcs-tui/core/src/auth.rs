@@ -278,6 +278,7 @@ impl Identity {
                 matches!(role, Role::Controller | Role::Operator)
             }
             Body::EStop(e) => role == Role::Operator || (e.engage && role == Role::Estop),
+            Body::Autopilot(_) => role == Role::Operator,
             Body::Welcome(_) | Body::Route(_) | Body::Channels(_) | Body::Time(_) => false,
         };
         if ok {

@@ -4,6 +4,7 @@
 //! [`VERBS`] that the parser and `help` read, the [`Command`] enum with its
 //! dispatch, and the poll loop of the waiting verbs.
 
+pub mod autopilot;
 pub mod channels;
 pub mod cluster;
 pub mod cluster_expect;
@@ -229,6 +230,12 @@ pub static VERBS: &[Verb] = &[
         parse: |a| record::Record::parse(a).map(Command::Record),
     },
     Verb {
+        name: "autopilot",
+        usage: "autopilot TARGET arm|disarm|offboard|hold|land | autopilot TARGET takeoff ALTITUDE",
+        help: "ask robots' autopilots (PX4, ArduPilot) to arm, disarm, change mode, land or take off",
+        parse: |a| autopilot::Autopilot::parse(a).map(Command::Autopilot),
+    },
+    Verb {
         name: "help",
         usage: "help",
         help: "list commands",
@@ -269,6 +276,7 @@ pub enum Command {
     Nav(nav::Nav),
     NavWait(nav_wait::NavWait),
     Record(record::Record),
+    Autopilot(autopilot::Autopilot),
 }
 
 impl Command {
@@ -304,6 +312,7 @@ impl Command {
             Command::Nav(c) => c.apply(ctx, at).await,
             Command::NavWait(c) => c.apply(ctx, at).await,
             Command::Record(c) => c.apply(ctx, at).await,
+            Command::Autopilot(c) => c.apply(ctx, at).await,
         }
     }
 }

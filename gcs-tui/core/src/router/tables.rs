@@ -12,11 +12,13 @@
 //! Bye, liveness, heartbeats), [`commands`] (commands, fleet and cluster
 //! commands: the hot path), [`routes`] (route changes and acks),
 //! [`missions`], [`estop`] and [`telemetry`] (telemetry, subscriptions,
-//! position fixes, channel discovery, notices). [`Tables::tick`] runs each
+//! position fixes, channel discovery, notices), [`autopilot`] (operators'
+//! requests to a robot's autopilot). [`Tables::tick`] runs each
 //! concern's timers.
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 
+mod autopilot;
 mod commands;
 mod estop;
 mod gate;
@@ -377,6 +379,7 @@ impl Tables {
             Body::Cluster(command) => self.on_cluster(m, command, events),
             Body::Bye(bye) => self.on_bye(m, bye, events),
             Body::TimeRequest(_) => Delivery::Consumed,
+            Body::Autopilot(request) => self.on_autopilot(m, request, out),
             Body::Command(_)
             | Body::Welcome(_)
             | Body::Route(_)
