@@ -31,8 +31,11 @@ pub struct AgentSettings {
     pub failsafe: FailsafeConfig,
     /// Telemetry period (default 50 ms = 20 Hz).
     pub telemetry_period: Duration,
-    /// Period of `Hello` while unregistered and of the agent's `Heartbeat`.
+    /// Period of the agent's `Heartbeat`.
     pub hello_period: Duration,
+    /// Period of `Hello` while unregistered: short, so a robot is back
+    /// within a fraction of a second of its station.
+    pub hello_retry: Duration,
     /// Answer a rejected command with `Notice{NotRouted}` (at most one a
     /// second), so a controller learns why it is ignored.
     pub notify_not_routed: bool,
@@ -56,6 +59,7 @@ impl AgentSettings {
             failsafe: FailsafeConfig::default(),
             telemetry_period: Duration::from_millis(50),
             hello_period: Duration::from_secs(1),
+            hello_retry: Duration::from_millis(250),
             notify_not_routed: true,
             filter_window: 9,
             external_position: false,
@@ -94,6 +98,11 @@ pub struct Counters {
     pub driver_faults: u64,
     /// Position fixes used.
     pub position_samples: u64,
+    /// Commands obeyed.
+    pub commands: u64,
+    /// Times the router said it did not know this robot (it restarted),
+    /// and the robot registered again at once.
+    pub reregistered: u64,
 }
 
 /// The result of one control period.
@@ -201,9 +210,21 @@ impl Agent {
     /// Encodes a message to send, signed when the robot has a key. The
     /// header's stamp is the robot's clock reading.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        self.encode_on(env, 0, out)
+    }
+
+    /// Like [`Agent::encode`], for the robot's link number `link` (its
+    /// place in the config's link list): each link is its own signed
+    /// stream, so a message sent on two links is never taken for a replay.
+    pub fn encode_on(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
         mech_proto::encode_into(env, out)?;
         if let Some(auth) = self.auth.as_mut() {
-            if let Err(e) = auth.seal(out, env.header.stamp_us) {
+            if let Err(e) = auth.seal(out, env.header.stamp_us, link) {
                 return Err(mech_proto::Error::Encode(e.to_string()));
             }
         }
@@ -320,6 +341,16 @@ impl Agent {
     /// Decodes and handles one received datagram or frame; undecodable bytes
     /// are counted and dropped.
     pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        // A radio is a broadcast medium: frames for other robots are
+        // skipped before they are checked (they are signed for those
+        // robots, not refused forgeries).
+        if let Ok(head) = mech_proto::peek(bytes) {
+            let dest = head.destination;
+            if !(dest.is_empty() || dest == mech_proto::BROADCAST || dest == self.settings.name) {
+                self.counters.not_for_me += 1;
+                return Vec::new();
+            }
+        }
         let env = match mech_proto::decode(bytes) {
             Ok(env) => env,
             Err(_) => {
@@ -377,6 +408,14 @@ impl Agent {
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
             Body::EStop(e) => self.estop_received(e, now, &mut out),
+            Body::Notice(n) if n.code == NoticeCode::UnknownRobot && self.registered => {
+                // The router restarted and forgot this robot: register now
+                // rather than after the router timeout.
+                tracing::info!(robot = %self.settings.name, "the router does not know this robot; registering again");
+                self.counters.reregistered += 1;
+                self.registered = false;
+                self.next_hello = now;
+            }
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -458,7 +497,7 @@ impl Agent {
 
     /// Registration: after the router is lost, register again (it may have
     /// restarted, or the robot moved); while unregistered, Hello every
-    /// `hello_period` (with a key, ask the station's time first: signed
+    /// `hello_retry` (with a key, ask the station's time first: signed
     /// stamps need it).
     fn register(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if self.registered && self.failsafe.router_lost(now) {
@@ -469,7 +508,7 @@ impl Agent {
             }
         }
         if !self.registered && now >= self.next_hello {
-            self.next_hello = now + self.settings.hello_period;
+            self.next_hello = now + self.settings.hello_retry;
             let body = match self.auth.as_mut() {
                 Some(auth) if !auth.synced() => Body::TimeRequest(auth.time_request()),
                 _ => Body::Hello(self.hello()),
@@ -525,10 +564,7 @@ impl Agent {
     fn report(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if now >= self.next_heartbeat {
             self.next_heartbeat = now + self.settings.hello_period;
-            let hb = Body::Heartbeat(Heartbeat {
-                uptime_ms: now.as_millis() as u64,
-            });
-            outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
+            outgoing.push(self.heartbeat(now));
         }
         if now >= self.next_telemetry {
             // Stay on the grid so the rate does not drift with jitter.
@@ -594,6 +630,16 @@ impl Agent {
         let c = &self.counters;
         let n = c.stale_commands + c.stale_estops + c.stale_routes + c.stale_missions;
         u32::try_from(n).unwrap_or(u32::MAX)
+    }
+
+    /// A heartbeat: sent every `hello_period`, and by a robot with several
+    /// links on each link it is not using, so the router hears which are
+    /// alive.
+    pub fn heartbeat(&mut self, now: Duration) -> Envelope {
+        let hb = Body::Heartbeat(Heartbeat {
+            uptime_ms: now.as_millis() as u64,
+        });
+        self.envelope(mech_proto::ROUTER, hb, now)
     }
 
     /// The `Bye` sent when the agent shuts down.
@@ -713,7 +759,10 @@ impl Agent {
             }
         }
         match self.controller.command(cmd) {
-            Ok(()) => self.failsafe.channel_heard(now),
+            Ok(()) => {
+                self.counters.commands += 1;
+                self.failsafe.channel_heard(now);
+            }
             Err(e) => {
                 self.counters.refused += 1;
                 let notice = Body::Notice(Notice {
@@ -896,7 +945,7 @@ mod tests {
     }
 
     #[test]
-    fn says_hello_every_second_until_welcomed() {
+    fn says_hello_every_quarter_second_until_welcomed() {
         let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
         let hellos = |t: &Tick| {
             t.outgoing
@@ -905,8 +954,8 @@ mod tests {
                 .count()
         };
         assert_eq!(hellos(&a.tick(ms(0))), 1);
-        assert_eq!(hellos(&a.tick(ms(500))), 0);
-        let t = a.tick(ms(1000));
+        assert_eq!(hellos(&a.tick(ms(200))), 0);
+        let t = a.tick(ms(250));
         assert_eq!(hellos(&t), 1);
         let Body::Hello(h) = &t.outgoing[0].body else {
             panic!()

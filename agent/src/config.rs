@@ -34,6 +34,14 @@ pub struct RobotConfig {
     pub platform: Spanned<Kind<PlatformSpec>>,
     #[serde(default = "spanned_default")]
     pub link: Spanned<Kind<LinkConfig>>,
+    /// Several links to the router (`[[links]]`, instead of `[link]`), in
+    /// order of preference: the robot uses the first that is alive and
+    /// fails over to the next (Wi-Fi first, then a radio).
+    #[serde(default)]
+    pub links: Vec<Spanned<Kind<LinkConfig>>>,
+    /// `[failover]`: when a link counts as alive.
+    #[serde(default)]
+    pub failover: FailoverConfig,
     #[serde(default = "spanned_default")]
     pub failsafe: Spanned<FailsafeToml>,
     #[serde(default = "spanned_default")]
@@ -99,7 +107,33 @@ pub enum LinkConfig {
         port: String,
         #[serde(default = "default_radio_baud")]
         baud: u32,
+        /// Most telemetry messages per second sent over this link (the
+        /// station shows each radio robot's budget); unset: the robot's
+        /// `telemetry_rate_hz`.
+        #[serde(default)]
+        telemetry_rate_hz: Option<f64>,
     },
+}
+
+/// `[failover]`: for a robot with several links.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FailoverConfig {
+    /// A link counts as alive while the router was heard on it within this
+    /// (seconds); the router's heartbeat comes every 0.25 s on each link.
+    pub link_timeout: f64,
+    /// Period of the heartbeat sent on each link not in use, so the router
+    /// knows it is there (seconds).
+    pub probe_period: f64,
+}
+
+impl Default for FailoverConfig {
+    fn default() -> Self {
+        FailoverConfig {
+            link_timeout: 0.6,
+            probe_period: 0.25,
+        }
+    }
 }
 
 fn default_router() -> SocketAddr {
@@ -329,6 +363,7 @@ impl RobotConfig {
             .validate()
             .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
         self.validate_failsafe()?;
+        self.validate_links()?;
         self.validate_filter()?;
         self.validate_actuators()
     }
@@ -361,6 +396,47 @@ impl RobotConfig {
                     format!("[failsafe] `{what}` = {v}: expected seconds in (0, 3600]"),
                 ));
             }
+        }
+        Ok(())
+    }
+
+    fn validate_links(&self) -> Result<(), Problem> {
+        if !self.links.is_empty() && !self.link.span().is_empty() {
+            return Err((
+                at(self.link.span()),
+                "give either [link] or [[links]], not both".to_string(),
+            ));
+        }
+        if self.links.len() > 8 {
+            return Err((at(self.links[8].span()), "at most 8 links".to_string()));
+        }
+        for link in &self.links {
+            if let LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } = &link.get_ref().0
+            {
+                if !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0) {
+                    return Err((
+                        at(link.span()),
+                        format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
+                    ));
+                }
+            }
+        }
+        let f = self.failover;
+        if !(f.link_timeout.is_finite() && f.link_timeout > 0.0 && f.link_timeout <= 60.0)
+            || !(f.probe_period.is_finite()
+                && f.probe_period > 0.0
+                && f.probe_period < f.link_timeout)
+        {
+            return Err((
+                None,
+                format!(
+                    "[failover] link_timeout = {} and probe_period = {}: expected 0 < probe_period < link_timeout <= 60 s",
+                    f.link_timeout, f.probe_period
+                ),
+            ));
         }
         Ok(())
     }
@@ -418,6 +494,16 @@ impl RobotConfig {
 
     pub fn link(&self) -> &LinkConfig {
         &self.link.get_ref().0
+    }
+
+    /// Every link to the router, in order of preference: `[[links]]`, or
+    /// the one `[link]`.
+    pub fn links(&self) -> Vec<&LinkConfig> {
+        if self.links.is_empty() {
+            vec![self.link()]
+        } else {
+            self.links.iter().map(|l| &l.get_ref().0).collect()
+        }
     }
 
     pub fn actuators(&self) -> &ActuatorConfig {

@@ -12,6 +12,7 @@ use tokio::time::Instant;
 use crate::agent::Agent;
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
+use crate::links::LinkChoice;
 use crate::runtime::{self, HardwareVehicle, Io, Ticker};
 use crate::sim::{SimAgent, UwbNoise, UwbNoiseModel};
 
@@ -104,12 +105,51 @@ pub async fn run(
 }
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {
-    // `--router` turns any robot into a UDP one (bench testing a radio robot).
-    let router = match config.link() {
-        LinkConfig::Udp { router } => Some(overrides.router.unwrap_or(*router)),
-        LinkConfig::Serial { .. } => overrides.router,
+    let links = config.links();
+    let caps: Vec<Option<std::time::Duration>> = links
+        .iter()
+        .map(|l| match l {
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } => Some(std::time::Duration::from_secs_f64(1.0 / hz)),
+            _ => None,
+        })
+        .collect();
+    if let ([only], false) = (links.as_slice(), caps[0].is_some()) {
+        return open_one(only, overrides.router, true).await;
+    }
+    let mut ios = Vec::with_capacity(links.len());
+    for link in &links {
+        ios.push(open_one(link, overrides.router, links.len() == 1).await?);
+    }
+    let f = config.failover;
+    let choice = LinkChoice::new(
+        caps,
+        std::time::Duration::from_secs_f64(f.link_timeout),
+        std::time::Duration::from_secs_f64(f.probe_period),
+    );
+    tracing::info!(links = ios.len(), "links in order of preference, with failover");
+    Ok(Io::Failover {
+        closed: vec![false; ios.len()],
+        links: ios,
+        choice,
+    })
+}
+
+/// Opens one link. `--router` sets the router of a UDP link, and turns a
+/// lone serial link into a UDP one (bench testing a radio robot).
+async fn open_one(
+    link: &LinkConfig,
+    router: Option<SocketAddr>,
+    alone: bool,
+) -> Result<Io, LaunchError> {
+    let router = match link {
+        LinkConfig::Udp { router: configured } => Some(router.unwrap_or(*configured)),
+        LinkConfig::Serial { .. } if alone => router,
+        LinkConfig::Serial { .. } => None,
     };
-    match (router, config.link()) {
+    match (router, link) {
         (Some(router), _) => {
             let local = if router.ip().is_loopback() {
                 SocketAddr::from(([127, 0, 0, 1], 0))
@@ -120,7 +160,7 @@ async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, La
             tracing::info!(%router, local = ?socket.local_addr().ok(), "UDP link");
             Ok(Io::Udp { socket, router })
         }
-        (None, LinkConfig::Serial { port, baud }) => open_serial(port, *baud),
+        (None, LinkConfig::Serial { port, baud, .. }) => open_serial(port, *baud),
         (None, LinkConfig::Udp { .. }) => {
             Err(LaunchError::Udp(std::io::ErrorKind::InvalidInput.into()))
         }

@@ -27,6 +27,7 @@ pub mod failsafe;
 pub mod filter;
 pub mod hal;
 pub mod launch;
+pub mod links;
 pub mod order;
 pub mod platform;
 pub mod runtime;

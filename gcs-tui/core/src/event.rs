@@ -40,6 +40,55 @@ impl LinkState {
     }
 }
 
+/// Where a robot was heard from: a UDP address, or a serial radio (the
+/// router's serial endpoint, by port).
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum LinkAddr {
+    Udp(SocketAddr),
+    /// A radio on the station's serial port with this path.
+    Radio(String),
+}
+
+impl std::fmt::Display for LinkAddr {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LinkAddr::Udp(a) => write!(f, "{a}"),
+            LinkAddr::Radio(port) => write!(f, "radio {port}"),
+        }
+    }
+}
+
+/// Which of a robot's links the router hears now, which one it sends on,
+/// and the robot's share of its radio.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RobotLinks {
+    /// Heard over UDP (Wi-Fi, Ethernet) within the router's link timeout.
+    pub udp: bool,
+    /// The radio (serial port) the robot is heard on within the link
+    /// timeout.
+    pub radio: Option<String>,
+    /// The link commands go out on now: `"udp"`, `"radio"`, or `""` when
+    /// the robot is heard on neither.
+    pub active: &'static str,
+    /// Telemetry messages per second this robot may send over its radio:
+    /// its share of the radio's bandwidth (`None` without a radio).
+    pub radio_budget_hz: Option<f64>,
+}
+
+impl RobotLinks {
+    /// How a card or a status line names the live links: `wifi+radio`,
+    /// `radio`, `wifi`, or `none`; the active one is starred when both live.
+    pub fn label(&self) -> String {
+        match (self.udp, self.radio.is_some()) {
+            (true, true) if self.active == "radio" => "wifi+radio*".into(),
+            (true, true) => "wifi*+radio".into(),
+            (true, false) => "wifi".into(),
+            (false, true) => "radio".into(),
+            (false, false) => "none".into(),
+        }
+    }
+}
+
 /// Something the router did or saw. Subscribers receive them in order, each
 /// wrapped in a [`Stamped`].
 #[derive(Debug, Clone, PartialEq)]
@@ -56,9 +105,11 @@ pub enum Event {
         /// capabilities and limits.
         hello: Hello,
         id: u16,
-        addr: SocketAddr,
+        addr: LinkAddr,
         known: bool,
     },
+    /// A robot's live links changed (or its radio budget did).
+    Links { robot: String, links: RobotLinks },
     /// A robot's link state changed.
     Link { robot: String, state: LinkState },
     /// A robot sent telemetry.
@@ -136,6 +187,7 @@ impl Event {
             Event::Listening { .. } => "listening",
             Event::Registered { .. } => "registered",
             Event::Link { .. } => "link",
+            Event::Links { .. } => "links",
             Event::Telemetry { .. } => "telemetry",
             Event::RouteChanged { .. } => "route_changed",
             Event::RouteAcked { .. } => "route_acked",

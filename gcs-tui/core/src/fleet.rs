@@ -21,7 +21,7 @@ pub use config::FleetConfig;
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
 
 use crate::counters::{ChannelStatus, Counters};
-use crate::event::{Event, EventSink, LinkState, Stamped};
+use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 use crate::sync::lock;
 
 /// A named set of robots.
@@ -176,8 +176,9 @@ impl Fleet {
                 id,
                 addr,
                 known,
-            } => self.registered(hello, *id, *addr, *known),
+            } => self.registered(hello, *id, addr, *known),
             Event::Link { robot, state } => self.link(robot, *state),
+            Event::Links { robot, links } => self.links(robot, links),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
             Event::RouteChanged {
                 robot,
@@ -237,15 +238,18 @@ impl Fleet {
         );
     }
 
-    fn registered(&mut self, hello: &Hello, id: u16, addr: SocketAddr, known: bool) {
+    fn registered(&mut self, hello: &Hello, id: u16, addr: &LinkAddr, known: bool) {
         let robot = &hello.name;
         let r = self
             .robots
             .entry(robot.clone())
-            .or_insert_with(|| Robot::new(robot, id, addr));
-        let moved = r.addr != addr;
+            .or_insert_with(|| Robot::new(robot, id, addr.clone()));
+        let moved = r.addr != *addr;
         r.id = id;
-        r.addr = addr;
+        r.addr = addr.clone();
+        // A robot registering again may have restarted and lost its
+        // mission: the next telemetry says (see `telemetry`).
+        r.registrations += 1;
         r.platform = hello.platform.clone();
         r.capabilities = hello.capabilities.clone();
         r.motors = hello.motors;
@@ -258,6 +262,19 @@ impl Fleet {
             (true, false) => format!("{robot} re-registered"),
         };
         self.log(Severity::Info, text);
+    }
+
+    fn links(&mut self, robot: &str, links: &RobotLinks) {
+        let Some(r) = self.robots.get_mut(robot) else {
+            return;
+        };
+        let was = std::mem::replace(&mut r.links, links.clone());
+        if was.label() != links.label() {
+            self.log(
+                Severity::Info,
+                format!("{robot} links {}", links.label()),
+            );
+        }
     }
 
     fn link(&mut self, robot: &str, state: LinkState) {
@@ -290,6 +307,7 @@ impl Fleet {
         r.actuators.clone_from(&t.actuators);
         r.mission = t.mission;
         r.stale = t.stale;
+        let lost = r.mission_lost();
         let far = r
             .path
             .back()
@@ -303,6 +321,15 @@ impl Fleet {
             while r.path.len() > history {
                 r.path.pop_front();
             }
+        }
+        if let Some(id) = lost {
+            self.log(
+                Severity::Warn,
+                format!(
+                    "{robot} registered again without mission {id} (its agent restarted?): \
+                     it holds still; send the mission again to resume"
+                ),
+            );
         }
     }
 

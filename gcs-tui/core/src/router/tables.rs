@@ -20,6 +20,7 @@ use std::net::SocketAddr;
 mod commands;
 mod estop;
 mod gate;
+mod links;
 mod missions;
 mod registration;
 mod routes;
@@ -43,6 +44,9 @@ pub(crate) enum Peer {
     Udp(SocketAddr),
     /// A TCP connection, by the router's connection number.
     Tcp(u64),
+    /// A serial radio, by its place in `router.serial`: every robot on it
+    /// hears what is sent (the destination picks the robot).
+    Serial(u16),
     /// A publisher inside the GCS process.
     Local,
 }
@@ -52,6 +56,7 @@ impl std::fmt::Display for Peer {
         match self {
             Peer::Udp(a) => write!(f, "udp:{a}"),
             Peer::Tcp(n) => write!(f, "tcp#{n}"),
+            Peer::Serial(n) => write!(f, "radio#{n}"),
             Peer::Local => f.write_str("gcs"),
         }
     }
@@ -86,7 +91,8 @@ pub enum Delivery {
 #[derive(Debug)]
 struct RobotEntry {
     id: u16,
-    addr: SocketAddr,
+    /// Where the robot is heard (UDP, a radio), and so where to send.
+    links: links::Links,
     last_seen: Instant,
     link: LinkState,
     route: Option<String>,
@@ -161,6 +167,8 @@ pub(crate) struct Tables {
     reject_logged: HashMap<String, Instant>,
     /// When each key's last time request was answered.
     time_answers: HashMap<u32, Instant>,
+    /// When each unknown robot was last told to register again.
+    unknown_told: HashMap<String, Instant>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -206,6 +214,7 @@ impl Tables {
             rejected: Rejections::default(),
             reject_logged: HashMap::new(),
             time_answers: HashMap::new(),
+            unknown_told: HashMap::new(),
         }
     }
 
@@ -298,8 +307,8 @@ impl Tables {
         if let Body::TimeRequest(request) = env.body {
             return self.answer_time(request, tag, sender, from, now, out);
         }
-        if let Peer::Udp(addr) = from {
-            self.seen_robot(sender, addr, now, events);
+        if matches!(from, Peer::Udp(_) | Peer::Serial(_)) {
+            self.seen_robot(sender, from, now, events);
         }
         let m = Incoming {
             header: &env.header,
@@ -320,7 +329,12 @@ impl Tables {
     ) -> Delivery {
         match body {
             Body::Hello(hello) => self.on_hello(m, hello, out, events),
-            Body::Heartbeat(_) => Delivery::Consumed,
+            Body::Heartbeat(_) => {
+                if !self.robots.contains_key(&m.header.sender) {
+                    self.unknown_robot(m, out);
+                }
+                Delivery::Consumed
+            }
             Body::Telemetry(t) => self.on_telemetry(m, t, out, events),
             Body::FleetCommand(fc) => self.on_fleet_command(m, fc, out, events),
             Body::Mission(mission) => self.on_mission(m, mission, out, events),
@@ -349,6 +363,7 @@ impl Tables {
     /// Timers: link states, heartbeats, retries, lapsed subscriptions.
     pub(crate) fn tick(&mut self, now: Instant, out: &mut Outbox, events: &mut Vec<Event>) {
         self.update_links(now, events);
+        self.report_links(now, events);
         self.send_heartbeats(now, out);
         self.retry_routes(now, out);
         self.retry_estop(now, out);
@@ -406,9 +421,9 @@ impl Tables {
         }
     }
 
-    /// Address of a registered robot.
-    pub(crate) fn robot_addr(&self, robot: &str) -> Option<SocketAddr> {
-        self.robots.get(robot).map(|r| r.addr)
+    /// Whether `robot` is registered.
+    pub(crate) fn knows_robot(&self, robot: &str) -> bool {
+        self.robots.contains_key(robot)
     }
 }
 

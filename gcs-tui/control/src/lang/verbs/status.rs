@@ -85,5 +85,13 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.stale)
     } else {
         String::new()
+    } + &links(r)
+}
+
+/// The live links when the robot has a radio (`links wifi*+radio radio-budget 12 Hz`).
+fn links(r: &Robot) -> String {
+    match r.links.radio_budget_hz {
+        Some(hz) => format!(" links {} radio-budget {hz} Hz", r.links.label()),
+        None => String::new(),
     }
 }
