@@ -1051,6 +1051,45 @@ mod tests {
     }
 
     #[test]
+    fn a_router_that_does_not_know_the_robot_gets_a_hello_at_once() {
+        let mut a = routed("joy/0");
+        let t = a.tick(ms(100));
+        assert!(!t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))));
+        let notice = Body::Notice(Notice {
+            level: Level::Warn,
+            code: NoticeCode::UnknownRobot,
+            text: "send Hello".into(),
+        });
+        a.handle(msg("", notice), ms(110));
+        assert!(!a.registered());
+        let t = a.tick(ms(120));
+        assert!(
+            t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+            "Hello at the next period, not after the router timeout"
+        );
+        assert_eq!(a.counters().reregistered, 1);
+    }
+
+    #[test]
+    fn frames_for_other_robots_on_a_shared_radio_are_skipped() {
+        let mut a = routed("joy/0");
+        let other = Envelope::new(
+            Header {
+                destination: "r2".into(),
+                channel: "joy/0".into(),
+                ..Header::default()
+            },
+            twist(0.5),
+        );
+        a.handle_bytes(&mech_proto::encode(&other).unwrap(), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.counters().not_for_me, 1);
+        assert_eq!(a.counters().commands, 0);
+        a.handle_bytes(&mech_proto::encode(&msg("joy/0", twist(0.5))).unwrap(), ms(30));
+        assert_eq!(a.counters().commands, 1);
+    }
+
+    #[test]
     fn router_loss_stops_and_re_registers() {
         let mut a = routed("joy/0");
         let mut now = ms(0);

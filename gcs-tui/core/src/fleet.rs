@@ -503,7 +503,7 @@ mod tests {
                 agent_version: "t".into(),
             },
             id: 1,
-            addr: "127.0.0.1:9000".parse().unwrap(),
+            addr: LinkAddr::Udp("127.0.0.1:9000".parse().unwrap()),
             known: false,
         }
     }
@@ -648,6 +648,90 @@ mod tests {
             !f.robot("robot_1").unwrap().arrived(),
             "an older mission finishing is not arrival"
         );
+    }
+
+    #[test]
+    fn a_robot_registering_again_without_its_mission_is_reported_and_the_mission_lost() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let wp = Waypoint {
+            x: 1.0,
+            y: 0.0,
+            z: 0.0,
+            time: None,
+        };
+        f.apply(&at(
+            1,
+            Event::MissionSent {
+                robot: "robot_1".into(),
+                channel: "joy/0".into(),
+                id: 7,
+                waypoints: vec![wp],
+                looped: false,
+            },
+        ));
+        f.apply(&at(
+            2,
+            Event::MissionAcked {
+                robot: "robot_1".into(),
+                id: 7,
+                accepted: true,
+                reason: String::new(),
+            },
+        ));
+        let running = Some(MissionProgress {
+            id: 7,
+            next: 0,
+            total: 1,
+        });
+        let tm = |mission| Event::Telemetry {
+            robot: "robot_1".into(),
+            telemetry: telemetry(0.5, mission),
+        };
+        f.apply(&at(3, tm(running)));
+        // Registered again (a link outage) and still holding it: fine.
+        f.apply(&at(4, registered("robot_1")));
+        f.apply(&at(5, tm(running)));
+        let delivery = |f: &Fleet| f.robot("robot_1").unwrap().waypoints.sent.clone().unwrap().delivery;
+        assert_eq!(delivery(&f), MissionDelivery::Acked);
+        // Its agent restarted: registered, reporting no mission.
+        f.apply(&at(6, registered("robot_1")));
+        f.apply(&at(7, tm(None)));
+        assert_eq!(delivery(&f), MissionDelivery::Lost);
+        let warned = f
+            .log
+            .iter()
+            .filter(|l| l.severity == Severity::Warn && l.text.contains("without mission 7"))
+            .count();
+        f.apply(&at(8, tm(None)));
+        assert_eq!(warned, 1);
+        assert_eq!(
+            f.log.iter().filter(|l| l.text.contains("without mission 7")).count(),
+            1,
+            "said once"
+        );
+    }
+
+    #[test]
+    fn live_links_reach_the_robot_and_changes_are_logged() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let links = RobotLinks {
+            udp: false,
+            radio: Some("/dev/ttyUSB0".into()),
+            active: "radio",
+            radio_budget_hz: Some(14.0),
+        };
+        f.apply(&at(
+            1,
+            Event::Links {
+                robot: "robot_1".into(),
+                links: links.clone(),
+            },
+        ));
+        assert_eq!(f.robot("robot_1").unwrap().links, links);
+        assert_eq!(links.label(), "radio");
+        assert!(f.log.back().unwrap().text.contains("links radio"));
     }
 
     #[test]

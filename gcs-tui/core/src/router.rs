@@ -624,6 +624,22 @@ fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<std::net::UdpSoc
     Ok(socket.into())
 }
 
+/// One serial radio at the station, as [`RouterHandle::radios`] reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RadioStatus {
+    pub port: String,
+    pub baud: u32,
+    /// Frames and bytes sent.
+    pub frames: u64,
+    pub bytes: u64,
+    /// Messages replaced in the queue by a newer one (newest wins).
+    pub replaced: u64,
+    /// Messages dropped because the queue was full.
+    pub dropped: u64,
+    /// Messages waiting to be sent.
+    pub waiting: usize,
+}
+
 /// A cheap, cloneable handle to a running router: publish, route, send
 /// missions, e-stop, subscribe, and read channels and counters.
 #[derive(Debug, Clone)]
@@ -761,6 +777,25 @@ impl RouterHandle {
     /// nothing when the router runs unauthenticated.
     pub fn add_key(&self, identity: Identity) {
         lock(&self.shared.tables).add_key(identity);
+    }
+
+    /// Every serial radio: what it sent and what waits.
+    pub fn radios(&self) -> Vec<RadioStatus> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let config = lock(&self.shared.tables).radio_config();
+        config
+            .into_iter()
+            .zip(&self.shared.radios)
+            .map(|(s, q)| RadioStatus {
+                port: s.port,
+                baud: s.baud,
+                frames: q.counters.frames.load(Relaxed),
+                bytes: q.counters.bytes.load(Relaxed),
+                replaced: q.counters.replaced.load(Relaxed),
+                dropped: q.counters.dropped.load(Relaxed),
+                waiting: q.len(),
+            })
+            .collect()
     }
 
     /// A copy of every counter.

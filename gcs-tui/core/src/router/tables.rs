@@ -421,6 +421,11 @@ impl Tables {
         }
     }
 
+    /// The configured serial radios.
+    pub(crate) fn radio_config(&self) -> Vec<super::config::SerialEndpoint> {
+        self.config.serial.clone()
+    }
+
     /// Whether `robot` is registered.
     pub(crate) fn knows_robot(&self, robot: &str) -> bool {
         self.robots.contains_key(robot)

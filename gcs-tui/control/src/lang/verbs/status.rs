@@ -51,9 +51,19 @@ impl Status {
                 .collect();
             format!("; rejected {}", by.join(", "))
         };
+        let radios: String = router
+            .radios()
+            .iter()
+            .map(|r| {
+                format!(
+                    "; radio {} {} frames {} replaced {} waiting",
+                    r.port, r.frames, r.replaced, r.waiting
+                )
+            })
+            .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}",
+                "{} robots; station {}{refused}{radios}",
                 details.len(),
                 router.security().as_str()
             ),
