@@ -186,7 +186,9 @@ impl Agent {
             last_not_routed_notice: None,
             last_driver_fault: None,
             actuator_fault_until: None,
-            last_state: FailsafeState::Ok,
+            // Nothing heard from a router yet: not a trip when the first tick
+            // finds the router lost.
+            last_state: FailsafeState::RouterLost,
             outputs: vec![0.0; motors],
             counters: Counters::default(),
             version: env!("CARGO_PKG_VERSION").to_string(),
@@ -1085,7 +1087,10 @@ mod tests {
         assert!(!moving(&a.tick(ms(20)).outputs));
         assert_eq!(a.counters().not_for_me, 1);
         assert_eq!(a.counters().commands, 0);
-        a.handle_bytes(&mech_proto::encode(&msg("joy/0", twist(0.5))).unwrap(), ms(30));
+        a.handle_bytes(
+            &mech_proto::encode(&msg("joy/0", twist(0.5))).unwrap(),
+            ms(30),
+        );
         assert_eq!(a.counters().commands, 1);
     }
 

@@ -95,7 +95,8 @@ impl RobotAuth {
     /// `local_us` + offset, as sent on the robot's link number `link`.
     pub fn seal(&mut self, bytes: &mut Vec<u8>, local_us: u64, link: u8) -> Result<(), AuthError> {
         let stamp = self.stamper.next(local_us);
-        self.key.seal(bytes, link & !mech_proto::auth::FROM_ROUTER, stamp)
+        self.key
+            .seal(bytes, link & !mech_proto::auth::FROM_ROUTER, stamp)
     }
 
     /// Checks a received message whose decoded form is `sender` + `body`,

@@ -129,7 +129,10 @@ async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, La
         std::time::Duration::from_secs_f64(f.link_timeout),
         std::time::Duration::from_secs_f64(f.probe_period),
     );
-    tracing::info!(links = ios.len(), "links in order of preference, with failover");
+    tracing::info!(
+        links = ios.len(),
+        "links in order of preference, with failover"
+    );
     Ok(Io::Failover {
         closed: vec![false; ios.len()],
         links: ios,

@@ -22,8 +22,12 @@ pub trait Vehicle: Send {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope>;
     /// Encodes a message to send on the robot's link number `link`
     /// (signed, when the robot has a key).
-    fn encode(&mut self, env: &Envelope, link: u8, out: &mut Vec<u8>)
-    -> Result<(), mech_proto::Error>;
+    fn encode(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error>;
     /// Handles one received message.
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope>;
     /// One control period; returns messages to send.
@@ -227,7 +231,12 @@ async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
             .iter_mut()
             .enumerate()
             .filter(|(i, _)| !closed[*i])
-            .map(|(i, l)| (i, Box::pin(l.recv_one()) as Pin<Box<dyn Future<Output = _> + Send>>))
+            .map(|(i, l)| {
+                (
+                    i,
+                    Box::pin(l.recv_one()) as Pin<Box<dyn Future<Output = _> + Send>>,
+                )
+            })
             .collect();
         let (i, got) = std::future::poll_fn(|cx| {
             for (i, w) in waits.iter_mut() {

@@ -2,6 +2,7 @@
 
 mod cli;
 mod cluster_script;
+mod radio;
 mod script;
 mod signed;
 mod tui;

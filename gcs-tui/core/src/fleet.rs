@@ -270,10 +270,7 @@ impl Fleet {
         };
         let was = std::mem::replace(&mut r.links, links.clone());
         if was.label() != links.label() {
-            self.log(
-                Severity::Info,
-                format!("{robot} links {}", links.label()),
-            );
+            self.log(Severity::Info, format!("{robot} links {}", links.label()));
         }
     }
 
@@ -692,7 +689,15 @@ mod tests {
         // Registered again (a link outage) and still holding it: fine.
         f.apply(&at(4, registered("robot_1")));
         f.apply(&at(5, tm(running)));
-        let delivery = |f: &Fleet| f.robot("robot_1").unwrap().waypoints.sent.clone().unwrap().delivery;
+        let delivery = |f: &Fleet| {
+            f.robot("robot_1")
+                .unwrap()
+                .waypoints
+                .sent
+                .clone()
+                .unwrap()
+                .delivery
+        };
         assert_eq!(delivery(&f), MissionDelivery::Acked);
         // Its agent restarted: registered, reporting no mission.
         f.apply(&at(6, registered("robot_1")));
@@ -706,7 +711,10 @@ mod tests {
         f.apply(&at(8, tm(None)));
         assert_eq!(warned, 1);
         assert_eq!(
-            f.log.iter().filter(|l| l.text.contains("without mission 7")).count(),
+            f.log
+                .iter()
+                .filter(|l| l.text.contains("without mission 7"))
+                .count(),
             1,
             "said once"
         );

@@ -486,7 +486,10 @@ impl Router {
 }
 
 /// A radio's port, opened: the reader's and the writer's handles.
-type RadioPort = (Box<dyn std::io::Read + Send>, Box<dyn std::io::Write + Send>);
+type RadioPort = (
+    Box<dyn std::io::Read + Send>,
+    Box<dyn std::io::Write + Send>,
+);
 
 /// Opens every configured radio (before anything starts, so a missing
 /// device is a clear error at startup).
@@ -504,7 +507,10 @@ fn open_radios(serial: &[SerialEndpoint]) -> Result<Vec<RadioPort>, RouterError>
                 .open()
                 .map_err(err)?;
             let writer = port.try_clone().map_err(err)?;
-            Ok((Box::new(port) as Box<dyn std::io::Read + Send>, Box::new(writer) as _))
+            Ok((
+                Box::new(port) as Box<dyn std::io::Read + Send>,
+                Box::new(writer) as _,
+            ))
         })
         .collect()
 }

@@ -201,7 +201,10 @@ impl Robot {
         let sent = self.waypoints.sent.as_mut()?;
         let held = self.mission.is_some_and(|p| p.id == sent.id);
         let on_its_channel = self.reported_channel.as_deref() == Some(sent.channel.as_str());
-        if self.registrations > 1 && on_its_channel && sent.delivery == MissionDelivery::Acked && !held
+        if self.registrations > 1
+            && on_its_channel
+            && sent.delivery == MissionDelivery::Acked
+            && !held
         {
             sent.delivery = MissionDelivery::Lost;
             return Some(sent.id);

@@ -298,7 +298,14 @@ mod tests {
         q.push(&msg("r1", "joy/0", twist(0.1)));
         q.push(&msg("r2", "joy/0", twist(0.2)));
         q.push(&msg("r1", "joy/0", twist(0.3)));
-        q.push(&msg("r2", "", Body::EStop(EStop { engage: true, id: 4 })));
+        q.push(&msg(
+            "r2",
+            "",
+            Body::EStop(EStop {
+                engage: true,
+                id: 4,
+            }),
+        ));
         assert_eq!(q.len(), 4, "the newer r1 command replaced the older");
         assert!(matches!(next(&q).body, Body::EStop(_)));
         let first = next(&q);

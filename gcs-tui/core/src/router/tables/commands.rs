@@ -156,9 +156,7 @@ impl Tables {
             None => Err(DropReason::UnknownRobot),
             Some(r) if r.route.as_deref() == Some(channel) => {
                 r.traffic.forwarded += 1;
-                r.links
-                    .target(now, timeout)
-                    .ok_or(DropReason::UnknownRobot)
+                r.links.target(now, timeout).ok_or(DropReason::UnknownRobot)
             }
             Some(r) => {
                 r.traffic.dropped.count(DropReason::NotRouted);

@@ -121,7 +121,10 @@ impl Tables {
             }
             if now.saturating_duration_since(m.last) >= retry {
                 m.last = now;
-                if let Some(to) = robots.get(&m.robot).and_then(|r| r.links.target(now, timeout)) {
+                if let Some(to) = robots
+                    .get(&m.robot)
+                    .and_then(|r| r.links.target(now, timeout))
+                {
                     due.push((to, m.robot.clone(), m.region.clone()));
                 }
             }
