@@ -38,6 +38,16 @@ impl Killed {
         }
     }
 
+    /// Whether it still runs, or how it ended (for failure messages).
+    pub fn state(&mut self) -> String {
+        match self.0.as_mut().map(Child::try_wait) {
+            None => "killed".into(),
+            Some(Ok(None)) => "running".into(),
+            Some(Ok(Some(status))) => format!("exited: {status}"),
+            Some(Err(e)) => format!("unknown: {e}"),
+        }
+    }
+
     /// The process id, while it runs.
     pub fn pid(&self) -> Option<u32> {
         self.0.as_ref().map(Child::id)

@@ -103,6 +103,10 @@ pub struct Counters {
     /// Times the router said it did not know this robot (it restarted),
     /// and the robot registered again at once.
     pub reregistered: u64,
+    /// When the failsafe last stopped the robot, and when it last obeyed a
+    /// new e-stop: the robot's clock, µs since the Unix epoch (0: never).
+    pub tripped_at_us: u64,
+    pub estopped_at_us: u64,
 }
 
 /// The result of one control period.
@@ -467,6 +471,9 @@ impl Agent {
             return;
         }
         self.last_estop_id = Some(e.id);
+        if e.engage && !self.failsafe.estopped() {
+            self.counters.estopped_at_us = self.stamp_origin_us + now.as_micros() as u64;
+        }
         if e.engage {
             self.failsafe.engage_estop(e.id);
             self.controller.idle();
@@ -527,6 +534,7 @@ impl Agent {
         let drive = self.failsafe.may_drive(state, mission_running);
         if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
             self.counters.failsafe_trips += 1;
+            self.counters.tripped_at_us = self.stamp_origin_us + now.as_micros() as u64;
         }
         if state != self.last_state {
             tracing::info!(robot = %self.settings.name, from = ?self.last_state, to = ?state, "failsafe");

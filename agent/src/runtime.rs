@@ -338,7 +338,7 @@ pub async fn drive<V: Vehicle>(
 /// and the fault-injection tests).
 fn report(c: &Counters) {
     println!(
-        "{{\"agent_counters\":{{\"commands\":{},\"failsafe_trips\":{},\"stale_commands\":{},\"stale_estops\":{},\"not_routed\":{},\"ignored_estopped\":{},\"bad_messages\":{},\"reregistered\":{}}}}}",
+        "{{\"agent_counters\":{{\"commands\":{},\"failsafe_trips\":{},\"stale_commands\":{},\"stale_estops\":{},\"not_routed\":{},\"ignored_estopped\":{},\"bad_messages\":{},\"reregistered\":{},\"tripped_at_us\":{},\"estopped_at_us\":{}}}}}",
         c.commands,
         c.failsafe_trips,
         c.stale_commands,
@@ -346,7 +346,9 @@ fn report(c: &Counters) {
         c.not_routed,
         c.ignored_estopped,
         c.bad_messages,
-        c.reregistered
+        c.reregistered,
+        c.tripped_at_us,
+        c.estopped_at_us
     );
 }
 

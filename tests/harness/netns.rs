@@ -120,15 +120,20 @@ impl RobotNet {
     pub fn set_loss(&self, percent: u32) {
         let rules = if percent == 0 {
             String::new()
+        } else if percent >= 100 {
+            "meta l4proto udp counter drop".to_string()
         } else {
             format!("meta l4proto udp numgen random mod 100 < {percent} counter drop")
         };
+        let chain = |hook: &str| {
+            format!(
+                "  chain {hook} {{\n    type filter hook {hook} priority 0; policy accept;\n    {rules}\n  }}\n"
+            )
+        };
         let ruleset = format!(
-            "table inet mechfault\ndelete table inet mechfault\n\
-             table inet mechfault {{\n\
-               chain input {{ type filter hook input priority 0; policy accept; {rules} }}\n\
-               chain output {{ type filter hook output priority 0; policy accept; {rules} }}\n\
-             }}\n"
+            "table inet mechfault\ndelete table inet mechfault\ntable inet mechfault {{\n{}{}}}\n",
+            chain("input"),
+            chain("output")
         );
         let mut child = Command::new("ip")
             .args(["netns", "exec", &self.name, "nft", "-f", "-"])

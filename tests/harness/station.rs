@@ -39,7 +39,7 @@ impl Line {
 /// A running station; killed (SIGKILL) when dropped.
 #[derive(Debug)]
 pub struct Station {
-    process: Killed,
+    process: Mutex<Killed>,
     lines: Arc<Mutex<Vec<Line>>>,
     /// When it was started, µs since the Unix epoch.
     pub started_us: u64,
@@ -78,7 +78,7 @@ impl Station {
             }
         });
         Station {
-            process: Killed(Some(child)),
+            process: Mutex::new(Killed(Some(child))),
             lines,
             started_us,
         }
@@ -100,7 +100,17 @@ impl Station {
         self.wait(timeout, |l| {
             l.json["type"] == "result" && l.json["summary"].as_str() == Some(text)
         })
-        .unwrap_or_else(|| panic!("no `log {text}` within {timeout:?}: {:#?}", self.tail()))
+        .unwrap_or_else(|| {
+            panic!(
+                "no `log {text}` within {timeout:?} ({} lines, station {}): {:#?}",
+                self.lines().len(),
+                self.process
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .state(),
+                self.tail()
+            )
+        })
     }
 
     /// The last lines, for failure messages.
@@ -112,7 +122,10 @@ impl Station {
 
     /// Kills the station (SIGKILL, as `kill -9`).
     pub fn kill(&mut self) {
-        self.process.kill();
+        self.process
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .kill();
     }
 }
 

@@ -45,6 +45,9 @@ pub struct RobotView {
     pub route: RouteView,
     pub computation: Computation,
     pub link: LinkState,
+    /// Live links and radio budget of a robot with a radio
+    /// (`wifi*+radio 14Hz`); empty for a robot on UDP alone.
+    pub links: String,
     pub failsafe: FailsafeState,
     pub health: Health,
     /// Fraction `[0, 1]`.
@@ -85,6 +88,7 @@ impl RobotView {
             route: RouteView::default(),
             computation: Computation::Onboard,
             link: LinkState::Connected,
+            links: String::new(),
             failsafe: FailsafeState::Ok,
             health: Health::Ok,
             battery: None,
