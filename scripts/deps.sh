@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
 # pkg-config (gilrs, serialport), socat (serial-link tests over a
-# pseudo-terminal pair), tmux (the end-to-end TUI test), and Python's msgpack
+# pseudo-terminal pair), nftables and iproute2 (the fault-injection suite's
+# packet loss in network namespaces), tmux (the end-to-end TUI test), and Python's msgpack
 # (the documented Python controller is run by the tests). Does nothing when
 # they are already there.
 set -euo pipefail
 need=()
-for pkg in libudev-dev pkg-config socat tmux; do
+for pkg in libudev-dev pkg-config socat nftables iproute2 tmux; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

@@ -734,6 +734,42 @@ mod tests {
     }
 
     #[test]
+    fn several_links_in_order_of_preference_or_one_link_but_not_both() {
+        let two = format!(
+            "{MINIMAL}[[links]]\nkind = \"udp\"\nrouter = \"10.0.0.1:7400\"\n\
+             [[links]]\nkind = \"serial\"\nport = \"/dev/ttyUSB0\"\ntelemetry_rate_hz = 5\n"
+        );
+        let c = RobotConfig::parse(&two, "r1.toml").unwrap();
+        let links = c.links();
+        assert_eq!(links.len(), 2);
+        assert!(matches!(links[0], LinkConfig::Udp { .. }));
+        assert!(matches!(
+            links[1],
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(5.0),
+                baud: 57_600,
+                ..
+            }
+        ));
+        assert_eq!(c.failover, FailoverConfig::default());
+        assert_eq!(
+            RobotConfig::parse(MINIMAL, "r1.toml")
+                .unwrap()
+                .links()
+                .len(),
+            1
+        );
+        let both = format!("{two}[link]\nkind = \"udp\"\n");
+        assert!(
+            error(&both).contains("either [link] or [[links]]"),
+            "{}",
+            error(&both)
+        );
+        let bad = format!("{MINIMAL}[failover]\nlink_timeout = 0.2\nprobe_period = 0.5\n");
+        assert!(error(&bad).contains("probe_period"), "{}", error(&bad));
+    }
+
+    #[test]
     fn example_configs_parse() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/agents");
         let mut seen = 0;

@@ -9,7 +9,7 @@ use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use crate::agent::Agent;
+use crate::agent::{Agent, Counters};
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
 use crate::links::LinkChoice;
@@ -41,12 +41,12 @@ pub struct Overrides {
 }
 
 /// Runs the robot until `shutdown` turns true, then zeroes the actuators and
-/// says `Bye`.
+/// says `Bye`; returns the agent's counters.
 pub async fn run(
     config: RobotConfig,
     overrides: Overrides,
     shutdown: watch::Receiver<bool>,
-) -> Result<(), LaunchError> {
+) -> Result<Counters, LaunchError> {
     let key = config.key().map_err(LaunchError::Key)?;
     let router_name = config
         .auth
@@ -64,7 +64,7 @@ pub async fn run(
         simulated,
         "agent starting"
     );
-    if simulated {
+    let counters = if simulated {
         let s = config.sim;
         let noise = s
             .noise
@@ -79,7 +79,7 @@ pub async fn run(
         if let Some(key) = key {
             sim.agent = sim.agent.with_key(key, &router_name);
         }
-        runtime::drive(sim, io, ticker, origin, shutdown).await;
+        runtime::drive(sim, io, ticker, origin, shutdown).await
     } else {
         let mut agent = Agent::new(settings, config.platform().build(), stamp_origin);
         if let Some(key) = key {
@@ -98,10 +98,10 @@ pub async fn run(
             origin,
             shutdown,
         )
-        .await;
-    }
+        .await
+    };
     tracing::info!("agent stopped");
-    Ok(())
+    Ok(counters)
 }
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {

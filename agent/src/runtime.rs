@@ -278,14 +278,15 @@ async fn next_tick(
 }
 
 /// Runs `vehicle` until `shutdown` turns true (or its sender is dropped),
-/// then zeroes its actuators and sends `Bye`. `origin` is agent time zero.
+/// then zeroes its actuators and sends `Bye`; returns the agent's
+/// counters. `origin` is agent time zero.
 pub async fn drive<V: Vehicle>(
     mut vehicle: V,
     mut io: Io,
     ticker: Ticker,
     origin: Instant,
     mut shutdown: watch::Receiver<bool>,
-) {
+) -> Counters {
     let (mut own, mut shared) = match ticker {
         Ticker::Own(period) => {
             let mut i = tokio::time::interval_at(origin, period);
@@ -314,7 +315,9 @@ pub async fn drive<V: Vehicle>(
                 match incoming {
                     Incoming::Bytes(b, link) => {
                         if let Io::Failover { choice, .. } = &mut io {
-                            choice.heard(link, now);
+                            if from_router(&b) {
+                                choice.heard(link, now);
+                            }
                         }
                         vehicle.handle_bytes(&b, now)
                     }
@@ -331,25 +334,14 @@ pub async fn drive<V: Vehicle>(
     let now = origin.elapsed();
     let bye = vehicle.stop(now);
     send(&mut vehicle, &mut io, &bye, now, &mut buf).await;
-    report(&vehicle.counters());
+    vehicle.counters()
 }
 
-/// The agent's counters, as one line on stdout when it stops (for logs
-/// and the fault-injection tests).
-fn report(c: &Counters) {
-    println!(
-        "{{\"agent_counters\":{{\"commands\":{},\"failsafe_trips\":{},\"stale_commands\":{},\"stale_estops\":{},\"not_routed\":{},\"ignored_estopped\":{},\"bad_messages\":{},\"reregistered\":{},\"tripped_at_us\":{},\"estopped_at_us\":{}}}}}",
-        c.commands,
-        c.failsafe_trips,
-        c.stale_commands,
-        c.stale_estops,
-        c.not_routed,
-        c.ignored_estopped,
-        c.bad_messages,
-        c.reregistered,
-        c.tripped_at_us,
-        c.estopped_at_us
-    );
+/// Whether a message came from the router: on a shared radio a robot also
+/// hears the other robots, whose messages are addressed to the router and
+/// say nothing about whether the router is there.
+fn from_router(bytes: &[u8]) -> bool {
+    mech_proto::peek(bytes).is_ok_and(|h| h.destination != mech_proto::ROUTER)
 }
 
 /// With several links, a heartbeat on each link not in use, when due.

@@ -58,6 +58,18 @@ impl Controller {
     /// Publishes to `robots` on `channel` (once [`Controller::publish`]
     /// says so) through the station at `router`.
     pub fn start(router: SocketAddr, robots: &[&str], channel: &str, vx: f64) -> Controller {
+        Controller::new(router, robots, channel, vx, true)
+    }
+
+    /// Like [`Controller::start`], without subscribing to telemetry when
+    /// `subscribe` is false (a long run that only commands).
+    pub fn new(
+        router: SocketAddr,
+        robots: &[&str],
+        channel: &str,
+        vx: f64,
+        subscribe: bool,
+    ) -> Controller {
         let socket = Arc::new(UdpSocket::bind("127.0.0.1:0").expect("controller binds"));
         socket
             .set_read_timeout(Some(Duration::from_millis(50)))
@@ -71,7 +83,12 @@ impl Controller {
             samples: Arc::new(Mutex::new(Vec::new())),
             seq: Arc::new(AtomicU64::new(0)),
         };
-        c.run_publisher(robots.iter().map(|r| r.to_string()).collect(), channel, vx);
+        c.run_publisher(
+            robots.iter().map(|r| r.to_string()).collect(),
+            channel,
+            vx,
+            subscribe,
+        );
         c.run_listener();
         c
     }
@@ -80,7 +97,7 @@ impl Controller {
         self.seq.fetch_add(1, Ordering::Relaxed) as u32 + 1
     }
 
-    fn run_publisher(&self, robots: Vec<String>, channel: &str, vx: f64) {
+    fn run_publisher(&self, robots: Vec<String>, channel: &str, vx: f64, subscribe: bool) {
         let (socket, router, stop, publishing, sent, seq) = (
             self.socket.clone(),
             self.router,
@@ -98,7 +115,7 @@ impl Controller {
             }));
             let mut n = 0u64;
             while !stop.load(Ordering::Relaxed) {
-                if n % 40 == 0 {
+                if subscribe && n % 40 == 0 {
                     let s = seq.fetch_add(1, Ordering::Relaxed) as u32 + 1;
                     let sub = Body::Subscribe(Subscribe { telemetry: true });
                     let _ = socket.send_to(&message(s, "router", "", sub), router);

@@ -2,8 +2,8 @@
 //! station's and each robot's port) joined by a [`RadioHub`] that acts as
 //! the air. Like a radio in transparent mode, the hub passes whole frames
 //! (split at the framing's `0x00` delimiters): what the station sends,
-//! every robot hears; what a robot sends, the station hears. Every bit on
-//! the way may be flipped at a given bit error rate.
+//! every robot hears; what a robot sends, the station and the other robots
+//! hear. Every bit on the way may be flipped at a given bit error rate.
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -91,9 +91,18 @@ impl RadioHub {
             .map(|f| Arc::new(Mutex::new(f.try_clone().expect("clone"))))
             .collect();
         let to_station = Arc::new(Mutex::new(station.try_clone().expect("clone")));
-        hub.carry(station, to_robots, seed);
+        hub.carry(station, to_robots.clone(), seed);
         for (i, port) in robot_ports.into_iter().enumerate() {
-            hub.carry(port, vec![to_station.clone()], seed + 1 + i as u64);
+            // A robot's frame reaches the station and the other robots.
+            let mut to = vec![to_station.clone()];
+            to.extend(
+                to_robots
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .map(|(_, p)| p.clone()),
+            );
+            hub.carry(port, to, seed + 1 + i as u64);
         }
         hub
     }

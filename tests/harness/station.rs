@@ -120,6 +120,11 @@ impl Station {
         lines[from..].iter().map(|l| l.json.to_string()).collect()
     }
 
+    /// The station's process id, while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.process.lock().unwrap_or_else(|e| e.into_inner()).pid()
+    }
+
     /// Kills the station (SIGKILL, as `kill -9`).
     pub fn kill(&mut self) {
         self.process

@@ -567,6 +567,58 @@ mod tests {
     }
 
     #[test]
+    fn a_robot_on_wifi_and_a_radio_is_commanded_on_the_live_link_and_estopped_on_both() {
+        let t0 = Instant::now();
+        let ms = |v| t0 + Duration::from_millis(v);
+        let (mut t, wifi) = registered(t0);
+        let radio = Peer::Serial(0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let hb = bytes(
+            "robot_1",
+            "router",
+            "",
+            Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 }),
+        );
+        t.handle(&hb, radio, ms(10), &mut out, &mut ev);
+        t.set_route("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);
+        let twist = bytes(
+            "pad",
+            "robot_1",
+            "joy/0",
+            Body::Command(mech_proto::Command::Twist(mech_proto::Twist {
+                vx: 0.1,
+                ..Default::default()
+            })),
+        );
+        let sent_to = |t: &mut Tables, at| {
+            let mut out = Outbox::default();
+            t.handle(&twist, Peer::Local, at, &mut out, &mut Vec::new());
+            out.raw
+        };
+        assert_eq!(sent_to(&mut t, ms(100)), vec![wifi], "UDP while live");
+        t.handle(&hb, radio, ms(350), &mut out, &mut ev);
+        assert_eq!(
+            sent_to(&mut t, ms(400)),
+            vec![radio],
+            "UDP silent 400 ms: the radio"
+        );
+        t.handle(&hb, wifi, ms(500), &mut out, &mut ev);
+        assert_eq!(sent_to(&mut t, ms(510)), vec![wifi], "UDP back");
+        let mut out = Outbox::default();
+        t.start_estop(true, ms(520), &mut out, &mut ev);
+        let estops: Vec<Peer> = out.owned.iter().map(|(p, _)| *p).collect();
+        assert_eq!(estops, vec![wifi, radio], "the e-stop on every link");
+        let mut ev = Vec::new();
+        t.tick(ms(530), &mut Outbox::default(), &mut ev);
+        let links = ev.iter().find_map(|e| match e {
+            Event::Links { links, .. } => Some(links.clone()),
+            _ => None,
+        });
+        let links = links.expect("a radio robot's links are reported");
+        assert!(links.udp && links.active == "udp" && links.radio.is_some());
+    }
+
+    #[test]
     fn a_subscription_lapses_after_five_seconds_unless_renewed() {
         let t0 = Instant::now();
         let (mut t, robot) = registered(t0);

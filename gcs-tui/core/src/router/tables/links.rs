@@ -146,13 +146,17 @@ impl Tables {
         })
     }
 
-    /// Reports every robot whose live links (or radio budget) changed.
+    /// Reports every robot with a radio whose live links (or radio budget)
+    /// changed. A robot on UDP alone has one link: its link state says it.
     pub(super) fn report_links(&mut self, now: Instant, events: &mut Vec<Event>) {
         let timeout = self.config.link_timeout;
         let mut changed = Vec::new();
         for (name, r) in &self.robots {
             let live = |at: Instant| now.saturating_duration_since(at) < timeout;
             let l = &r.links;
+            if l.radio.is_none() {
+                continue;
+            }
             let report = RobotLinks {
                 udp: l.udp.is_some_and(|(_, t)| live(t)),
                 radio: l
