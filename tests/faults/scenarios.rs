@@ -45,7 +45,14 @@ fn run(mut rig: Rig, plan: &Plan<'_>) -> Figures {
     for a in &mut rig.agents {
         let c = a.stop().unwrap_or_default();
         obeyed += c["commands"].as_u64().unwrap_or(0);
-        trips += c["failsafe_trips"].as_i64().unwrap_or(0);
+        let tripped = c["failsafe_trips"].as_i64().unwrap_or(0);
+        trips += tripped;
+        if tripped > plan.trips_each {
+            // What the failsafe did, to tell a false trip's cause.
+            let log = a.log();
+            let lines: Vec<&str> = log.lines().filter(|l| l.contains("failsafe")).collect();
+            println!("{}: {} trips:\n{}", a.name, tripped, lines.join("\n"));
+        }
         trip_ms = figures::worse(trip_ms, figures::after(&c["tripped_at_us"], stop));
         estop_ms = figures::worse(estop_ms, figures::after(&c["estopped_at_us"], estop));
     }
