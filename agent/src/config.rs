@@ -425,11 +425,11 @@ impl RobotConfig {
             }
         }
         let f = self.failover;
-        if !(f.link_timeout.is_finite() && f.link_timeout > 0.0 && f.link_timeout <= 60.0)
-            || !(f.probe_period.is_finite()
-                && f.probe_period > 0.0
-                && f.probe_period < f.link_timeout)
-        {
+        let timeout_ok =
+            f.link_timeout.is_finite() && f.link_timeout > 0.0 && f.link_timeout <= 60.0;
+        let probe_ok =
+            f.probe_period.is_finite() && f.probe_period > 0.0 && f.probe_period < f.link_timeout;
+        if !(timeout_ok && probe_ok) {
             return Err((
                 None,
                 format!(

@@ -217,6 +217,9 @@ impl Io {
     }
 }
 
+/// One link's receive in progress.
+type Receiving<'a> = std::pin::Pin<Box<dyn std::future::Future<Output = Incoming> + Send + 'a>>;
+
 /// The next message on any of `links` (and which); a link whose
 /// receiving side ended is marked in `closed` and no longer waited on.
 async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
@@ -227,7 +230,7 @@ async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
         if closed.iter().all(|c| *c) {
             return Incoming::Closed;
         }
-        let mut waits: Vec<(usize, Pin<Box<dyn Future<Output = Incoming> + Send + '_>>)> = links
+        let mut waits: Vec<(usize, Receiving<'_>)> = links
             .iter_mut()
             .enumerate()
             .filter(|(i, _)| !closed[*i])

@@ -20,8 +20,7 @@ const FAILSAFE: &str = "channel_timeout = 0.5\nrouter_timeout = 2.0";
 fn active_at(lines: &[Line], robot: &str, until_us: u64) -> String {
     lines
         .iter()
-        .filter(|l| l.is_event("links") && l.robot() == robot && l.at_us <= until_us)
-        .last()
+        .rfind(|l| l.is_event("links") && l.robot() == robot && l.at_us <= until_us)
         .map(|l| l.json["active"].as_str().unwrap_or("").to_string())
         .unwrap_or_default()
 }
@@ -107,7 +106,7 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
         .iter()
         .filter(|l| l.is_event("links") && l.robot() == "ra")
         .filter_map(|l| l.json["radio_budget_hz"].as_f64())
-        .last();
+        .next_back();
     assert!(
         budget.is_some_and(|hz| hz > 0.0),
         "a radio budget: {budget:?}"

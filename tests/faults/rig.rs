@@ -55,7 +55,7 @@ impl Rig {
     /// script).
     pub fn udp(n: usize, namespace: bool, failsafe: &str, script: Option<&str>) -> Rig {
         let dir = tempfile::tempdir().expect("temp dir");
-        let net = namespace.then(RobotNet::new);
+        let net = namespace.then(RobotNet::create);
         let port = station::free_port();
         let listen: SocketAddr = match &net {
             Some(net) => (net.host, 0).into(),

@@ -65,7 +65,7 @@ pub fn available() -> Result<(), String> {
 
 impl RobotNet {
     /// Makes the namespace, its veth pair and addresses.
-    pub fn new() -> RobotNet {
+    pub fn create() -> RobotNet {
         sweep();
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let pid = std::process::id();
