@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
 # Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
 # pkg-config (gilrs, serialport), socat (serial-link tests over a
-# pseudo-terminal pair), tmux (the end-to-end TUI test), strace (the replay
-# test checks that a replay opens no socket), GNU Octave with its
+# pseudo-terminal pair), nftables and iproute2 (the fault-injection suite's
+# packet loss in network namespaces), tmux (the end-to-end TUI test), strace
+# (the replay test checks that a replay opens no socket), GNU Octave with its
 # instrument-control package (the tests run the Octave example; about a
 # minute to install once, without recommended packages), Python's msgpack
-# (the Python client and the documented controller) and pymavlink (the fake
+# (the Python client and the documented controller), pymavlink (the fake
 # autopilot the MAVLink tests fly against) and Python's mcap (the recording
-# test reads recordings with it). Does nothing when they are
-# already there.
+# test reads recordings with it). Does nothing when they are already there.
 set -euo pipefail
 need=()
-for pkg in libudev-dev pkg-config socat tmux strace octave octave-instrument-control; do
+for pkg in libudev-dev pkg-config socat nftables iproute2 tmux strace octave octave-instrument-control; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

@@ -34,8 +34,11 @@ pub struct AgentSettings {
     pub failsafe: FailsafeConfig,
     /// Telemetry period (default 50 ms = 20 Hz).
     pub telemetry_period: Duration,
-    /// Period of `Hello` while unregistered and of the agent's `Heartbeat`.
+    /// Period of the agent's `Heartbeat`.
     pub hello_period: Duration,
+    /// Period of `Hello` while unregistered: short, so a robot is back
+    /// within a fraction of a second of its station.
+    pub hello_retry: Duration,
     /// Answer a rejected command with `Notice{NotRouted}` (at most one a
     /// second), so a controller learns why it is ignored.
     pub notify_not_routed: bool,
@@ -72,6 +75,7 @@ impl AgentSettings {
             failsafe: FailsafeConfig::default(),
             telemetry_period: Duration::from_millis(50),
             hello_period: Duration::from_secs(1),
+            hello_retry: Duration::from_millis(250),
             notify_not_routed: true,
             filter_window: 9,
             external_position: false,
@@ -116,6 +120,15 @@ pub struct Counters {
     /// Times a wheel stalled (driven without turning) and the outputs were
     /// zeroed.
     pub stalls: u64,
+    /// Commands obeyed.
+    pub commands: u64,
+    /// Times the router said it did not know this robot (it restarted),
+    /// and the robot registered again at once.
+    pub reregistered: u64,
+    /// When the failsafe last stopped the robot, and when it last obeyed a
+    /// new e-stop: the robot's clock, µs since the Unix epoch (0: never).
+    pub tripped_at_us: u64,
+    pub estopped_at_us: u64,
 }
 
 /// The result of one control period.
@@ -223,7 +236,9 @@ impl Agent {
             last_not_routed_notice: None,
             last_driver_fault: None,
             actuator_fault_until: None,
-            last_state: FailsafeState::Ok,
+            // Nothing heard from a router yet: not a trip when the first tick
+            // finds the router lost.
+            last_state: FailsafeState::RouterLost,
             outputs: vec![0.0; motors],
             counters: Counters::default(),
             version: env!("CARGO_PKG_VERSION").to_string(),
@@ -248,9 +263,21 @@ impl Agent {
     /// Encodes a message to send, signed when the robot has a key. The
     /// header's stamp is the robot's clock reading.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        self.encode_on(env, 0, out)
+    }
+
+    /// Like [`Agent::encode`], for the robot's link number `link` (its
+    /// place in the config's link list): each link is its own signed
+    /// stream, so a message sent on two links is never taken for a replay.
+    pub fn encode_on(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
         mech_proto::encode_into(env, out)?;
         if let Some(auth) = self.auth.as_mut()
-            && let Err(e) = auth.seal(out, env.header.stamp_us)
+            && let Err(e) = auth.seal(out, env.header.stamp_us, link)
         {
             return Err(mech_proto::Error::Encode(e.to_string()));
         }
@@ -424,6 +451,16 @@ impl Agent {
     /// Decodes and handles one received datagram or frame; undecodable bytes
     /// are counted and dropped.
     pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        // A radio is a broadcast medium: frames for other robots are
+        // skipped before they are checked (they are signed for those
+        // robots, not refused forgeries).
+        if let Ok(head) = mech_proto::peek(bytes) {
+            let dest = head.destination;
+            if !(dest.is_empty() || dest == mech_proto::BROADCAST || dest == self.settings.name) {
+                self.counters.not_for_me += 1;
+                return Vec::new();
+            }
+        }
         let env = match mech_proto::decode(bytes) {
             Ok(env) => env,
             Err(_) => {
@@ -483,6 +520,14 @@ impl Agent {
             Body::EStop(e) => self.estop_received(e, now, &mut out),
             Body::Bye(bye) if sender == mech_proto::ROUTER => self.router_left(&bye.reason),
             Body::Autopilot(r) => self.autopilot_received(r, now, &mut out),
+            Body::Notice(n) if n.code == NoticeCode::UnknownRobot && self.registered => {
+                // The router restarted and forgot this robot: register now
+                // rather than after the router timeout.
+                tracing::info!(robot = %self.settings.name, "the router does not know this robot; registering again");
+                self.counters.reregistered += 1;
+                self.registered = false;
+                self.next_hello = now;
+            }
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -540,6 +585,9 @@ impl Agent {
             return;
         }
         self.last_estop_id = Some(e.id);
+        if e.engage && !self.failsafe.estopped() {
+            self.counters.estopped_at_us = self.stamp_origin_us + now.as_micros() as u64;
+        }
         if e.engage {
             self.failsafe.engage_estop(e.id);
             self.controller.idle();
@@ -628,7 +676,7 @@ impl Agent {
 
     /// Registration: after the router is lost, register again (it may have
     /// restarted, or the robot moved); while unregistered, Hello every
-    /// `hello_period` (with a key, ask the station's time first: signed
+    /// `hello_retry` (with a key, ask the station's time first: signed
     /// stamps need it).
     fn register(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if self.registered && self.failsafe.router_lost(now) {
@@ -639,7 +687,7 @@ impl Agent {
             }
         }
         if !self.registered && now >= self.next_hello {
-            self.next_hello = now + self.settings.hello_period;
+            self.next_hello = now + self.settings.hello_retry;
             let body = match self.auth.as_mut() {
                 Some(auth) if !auth.synced() => Body::TimeRequest(auth.time_request()),
                 _ => Body::Hello(self.hello()),
@@ -673,6 +721,7 @@ impl Agent {
         let drive = self.failsafe.may_drive(state, mission_running);
         if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
             self.counters.failsafe_trips += 1;
+            self.counters.tripped_at_us = self.stamp_origin_us + now.as_micros() as u64;
         }
         if state != self.last_state {
             tracing::info!(robot = %self.settings.name, from = ?self.last_state, to = ?state, "failsafe");
@@ -719,10 +768,7 @@ impl Agent {
     fn report(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if now >= self.next_heartbeat {
             self.next_heartbeat = now + self.settings.hello_period;
-            let hb = Body::Heartbeat(Heartbeat {
-                uptime_ms: now.as_millis() as u64,
-            });
-            outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
+            outgoing.push(self.heartbeat(now));
         }
         if now >= self.next_telemetry {
             // Stay on the grid so the rate does not drift with jitter.
@@ -797,6 +843,16 @@ impl Agent {
         let c = &self.counters;
         let n = c.stale_commands + c.stale_estops + c.stale_routes + c.stale_missions;
         u32::try_from(n).unwrap_or(u32::MAX)
+    }
+
+    /// A heartbeat: sent every `hello_period`, and by a robot with several
+    /// links on each link it is not using, so the router hears which are
+    /// alive.
+    pub fn heartbeat(&mut self, now: Duration) -> Envelope {
+        let hb = Body::Heartbeat(Heartbeat {
+            uptime_ms: now.as_millis() as u64,
+        });
+        self.envelope(mech_proto::ROUTER, hb, now)
     }
 
     /// The `Bye` sent when the agent shuts down.
@@ -924,7 +980,10 @@ impl Agent {
             }
         }
         match self.controller.command(cmd) {
-            Ok(()) => self.failsafe.channel_heard(now),
+            Ok(()) => {
+                self.counters.commands += 1;
+                self.failsafe.channel_heard(now);
+            }
             Err(e) => {
                 self.counters.refused += 1;
                 let notice = Body::Notice(Notice {
@@ -1135,7 +1194,7 @@ mod tests {
     }
 
     #[test]
-    fn says_hello_every_second_until_welcomed() {
+    fn says_hello_every_quarter_second_until_welcomed() {
         let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
         let hellos = |t: &Tick| {
             t.outgoing
@@ -1144,8 +1203,8 @@ mod tests {
                 .count()
         };
         assert_eq!(hellos(&a.tick(ms(0))), 1);
-        assert_eq!(hellos(&a.tick(ms(500))), 0);
-        let t = a.tick(ms(1000));
+        assert_eq!(hellos(&a.tick(ms(200))), 0);
+        let t = a.tick(ms(250));
         assert_eq!(hellos(&t), 1);
         let Body::Hello(h) = &t.outgoing[0].body else {
             panic!()
@@ -1238,6 +1297,48 @@ mod tests {
 
     fn router_heartbeat(a: &mut Agent, now: Duration) {
         a.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+    }
+
+    #[test]
+    fn a_router_that_does_not_know_the_robot_gets_a_hello_at_once() {
+        let mut a = routed("joy/0");
+        let t = a.tick(ms(100));
+        assert!(!t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))));
+        let notice = Body::Notice(Notice {
+            level: Level::Warn,
+            code: NoticeCode::UnknownRobot,
+            text: "send Hello".into(),
+        });
+        a.handle(msg("", notice), ms(110));
+        assert!(!a.registered());
+        let t = a.tick(ms(120));
+        assert!(
+            t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+            "Hello at the next period, not after the router timeout"
+        );
+        assert_eq!(a.counters().reregistered, 1);
+    }
+
+    #[test]
+    fn frames_for_other_robots_on_a_shared_radio_are_skipped() {
+        let mut a = routed("joy/0");
+        let other = Envelope::new(
+            Header {
+                destination: "r2".into(),
+                channel: "joy/0".into(),
+                ..Header::default()
+            },
+            twist(0.5),
+        );
+        a.handle_bytes(&mech_proto::encode(&other).unwrap(), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.counters().not_for_me, 1);
+        assert_eq!(a.counters().commands, 0);
+        a.handle_bytes(
+            &mech_proto::encode(&msg("joy/0", twist(0.5))).unwrap(),
+            ms(30),
+        );
+        assert_eq!(a.counters().commands, 1);
     }
 
     #[test]

@@ -39,6 +39,14 @@ pub struct RobotConfig {
     pub platform: Spanned<Kind<PlatformSpec>>,
     #[serde(default = "spanned_default")]
     pub link: Spanned<Kind<LinkConfig>>,
+    /// Several links to the router (`[[links]]`, instead of `[link]`), in
+    /// order of preference: the robot uses the first that is alive and
+    /// fails over to the next (Wi-Fi first, then a radio).
+    #[serde(default)]
+    pub links: Vec<Spanned<Kind<LinkConfig>>>,
+    /// `[failover]`: when a link counts as alive.
+    #[serde(default)]
+    pub failover: FailoverConfig,
     #[serde(default = "spanned_default")]
     pub failsafe: Spanned<FailsafeToml>,
     #[serde(default = "spanned_default")]
@@ -112,7 +120,33 @@ pub enum LinkConfig {
         port: String,
         #[serde(default = "default_radio_baud")]
         baud: u32,
+        /// Most telemetry messages per second sent over this link (the
+        /// station shows each radio robot's budget); unset: the robot's
+        /// `telemetry_rate_hz`.
+        #[serde(default)]
+        telemetry_rate_hz: Option<f64>,
     },
+}
+
+/// `[failover]`: for a robot with several links.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FailoverConfig {
+    /// A link counts as alive while the router was heard on it within this
+    /// (seconds); the router's heartbeat comes every 0.25 s on each link.
+    pub link_timeout: f64,
+    /// Period of the heartbeat sent on each link not in use, so the router
+    /// knows it is there (seconds).
+    pub probe_period: f64,
+}
+
+impl Default for FailoverConfig {
+    fn default() -> Self {
+        FailoverConfig {
+            link_timeout: 0.6,
+            probe_period: 0.25,
+        }
+    }
 }
 
 fn default_router() -> SocketAddr {
@@ -439,6 +473,7 @@ impl RobotConfig {
             .validate()
             .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
         self.validate_failsafe()?;
+        self.validate_links()?;
         self.validate_filter()?;
         self.validate_actuators()?;
         self.validate_encoders()?;
@@ -498,6 +533,47 @@ impl RobotConfig {
                     format!("[failsafe] `{what}` = {v}: expected seconds in (0, 3600]"),
                 ));
             }
+        }
+        Ok(())
+    }
+
+    fn validate_links(&self) -> Result<(), Problem> {
+        if !self.links.is_empty() && !self.link.span().is_empty() {
+            return Err((
+                at(self.link.span()),
+                "give either [link] or [[links]], not both".to_string(),
+            ));
+        }
+        if self.links.len() > 8 {
+            return Err((at(self.links[8].span()), "at most 8 links".to_string()));
+        }
+        for link in &self.links {
+            if let LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } = &link.get_ref().0
+            {
+                if !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0) {
+                    return Err((
+                        at(link.span()),
+                        format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
+                    ));
+                }
+            }
+        }
+        let f = self.failover;
+        let timeout_ok =
+            f.link_timeout.is_finite() && f.link_timeout > 0.0 && f.link_timeout <= 60.0;
+        let probe_ok =
+            f.probe_period.is_finite() && f.probe_period > 0.0 && f.probe_period < f.link_timeout;
+        if !(timeout_ok && probe_ok) {
+            return Err((
+                None,
+                format!(
+                    "[failover] link_timeout = {} and probe_period = {}: expected 0 < probe_period < link_timeout <= 60 s",
+                    f.link_timeout, f.probe_period
+                ),
+            ));
         }
         Ok(())
     }
@@ -635,6 +711,16 @@ impl RobotConfig {
 
     pub fn link(&self) -> &LinkConfig {
         &self.link.get_ref().0
+    }
+
+    /// Every link to the router, in order of preference: `[[links]]`, or
+    /// the one `[link]`.
+    pub fn links(&self) -> Vec<&LinkConfig> {
+        if self.links.is_empty() {
+            vec![self.link()]
+        } else {
+            self.links.iter().map(|l| &l.get_ref().0).collect()
+        }
     }
 
     pub fn actuators(&self) -> &ActuatorConfig {
@@ -932,6 +1018,42 @@ mod tests {
             "name = \"q\"\n[platform]\nkind = \"quadcopter\"\nmax_speed = 1\nmax_climb = 1\nmax_yaw_rate = 1\n[encoders]\n{quad}channels = []\n"
         ));
         assert!(e.contains("need a wheeled platform"), "{e}");
+    }
+
+    #[test]
+    fn several_links_in_order_of_preference_or_one_link_but_not_both() {
+        let two = format!(
+            "{MINIMAL}[[links]]\nkind = \"udp\"\nrouter = \"10.0.0.1:7400\"\n\
+             [[links]]\nkind = \"serial\"\nport = \"/dev/ttyUSB0\"\ntelemetry_rate_hz = 5\n"
+        );
+        let c = RobotConfig::parse(&two, "r1.toml").unwrap();
+        let links = c.links();
+        assert_eq!(links.len(), 2);
+        assert!(matches!(links[0], LinkConfig::Udp { .. }));
+        assert!(matches!(
+            links[1],
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(5.0),
+                baud: 57_600,
+                ..
+            }
+        ));
+        assert_eq!(c.failover, FailoverConfig::default());
+        assert_eq!(
+            RobotConfig::parse(MINIMAL, "r1.toml")
+                .unwrap()
+                .links()
+                .len(),
+            1
+        );
+        let both = format!("{two}[link]\nkind = \"udp\"\n");
+        assert!(
+            error(&both).contains("either [link] or [[links]]"),
+            "{}",
+            error(&both)
+        );
+        let bad = format!("{MINIMAL}[failover]\nlink_timeout = 0.2\nprobe_period = 0.5\n");
+        assert!(error(&bad).contains("probe_period"), "{}", error(&bad));
     }
 
     #[test]

@@ -9,9 +9,10 @@ use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use crate::agent::Agent;
+use crate::agent::{Agent, Counters};
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource, WheelEncoders};
+use crate::links::LinkChoice;
 use crate::runtime::{self, HardwareVehicle, Io, Ticker};
 use crate::sim::{SimAgent, SimEncoderModel, UwbNoise, UwbNoiseModel};
 
@@ -44,12 +45,12 @@ pub struct Overrides {
 }
 
 /// Runs the robot until `shutdown` turns true, then zeroes the actuators and
-/// says `Bye`.
+/// says `Bye`; returns the agent's counters.
 pub async fn run(
     config: RobotConfig,
     overrides: Overrides,
     shutdown: watch::Receiver<bool>,
-) -> Result<(), LaunchError> {
+) -> Result<Counters, LaunchError> {
     let key = config.key().map_err(LaunchError::Key)?;
     let router_name = config
         .auth
@@ -67,7 +68,7 @@ pub async fn run(
         simulated,
         "agent starting"
     );
-    if simulated {
+    let counters = if simulated {
         let s = config.sim;
         let noise = s
             .noise
@@ -93,7 +94,7 @@ pub async fn run(
         if let Some(key) = key {
             sim.agent = sim.agent.with_key(key, &router_name);
         }
-        runtime::drive(sim, io, ticker, origin, shutdown).await;
+        runtime::drive(sim, io, ticker, origin, shutdown).await
     } else {
         let mut settings = settings;
         if config.autopilot().is_some() {
@@ -108,9 +109,7 @@ pub async fn run(
         }
         if let Some(autopilot) = config.autopilot() {
             let vehicle = open_autopilot(autopilot, agent)?;
-            runtime::drive(vehicle, io, ticker, origin, shutdown).await;
-            tracing::info!("agent stopped");
-            return Ok(());
+            return Ok(runtime::drive(vehicle, io, ticker, origin, shutdown).await);
         }
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
@@ -127,19 +126,61 @@ pub async fn run(
             origin,
             shutdown,
         )
-        .await;
-    }
+        .await
+    };
     tracing::info!("agent stopped");
-    Ok(())
+    Ok(counters)
 }
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {
-    // `--router` turns any robot into a UDP one (bench testing a radio robot).
-    let router = match config.link() {
-        LinkConfig::Udp { router } => Some(overrides.router.unwrap_or(*router)),
-        LinkConfig::Serial { .. } => overrides.router,
+    let links = config.links();
+    let caps: Vec<Option<std::time::Duration>> = links
+        .iter()
+        .map(|l| match l {
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } => Some(std::time::Duration::from_secs_f64(1.0 / hz)),
+            _ => None,
+        })
+        .collect();
+    if let ([only], false) = (links.as_slice(), caps[0].is_some()) {
+        return open_one(only, overrides.router, true).await;
+    }
+    let mut ios = Vec::with_capacity(links.len());
+    for link in &links {
+        ios.push(open_one(link, overrides.router, links.len() == 1).await?);
+    }
+    let f = config.failover;
+    let choice = LinkChoice::new(
+        caps,
+        std::time::Duration::from_secs_f64(f.link_timeout),
+        std::time::Duration::from_secs_f64(f.probe_period),
+    );
+    tracing::info!(
+        links = ios.len(),
+        "links in order of preference, with failover"
+    );
+    Ok(Io::Failover {
+        closed: vec![false; ios.len()],
+        links: ios,
+        choice,
+    })
+}
+
+/// Opens one link. `--router` sets the router of a UDP link, and turns a
+/// lone serial link into a UDP one (bench testing a radio robot).
+async fn open_one(
+    link: &LinkConfig,
+    router: Option<SocketAddr>,
+    alone: bool,
+) -> Result<Io, LaunchError> {
+    let router = match link {
+        LinkConfig::Udp { router: configured } => Some(router.unwrap_or(*configured)),
+        LinkConfig::Serial { .. } if alone => router,
+        LinkConfig::Serial { .. } => None,
     };
-    match (router, config.link()) {
+    match (router, link) {
         (Some(router), _) => {
             let local = if router.ip().is_loopback() {
                 SocketAddr::from(([127, 0, 0, 1], 0))
@@ -150,7 +191,7 @@ async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, La
             tracing::info!(%router, local = ?socket.local_addr().ok(), "UDP link");
             Ok(Io::Udp { socket, router })
         }
-        (None, LinkConfig::Serial { port, baud }) => open_serial(port, *baud),
+        (None, LinkConfig::Serial { port, baud, .. }) => open_serial(port, *baud),
         (None, LinkConfig::Udp { .. }) => {
             Err(LaunchError::Udp(std::io::ErrorKind::InvalidInput.into()))
         }

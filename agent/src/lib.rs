@@ -32,6 +32,7 @@ pub mod filter;
 pub mod fusion;
 pub mod hal;
 pub mod launch;
+pub mod links;
 pub mod order;
 pub mod platform;
 pub mod runtime;

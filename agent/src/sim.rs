@@ -180,7 +180,7 @@ impl SimFleet {
             let io = runtime::Io::Udp { socket, router };
             let shutdown_rx = shutdown_rx.clone();
             agents.push(tokio::spawn(async move {
-                runtime::drive(sim, io, ticker, origin, shutdown_rx).await;
+                let _ = runtime::drive(sim, io, ticker, origin, shutdown_rx).await;
             }));
             names.push(name);
         }

@@ -6,6 +6,7 @@ mod cluster_script;
 mod record;
 mod octave;
 mod python;
+mod radio;
 mod script;
 mod serve;
 mod signed;

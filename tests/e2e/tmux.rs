@@ -76,7 +76,7 @@ pub fn card_position(screen: &str, robot: &str) -> Option<(f64, f64)> {
     let after_x = pose.split(" x").nth(1)?;
     let mut parts = after_x.split(" y");
     let x: f64 = parts.next()?.trim().parse().ok()?;
-    let y: f64 = parts.next()?.split(" z").next()?.trim().parse().ok()?;
+    let y: f64 = parts.next()?.split_whitespace().next()?.parse().ok()?;
     Some((x, y))
 }
 

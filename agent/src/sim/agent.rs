@@ -126,8 +126,19 @@ impl Vehicle for SimAgent {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         SimAgent::handle_bytes(self, bytes, now)
     }
-    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
-        self.agent.encode(env, out)
+    fn encode(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
+        self.agent.encode_on(env, link, out)
+    }
+    fn heartbeat(&mut self, now: Duration) -> Envelope {
+        self.agent.heartbeat(now)
+    }
+    fn counters(&self) -> crate::agent::Counters {
+        self.agent.counters()
     }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         SimAgent::handle(self, env, now)

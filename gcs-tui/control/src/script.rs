@@ -73,6 +73,10 @@ pub fn event_json(s: &Stamped) -> Value {
             "known": known,
         }),
         Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
+        Event::Links { robot, links } => json!({
+            "robot": robot, "udp": links.udp, "radio": links.radio, "active": links.active,
+            "radio_budget_hz": links.radio_budget_hz,
+        }),
         Event::Telemetry {
             robot,
             telemetry: t,

@@ -34,10 +34,11 @@ pub mod sync;
 
 pub use config::ConfigError;
 pub use counters::{ChannelStatus, Counters, DropReason, Drops, Traffic};
-pub use event::{Event, EventSink, LinkState, Stamped};
+pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 pub use fleet::{Fleet, FleetConfig};
 pub use record::{RecordConfig, RecordTarget, RecordingStatus};
 pub use router::{
-    Delivery, Publisher, Router, RouterConfig, RouterError, RouterHandle, Subscription,
+    Delivery, Publisher, RadioStatus, Router, RouterConfig, RouterError, RouterHandle,
+    SerialEndpoint, Subscription,
 };
 pub use station::{CoreConfig, Gcs};

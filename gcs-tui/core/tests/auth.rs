@@ -268,7 +268,10 @@ async fn a_hello_cannot_take_over_a_robots_address() {
     let r = s.rejected();
     assert_eq!((r.replay, r.not_permitted), (1, 1), "{r:?}");
     tokio::time::sleep(Duration::from_millis(200)).await;
-    assert_eq!(s.gcs.snapshot().robot("robot_1").unwrap().addr, addr);
+    assert_eq!(
+        s.gcs.snapshot().robot("robot_1").unwrap().addr,
+        mech_core::LinkAddr::Udp(addr)
+    );
     let mut matlab = s.peer("matlab").await;
     matlab.command("robot_1", "ext/matlab", 0.3).await;
     let got = robot

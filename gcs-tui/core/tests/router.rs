@@ -65,7 +65,7 @@ async fn registration_routes_to_none_and_tracks_the_robot() {
     assert_eq!(w.route.robot, "robot_1");
     let fleet = gcs.snapshot();
     let r = fleet.robot("robot_1").unwrap();
-    assert_eq!(r.addr, robot.addr());
+    assert_eq!(r.addr, mech_core::LinkAddr::Udp(robot.addr()));
     assert_eq!(r.link, LinkState::Connected);
     assert_eq!(r.platform, "diff-drive");
     assert_eq!(r.route.requested, None);
@@ -135,7 +135,10 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
     );
     let fleet = gcs.snapshot();
     assert_eq!(fleet.robots.len(), 1, "same robot, not a duplicate");
-    assert_eq!(fleet.robot("robot_1").unwrap().addr, second.addr());
+    assert_eq!(
+        fleet.robot("robot_1").unwrap().addr,
+        mech_core::LinkAddr::Udp(second.addr())
+    );
     let mut pad = Peer::new("gamepad", gcs.router().udp_addr()).await;
     let seq = pad.command("robot_1", "joy/0", 0.3).await;
     let got = second

@@ -52,6 +52,9 @@ pub struct RobotView {
     pub route: RouteView,
     pub computation: Computation,
     pub link: LinkState,
+    /// Live links and radio budget of a robot with a radio
+    /// (`wifi*+radio 14Hz`); empty for a robot on UDP alone.
+    pub links: String,
     pub failsafe: FailsafeState,
     pub health: Health,
     /// The robot's driver fault text while it reports the fault.
@@ -95,6 +98,7 @@ impl RobotView {
             route: RouteView::default(),
             computation: Computation::Onboard,
             link: LinkState::Connected,
+            links: String::new(),
             failsafe: FailsafeState::Ok,
             health: Health::Ok,
             fault: None,

@@ -503,3 +503,45 @@ async fn a_route_change_by_one_operator_reaches_the_others_snapshot_at_once() {
     );
     rig.stop().await;
 }
+
+#[test]
+fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
+    use mech_core::event::{Event, LinkAddr, RobotLinks, Stamped};
+    let mut fleet = mech_core::Fleet::new(mech_core::FleetConfig::default());
+    let hello = mech_proto::Hello {
+        name: "xbee_bot".into(),
+        platform: "diff-drive".into(),
+        capabilities: vec![],
+        motors: 2,
+        max_speed: 0.5,
+        max_yaw_rate: 2.0,
+        agent_version: "t".into(),
+    };
+    let at = |event| Stamped {
+        at: Duration::ZERO,
+        event,
+    };
+    fleet.apply(&at(Event::Registered {
+        hello,
+        id: 1,
+        addr: LinkAddr::Radio("/dev/ttyUSB0".into()),
+        known: false,
+    }));
+    fleet.apply(&at(Event::Links {
+        robot: "xbee_bot".into(),
+        links: RobotLinks {
+            udp: true,
+            radio: Some("/dev/ttyUSB0".into()),
+            active: "radio",
+            radio_budget_hz: Some(14.0),
+        },
+    }));
+    let mut app = App::new("127.0.0.1:7400", Instant::now());
+    app.update(Action::Fleet(mech_gcs::station::snapshot(&fleet, Vec::new())));
+    let mut term =
+        ratatui::Terminal::new(ratatui::backend::TestBackend::new(120, 36)).expect("terminal");
+    term.draw(|f| f.render_widget(&app, f.area()))
+        .expect("draws");
+    let screen = term.backend().to_string();
+    assert!(screen.contains("wifi+radio* 14Hz"), "{screen}");
+}

@@ -43,7 +43,7 @@ fn robot(r: &Robot, out: &mut Vec<Event>) {
             agent_version: String::new(),
         },
         id: r.id,
-        addr: r.addr,
+        addr: r.addr.clone(),
         known: false,
     });
     if r.route.epoch != 0 {
@@ -90,7 +90,9 @@ fn mission(r: &Robot, out: &mut Vec<Event>) {
     let id = sent.id;
     match &sent.delivery {
         MissionDelivery::Sending => {}
-        MissionDelivery::Acked => out.push(Event::MissionAcked {
+        // A lost mission was acknowledged before its robot restarted; the
+        // snapshot replays the acknowledgement (the loss is not restated).
+        MissionDelivery::Acked | MissionDelivery::Lost => out.push(Event::MissionAcked {
             robot,
             id,
             accepted: true,

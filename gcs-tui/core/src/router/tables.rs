@@ -22,6 +22,7 @@ mod autopilot;
 mod commands;
 mod estop;
 mod gate;
+mod links;
 mod missions;
 mod registration;
 mod routes;
@@ -48,6 +49,9 @@ pub(crate) enum Peer {
     Udp(SocketAddr),
     /// A TCP connection, by the router's connection number.
     Tcp(u64),
+    /// A serial radio, by its place in `router.serial`: every robot on it
+    /// hears what is sent (the destination picks the robot).
+    Serial(u16),
     /// A publisher inside the GCS process.
     Local,
 }
@@ -57,6 +61,7 @@ impl std::fmt::Display for Peer {
         match self {
             Peer::Udp(a) => write!(f, "udp:{a}"),
             Peer::Tcp(n) => write!(f, "tcp#{n}"),
+            Peer::Serial(n) => write!(f, "radio#{n}"),
             Peer::Local => f.write_str("gcs"),
         }
     }
@@ -91,7 +96,8 @@ pub enum Delivery {
 #[derive(Debug)]
 struct RobotEntry {
     id: u16,
-    addr: SocketAddr,
+    /// Where the robot is heard (UDP, a radio), and so where to send.
+    links: links::Links,
     last_seen: Instant,
     link: LinkState,
     route: Option<String>,
@@ -171,6 +177,8 @@ pub(crate) struct Tables {
     /// Why the message being decided was refused or unreadable, kept for
     /// the tap (only while recording).
     refusal: Option<String>,
+    /// When each unknown robot was last told to register again.
+    unknown_told: HashMap<String, Instant>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -218,6 +226,7 @@ impl Tables {
             time_answers: HashMap::new(),
             tap: None,
             refusal: None,
+            unknown_told: HashMap::new(),
         }
     }
 
@@ -342,8 +351,8 @@ impl Tables {
         if let Body::TimeRequest(request) = env.body {
             return self.answer_time(request, tag, sender, from, now, out);
         }
-        if let Peer::Udp(addr) = from {
-            self.seen_robot(sender, addr, now, events);
+        if matches!(from, Peer::Udp(_) | Peer::Serial(_)) {
+            self.seen_robot(sender, from, now, events);
         }
         let m = Incoming {
             header: &env.header,
@@ -364,7 +373,12 @@ impl Tables {
     ) -> Delivery {
         match body {
             Body::Hello(hello) => self.on_hello(m, hello, out, events),
-            Body::Heartbeat(_) => Delivery::Consumed,
+            Body::Heartbeat(_) => {
+                if !self.robots.contains_key(&m.header.sender) {
+                    self.unknown_robot(m, out);
+                }
+                Delivery::Consumed
+            }
             Body::Telemetry(t) => self.on_telemetry(m, t, out, events),
             Body::FleetCommand(fc) => self.on_fleet_command(m, fc, out, events),
             Body::Mission(mission) => self.on_mission(m, mission, out, events),
@@ -394,6 +408,7 @@ impl Tables {
     /// Timers: link states, heartbeats, retries, lapsed subscriptions.
     pub(crate) fn tick(&mut self, now: Instant, out: &mut Outbox, events: &mut Vec<Event>) {
         self.update_links(now, events);
+        self.report_links(now, events);
         self.send_heartbeats(now, out);
         self.retry_routes(now, out);
         self.retry_estop(now, out);
@@ -461,9 +476,14 @@ impl Tables {
         self.auth.as_ref()?.identity(key_id).cloned()
     }
 
-    /// Address of a registered robot.
-    pub(crate) fn robot_addr(&self, robot: &str) -> Option<SocketAddr> {
-        self.robots.get(robot).map(|r| r.addr)
+    /// The configured serial radios.
+    pub(crate) fn radio_config(&self) -> Vec<super::config::SerialEndpoint> {
+        self.config.serial.clone()
+    }
+
+    /// Whether `robot` is registered.
+    pub(crate) fn knows_robot(&self, robot: &str) -> bool {
+        self.robots.contains_key(robot)
     }
 }
 
@@ -615,6 +635,58 @@ mod tests {
             ev.iter()
                 .any(|e| matches!(e, Event::MissionFailed { id: 7, .. }))
         );
+    }
+
+    #[test]
+    fn a_robot_on_wifi_and_a_radio_is_commanded_on_the_live_link_and_estopped_on_both() {
+        let t0 = Instant::now();
+        let ms = |v| t0 + Duration::from_millis(v);
+        let (mut t, wifi) = registered(t0);
+        let radio = Peer::Serial(0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let hb = bytes(
+            "robot_1",
+            "router",
+            "",
+            Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 }),
+        );
+        t.handle(&hb, radio, ms(10), &mut out, &mut ev);
+        t.set_route("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);
+        let twist = bytes(
+            "pad",
+            "robot_1",
+            "joy/0",
+            Body::Command(mech_proto::Command::Twist(mech_proto::Twist {
+                vx: 0.1,
+                ..Default::default()
+            })),
+        );
+        let sent_to = |t: &mut Tables, at| {
+            let mut out = Outbox::default();
+            t.handle(&twist, Peer::Local, at, &mut out, &mut Vec::new());
+            out.raw
+        };
+        assert_eq!(sent_to(&mut t, ms(100)), vec![wifi], "UDP while live");
+        t.handle(&hb, radio, ms(350), &mut out, &mut ev);
+        assert_eq!(
+            sent_to(&mut t, ms(400)),
+            vec![radio],
+            "UDP silent 400 ms: the radio"
+        );
+        t.handle(&hb, wifi, ms(500), &mut out, &mut ev);
+        assert_eq!(sent_to(&mut t, ms(510)), vec![wifi], "UDP back");
+        let mut out = Outbox::default();
+        t.start_estop(true, ms(520), &mut out, &mut ev);
+        let estops: Vec<Peer> = out.owned.iter().map(|(p, _)| *p).collect();
+        assert_eq!(estops, vec![wifi, radio], "the e-stop on every link");
+        let mut ev = Vec::new();
+        t.tick(ms(530), &mut Outbox::default(), &mut ev);
+        let links = ev.iter().find_map(|e| match e {
+            Event::Links { links, .. } => Some(links.clone()),
+            _ => None,
+        });
+        let links = links.expect("a radio robot's links are reported");
+        assert!(links.udp && links.active == "udp" && links.radio.is_some());
     }
 
     #[test]

@@ -220,6 +220,11 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             },
             computation: r.computation,
             link: r.link,
+            links: r
+                .links
+                .radio_budget_hz
+                .map(|hz| format!("{} {hz}Hz", r.links.label()))
+                .unwrap_or_default(),
             failsafe: r.failsafe,
             health: r.health,
             fault: r.fault.clone(),

@@ -140,6 +140,11 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
         spans.push(Span::raw(format!(" {:.0}%", b * 100.0)));
     }
     spans.push(Span::raw(format!(" {comp}board")));
+    spans.push(Span::raw(if r.links.is_empty() {
+        String::new()
+    } else {
+        format!(" {}", r.links)
+    }));
     out.push(Line::from(spans));
 }
 

@@ -2,7 +2,7 @@
 //! failsafe), for every robot when no target is given, after a summary that
 //! says whether the station authenticates and what it refused.
 
-use mech_core::fleet::Robot;
+use mech_core::fleet::{MissionDelivery, Robot};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target, failsafe_name};
@@ -56,9 +56,19 @@ impl Status {
             .recording()
             .map(|r| format!("; {}", super::record::describe(&r)))
             .unwrap_or_default();
+        let radios: String = router
+            .radios()
+            .iter()
+            .map(|r| {
+                format!(
+                    "; radio {} {} frames {} replaced {} waiting",
+                    r.port, r.frames, r.replaced, r.waiting
+                )
+            })
+            .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}{recording}",
+                "{} robots; station {}{refused}{radios}{recording}",
                 details.len(),
                 router.security().as_str()
             ),
@@ -90,5 +100,25 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.stale)
     } else {
         String::new()
+    } + &links(r)
+        + &lost_mission(r)
+}
+
+/// A mission the robot lost (registered again without it: its agent
+/// restarted), so the operator knows it will not resume by itself.
+fn lost_mission(r: &Robot) -> String {
+    match &r.waypoints.sent {
+        Some(m) if m.delivery == MissionDelivery::Lost => {
+            format!(" mission {} lost (agent restarted; send it again)", m.id)
+        }
+        _ => String::new(),
+    }
+}
+
+/// The live links when the robot has a radio (`links wifi*+radio radio-budget 12 Hz`).
+fn links(r: &Robot) -> String {
+    match r.links.radio_budget_hz {
+        Some(hz) => format!(" links {} radio-budget {hz} Hz", r.links.label()),
+        None => String::new(),
     }
 }

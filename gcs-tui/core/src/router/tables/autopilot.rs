@@ -6,7 +6,7 @@
 use mech_proto::AutopilotRequest;
 use tracing::info;
 
-use super::{Delivery, Incoming, Outbox, Peer, Tables};
+use super::{Delivery, Incoming, Outbox, Tables};
 use crate::counters::DropReason;
 
 impl Tables {
@@ -21,7 +21,10 @@ impl Tables {
             return Delivery::Dropped(DropReason::UnknownRobot);
         };
         entry.traffic.forwarded += 1;
-        let addr = entry.addr;
+        let Some(to) = self.target(&request.robot, m.now) else {
+            self.dropped.count(DropReason::UnknownRobot);
+            return Delivery::Dropped(DropReason::UnknownRobot);
+        };
         self.forwarded += 1;
         info!(
             robot = %request.robot,
@@ -29,7 +32,7 @@ impl Tables {
             from = %m.header.sender,
             "autopilot request"
         );
-        self.pass_on(m.bytes, Peer::Udp(addr), &request.robot, out);
+        self.pass_on(m.bytes, to, &request.robot, out);
         Delivery::Forwarded(1)
     }
 }
