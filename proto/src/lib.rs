@@ -30,8 +30,8 @@ pub use body::{
     ClusterCommand, ClusterGoal, ClusterPose, ClusterVelocity, Computation, ControlMode, EStop,
     EStopAck, FailsafeState, FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello,
     Level, Mission, MissionAck, MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix,
-    RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity, VelocitySource,
-    Waypoint, Welcome,
+    RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity,
+    VelocitySource, Waypoint, Welcome,
 };
 pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,

@@ -3,13 +3,14 @@
 mod autopilot;
 mod cli;
 mod cluster_script;
-mod record;
 mod octave;
 mod python;
 mod radio;
+mod record;
+mod replay_tui;
 mod script;
 mod serve;
 mod signed;
-mod tmux;
 mod station;
+mod tmux;
 mod tui;

@@ -537,7 +537,10 @@ fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
         },
     }));
     let mut app = App::new("127.0.0.1:7400", Instant::now());
-    app.update(Action::Fleet(mech_gcs::station::snapshot(&fleet, Vec::new())));
+    app.update(Action::Fleet(mech_gcs::station::snapshot(
+        &fleet,
+        Vec::new(),
+    )));
     let mut term =
         ratatui::Terminal::new(ratatui::backend::TestBackend::new(120, 36)).expect("terminal");
     term.draw(|f| f.render_widget(&app, f.area()))

@@ -16,7 +16,9 @@ use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::Rect;
 
 use super::layout::{Areas, CARD_HEIGHT, SidePanel};
-use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView, Security};
+use super::view::{
+    ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView, Security,
+};
 use super::viewport::Viewport;
 use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
 
@@ -261,6 +263,8 @@ pub struct App {
     pub security: Security,
     /// Messages the station refused, as last reported.
     pub rejected: u64,
+    /// A replay's clock, when the TUI shows a recording.
+    pub replay: Option<ReplayClock>,
     pub log: VecDeque<LogLine>,
     /// Routing-table cursor: robot row, channel column.
     pub route_cursor: (usize, usize),
@@ -308,6 +312,7 @@ impl App {
             estop: false,
             security: Security::default(),
             rejected: 0,
+            replay: None,
             log: VecDeque::new(),
             route_cursor: (0, 0),
             cards_scroll: 0,
@@ -469,6 +474,7 @@ impl App {
         self.estop = s.estop;
         self.security = s.security;
         self.rejected = s.rejected;
+        self.replay = s.replay;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;
