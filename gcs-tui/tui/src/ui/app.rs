@@ -185,6 +185,8 @@ pub enum Action {
     /// Move the selected robots' waypoint navigation to the other side
     /// (onboard <-> offboard).
     ToggleNav,
+    /// Start recording into the recording directory, or stop.
+    ToggleRecording,
     Drive(DriveKey),
     DriveStop,
     Pad(PadEvent),
@@ -395,6 +397,7 @@ impl App {
             Action::ToggleHelp => self.toggle_help(),
             Action::HelpScroll(d) => self.scroll_help(d),
             Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
+            Action::ToggleRecording => self.outbox.push(Request::Exec("record toggle".into())),
             Action::Select(s) => self.select(s),
             Action::Click { col, row, add } => self.click(col, row, add),
             Action::Drag { col, row } => self.drag(col, row),
