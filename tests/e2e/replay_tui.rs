@@ -6,7 +6,7 @@
 //! robot, and open no network socket.
 
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 use crate::tmux::{Tmux, card_position};
@@ -16,31 +16,18 @@ const RUN: &str = "spawn 1\nwait connected robot_1 5s\nwaypoint robot_1 2.4,1.4\
 
 /// Records RUN into `file`.
 fn record(file: &Path, state: &Path) {
-    let mut child = Command::new(mech_e2e::binary("mech-gcs"))
-        .args([
-            "--script",
-            "-",
-            "--udp",
-            "127.0.0.1:0",
-            "--tcp",
-            "127.0.0.1:0",
-        ])
-        .arg("--record")
-        .arg(file)
-        .env("XDG_STATE_HOME", state)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mech-gcs starts");
-    use std::io::Write;
-    child
-        .stdin
-        .take()
-        .expect("stdin")
-        .write_all(RUN.as_bytes())
-        .expect("script written");
-    let out = child.wait_with_output().expect("mech-gcs finishes");
+    let file = file.to_str().expect("utf-8 path");
+    let args = [
+        "--script",
+        "-",
+        "--udp",
+        "127.0.0.1:0",
+        "--tcp",
+        "127.0.0.1:0",
+        "--record",
+        file,
+    ];
+    let out = mech_e2e::mech_gcs(&args, RUN, state);
     assert!(
         out.status.success(),
         "{}",
