@@ -7,6 +7,8 @@
 //!   configuration section shares;
 //! - [`auth`]: keys, roles and the `[auth]` section of the authenticated
 //!   control plane;
+//! - [`names`]: robot names as an operator reads them (the number a name
+//!   ends with, natural order);
 //! - [`event`]: what the station saw happen, and the [`EventSink`] the
 //!   router delivers it to;
 //! - [`counters`]: traffic counters and live channels;
@@ -24,6 +26,7 @@ pub mod config;
 pub mod counters;
 pub mod event;
 pub mod fleet;
+pub mod names;
 pub mod router;
 pub mod station;
 pub mod sync;

@@ -133,7 +133,6 @@ struct EStopRun {
 pub(crate) struct Tables {
     config: RouterConfig,
     robots: HashMap<String, RobotEntry>,
-    next_id: u16,
     channels: HashMap<String, ChannelEntry>,
     /// Last address of each controller or tool, by sender name, for replies.
     peers: HashMap<String, Peer>,
@@ -187,7 +186,6 @@ impl Tables {
         Tables {
             config,
             robots: HashMap::new(),
-            next_id: 1,
             channels: HashMap::new(),
             peers: HashMap::new(),
             subscribers: HashMap::new(),
@@ -475,6 +473,41 @@ mod tests {
         t.tick(ms(999), &mut out, &mut ev);
         t.tick(ms(1000), &mut out, &mut ev);
         assert_eq!(links(&ev), vec![LinkState::Stale, LinkState::Lost]);
+    }
+
+    fn welcomed_ids(ev: &[Event]) -> Vec<(String, u16)> {
+        ev.iter()
+            .filter_map(|e| match e {
+                Event::Registered { hello, id, .. } => Some((hello.name.clone(), *id)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_robot_gets_the_number_its_name_ends_with_whatever_the_order() {
+        let t0 = Instant::now();
+        let mut t = Tables::new(RouterConfig::default(), None);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        for (k, name) in ["robot_10", "rover", "robot_2", "rover_2", "robot_1", "robot_10"]
+            .into_iter()
+            .enumerate()
+        {
+            let peer = Peer::Udp(format!("127.0.0.1:{}", 9000 + k).parse().unwrap());
+            t.handle(&hello(name), peer, t0, &mut out, &mut ev);
+        }
+        assert_eq!(
+            welcomed_ids(&ev),
+            [
+                ("robot_10".to_string(), 10),
+                ("rover".to_string(), 65535),
+                ("robot_2".to_string(), 2),
+                ("rover_2".to_string(), 65534),
+                ("robot_1".to_string(), 1),
+                ("robot_10".to_string(), 10),
+            ],
+            "the name's number; taken or none: the highest free id; again: the same id"
+        );
     }
 
     #[test]

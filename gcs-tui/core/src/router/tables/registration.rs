@@ -80,11 +80,11 @@ impl Tables {
         self.estop_newcomer(&name, addr, now, out);
     }
 
-    /// A robot's first registration: a new id, and the configured default
-    /// route (none unless configured, so it holds still).
+    /// A robot's first registration: its id (see [`Tables::id_for`]), and
+    /// the configured default route (none unless configured, so it holds
+    /// still).
     fn enrol(&mut self, hello: &Hello, addr: SocketAddr, now: Instant, events: &mut Vec<Event>) {
-        let id = self.next_id;
-        self.next_id = self.next_id.wrapping_add(1).max(1);
+        let id = self.id_for(&hello.name);
         let route = self.config.default_route.clone();
         let epoch = u32::from(route.is_some());
         self.robots.insert(
@@ -112,6 +112,20 @@ impl Tables {
                 channel: route,
                 epoch,
             });
+        }
+    }
+
+    /// The id a newly registered robot gets: the number its name ends with
+    /// (`robot_12` is #12), so the id the operator reads agrees with the
+    /// name whatever order robots register in; when the name has no number
+    /// in `1..=65535` or another robot holds it, the highest id no robot
+    /// holds (65535, 65534...), which stays clear of the small numbers names
+    /// carry.
+    fn id_for(&self, name: &str) -> u16 {
+        let taken = |id: u16| self.robots.values().any(|r| r.id == id);
+        match crate::names::trailing_number(name) {
+            Some(n) if !taken(n) => n,
+            _ => (1..=u16::MAX).rev().find(|&id| !taken(id)).unwrap_or(0),
         }
     }
 
