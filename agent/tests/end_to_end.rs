@@ -63,7 +63,7 @@ async fn wait_for<R: RouterSide, T>(
         r.send(&from_router(
             NAME,
             "",
-            Body::Heartbeat(Heartbeat { uptime_ms: 0 }),
+            Body::Heartbeat(Heartbeat::new(0)),
         ))
         .await;
         while let Some(env) = r.recv().await {

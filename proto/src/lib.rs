@@ -28,7 +28,7 @@ pub use body::Body;
 pub use body::{
     Bye, Channel as ChannelInfo, Channels, ChannelsRequest, ClusterCommand, ClusterGoal,
     ClusterPose, ClusterVelocity, Computation, ControlMode, EStop, EStopAck, FailsafeState,
-    FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello, Level, Mission, MissionAck,
+    Echo, FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello, Level, Mission, MissionAck,
     MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix, RobotCommand, Route, RouteAck,
     Subscribe, Telemetry, Time, TimeRequest, Velocity, Waypoint, Welcome,
 };

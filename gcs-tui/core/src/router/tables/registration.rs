@@ -215,7 +215,7 @@ impl Tables {
             }
         }
         for (name, addr) in due {
-            let body = Body::Heartbeat(Heartbeat { uptime_ms: 0 });
+            let body = Body::Heartbeat(Heartbeat::new(0));
             if let Some(b) = self.make(&name, body) {
                 out.owned.push((Peer::Udp(addr), b));
             }
