@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use mech_proto::{
     Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Echo, Envelope, FailsafeState,
-    Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
-    Telemetry, Velocity,
+    Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route,
+    RouteAck, Telemetry, Velocity,
 };
 
 use crate::auth::{Checked, RobotAuth};
@@ -1034,7 +1034,10 @@ mod tests {
         let held = Duration::from_millis(1000 - 550).as_micros() as u64;
         assert_eq!(
             echoes(&a.tick(ms(1000))),
-            [Some(Echo { seq: 41, held_us: held })],
+            [Some(Echo {
+                seq: 41,
+                held_us: held
+            })],
             "the newest, with the time it was held"
         );
         a.handle(msg("", route("", 2)), ms(1500)); // the router is still heard

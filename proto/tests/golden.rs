@@ -2,9 +2,7 @@
 //! every byte explained. A change here is a change of the wire protocol.
 
 use mech_proto::framing::{SerialDecoder, StreamDecoder, write_serial_frame, write_stream_frame};
-use mech_proto::{
-    Body, Command, Echo, Envelope, Header, Heartbeat, Route, Twist, decode, encode,
-};
+use mech_proto::{Body, Command, Echo, Envelope, Header, Heartbeat, Route, Twist, decode, encode};
 
 fn header(sender: &str, destination: &str, channel: &str) -> Header {
     Header {

@@ -32,7 +32,7 @@ pub mod station;
 pub mod sync;
 
 pub use config::ConfigError;
-pub use counters::{ChannelStatus, Counters, DropReason, Drops, Traffic};
+pub use counters::{ChannelStatus, Counters, DropReason, Drops, LinkQuality, Traffic};
 pub use event::{Event, EventSink, LinkState, Stamped};
 pub use fleet::{Fleet, FleetConfig};
 pub use router::{

@@ -71,7 +71,14 @@ mod tests {
     #[test]
     fn numbers_in_names_sort_by_value() {
         let mut names = vec![
-            "robot_10", "robot_2", "robot_1", "rover", "robot_100", "robot_11", "r01", "r1",
+            "robot_10",
+            "robot_2",
+            "robot_1",
+            "rover",
+            "robot_100",
+            "robot_11",
+            "r01",
+            "r1",
         ];
         names.sort_by(|a, b| natural_cmp(a, b));
         assert_eq!(

@@ -11,7 +11,7 @@ use mech_proto::{
     Waypoint,
 };
 
-use crate::counters::Traffic;
+use crate::counters::{LinkQuality, Traffic};
 use crate::event::LinkState;
 
 /// A robot's entry in the routing table, as the GCS knows it.
@@ -118,6 +118,9 @@ pub struct Robot {
     pub estop_ack: Option<(bool, u32)>,
     /// Messages the robot reports it ignored as stale (telemetry).
     pub stale: u32,
+    /// Rates each way, loss and round trip, as the router last measured
+    /// them (once a second).
+    pub quality: LinkQuality,
 }
 
 impl Robot {
@@ -151,6 +154,7 @@ impl Robot {
             traffic: Traffic::default(),
             estop_ack: None,
             stale: 0,
+            quality: LinkQuality::default(),
         }
     }
 

@@ -155,6 +155,7 @@ impl Tables {
             None => Err(DropReason::UnknownRobot),
             Some(r) if r.route.as_deref() == Some(channel) => {
                 r.traffic.forwarded += 1;
+                r.meter.sent();
                 Ok(r.addr)
             }
             Some(r) => {

@@ -34,6 +34,7 @@ impl Tables {
         };
         if let Some(b) = self.seal(&region, &robot) {
             out.owned.push((Peer::Udp(addr), b));
+            self.count_sent(&robot);
         }
         self.missions
             .retain(|p| !(p.robot == robot && p.id == mission.id));
@@ -129,6 +130,7 @@ impl Tables {
         for (addr, robot, region) in due {
             if let Some(b) = self.seal(&region, &robot) {
                 out.owned.push((Peer::Udp(addr), b));
+                self.count_sent(&robot);
             }
         }
     }

@@ -8,6 +8,7 @@ use mech_proto::{Body, Bye, Heartbeat, Hello, Route, Welcome};
 use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
+use super::link::LinkMeter;
 use super::{Delivery, Incoming, Outbox, Peer, RobotEntry, Tables};
 use crate::counters::Traffic;
 use crate::event::{Event, LinkState};
@@ -27,16 +28,19 @@ impl Tables {
             let why = format!("Hello for {} sent by {}", hello.name, m.header.sender);
             return self.bad(m.from, why, events);
         }
-        self.register(hello, addr, m.now, out, events);
+        self.register(hello, m.header.seq, addr, m.now, out, events);
         Delivery::Consumed
     }
 
     /// Registers a robot (again, after a restart or from a new address: its
     /// id and route are kept, but it must confirm the route), welcomes it
-    /// with its id and route, and gives it a latched e-stop.
+    /// with its id and route, and gives it a latched e-stop. `seq` is the
+    /// Hello's sequence number: a robot numbers its messages afresh when it
+    /// registers again.
     pub(super) fn register(
         &mut self,
         hello: Hello,
+        seq: u32,
         addr: SocketAddr,
         now: Instant,
         out: &mut Outbox,
@@ -51,6 +55,11 @@ impl Tables {
         let Some(entry) = self.robots.get_mut(&hello.name) else {
             return;
         };
+        if known {
+            entry.meter.renumbered(seq);
+        } else {
+            entry.meter.received(seq);
+        }
         entry.route_sent = now;
         // An agent that restarted has forgotten its route: it must confirm it.
         if known {
@@ -103,6 +112,7 @@ impl Tables {
                     received: 1,
                     ..Traffic::default()
                 },
+                meter: LinkMeter::new(now),
             },
         );
         info!(robot = %hello.name, platform = %hello.platform, %addr, id, "robot registered");
@@ -149,10 +159,12 @@ impl Tables {
         Delivery::Consumed
     }
 
-    /// Liveness: any message from a registered robot's name over UDP.
+    /// Liveness: any message from a registered robot's name over UDP; its
+    /// sequence number `seq` goes to the link measurement.
     pub(super) fn seen_robot(
         &mut self,
         sender: &str,
+        seq: u32,
         addr: SocketAddr,
         now: Instant,
         events: &mut Vec<Event>,
@@ -160,6 +172,7 @@ impl Tables {
         if let Some(r) = self.robots.get_mut(sender) {
             r.last_seen = now;
             r.traffic.received += 1;
+            r.meter.received(seq);
             if r.addr != addr {
                 info!(robot = sender, old = %r.addr, new = %addr, "robot moved to a new address");
                 r.addr = addr;
@@ -204,7 +217,8 @@ impl Tables {
         }
     }
 
-    /// The router's heartbeat to every robot, every `heartbeat_period`.
+    /// The router's heartbeat to every robot, every `heartbeat_period`,
+    /// remembered so the robot's echo of it times the round trip.
     pub(super) fn send_heartbeats(&mut self, now: Instant, out: &mut Outbox) {
         let period = self.config.heartbeat_period;
         let mut due = Vec::new();
@@ -214,9 +228,14 @@ impl Tables {
                 due.push((name.clone(), r.addr));
             }
         }
+        let uptime_ms = now.saturating_duration_since(self.started).as_millis() as u64;
         for (name, addr) in due {
-            let body = Body::Heartbeat(Heartbeat::new(0));
+            let body = Body::Heartbeat(Heartbeat::new(uptime_ms));
             if let Some(b) = self.make(&name, body) {
+                let seq = self.seq;
+                if let Some(r) = self.robots.get_mut(&name) {
+                    r.meter.beat_sent(seq, now);
+                }
                 out.owned.push((Peer::Udp(addr), b));
             }
         }

@@ -59,6 +59,7 @@ impl Tables {
             Some(r) => {
                 let to = Peer::Udp(r.addr);
                 self.pass_on(m.bytes, to, &fix.robot, out);
+                self.count_sent(&fix.robot);
                 Delivery::Consumed
             }
             None => {
