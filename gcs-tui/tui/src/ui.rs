@@ -35,6 +35,6 @@ pub mod waypoints;
 pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
 pub use station::{CoreLink, RunOptions, apply_control, demo_arena, run, snapshot};
 pub use view::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkState,
-    RobotView, RouteView, SlotView,
+    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
+    LinkState, RobotView, RouteView, SlotView,
 };

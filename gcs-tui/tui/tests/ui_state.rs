@@ -65,10 +65,10 @@ fn clicking_a_robot_selects_it_and_shift_click_adds() {
 fn clicking_a_card_selects_its_robot() {
     let mut app = fixture::app(6, 80, 24);
     let cards = app.areas().cards.expect("cards shown");
-    // Third card: rows 1 + 2*3 inside the border.
+    // Third card: two cards down inside the border.
     app.update(Action::Click {
         col: cards.x + 3,
-        row: cards.y + 1 + 2 * 3,
+        row: cards.y + 1 + 2 * mech_gcs::ui::layout::CARD_HEIGHT as u16,
         add: false,
     });
     assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
@@ -465,5 +465,43 @@ fn nav_toggle_asks_for_the_selected_robots_only() {
         [Request::ToggleNav {
             robots: vec!["robot_1".into(), "robot_3".into()]
         }]
+    );
+}
+
+/// The core lists robots as text (robot_1, robot_10, robot_2); the screen
+/// shows them in natural order, and next/previous follow it.
+#[test]
+fn robots_are_listed_in_natural_name_order() {
+    let mut snap = fixture::fleet(12);
+    snap.robots.sort_by(|a, b| a.name.cmp(&b.name));
+    assert_eq!(snap.robots[2].name, "robot_11", "text order");
+    let mut app = fixture::app(0, 160, 48);
+    app.update(Action::Fleet(snap));
+    let names: Vec<&str> = app.robots.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names[..3], ["robot_1", "robot_2", "robot_3"]);
+    assert_eq!(names[11], "robot_12");
+    app.update(Action::Select(Select::Only("robot_9".into())));
+    app.update(Action::Select(Select::Next));
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_10"]);
+}
+
+/// A card's last line is the link as the router measures it.
+#[test]
+fn a_card_shows_the_link_quality() {
+    let app = fixture::app(3, 160, 48);
+    let buf = render(&app);
+    let cards = app.areas().cards.expect("cards shown");
+    let text: String = (cards.y..cards.y + cards.height)
+        .map(|row| {
+            (cards.x..cards.x + cards.width)
+                .map(|col| buf[(col, row)].symbol())
+                .collect::<String>()
+                + "\n"
+        })
+        .collect();
+    // robot_2: rx 20/s, tx 14/s, loss 6.0 %, rtt 1.0 ms (the fixture).
+    assert!(
+        text.contains("rx 20/s tx 14/s loss 6.0% rtt 1.00ms"),
+        "{text}"
     );
 }

@@ -19,6 +19,7 @@ use super::layout::{Areas, CARD_HEIGHT, SidePanel};
 use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView, Security};
 use super::viewport::Viewport;
 use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
+use mech_core::names::natural_cmp;
 
 mod manual;
 mod mouse;
@@ -457,15 +458,18 @@ impl App {
         }
     }
 
-    /// Takes the core's state as it is: the e-stop, robots, channels and
-    /// (when the source keeps them) clusters; fits the map to the first
-    /// robots seen.
+    /// Takes the core's state as it is: the e-stop, robots (in natural
+    /// name order: robot_2 before robot_10), channels and (when the source
+    /// keeps them) clusters; fits the map to the first robots seen.
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
         self.estop = s.estop;
         self.security = s.security;
         self.rejected = s.rejected;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
+        // Already in order from the station: a stable sort then costs one
+        // comparison per robot.
+        self.robots.sort_by(|a, b| natural_cmp(&a.name, &b.name));
         self.channels = s.channels;
         if let Some(c) = s.clusters {
             self.clusters = c;

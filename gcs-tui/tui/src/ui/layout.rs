@@ -9,7 +9,7 @@ use ratatui::layout::{Constraint, Layout, Rect};
 pub const WIDE_MIN: (u16, u16) = (120, 36);
 
 /// Lines per robot card, so scrolling and clicks land on the card drawn.
-pub const CARD_HEIGHT: usize = 3;
+pub const CARD_HEIGHT: usize = 4;
 
 /// Width of the routing table's robot-name column (a space follows it).
 pub const ROUTE_NAME_W: usize = 9;
