@@ -6,17 +6,21 @@
 //! each panel a small widget of its own.
 //!
 //! - state: [`app`] (App, actions, requests), [`view`] (what the core
-//!   reports, as the screen shows it), [`layout`] (where each panel goes)
-//!   and [`viewport`] (map geometry);
+//!   reports, as the screen shows it), [`layout`] (where each panel goes),
+//!   [`viewport`] (map geometry), [`columns`] (the fleet table's columns,
+//!   sorting and filter);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
-//!   [`status`], [`cards`], [`map`], [`waypoints`], [`routes`], [`events`]
-//!   and [`help`], styled by [`theme`];
+//!   [`status`], [`cards`], [`table`] (the fleet table), [`detail`] (one
+//!   robot), [`map`], [`waypoints`], [`routes`], [`events`] and [`help`],
+//!   styled by [`theme`];
 //! - input and I/O: [`keys`] (terminal events into actions) and [`station`]
 //!   (the event loop, and requests carried to the core);
 //! - [`fixture`]: fixed fleets for snapshots, benchmarks and tests.
 
 pub mod app;
 pub mod cards;
+pub mod columns;
+pub mod detail;
 pub mod events;
 pub mod fixture;
 pub mod help;
@@ -27,12 +31,16 @@ pub mod render;
 pub mod routes;
 pub mod station;
 pub mod status;
+pub mod table;
 pub mod theme;
 pub mod view;
 pub mod viewport;
 pub mod waypoints;
 
-pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
+pub use app::{
+    Action, App, Focus, LogLevel, Prompt, PromptError, Request, RobotsView, Select, TableState,
+};
+pub use columns::Column;
 pub use station::{CoreLink, RunOptions, apply_control, demo_arena, run, snapshot};
 pub use view::{
     ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,

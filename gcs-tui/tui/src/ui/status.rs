@@ -7,7 +7,7 @@ use ratatui::layout::Rect;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Clear, Paragraph, Widget};
 
-use super::app::{App, Prompt, PromptError};
+use super::app::{App, Prompt, PromptError, RobotsView};
 use super::theme::Theme;
 use super::view::{LinkState, Security};
 
@@ -106,6 +106,12 @@ impl Widget for BottomBar<'_> {
                 Span::raw(s.as_str()),
                 Span::styled(" ", t.selected()),
             ]),
+            Some(Prompt::Filter(s)) => Line::from(vec![
+                Span::raw("/"),
+                Span::raw(s.as_str()),
+                Span::styled(" ", t.selected()),
+                Span::styled("  name, route or state │ Enter keep │ Esc clear", t.dim()),
+            ]),
             None if self.app.waypoint_mode => Line::styled(
                 "WAYPOINTS click map │ e type x,y │ ⌫ remove │ Del clear │ Enter send │ Esc done │ X E-STOP",
                 t.dim(),
@@ -114,8 +120,12 @@ impl Widget for BottomBar<'_> {
                 "TELEOP key/0 arrows/WASD drive │ Q E strafe │ Space stop │ t off │ X E-STOP",
                 t.warn(),
             ),
+            None if self.app.robots_view == RobotsView::Table => Line::styled(
+                "v map │ ↑↓ select │ Space mark │ Enter detail │ / filter │ < > sort │ r reverse │ Tab panel │ ? help │ X E-STOP",
+                t.dim(),
+            ),
             None => Line::styled(
-                "q quit │ ? help │ : cmd │ X E-STOP │ n/p select │ f waypoints │ c cluster │ Tab panel │ t teleop │ +/- zoom │ 0 fit",
+                "q quit │ ? help │ : cmd │ X E-STOP │ n/p select │ v table │ / filter │ f waypoints │ c cluster │ Tab panel │ t teleop │ +/- zoom │ 0 fit",
                 t.dim(),
             ),
         };
