@@ -96,7 +96,10 @@ impl Drops {
 }
 
 /// Rejection reasons, as counted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
 pub enum RejectReason {
     Unsigned,
     UnknownKey,
@@ -169,7 +172,8 @@ pub struct Traffic {
 /// How well the link to one robot works, as the router measures it over
 /// its last few seconds (`docs/protocol.md`, *Link quality*): the 2017
 /// thesis's "usable packets" figure, live.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct LinkQuality {
     /// Messages per second received from the robot.
     pub rx_hz: f64,

@@ -4,7 +4,7 @@
 //! whether the station authenticates and what it refused.
 
 use mech_core::LinkQuality;
-use mech_core::fleet::Robot;
+use mech_core::fleet::{MissionDelivery, Robot};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target, failsafe_name};
@@ -57,9 +57,24 @@ impl Status {
                 .collect();
             format!("; rejected {}", by.join(", "))
         };
+        let recording = ctx
+            .gcs
+            .recording()
+            .map(|r| format!("; {}", super::record::describe(&r)))
+            .unwrap_or_default();
+        let radios: String = router
+            .radios()
+            .iter()
+            .map(|r| {
+                format!(
+                    "; radio {} {} frames {} replaced {} waiting",
+                    r.port, r.frames, r.replaced, r.waiting
+                )
+            })
+            .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}",
+                "{} robots; station {}{refused}{radios}{recording}",
                 details.len(),
                 router.security().as_str()
             ),
@@ -92,6 +107,8 @@ fn status_line(r: &Robot) -> String {
     } else {
         String::new()
     } + &link_quality(&r.quality)
+        + &links(r)
+        + &lost_mission(r)
 }
 
 /// ` link rx 21.0/s tx 4.0/s loss 0.0% rtt 0.42ms`, once measured.
@@ -106,4 +123,23 @@ fn link_quality(q: &LinkQuality) -> String {
         q.loss_text(),
         q.rtt_text()
     )
+}
+
+/// A mission the robot lost (registered again without it: its agent
+/// restarted), so the operator knows it will not resume by itself.
+fn lost_mission(r: &Robot) -> String {
+    match &r.waypoints.sent {
+        Some(m) if m.delivery == MissionDelivery::Lost => {
+            format!(" mission {} lost (agent restarted; send it again)", m.id)
+        }
+        _ => String::new(),
+    }
+}
+
+/// The live links when the robot has a radio (`links wifi*+radio radio-budget 12 Hz`).
+fn links(r: &Robot) -> String {
+    match r.links.radio_budget_hz {
+        Some(hz) => format!(" links {} radio-budget {hz} Hz", r.links.label()),
+        None => String::new(),
+    }
 }

@@ -94,6 +94,7 @@ impl Tables {
     /// per source per second.
     fn reject(&mut self, from: Peer, r: Rejection, events: &mut Vec<Event>) -> Delivery {
         self.rejected.count(r.reason);
+        self.note_refusal(|| format!("{}: {}", r.reason.as_str(), r.detail));
         let now = Instant::now();
         let source = from.to_string();
         let due = self

@@ -7,7 +7,9 @@
 
 use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+    VelocitySource,
 };
+use serde::{Deserialize, Serialize};
 
 /// Rates each way, loss and round trip of a robot's link, as the router
 /// measures them (the core's type, copied).
@@ -16,6 +18,9 @@ pub use mech_core::LinkQuality;
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
 pub use mech_core::auth::Security;
+
+/// How long a robot's path stays on the map.
+pub const TRAIL_SECONDS: f64 = 10.0;
 
 /// How a card spells a link state.
 pub fn link_label(link: LinkState) -> &'static str {
@@ -28,7 +33,7 @@ pub fn link_label(link: LinkState) -> &'static str {
 
 /// Route of a robot: the channel the router forwards, and whether the agent
 /// has acknowledged it yet.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct RouteView {
     /// Empty = routed to none.
     pub channel: String,
@@ -36,7 +41,7 @@ pub struct RouteView {
 }
 
 /// One robot, as the cards and the map show it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RobotView {
     pub name: String,
     /// Router-assigned id.
@@ -44,20 +49,29 @@ pub struct RobotView {
     pub platform: String,
     pub pose: Pose,
     pub velocity: Velocity,
+    /// Measured by wheel encoders, or following from the commands.
+    pub velocity_source: VelocitySource,
     pub mode: ControlMode,
     pub route: RouteView,
     pub computation: Computation,
     pub link: LinkState,
+    /// Live links and radio budget of a robot with a radio
+    /// (`wifi*+radio 14Hz`); empty for a robot on UDP alone.
+    pub links: String,
     pub failsafe: FailsafeState,
     pub health: Health,
+    /// The robot's driver fault text while it reports the fault.
+    pub fault: Option<String>,
     /// Fraction `[0, 1]`.
     pub battery: Option<f64>,
     pub mission: Option<MissionProgress>,
-    /// Where the robot went in the last [`super::app::TRAIL_SECONDS`],
+    /// Where the robot went in the last [`TRAIL_SECONDS`],
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
     pub trail: Vec<(f64, f64)>,
-    /// The link as the router measures it.
+    /// The link as the router measures it (absent from an older
+    /// station's snapshot: not measured).
+    #[serde(default)]
     pub quality: LinkQuality,
 }
 
@@ -86,12 +100,15 @@ impl RobotView {
                 heading,
             },
             velocity: Velocity::default(),
+            velocity_source: VelocitySource::Commanded,
             mode: ControlMode::Idle,
             route: RouteView::default(),
             computation: Computation::Onboard,
             link: LinkState::Connected,
+            links: String::new(),
             failsafe: FailsafeState::Ok,
             health: Health::Ok,
+            fault: None,
             battery: None,
             mission: None,
             trail: Vec::new(),
@@ -101,7 +118,7 @@ impl RobotView {
 }
 
 /// A live controller channel seen by the router.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ChannelView {
     pub name: String,
     /// Last publisher's sender name.
@@ -113,7 +130,7 @@ pub struct ChannelView {
 /// panel show it: its members from the fleet model and, once a cluster
 /// controller runs it, what that controller reports (not to be confused
 /// with [`mech_control::ClusterView`], the controller's own account).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ClusterOnScreen {
     pub name: String,
     pub members: Vec<String>,
@@ -123,7 +140,7 @@ pub struct ClusterOnScreen {
 
 /// A cluster controller's last period, as the map and the routes panel
 /// show it (copied from [`mech_control::ControlHub::snapshot`]).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct ClusterControlView {
     /// Cluster pose being tracked (x, y, heading).
     pub desired: Option<(f64, f64, f64)>,
@@ -138,7 +155,7 @@ pub struct ClusterControlView {
 }
 
 /// One member's slot in the formation.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlotView {
     pub robot: String,
     /// Slot position, m.
@@ -172,7 +189,7 @@ impl ClusterControlView {
 }
 
 /// The arena rectangle from the config, metres.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ArenaBounds {
     pub min_x: f64,
     pub min_y: f64,
@@ -181,7 +198,7 @@ pub struct ArenaBounds {
 }
 
 /// Everything the core reports in one refresh.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct FleetSnapshot {
     pub robots: Vec<RobotView>,
     pub channels: Vec<ChannelView>,
@@ -215,6 +232,15 @@ pub fn failsafe_str(f: FailsafeState) -> &'static str {
         FailsafeState::RouterLost => "router-lost",
         FailsafeState::EStopped => "E-STOPPED",
         FailsafeState::Fault => "fault",
+    }
+}
+
+/// How a card tags a speed: measured by encoders or following from the
+/// commands (a stuck wheel shows as a commanded speed with no measured one).
+pub fn velocity_source_str(v: VelocitySource) -> &'static str {
+    match v {
+        VelocitySource::Measured => "meas",
+        VelocitySource::Commanded => "cmd",
     }
 }
 

@@ -11,7 +11,7 @@ use std::time::Duration;
 use mech_proto::{Echo, Heartbeat};
 use tokio::time::Instant;
 
-use super::{Delivery, Incoming, Tables};
+use super::{Delivery, Incoming, Outbox, Tables};
 use crate::counters::LinkQuality;
 use crate::event::Event;
 
@@ -182,12 +182,20 @@ impl LinkMeter {
 
 impl Tables {
     /// A heartbeat: liveness was noted on the way in; an echo times the
-    /// round trip.
-    pub(super) fn on_heartbeat(&mut self, m: Incoming<'_>, hb: Heartbeat) -> Delivery {
-        if let Some(echo) = hb.echo {
-            if let Some(r) = self.robots.get_mut(&m.header.sender) {
-                r.meter.echoed(echo, m.now);
+    /// round trip. An unknown robot is told to register again.
+    pub(super) fn on_heartbeat(
+        &mut self,
+        m: Incoming<'_>,
+        hb: Heartbeat,
+        out: &mut Outbox,
+    ) -> Delivery {
+        match self.robots.get_mut(&m.header.sender) {
+            Some(r) => {
+                if let Some(echo) = hb.echo {
+                    r.meter.echoed(echo, m.now);
+                }
             }
+            None => self.unknown_robot(m, out),
         }
         Delivery::Consumed
     }
@@ -200,7 +208,7 @@ impl Tables {
     }
 
     /// Closes each robot's step once a second and reports its figures.
-    pub(super) fn roll_links(&mut self, now: Instant, events: &mut Vec<Event>) {
+    pub(super) fn roll_link_quality(&mut self, now: Instant, events: &mut Vec<Event>) {
         for (name, r) in self.robots.iter_mut() {
             if let Some(quality) = r.meter.roll(now) {
                 events.push(Event::LinkQuality {
