@@ -552,13 +552,12 @@ impl RobotConfig {
                 telemetry_rate_hz: Some(hz),
                 ..
             } = &link.get_ref().0
+                && !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0)
             {
-                if !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0) {
-                    return Err((
-                        at(link.span()),
-                        format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
-                    ));
-                }
+                return Err((
+                    at(link.span()),
+                    format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
+                ));
             }
         }
         let f = self.failover;

@@ -330,10 +330,10 @@ pub async fn drive<V: Vehicle>(
                 let now = origin.elapsed();
                 match incoming {
                     Incoming::Bytes(b, link) => {
-                        if let Io::Failover { choice, .. } = &mut io {
-                            if from_router(&b) {
-                                choice.heard(link, now);
-                            }
+                        if let Io::Failover { choice, .. } = &mut io
+                            && from_router(&b)
+                        {
+                            choice.heard(link, now);
                         }
                         vehicle.handle_bytes(&b, now)
                     }
