@@ -8,6 +8,7 @@
 //! - state: [`app`] (App, actions, requests), [`view`] (what the station
 //!   reports, as the screen shows it; shared with the station, which sends
 //!   it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
+//!   [`labels`] (where the map's text goes so nothing overlaps),
 //!   [`columns`] (the fleet table's columns, sorting and filter);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
 //!   [`status`], [`cards`], [`table`] (the fleet table), [`detail`] (one
@@ -25,6 +26,7 @@ pub mod events;
 pub mod fixture;
 pub mod help;
 pub mod keys;
+pub mod labels;
 pub mod layout;
 pub mod map;
 pub mod render;

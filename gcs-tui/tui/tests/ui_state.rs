@@ -505,3 +505,58 @@ fn a_card_shows_the_link_quality() {
         "{text}"
     );
 }
+
+/// The pointer over a robot on the map makes it the hovered one (always
+/// labelled); off it, none.
+#[test]
+fn hovering_a_robot_on_the_map_marks_it() {
+    let mut app = fixture::app(6, 160, 48);
+    let (c, r) = drawn_robot_cell(&app, "robot_4");
+    app.update(Action::Hover { col: c, row: r });
+    assert_eq!(app.hover.as_deref(), Some("robot_4"));
+    let inner = app.areas().map_inner();
+    app.update(Action::Hover {
+        col: inner.x,
+        row: inner.y,
+    });
+    assert_eq!(app.hover, None);
+}
+
+/// A crowded map: its title counts the labels left out, every label the
+/// placer kept is on the screen where it says, and the robot under the
+/// pointer is labelled even in the crowd.
+#[test]
+fn a_crowded_map_counts_its_hidden_labels_and_labels_the_hovered_robot() {
+    use mech_gcs::ui::labels::{Kind, on_map};
+    let mut app = fixture::app(100, 120, 36);
+    let labelled = |t: &mech_gcs::ui::labels::MapText, i: usize| {
+        t.texts.iter().any(|p| p.kind == Kind::Robot(i))
+    };
+    let before = on_map(&app);
+    let unlabelled = (0..100)
+        .find(|&i| !labelled(&before, i))
+        .expect("100 robots at 120x36 leave some unlabelled");
+    app.hover = Some(app.robots[unlabelled].name.clone());
+    let text = on_map(&app);
+    assert!(labelled(&text, unlabelled), "the hovered robot is labelled");
+    assert!(text.hidden > 0);
+    let buf = render(&app);
+    let inner = app.areas().map_inner();
+    let title: String = (inner.x..inner.x + inner.width)
+        .map(|c| buf[(c, inner.y - 1)].symbol().to_string())
+        .collect();
+    assert!(
+        title.contains(&format!("{} labels hidden", text.hidden)),
+        "{title}"
+    );
+    for p in &text.texts {
+        let drawn: String = (0..p.width())
+            .map(|k| {
+                buf[(inner.x + p.col + k, inner.y + p.row)]
+                    .symbol()
+                    .to_string()
+            })
+            .collect();
+        assert_eq!(drawn, p.text, "{p:?} drawn where placed");
+    }
+}
