@@ -1,7 +1,8 @@
 //! The TUI at fleet scale, end to end: `mech-gcs --demo 100` in a detached
 //! tmux session at 120x36 and at 200x50. On the captured map no two labels
 //! run into each other; the fleet table (`v`) lists robots in natural order
-//! and `/robot_9` keeps exactly robot_9 and robot_90..99.
+//! and `/robot_9` keeps exactly robot_9 and robot_90..99; the status bar
+//! says the TUI runs its own station (embedded).
 //!
 //! How a label is read off the captured map (the cells inside the Map
 //! panel's border): a *label* is a maximal run, along a row, of label
@@ -56,8 +57,12 @@ fn start(w: u16, h: u16) -> Tmux {
     let args = ["new-session", "-d", "-s", "gcs", "-x", &ws, "-y", &hs, &cmd];
     let out = tmux.run(&args);
     assert!(out.status.success(), "tmux new-session: {out:?}");
+    // The status bar in full (200 columns) or short (120): either way it
+    // says the TUI runs its own station.
     tmux.wait_for("100 connected robots", Duration::from_secs(90), |s| {
-        s.contains("robots 100 (100 ok") && s.contains("Map")
+        let full = s.contains("robots 100 (100 ok") && s.contains("│ embedded as ");
+        let short = s.contains("│ 100/100 ok") && s.contains("@embedded │");
+        (full || short) && s.contains("Map")
     });
     tmux
 }

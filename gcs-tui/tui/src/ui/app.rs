@@ -334,6 +334,9 @@ pub struct App {
     pub key_channel: String,
     /// Who the station logs this TUI's commands under.
     pub operator: String,
+    /// The station this TUI is attached to (`gcs.sock`, `host:7701`); None
+    /// when it runs its own station (embedded).
+    pub attached: Option<String>,
     pub teleop: Teleop,
     /// Cluster a pad in cluster mode drives (the last one made or selected).
     pub active_cluster: Option<String>,
@@ -381,6 +384,7 @@ impl App {
             key_teleop: KeyTeleop::default(),
             key_channel: KEY_CHANNEL.to_string(),
             operator: String::new(),
+            attached: None,
             teleop: Teleop::new(TeleopConfig::default()),
             active_cluster: None,
             now,
