@@ -49,6 +49,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("arrows, drag", "pan the map (map panel focused)"),
     ("0  z", "fit the fleet in view"),
     (
+        "pointer on a robot",
+        "name it on the map, even where a crowd hides names",
+    ),
+    (
         "Routes: ↑↓ ←→",
         "move the cursor: robot row, channel column",
     ),
