@@ -527,7 +527,8 @@ fn hovering_a_robot_on_the_map_marks_it() {
 /// pointer is labelled even in the crowd.
 #[test]
 fn a_crowded_map_counts_its_hidden_labels_and_labels_the_hovered_robot() {
-    use mech_gcs::ui::labels::{Kind, on_map};
+    use mech_gcs::ui::labels::Kind;
+    use mech_gcs::ui::map::map_text as on_map;
     let mut app = fixture::app(100, 120, 36);
     let labelled = |t: &mech_gcs::ui::labels::MapText, i: usize| {
         t.texts.iter().any(|p| p.kind == Kind::Robot(i))

@@ -278,18 +278,6 @@ fn label_robot(
     }
 }
 
-/// The text of `app`'s map as its panel draws it now (its inner area,
-/// projection and grid step).
-pub fn on_map(app: &App) -> MapText {
-    let inner = app.areas().map_inner();
-    let proj = app.viewport.project(inner.width, inner.height);
-    layout(
-        app,
-        &proj,
-        super::map::grid_step(proj.metres_per_dot * 16.0),
-    )
-}
-
 /// Waypoint flags, cluster names and controller glyphs, where they are
 /// (they may not move): reserved before any label.
 fn fixed_texts(app: &App, proj: &Projection, grid: &mut Grid, out: &mut MapText) {
@@ -435,7 +423,10 @@ mod tests {
     }
 
     fn map_text(app: &App) -> MapText {
-        on_map(app)
+        let inner = app.areas().map_inner();
+        let proj = app.viewport.project(inner.width, inner.height);
+        let step = crate::ui::map::grid_step(proj.metres_per_dot * 16.0);
+        layout(app, &proj, step)
     }
 
     #[test]

@@ -54,6 +54,14 @@ pub fn format_length(m: f64) -> String {
     }
 }
 
+/// The text of `app`'s map as its panel draws it now (its inner area,
+/// projection and grid step): see [`labels`].
+pub fn map_text(app: &App) -> MapText {
+    let inner = app.areas().map_inner();
+    let proj = app.viewport.project(inner.width, inner.height);
+    labels::layout(app, &proj, grid_step(proj.metres_per_dot * 16.0))
+}
+
 /// Dots painted straight from world coordinates through the projection, so
 /// the map and click handling share one mapping.
 struct Dots<'a> {
