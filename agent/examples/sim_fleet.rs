@@ -92,7 +92,7 @@ async fn main() -> std::io::Result<()> {
                         destination: name.clone(),
                         ..Header::default()
                     },
-                    Body::Heartbeat(Heartbeat { uptime_ms: 0 }),
+                    Body::Heartbeat(Heartbeat::new(0)),
                 );
                 if let Ok(bytes) = mech_proto::encode(&hb) {
                     router.send_to(&bytes, *to).await?;

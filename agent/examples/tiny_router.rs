@@ -63,7 +63,7 @@ fn main() -> std::io::Result<()> {
         if now >= next_heartbeat {
             next_heartbeat = now + Duration::from_millis(250);
             for (name, to) in &robots {
-                send(*to, name, Body::Heartbeat(Heartbeat { uptime_ms: 0 }));
+                send(*to, name, Body::Heartbeat(Heartbeat::new(0)));
             }
         }
         if now >= next_report {

@@ -10,8 +10,8 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use mech_proto::{
-    AutopilotRequest, Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope,
-    FailsafeState, Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice,
+    AutopilotRequest, Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Echo,
+    Envelope, FailsafeState, Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice,
     NoticeCode, Route, RouteAck, Telemetry, Twist, Velocity, VelocitySource,
 };
 use nalgebra::{DMatrix, Matrix3, Vector3};
@@ -172,6 +172,10 @@ pub struct Agent {
     stamp_origin_us: u64,
     next_hello: Duration,
     next_heartbeat: Duration,
+    /// The newest router heartbeat not yet echoed: its sequence number and
+    /// when it arrived, so the next heartbeat tells the router which one it
+    /// answers and how long it was held (the router measures the round trip).
+    router_beat: Option<(u32, Duration)>,
     next_telemetry: Duration,
     last_not_routed_notice: Option<Duration>,
     last_driver_fault: Option<Duration>,
@@ -232,6 +236,7 @@ impl Agent {
             stamp_origin_us,
             next_hello: Duration::ZERO,
             next_heartbeat: Duration::ZERO,
+            router_beat: None,
             next_telemetry: Duration::ZERO,
             last_not_routed_notice: None,
             last_driver_fault: None,
@@ -517,6 +522,7 @@ impl Agent {
                 }
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
+            Body::Heartbeat(_) => self.router_beat = Some((seq, now)),
             Body::EStop(e) => self.estop_received(e, now, &mut out),
             Body::Bye(bye) if sender == mech_proto::ROUTER => self.router_left(&bye.reason),
             Body::Autopilot(r) => self.autopilot_received(r, now, &mut out),
@@ -768,7 +774,11 @@ impl Agent {
     fn report(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if now >= self.next_heartbeat {
             self.next_heartbeat = now + self.settings.hello_period;
-            outgoing.push(self.heartbeat(now));
+            let echo = self.router_beat.take().map(|(seq, at)| Echo {
+                seq,
+                held_us: now.saturating_sub(at).as_micros() as u64,
+            });
+            outgoing.push(self.beat(now, echo));
         }
         if now >= self.next_telemetry {
             // Stay on the grid so the rate does not drift with jitter.
@@ -845,12 +855,19 @@ impl Agent {
         u32::try_from(n).unwrap_or(u32::MAX)
     }
 
-    /// A heartbeat: sent every `hello_period`, and by a robot with several
-    /// links on each link it is not using, so the router hears which are
-    /// alive.
+    /// A heartbeat as a robot with several links sends on each link it is
+    /// not using, so the router hears which are alive (no echo: the round
+    /// trip is timed on the link in use).
     pub fn heartbeat(&mut self, now: Duration) -> Envelope {
+        self.beat(now, None)
+    }
+
+    /// A heartbeat, echoing the router's newest one when there is one (the
+    /// periodic heartbeat, every `hello_period`).
+    fn beat(&mut self, now: Duration, echo: Option<Echo>) -> Envelope {
         let hb = Body::Heartbeat(Heartbeat {
             uptime_ms: now.as_millis() as u64,
+            echo,
         });
         self.envelope(mech_proto::ROUTER, hb, now)
     }
@@ -1296,7 +1313,39 @@ mod tests {
     }
 
     fn router_heartbeat(a: &mut Agent, now: Duration) {
-        a.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+        a.handle(msg("", Body::Heartbeat(Heartbeat::new(0))), now);
+    }
+
+    #[test]
+    fn a_heartbeat_echoes_the_newest_router_heartbeat_once() {
+        let mut a = routed("");
+        let echoes = |t: &Tick| -> Vec<Option<Echo>> {
+            t.outgoing
+                .iter()
+                .filter_map(|e| match e.body {
+                    Body::Heartbeat(h) => Some(h.echo),
+                    _ => None,
+                })
+                .collect()
+        };
+        // Registration makes a heartbeat due at once: nothing to echo yet.
+        assert_eq!(echoes(&a.tick(ms(0))), [None]);
+        for (seq, at) in [(40, 300), (41, 550)] {
+            let mut beat = msg("", Body::Heartbeat(Heartbeat::new(0)));
+            beat.header.seq = seq;
+            a.handle(beat, ms(at));
+        }
+        let held = Duration::from_millis(1000 - 550).as_micros() as u64;
+        assert_eq!(
+            echoes(&a.tick(ms(1000))),
+            [Some(Echo {
+                seq: 41,
+                held_us: held
+            })],
+            "the newest, with the time it was held"
+        );
+        a.handle(msg("", route("", 2)), ms(1500)); // the router is still heard
+        assert_eq!(echoes(&a.tick(ms(2000))), [None], "each is echoed once");
     }
 
     #[test]
@@ -1827,7 +1876,7 @@ mod loss_tests {
                 // 40 ms (on the 20 ms control grid), each lost with
                 // probability 0.3.
                 if now.as_millis().is_multiple_of(240) && !rng.random_bool(0.3) {
-                    a.handle(env("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+                    a.handle(env("", Body::Heartbeat(Heartbeat::new(0))), now);
                 }
                 if now < stop_publishing
                     && now.as_millis().is_multiple_of(40)

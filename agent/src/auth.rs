@@ -160,7 +160,7 @@ mod tests {
     fn a_robot_booted_in_1970_syncs_then_takes_only_newer_router_messages() {
         let key = Key::new(&[4; 32]);
         let mut auth = RobotAuth::new(key.clone(), "router");
-        let hb = Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 });
+        let hb = Body::Heartbeat(mech_proto::Heartbeat::new(1));
         let (b, body) = router_msg(&key, hb.clone(), 10);
         assert_eq!(
             auth.check(&b, "router", &body, 5),

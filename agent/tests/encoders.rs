@@ -89,10 +89,7 @@ fn drive(
                 ..Twist::default()
             }));
             sim.handle(message("joy/0", seq, twist), now);
-            sim.handle(
-                message("", seq, Body::Heartbeat(Heartbeat { uptime_ms: 0 })),
-                now,
-            );
+            sim.handle(message("", seq, Body::Heartbeat(Heartbeat::new(0))), now);
         }
         let out = sim.tick(now);
         each(sim, now, out);

@@ -60,12 +60,8 @@ async fn wait_for<R: RouterSide, T>(
     mut want: impl FnMut(&Envelope) -> Option<T>,
 ) -> T {
     for _ in 0..100 {
-        r.send(&from_router(
-            NAME,
-            "",
-            Body::Heartbeat(Heartbeat { uptime_ms: 0 }),
-        ))
-        .await;
+        r.send(&from_router(NAME, "", Body::Heartbeat(Heartbeat::new(0))))
+            .await;
         while let Some(env) = r.recv().await {
             if let Some(t) = want(&env) {
                 return t;

@@ -47,11 +47,39 @@ pub struct Welcome {
 
 /// Liveness, both directions. Agents use router heartbeats to detect a lost
 /// router even while routed to none; the router uses agent heartbeats (and
-/// telemetry) for link state.
+/// telemetry) for link state, and the echo in them for the round-trip time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Heartbeat {
     /// Milliseconds since the sender started.
     pub uptime_ms: u64,
+    /// A robot's heartbeat echoes the newest router heartbeat it received,
+    /// so the router measures the round trip on its own clock. Added to
+    /// version 1 at the end, and left out of the array when absent: a
+    /// heartbeat without an echo is the one-element array it always was,
+    /// and a one-element heartbeat reads as having none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub echo: Option<Echo>,
+}
+
+impl Heartbeat {
+    /// A heartbeat with no echo (what the router sends).
+    pub fn new(uptime_ms: u64) -> Heartbeat {
+        Heartbeat {
+            uptime_ms,
+            echo: None,
+        }
+    }
+}
+
+/// The router heartbeat a robot echoes: which one (its envelope `seq`) and
+/// how long the robot held it before this heartbeat left, which the router
+/// subtracts from the time the echo took to come back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Echo {
+    /// Envelope sequence number of the router heartbeat echoed.
+    pub seq: u32,
+    /// Microseconds between receiving it and sending this heartbeat.
+    pub held_us: u64,
 }
 
 /// Robot pose in the world frame (REP 103): metres and radians, heading

@@ -28,9 +28,9 @@ pub use body::Body;
 pub use body::{
     AutopilotAction, AutopilotRequest, Bye, Channel as ChannelInfo, Channels, ChannelsRequest,
     ClusterCommand, ClusterGoal, ClusterPose, ClusterVelocity, Computation, ControlMode, EStop,
-    EStopAck, FailsafeState, FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello,
-    Level, Mission, MissionAck, MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix,
-    RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity,
+    EStopAck, Echo, FailsafeState, FleetCommand, Formation, FormationKind, Health, Heartbeat,
+    Hello, Level, Mission, MissionAck, MissionProgress, Notice, NoticeCode, Offset, Pose,
+    PositionFix, RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity,
     VelocitySource, Waypoint, Welcome,
 };
 pub use command::{

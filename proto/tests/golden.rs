@@ -2,7 +2,7 @@
 //! every byte explained. A change here is a change of the wire protocol.
 
 use mech_proto::framing::{SerialDecoder, StreamDecoder, write_serial_frame, write_stream_frame};
-use mech_proto::{Body, Command, Envelope, Header, Heartbeat, Route, Twist, decode, encode};
+use mech_proto::{Body, Command, Echo, Envelope, Header, Heartbeat, Route, Twist, decode, encode};
 
 fn header(sender: &str, destination: &str, channel: &str) -> Header {
     Header {
@@ -17,7 +17,7 @@ fn header(sender: &str, destination: &str, channel: &str) -> Header {
 fn heartbeat() -> Envelope {
     Envelope::new(
         header("robot_1", "router", ""),
-        Body::Heartbeat(Heartbeat { uptime_ms: 1500 }),
+        Body::Heartbeat(Heartbeat::new(1500)),
     )
 }
 
@@ -34,6 +34,38 @@ const HEARTBEAT: &[u8] = &[
     0x91,                                     // body: fixarray, 1 field
     0xcd, 0x05, 0xdc,                         //   uptime_ms: uint16 1500
     0xc0,                                     // auth: nil (unsigned)
+];
+
+/// A robot's heartbeat echoing router heartbeat 300, held 20 ms.
+fn heartbeat_with_echo() -> Envelope {
+    Envelope::new(
+        header("robot_1", "router", ""),
+        Body::Heartbeat(Heartbeat {
+            uptime_ms: 1500,
+            echo: Some(Echo {
+                seq: 300,
+                held_us: 20_000,
+            }),
+        }),
+    )
+}
+
+#[rustfmt::skip]
+const HEARTBEAT_WITH_ECHO: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x03,                                     // kind 3 = Heartbeat
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // sender "robot_1"
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // destination "router"
+    0xa0,                                     // channel ""
+    0x92,                                     // body: fixarray, 2 fields
+    0xcd, 0x05, 0xdc,                         //   uptime_ms 1500
+    0x92,                                     //   echo: fixarray, 2 fields
+    0xcd, 0x01, 0x2c,                         //     seq: uint16 300
+    0xcd, 0x4e, 0x20,                         //     held_us: uint16 20_000
+    0xc0,                                     // auth: nil
 ];
 
 fn twist() -> Envelope {
@@ -101,6 +133,7 @@ fn golden_messages_decode_to_fixtures() {
     assert_eq!(decode(HEARTBEAT), Ok(heartbeat()));
     assert_eq!(decode(TWIST), Ok(twist()));
     assert_eq!(decode(ROUTE), Ok(route()));
+    assert_eq!(decode(HEARTBEAT_WITH_ECHO), Ok(heartbeat_with_echo()));
 }
 
 #[test]
@@ -108,6 +141,23 @@ fn fixtures_encode_to_golden_messages() {
     assert_eq!(encode(&heartbeat()).as_deref(), Ok(HEARTBEAT));
     assert_eq!(encode(&twist()).as_deref(), Ok(TWIST));
     assert_eq!(encode(&route()).as_deref(), Ok(ROUTE));
+    assert_eq!(
+        encode(&heartbeat_with_echo()).as_deref(),
+        Ok(HEARTBEAT_WITH_ECHO)
+    );
+}
+
+/// The echo was added at the end of the heartbeat: a heartbeat without one
+/// is byte for byte what it was before (so a robot that does not know the
+/// echo still reads the router's), and the old one-element heartbeat reads
+/// as having no echo.
+#[test]
+fn a_heartbeat_without_an_echo_keeps_its_old_bytes() {
+    let Body::Heartbeat(hb) = heartbeat().body else {
+        unreachable!("the fixture is a heartbeat")
+    };
+    assert_eq!(hb.echo, None);
+    assert_eq!(HEARTBEAT[HEARTBEAT.len() - 5], 0x91, "one field");
 }
 
 #[test]

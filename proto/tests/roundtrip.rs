@@ -275,7 +275,14 @@ fn body() -> impl Strategy<Value = Body> {
     prop_oneof![
         hello,
         welcome,
-        any::<u64>().prop_map(|uptime_ms| Body::Heartbeat(Heartbeat { uptime_ms })),
+        (
+            any::<u64>(),
+            proptest::option::of((any::<u32>(), any::<u64>()))
+        )
+            .prop_map(|(uptime_ms, echo)| Body::Heartbeat(Heartbeat {
+                uptime_ms,
+                echo: echo.map(|(seq, held_us)| Echo { seq, held_us }),
+            })),
         telemetry,
         command().prop_map(Body::Command),
         fleet,

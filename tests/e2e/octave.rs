@@ -61,7 +61,7 @@ fn the_matlab_golden_messages_are_what_mech_proto_writes() {
             "heartbeat",
             Envelope::new(
                 at("robot_1", "router", "", 7, 1_000_000),
-                Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1500 }),
+                Body::Heartbeat(mech_proto::Heartbeat::new(1500)),
             ),
         ),
         (

@@ -134,9 +134,9 @@ impl Service {
         ]);
         assert!(out.status.success(), "tmux new-session: {out:?}");
         tmux.wait_for(
-            "both robots on the attached TUI",
+            "both robots on the attached TUI, which says it is attached",
             Duration::from_secs(20),
-            |s| s.contains("robots 2 (2 ok"),
+            |s| s.contains("robots 2 (2 ok") && s.contains("│ attached "),
         );
         tmux
     }

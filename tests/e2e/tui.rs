@@ -47,9 +47,10 @@ fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
     });
     let (x, y) = card_position(&screen, "robot_1").expect("robot_1 pose on its card");
 
-    // Mouse: an SGR click on robot_2's card (second card, 1-based row 6)
-    // selects it.
-    tmux.literal("\x1b[<0;6;6M\x1b[<0;6;6m");
+    // Mouse: an SGR click on robot_2's card (second card: four-line cards
+    // under the status bar and the panel's border, 1-based row 7) selects
+    // it.
+    tmux.literal("\x1b[<0;6;7M\x1b[<0;6;7m");
     tmux.wait_for("robot_2 selected by a click", Duration::from_secs(5), |s| {
         s.contains("▶robot_2") && s.contains("sel 1")
     });

@@ -356,9 +356,7 @@ mod tests {
         );
         // Channel silent: zero-velocity hold, streamed every period.
         for t in [600u32, 620, 640] {
-            let hb = mech_proto::Heartbeat {
-                uptime_ms: u64::from(t),
-            };
+            let hb = mech_proto::Heartbeat::new(u64::from(t));
             v.handle(msg("", Body::Heartbeat(hb)), t * MS);
             px4(&mut v, true);
             v.tick(t * MS);

@@ -183,9 +183,7 @@ mod tests {
                     sender: "r".into(),
                     ..Header::default()
                 },
-                Body::Heartbeat(Heartbeat {
-                    uptime_ms: n as u64,
-                }),
+                Body::Heartbeat(Heartbeat::new(n as u64)),
             )
         };
         let mut tx = SerialLink::new(Vec::new());

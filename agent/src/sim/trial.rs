@@ -159,7 +159,7 @@ impl Trial {
         while now < self.timeout {
             now += self.control_period;
             if now >= next_heartbeat {
-                sim.handle(msg("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
+                sim.handle(msg("", Body::Heartbeat(Heartbeat::new(0))), now);
                 next_heartbeat = now + Duration::from_millis(250);
             }
             sim.tick(now);

@@ -1,6 +1,7 @@
 //! A recording printed as the JSON lines of `--script` (`mech-gcs replay
 //! FILE --script`), for analysis with the same tools: one `event` line per
-//! station event (telemetry left out, as `--script` does; the router's
+//! station event (the periodic telemetry and link quality left out, as
+//! `--script` does; the router's
 //! binding from the file's snapshot first), one `result` line per operator
 //! command, and a closing `summary`. Nothing is sent anywhere: this reads
 //! the file only.
@@ -14,7 +15,11 @@ use mech_core::{Event, Stamped};
 /// The line `--script` would print for `entry`, if any.
 pub fn entry_json(entry: &Entry) -> Option<Value> {
     match entry {
-        Entry::Event(s) if matches!(s.event, Event::Telemetry { .. }) => None,
+        Entry::Event(s)
+            if matches!(s.event, Event::Telemetry { .. } | Event::LinkQuality { .. }) =>
+        {
+            None
+        }
         Entry::Event(s) => Some(event_json(s)),
         Entry::Snapshot(
             s @ Stamped {

@@ -83,6 +83,10 @@ pub fn event_json(s: &Stamped) -> Value {
         } => json!({
             "robot": robot, "x": t.pose.x, "y": t.pose.y, "heading": t.pose.heading, "channel": t.channel,
         }),
+        Event::LinkQuality { robot, quality: q } => json!({
+            "robot": robot, "rx_hz": q.rx_hz, "tx_hz": q.tx_hz, "loss": q.loss,
+            "rtt_ms": q.rtt.map(|d| d.as_secs_f64() * 1e3),
+        }),
         Event::RouteChanged {
             robot,
             channel,

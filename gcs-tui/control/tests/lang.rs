@@ -123,6 +123,42 @@ async fn commands_refuse_what_cannot_work_and_point_at_the_argument() {
     gcs.shutdown().await;
 }
 
+/// Robots in natural order (robot_2 before robot_10), each with the link
+/// the router measured from the gaps in its sequence numbers.
+#[tokio::test]
+async fn status_lists_robots_naturally_with_their_link_quality() {
+    let (gcs, mut exec, mut robot_1) = setup().await;
+    let mut robots = Vec::new();
+    for name in ["robot_10", "robot_2"] {
+        let mut r = Peer::new(name, gcs.router().udp_addr()).await;
+        r.register().await;
+        robots.push(r);
+    }
+    let robot_10 = &mut robots[0];
+    for k in 0..5 {
+        let hb = Body::Heartbeat(mech_proto::Heartbeat::new(k));
+        let bytes = robot_10.encode("router", "", 10 + 2 * k as u32, hb);
+        robot_10.send_raw(&bytes).await;
+    }
+    robot_1
+        .send("router", "", Body::Heartbeat(mech_proto::Heartbeat::new(1)))
+        .await;
+    tokio::time::sleep(Duration::from_millis(1300)).await;
+    let out = exec.execute_line("status").await.unwrap();
+    let names: Vec<&str> = out
+        .details
+        .iter()
+        .map(|l| l.split(' ').next().unwrap())
+        .collect();
+    assert_eq!(names, ["robot_1", "robot_2", "robot_10"]);
+    assert!(out.details[0].contains(" link rx "), "{:?}", out.details);
+    assert!(out.details[0].contains("loss 0.0%"), "{:?}", out.details);
+    // robot_10 sent its Hello (1) and route acknowledgement (2), then
+    // heartbeats 10, 12, ... 18: 7 of 18 arrived.
+    assert!(out.details[2].contains("loss 61.1%"), "{:?}", out.details);
+    gcs.shutdown().await;
+}
+
 #[tokio::test]
 async fn send_delivers_the_waypoint_list_as_a_mission() {
     let (gcs, mut exec, robot) = setup().await;

@@ -1,7 +1,7 @@
 //! Traffic counters: per robot, per channel and router-wide, with drops by
-//! reason, and the live-channel listing. Updated on the routing path under
-//! the router's table lock (plain integer increments) and copied out for the
-//! fleet model, displays and `--script`.
+//! reason, each robot's link quality, and the live-channel listing. Updated
+//! on the routing path under the router's table lock (plain integer
+//! increments) and copied out for the fleet model, displays and `--script`.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -167,6 +167,67 @@ pub struct Traffic {
     pub received: u64,
     pub forwarded: u64,
     pub dropped: Drops,
+}
+
+/// How well the link to one robot works, as the router measures it over
+/// its last few seconds (`docs/protocol.md`, *Link quality*): the 2017
+/// thesis's "usable packets" figure, live.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct LinkQuality {
+    /// Messages per second received from the robot.
+    pub rx_hz: f64,
+    /// Messages per second the router sent the robot (commands forwarded
+    /// to it, and the router's own heartbeats, routes, missions...).
+    pub tx_hz: f64,
+    /// Fraction, in `[0, 1]`, of the robot's messages that did not reach
+    /// the router, from the gaps in their sequence numbers; `None` when the
+    /// robot sent nothing in the window.
+    pub loss: Option<f64>,
+    /// Mean round-trip time of the robot's heartbeat echoes in the window;
+    /// `None` without one (an agent that does not echo, or all echoes lost).
+    pub rtt: Option<Duration>,
+    /// The time these figures cover (up to the last five seconds).
+    pub window: Duration,
+    /// Since the robot registered: messages received from it.
+    pub received: u64,
+    /// Since the robot registered: messages sent to it.
+    pub sent: u64,
+    /// Since the robot registered: its messages lost on the way.
+    pub lost: u64,
+}
+
+impl LinkQuality {
+    /// Whether anything has been measured yet.
+    pub fn measured(&self) -> bool {
+        !self.window.is_zero()
+    }
+
+    /// Loss as a percentage with one decimal (`19.8%`), `–` unknown.
+    pub fn loss_text(&self) -> String {
+        match self.loss {
+            Some(l) => format!("{:.1}%", l * 100.0),
+            None => "–".into(),
+        }
+    }
+
+    /// Round-trip time in milliseconds, to three significant figures at
+    /// most (`0.42ms`, `12.5ms`, `230ms`), `–` unknown.
+    pub fn rtt_text(&self) -> String {
+        match self.rtt {
+            Some(d) => {
+                let ms = d.as_secs_f64() * 1e3;
+                if ms < 10.0 {
+                    format!("{ms:.2}ms")
+                } else if ms < 100.0 {
+                    format!("{ms:.1}ms")
+                } else {
+                    format!("{ms:.0}ms")
+                }
+            }
+            None => "–".into(),
+        }
+    }
 }
 
 /// Every counter of the router.

@@ -11,7 +11,7 @@ use std::time::Duration;
 use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
 use serde::{Deserialize, Serialize};
 
-use crate::counters::RejectReason;
+use crate::counters::{LinkQuality, RejectReason};
 
 /// How recently the router heard from a robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -145,6 +145,9 @@ pub enum Event {
     Link { robot: String, state: LinkState },
     /// A robot sent telemetry.
     Telemetry { robot: String, telemetry: Telemetry },
+    /// A robot's link quality over the last seconds, once a second. Like
+    /// telemetry, it reaches only subscribers that asked for telemetry.
+    LinkQuality { robot: String, quality: LinkQuality },
     /// The routing table changed; the robot has not acknowledged yet.
     RouteChanged {
         robot: String,
@@ -223,6 +226,7 @@ impl Event {
             Event::Link { .. } => "link",
             Event::Links { .. } => "links",
             Event::Telemetry { .. } => "telemetry",
+            Event::LinkQuality { .. } => "link_quality",
             Event::RouteChanged { .. } => "route_changed",
             Event::RouteAcked { .. } => "route_acked",
             Event::MissionSent { .. } => "mission_sent",

@@ -180,6 +180,11 @@ impl Fleet {
             Event::Link { robot, state } => self.link(robot, *state),
             Event::Links { robot, links } => self.links(robot, links),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
+            Event::LinkQuality { robot, quality } => {
+                if let Some(r) = self.robots.get_mut(robot) {
+                    r.quality = *quality;
+                }
+            }
             Event::RouteChanged {
                 robot,
                 channel,
@@ -709,6 +714,28 @@ mod tests {
             !f.robot("robot_1").unwrap().arrived(),
             "an older mission finishing is not arrival"
         );
+    }
+
+    #[test]
+    fn link_quality_is_kept_per_robot() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let lines = f.log.len();
+        let quality = crate::counters::LinkQuality {
+            rx_hz: 16.0,
+            loss: Some(0.2),
+            window: Duration::from_secs(5),
+            ..Default::default()
+        };
+        f.apply(&at(
+            1000,
+            Event::LinkQuality {
+                robot: "robot_1".into(),
+                quality,
+            },
+        ));
+        assert_eq!(f.robot("robot_1").unwrap().quality, quality);
+        assert_eq!(f.log.len(), lines, "a periodic report logs nothing");
     }
 
     #[test]

@@ -7,6 +7,8 @@
 //!   configuration section shares;
 //! - [`auth`]: keys, roles and the `[auth]` section of the authenticated
 //!   control plane;
+//! - [`names`]: robot names as an operator reads them (the number a name
+//!   ends with, natural order);
 //! - [`event`]: what the station saw happen, and the [`EventSink`] the
 //!   router delivers it to;
 //! - [`counters`]: traffic counters and live channels;
@@ -26,6 +28,7 @@ pub mod config;
 pub mod counters;
 pub mod event;
 pub mod fleet;
+pub mod names;
 pub mod record;
 pub mod replay;
 pub mod router;
@@ -33,7 +36,7 @@ pub mod station;
 pub mod sync;
 
 pub use config::ConfigError;
-pub use counters::{ChannelStatus, Counters, DropReason, Drops, Traffic};
+pub use counters::{ChannelStatus, Counters, DropReason, Drops, LinkQuality, Traffic};
 pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 pub use fleet::{Fleet, FleetConfig};
 pub use record::{RecordConfig, RecordTarget, RecordingStatus};

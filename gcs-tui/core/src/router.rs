@@ -756,7 +756,7 @@ impl RouterHandle {
 
     /// A subscription to router events. With `telemetry` it also gets every
     /// telemetry event (at the fleet's telemetry rate: size `capacity`
-    /// accordingly). A full queue drops this subscriber's events only.
+    /// accordingly) and each robot's link quality once a second. A full queue drops this subscriber's events only.
     pub fn subscribe(&self, capacity: usize, telemetry: bool) -> Subscription {
         self.shared.bus.subscribe(capacity, telemetry)
     }

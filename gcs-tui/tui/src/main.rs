@@ -284,6 +284,7 @@ async fn run_tui(config: GcsConfig, cli: &Cli) -> anyhow::Result<()> {
         match attach(&addr, opts.clone()).await {
             Ok(attached) => {
                 tracing::info!(station = %addr, "attached");
+                options.attached = Some(addr.short());
                 return mech_gcs::ui::run(attached, options)
                     .await
                     .context("terminal error");

@@ -7,35 +7,44 @@
 //!
 //! - state: [`app`] (App, actions, requests), [`view`] (what the station
 //!   reports, as the screen shows it; shared with the station, which sends
-//!   it), [`layout`] (where each panel goes) and [`viewport`] (map
-//!   geometry);
+//!   it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
+//!   [`labels`] (where the map's text goes so nothing overlaps),
+//!   [`columns`] (the fleet table's columns, sorting and filter);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
-//!   [`status`], [`cards`], [`map`], [`waypoints`], [`routes`], [`events`]
-//!   and [`help`], styled by [`theme`];
+//!   [`status`], [`cards`], [`table`] (the fleet table), [`detail`] (one
+//!   robot), [`map`], [`waypoints`], [`routes`], [`events`] and [`help`],
+//!   styled by [`theme`];
 //! - input and I/O: [`keys`] (terminal events into actions) and [`station`]
 //!   (the event loop, and requests carried to the station);
 //! - [`fixture`]: fixed fleets for snapshots, benchmarks and tests.
 
 pub mod app;
 pub mod cards;
+pub mod columns;
+pub mod detail;
 pub mod events;
 pub mod fixture;
 pub mod help;
 pub mod keys;
+pub mod labels;
 pub mod layout;
 pub mod map;
 pub mod render;
 pub mod routes;
 pub mod station;
 pub mod status;
+pub mod table;
 pub mod theme;
 pub mod viewport;
 pub mod waypoints;
 
 pub use crate::view;
-pub use app::{Action, App, Focus, LogLevel, Prompt, PromptError, Request, Select};
+pub use app::{
+    Action, App, Focus, LogLevel, Prompt, PromptError, Request, RobotsView, Select, TableState,
+};
+pub use columns::Column;
 pub use station::{RunOptions, StationLink, run};
 pub use view::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkState,
-    RobotView, RouteView, SlotView,
+    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
+    LinkState, RobotView, RouteView, SlotView,
 };

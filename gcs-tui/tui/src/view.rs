@@ -11,6 +11,9 @@ use mech_proto::{
 };
 use serde::{Deserialize, Serialize};
 
+/// Rates each way, loss and round trip of a robot's link, as the router
+/// measures them (the core's type, copied).
+pub use mech_core::LinkQuality;
 /// Link to a robot as the router judges it from its timeouts (the core's
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
@@ -66,6 +69,10 @@ pub struct RobotView {
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
     pub trail: Vec<(f64, f64)>,
+    /// The link as the router measures it (absent from an older
+    /// station's snapshot: not measured).
+    #[serde(default)]
+    pub quality: LinkQuality,
 }
 
 impl RobotView {
@@ -105,6 +112,7 @@ impl RobotView {
             battery: None,
             mission: None,
             trail: Vec::new(),
+            quality: LinkQuality::default(),
         }
     }
 }

@@ -171,3 +171,47 @@ fn cluster_slots_and_tracking_errors_160x48() {
     assert!(text.contains('◇') && text.contains('⊕'), "{text}");
     insta::assert_snapshot!(text);
 }
+
+/// The fleet table in place of the cards and the map: every column at
+/// 200x50, sorted by loss (worst first), robot_3 under the cursor.
+#[test]
+fn fleet_table_200x50() {
+    let mut app = fixture::app(30, 200, 50);
+    app.update(Action::ToggleTable);
+    app.update(Action::SortBy(mech_gcs::ui::Column::Loss));
+    app.update(Action::SortReverse);
+    app.update(Action::Select(Select::Only("robot_3".into())));
+    insta::assert_snapshot!(screen(&app, 200, 50));
+}
+
+/// At 120x36 the columns that matter most stay; filtered by `/robot_1`.
+#[test]
+fn fleet_table_filtered_120x36() {
+    let mut app = fixture::app(30, 120, 36);
+    app.update(Action::OpenFilter);
+    for ch in "robot_1".chars() {
+        app.update(Action::PromptChar(ch));
+    }
+    insta::assert_snapshot!(screen(&app, 120, 36));
+}
+
+/// One robot in detail: its card, link and counters, and its events.
+#[test]
+fn robot_detail_120x36() {
+    let mut app = fixture::app(6, 120, 36);
+    app.update(Action::Log(
+        mech_gcs::ui::LogLevel::Warn,
+        "robot_4 link lost".into(),
+    ));
+    app.update(Action::ToggleTable);
+    app.update(Action::Select(Select::Only("robot_4".into())));
+    app.update(Action::ToggleDetail);
+    insta::assert_snapshot!(screen(&app, 120, 36));
+}
+
+#[test]
+fn fleet_table_80x24() {
+    let mut app = fixture::app(30, 80, 24);
+    app.update(Action::ToggleTable);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}

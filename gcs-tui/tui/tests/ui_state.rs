@@ -65,10 +65,10 @@ fn clicking_a_robot_selects_it_and_shift_click_adds() {
 fn clicking_a_card_selects_its_robot() {
     let mut app = fixture::app(6, 80, 24);
     let cards = app.areas().cards.expect("cards shown");
-    // Third card: rows 1 + 2*3 inside the border.
+    // Third card: two cards down inside the border.
     app.update(Action::Click {
         col: cards.x + 3,
-        row: cards.y + 1 + 2 * 3,
+        row: cards.y + 1 + 2 * mech_gcs::ui::layout::CARD_HEIGHT as u16,
         add: false,
     });
     assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
@@ -505,4 +505,97 @@ fn a_waypoint_past_the_limit_is_refused_with_a_message() {
         "{:?}",
         app.log.back()
     );
+}
+/// The core lists robots as text (robot_1, robot_10, robot_2); the screen
+/// shows them in natural order, and next/previous follow it.
+#[test]
+fn robots_are_listed_in_natural_name_order() {
+    let mut snap = fixture::fleet(12);
+    snap.robots.sort_by(|a, b| a.name.cmp(&b.name));
+    assert_eq!(snap.robots[2].name, "robot_11", "text order");
+    let mut app = fixture::app(0, 160, 48);
+    app.update(Action::Fleet(snap));
+    let names: Vec<&str> = app.robots.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names[..3], ["robot_1", "robot_2", "robot_3"]);
+    assert_eq!(names[11], "robot_12");
+    app.update(Action::Select(Select::Only("robot_9".into())));
+    app.update(Action::Select(Select::Next));
+    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_10"]);
+}
+
+/// A card's last line is the link as the router measures it.
+#[test]
+fn a_card_shows_the_link_quality() {
+    let app = fixture::app(3, 160, 48);
+    let buf = render(&app);
+    let cards = app.areas().cards.expect("cards shown");
+    let text: String = (cards.y..cards.y + cards.height)
+        .map(|row| {
+            (cards.x..cards.x + cards.width)
+                .map(|col| buf[(col, row)].symbol())
+                .collect::<String>()
+                + "\n"
+        })
+        .collect();
+    // robot_2: rx 20/s, tx 14/s, loss 6.0 %, rtt 1.0 ms (the fixture).
+    assert!(
+        text.contains("rx 20/s tx 14/s loss 6.0% rtt 1.00ms"),
+        "{text}"
+    );
+}
+
+/// The pointer over a robot on the map makes it the hovered one (always
+/// labelled); off it, none.
+#[test]
+fn hovering_a_robot_on_the_map_marks_it() {
+    let mut app = fixture::app(6, 160, 48);
+    let (c, r) = drawn_robot_cell(&app, "robot_4");
+    app.update(Action::Hover { col: c, row: r });
+    assert_eq!(app.hover.as_deref(), Some("robot_4"));
+    let inner = app.areas().map_inner();
+    app.update(Action::Hover {
+        col: inner.x,
+        row: inner.y,
+    });
+    assert_eq!(app.hover, None);
+}
+
+/// A crowded map: its title counts the labels left out, every label the
+/// placer kept is on the screen where it says, and the robot under the
+/// pointer is labelled even in the crowd.
+#[test]
+fn a_crowded_map_counts_its_hidden_labels_and_labels_the_hovered_robot() {
+    use mech_gcs::ui::labels::Kind;
+    use mech_gcs::ui::map::map_text as on_map;
+    let mut app = fixture::app(100, 120, 36);
+    let labelled = |t: &mech_gcs::ui::labels::MapText, i: usize| {
+        t.texts.iter().any(|p| p.kind == Kind::Robot(i))
+    };
+    let before = on_map(&app);
+    let unlabelled = (0..100)
+        .find(|&i| !labelled(&before, i))
+        .expect("100 robots at 120x36 leave some unlabelled");
+    app.hover = Some(app.robots[unlabelled].name.clone());
+    let text = on_map(&app);
+    assert!(labelled(&text, unlabelled), "the hovered robot is labelled");
+    assert!(text.hidden > 0);
+    let buf = render(&app);
+    let inner = app.areas().map_inner();
+    let title: String = (inner.x..inner.x + inner.width)
+        .map(|c| buf[(c, inner.y - 1)].symbol().to_string())
+        .collect();
+    assert!(
+        title.contains(&format!("{} labels hidden", text.hidden)),
+        "{title}"
+    );
+    for p in &text.texts {
+        let drawn: String = (0..p.width())
+            .map(|k| {
+                buf[(inner.x + p.col + k, inner.y + p.row)]
+                    .symbol()
+                    .to_string()
+            })
+            .collect();
+        assert_eq!(drawn, p.text, "{p:?} drawn where placed");
+    }
 }

@@ -167,9 +167,7 @@ impl Bench {
                     self.to(
                         &n,
                         "",
-                        Body::Heartbeat(Heartbeat {
-                            uptime_ms: now.as_millis() as u64,
-                        }),
+                        Body::Heartbeat(Heartbeat::new(now.as_millis() as u64)),
                     );
                 }
             }

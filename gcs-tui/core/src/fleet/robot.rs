@@ -10,7 +10,7 @@ use mech_proto::{
     VelocitySource, Waypoint,
 };
 
-use crate::counters::Traffic;
+use crate::counters::{LinkQuality, Traffic};
 use crate::event::{LinkAddr, LinkState, RobotLinks};
 
 /// A robot's entry in the routing table, as the GCS knows it.
@@ -127,6 +127,9 @@ pub struct Robot {
     pub estop_ack: Option<(bool, u32)>,
     /// Messages the robot reports it ignored as stale (telemetry).
     pub stale: u32,
+    /// Rates each way, loss and round trip, as the router last measured
+    /// them (once a second).
+    pub quality: LinkQuality,
     /// Whether `velocity` was measured by wheel encoders or follows from
     /// the commanded outputs (telemetry).
     pub velocity_source: VelocitySource,
@@ -168,6 +171,7 @@ impl Robot {
             traffic: Traffic::default(),
             estop_ack: None,
             stale: 0,
+            quality: LinkQuality::default(),
             velocity_source: VelocitySource::Commanded,
             fault: None,
         }

@@ -95,10 +95,15 @@ impl EventBus {
             event,
         });
         self.sink.apply(&stamped);
-        let is_telemetry = matches!(stamped.event, Event::Telemetry { .. });
+        // Periodic reports, per robot many times a second or every second:
+        // only for subscribers that asked for them.
+        let periodic = matches!(
+            stamped.event,
+            Event::Telemetry { .. } | Event::LinkQuality { .. }
+        );
         let mut subs = lock(&self.subscribers);
         subs.retain(|s| {
-            if is_telemetry && !s.telemetry {
+            if periodic && !s.telemetry {
                 return true;
             }
             match s.tx.try_send(stamped.clone()) {
@@ -117,5 +122,37 @@ impl EventBus {
     /// Closes every subscription (after shutdown, `recv` returns `None`).
     pub(crate) fn close(&self) {
         lock(&self.subscribers).clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::counters::LinkQuality;
+
+    #[derive(Debug)]
+    struct Nowhere;
+
+    impl EventSink for Nowhere {
+        fn apply(&self, _: &Stamped) {}
+    }
+
+    #[tokio::test]
+    async fn periodic_reports_reach_only_subscribers_that_asked_for_them() {
+        let bus = EventBus::new(Instant::now(), Arc::new(Nowhere));
+        let mut plain = bus.subscribe(8, false);
+        let mut all = bus.subscribe(8, true);
+        bus.emit(Event::LinkQuality {
+            robot: "robot_1".into(),
+            quality: LinkQuality::default(),
+        });
+        bus.emit(Event::Bye {
+            robot: "robot_1".into(),
+            reason: "done".into(),
+        });
+        let name = |s: &mut Subscription| s.try_recv().map(|e| e.event.name());
+        assert_eq!(name(&mut plain), Some("bye"));
+        assert_eq!(name(&mut all), Some("link_quality"));
+        assert_eq!(name(&mut all), Some("bye"));
     }
 }

@@ -294,7 +294,7 @@ mod tests {
     #[test]
     fn estops_go_first_then_commands_then_heartbeats_and_the_newest_command_wins() {
         let q = RadioQueue::default();
-        q.push(&msg("r1", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        q.push(&msg("r1", "", Body::Heartbeat(Heartbeat::new(1))));
         q.push(&msg("r1", "joy/0", twist(0.1)));
         q.push(&msg("r2", "joy/0", twist(0.2)));
         q.push(&msg("r1", "joy/0", twist(0.3)));
@@ -322,13 +322,13 @@ mod tests {
         let q = RadioQueue::default();
         for i in 0..QUEUE_LIMIT {
             let dest = format!("r{i}");
-            q.push(&msg(&dest, "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+            q.push(&msg(&dest, "", Body::Heartbeat(Heartbeat::new(1))));
         }
         q.push(&msg("x", "joy/0", twist(0.1)));
         assert_eq!(q.len(), QUEUE_LIMIT);
         assert_eq!(next(&q).body, twist(0.1), "the command made room");
-        q.push(&msg("y", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
-        q.push(&msg("z", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        q.push(&msg("y", "", Body::Heartbeat(Heartbeat::new(1))));
+        q.push(&msg("z", "", Body::Heartbeat(Heartbeat::new(1))));
         assert_eq!(q.len(), QUEUE_LIMIT);
         assert_eq!(q.counters.dropped.load(Ordering::Relaxed), 1);
         q.push(&[0x99]);

@@ -13,8 +13,9 @@
 //! commands: the hot path), [`routes`] (route changes and acks),
 //! [`missions`], [`estop`] and [`telemetry`] (telemetry, subscriptions,
 //! position fixes, channel discovery, notices), [`autopilot`] (operators'
-//! requests to a robot's autopilot). [`Tables::tick`] runs each
-//! concern's timers.
+//! requests to a robot's autopilot), [`links`] (a robot's links and
+//! failover) and [`link_quality`] (each robot's measured link quality).
+//! [`Tables::tick`] runs each concern's timers.
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 
@@ -22,6 +23,7 @@ mod autopilot;
 mod commands;
 mod estop;
 mod gate;
+mod link_quality;
 mod links;
 mod missions;
 mod registration;
@@ -107,6 +109,8 @@ struct RobotEntry {
     route_sent: Instant,
     heartbeat_sent: Instant,
     traffic: Traffic,
+    /// Rates each way, loss and round trip (see [`link_quality`]).
+    meter: link_quality::LinkMeter,
 }
 
 #[derive(Debug)]
@@ -144,7 +148,6 @@ struct EStopRun {
 pub(crate) struct Tables {
     config: RouterConfig,
     robots: HashMap<String, RobotEntry>,
-    next_id: u16,
     channels: HashMap<String, ChannelEntry>,
     /// Last address of each controller or tool, by sender name, for replies.
     peers: HashMap<String, Peer>,
@@ -172,6 +175,8 @@ pub(crate) struct Tables {
     reject_logged: HashMap<String, Instant>,
     /// When each key's last time request was answered.
     time_answers: HashMap<u32, Instant>,
+    /// When the router started, for the uptime in its heartbeats.
+    started: Instant,
     /// The recorder's tap, while recording.
     pub(super) tap: Option<Tap>,
     /// Why the message being decided was refused or unreadable, kept for
@@ -205,7 +210,6 @@ impl Tables {
         Tables {
             config,
             robots: HashMap::new(),
-            next_id: 1,
             channels: HashMap::new(),
             peers: HashMap::new(),
             subscribers: HashMap::new(),
@@ -224,13 +228,15 @@ impl Tables {
             rejected: Rejections::default(),
             reject_logged: HashMap::new(),
             time_answers: HashMap::new(),
+            started: Instant::now(),
             tap: None,
             refusal: None,
             unknown_told: HashMap::new(),
         }
     }
 
-    /// Encodes a message from the router itself.
+    /// Encodes a message from the router itself, counted as sent to
+    /// `destination` when that is a robot.
     fn make(&mut self, destination: &str, body: Body) -> Option<Vec<u8>> {
         self.seq = self.seq.wrapping_add(1);
         let header = Header {
@@ -243,7 +249,11 @@ impl Tables {
         match mech_proto::encode(&Envelope::new(header, body)) {
             Ok(mut b) => {
                 b.pop(); // the nil auth element: signed for the receiver
-                self.seal(&b, destination)
+                let sealed = self.seal(&b, destination);
+                if sealed.is_some() {
+                    self.count_sent(destination);
+                }
+                sealed
             }
             Err(e) => {
                 warn!(error = %e, destination, "router could not encode its own message");
@@ -352,7 +362,7 @@ impl Tables {
             return self.answer_time(request, tag, sender, from, now, out);
         }
         if matches!(from, Peer::Udp(_) | Peer::Serial(_)) {
-            self.seen_robot(sender, from, now, events);
+            self.seen_robot(sender, env.header.seq, from, now, events);
         }
         let m = Incoming {
             header: &env.header,
@@ -373,12 +383,7 @@ impl Tables {
     ) -> Delivery {
         match body {
             Body::Hello(hello) => self.on_hello(m, hello, out, events),
-            Body::Heartbeat(_) => {
-                if !self.robots.contains_key(&m.header.sender) {
-                    self.unknown_robot(m, out);
-                }
-                Delivery::Consumed
-            }
+            Body::Heartbeat(hb) => self.on_heartbeat(m, hb, out),
             Body::Telemetry(t) => self.on_telemetry(m, t, out, events),
             Body::FleetCommand(fc) => self.on_fleet_command(m, fc, out, events),
             Body::Mission(mission) => self.on_mission(m, mission, out, events),
@@ -409,6 +414,7 @@ impl Tables {
     pub(crate) fn tick(&mut self, now: Instant, out: &mut Outbox, events: &mut Vec<Event>) {
         self.update_links(now, events);
         self.report_links(now, events);
+        self.roll_link_quality(now, events);
         self.send_heartbeats(now, out);
         self.retry_routes(now, out);
         self.retry_estop(now, out);
@@ -552,6 +558,43 @@ mod tests {
         assert_eq!(links(&ev), vec![LinkState::Stale, LinkState::Lost]);
     }
 
+    fn welcomed_ids(ev: &[Event]) -> Vec<(String, u16)> {
+        ev.iter()
+            .filter_map(|e| match e {
+                Event::Registered { hello, id, .. } => Some((hello.name.clone(), *id)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_robot_gets_the_number_its_name_ends_with_whatever_the_order() {
+        let t0 = Instant::now();
+        let mut t = Tables::new(RouterConfig::default(), None);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        for (k, name) in [
+            "robot_10", "rover", "robot_2", "rover_2", "robot_1", "robot_10",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let peer = Peer::Udp(format!("127.0.0.1:{}", 9000 + k).parse().unwrap());
+            t.handle(&hello(name), peer, t0, &mut out, &mut ev);
+        }
+        assert_eq!(
+            welcomed_ids(&ev),
+            [
+                ("robot_10".to_string(), 10),
+                ("rover".to_string(), 65535),
+                ("robot_2".to_string(), 2),
+                ("rover_2".to_string(), 65534),
+                ("robot_1".to_string(), 1),
+                ("robot_10".to_string(), 10),
+            ],
+            "the name's number; taken or none: the highest free id; again: the same id"
+        );
+    }
+
     #[test]
     fn a_stopping_router_says_bye_to_every_robot() {
         let (mut t, robot) = registered(Instant::now());
@@ -588,6 +631,65 @@ mod tests {
         // A quarter second after the last, on the 20 ms timer grid: at
         // 0.26, 0.52 and 0.78 s (the next is due at 1.03 s).
         assert_eq!(beats(&out), 3);
+    }
+
+    /// The robot's link, measured from what it sends: its Hello was number 1
+    /// (see `registered`), then heartbeats numbered 2..=41 with every
+    /// fourth missing, the last echoing the router's heartbeat.
+    #[test]
+    fn link_quality_is_reported_every_second_from_sequence_gaps_and_echoes() {
+        let t0 = Instant::now();
+        let mut t = Tables::new(RouterConfig::default(), None);
+        let robot = Peer::Udp("127.0.0.1:9000".parse().unwrap());
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let numbered = |seq: u32, body: Body| {
+            let header = Header {
+                seq,
+                sender: "robot_1".into(),
+                destination: "router".into(),
+                ..Header::default()
+            };
+            mech_proto::encode(&Envelope::new(header, body)).unwrap()
+        };
+        let hello = match mech_proto::decode(&hello("robot_1")).unwrap().body {
+            b @ Body::Hello(_) => b,
+            _ => unreachable!(),
+        };
+        t.handle(&numbered(1, hello), robot, t0, &mut out, &mut ev);
+        // The router's heartbeat at 260 ms; its sequence number is the echo's.
+        t.tick(t0 + Duration::from_millis(260), &mut out, &mut ev);
+        let beat = out
+            .owned
+            .iter()
+            .map(|(_, b)| mech_proto::decode(b).unwrap())
+            .find(|e| matches!(e.body, Body::Heartbeat(_)))
+            .expect("a router heartbeat");
+        for seq in (2..=41).filter(|s| s % 4 != 0) {
+            let at = t0 + Duration::from_millis(300 + u64::from(seq) * 10);
+            let echo = (seq == 41).then_some(mech_proto::Echo {
+                seq: beat.header.seq,
+                held_us: 400_000,
+            });
+            let hb = Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 0, echo });
+            t.handle(&numbered(seq, hb), robot, at, &mut out, &mut ev);
+        }
+        ev.clear();
+        t.tick(t0 + Duration::from_millis(1000), &mut out, &mut ev);
+        let q = ev
+            .iter()
+            .find_map(|e| match e {
+                Event::LinkQuality { robot, quality } if robot == "robot_1" => Some(*quality),
+                _ => None,
+            })
+            .expect("a link report after a second");
+        // 31 of 41 arrived (10 of 2..=41 are multiples of 4).
+        assert_eq!((q.received, q.lost), (31, 10));
+        assert!((q.loss.unwrap() - 10.0 / 41.0).abs() < 1e-9, "{q:?}");
+        assert!((q.rx_hz - 31.0).abs() < 1e-9, "{q:?}");
+        // Sent: the Welcome and the heartbeat.
+        assert_eq!(q.sent, 2);
+        // Heartbeat out at 260 ms, echo back at 710 ms, held 400 ms.
+        assert_eq!(q.rtt, Some(Duration::from_millis(50)));
     }
 
     #[test]
@@ -648,7 +750,7 @@ mod tests {
             "robot_1",
             "router",
             "",
-            Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 }),
+            Body::Heartbeat(mech_proto::Heartbeat::new(1)),
         );
         t.handle(&hb, radio, ms(10), &mut out, &mut ev);
         t.set_route("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);

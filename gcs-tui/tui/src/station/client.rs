@@ -60,6 +60,20 @@ impl std::fmt::Display for Address {
     }
 }
 
+impl Address {
+    /// The address as a status bar names it: a socket's file name
+    /// (`gcs.sock`), a TCP address as given (`host:7701`).
+    pub fn short(&self) -> String {
+        match self {
+            Address::Unix(p) => p.file_name().map_or_else(
+                || p.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
+            Address::Tcp(a) => a.clone(),
+        }
+    }
+}
+
 /// Why attaching failed.
 #[derive(Debug, thiserror::Error)]
 pub enum AttachError {

@@ -234,6 +234,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             battery: r.battery,
             mission: r.mission,
             trail: recent_path(r),
+            quality: r.quality,
         })
         .collect();
     FleetSnapshot {

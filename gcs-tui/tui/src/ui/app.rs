@@ -5,9 +5,10 @@
 //!
 //! This file has the state, the actions and requests, and the dispatch;
 //! the larger families of changes have a file each: `prompt` (command
-//! line and waypoint entry), `mouse` (clicks, drags and the wheel
-//! resolved against the layout) and `manual` (keyboard teleop and
-//! gamepads).
+//! line, waypoint entry and the table's filter), `mouse` (clicks, drags,
+//! the wheel and hovering resolved against the layout), `manual`
+//! (keyboard teleop and gamepads) and `table` (the fleet table: its rows,
+//! sorting, cursor and detail).
 
 use std::collections::{BTreeSet, VecDeque};
 use std::time::Instant;
@@ -15,16 +16,19 @@ use std::time::Instant;
 use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::Rect;
 
+use super::columns::Column;
 use super::layout::{Areas, CARD_HEIGHT, SidePanel};
 use super::view::{
     ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView, Security,
 };
 use super::viewport::Viewport;
 use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
+use mech_core::names::natural_cmp;
 
 mod manual;
 mod mouse;
 mod prompt;
+mod table;
 
 pub use prompt::parse_waypoint;
 
@@ -72,6 +76,38 @@ pub enum Prompt {
     Command(String),
     /// `x,y[,t]` waypoint entry.
     Waypoint(String),
+    /// `/` the fleet table's filter, applied as it is typed.
+    Filter(String),
+}
+
+/// How the robots are shown: cards beside the map, or the fleet table in
+/// place of both (the side column stays).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum RobotsView {
+    #[default]
+    Cards,
+    Table,
+}
+
+/// The fleet table: its order, filter, rows, cursor and whether the
+/// cursor's robot is shown in detail.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct TableState {
+    pub sort: Column,
+    pub descending: bool,
+    /// Text the rows must contain (name, route or state), any case.
+    pub filter: String,
+    /// Indices into [`App::robots`], filtered and sorted: kept up to date
+    /// by `update`, so drawing only reads them.
+    pub rows: Vec<usize>,
+    /// The robot the keys act on, by name, so it stays put when rows
+    /// re-sort (a speed column re-sorts every frame).
+    pub cursor: Option<String>,
+    /// First row shown.
+    pub scroll: usize,
+    /// The cursor's robot in detail (card, events, counters) in place of
+    /// the table.
+    pub detail: bool,
 }
 
 /// The last command-line error, with the column it points at.
@@ -94,6 +130,8 @@ pub enum Select {
     Prev,
     /// Add the robot after the last selected one.
     AddNext,
+    /// Add the robot before the first selected one.
+    AddPrev,
     All,
     Clear,
     /// Every member of a cluster.
@@ -141,6 +179,11 @@ pub enum Action {
     },
     /// Mouse button released.
     MouseUp,
+    /// The pointer moved over a cell (the robot under it is labelled).
+    Hover {
+        col: u16,
+        row: u16,
+    },
     /// Mouse wheel over a cell: zoom about it (`steps` > 0 zooms in).
     Scroll {
         col: u16,
@@ -191,6 +234,22 @@ pub enum Action {
     DriveStop,
     Pad(PadEvent),
     Log(LogLevel, String),
+    /// The fleet table in place of the cards and the map, or back.
+    ToggleTable,
+    /// Sort the table by a column; the column it is sorted by already:
+    /// reverse.
+    SortBy(Column),
+    /// Sort by the column `n` places after the current one.
+    SortStep(i32),
+    SortReverse,
+    /// Open the table (if need be) and its `/` filter.
+    OpenFilter,
+    ClearFilter,
+    /// Move the table's cursor by rows (selecting only that robot).
+    TableMove(i32),
+    /// The cursor's robot in detail, or back to the table.
+    ToggleDetail,
+    CloseDetail,
 }
 
 /// What the core must do on the UI's behalf.
@@ -257,6 +316,10 @@ pub struct App {
     pub waypoints: Vec<Waypoint>,
     pub prompt: Option<Prompt>,
     pub prompt_error: Option<PromptError>,
+    pub robots_view: RobotsView,
+    pub table: TableState,
+    /// The robot under the mouse pointer on the map: always labelled.
+    pub hover: Option<String>,
     pub history: Vec<String>,
     history_pos: Option<usize>,
     /// Fleet-wide e-stop engaged (requested here or reported by the core).
@@ -277,6 +340,9 @@ pub struct App {
     pub key_channel: String,
     /// Who the station logs this TUI's commands under.
     pub operator: String,
+    /// The station this TUI is attached to (`gcs.sock`, `host:7701`); None
+    /// when it runs its own station (embedded).
+    pub attached: Option<String>,
     pub teleop: Teleop,
     /// Cluster a pad in cluster mode drives (the last one made or selected).
     pub active_cluster: Option<String>,
@@ -309,6 +375,9 @@ impl App {
             waypoints: Vec::new(),
             prompt: None,
             prompt_error: None,
+            robots_view: RobotsView::Cards,
+            table: TableState::default(),
+            hover: None,
             history: Vec::new(),
             history_pos: None,
             estop: false,
@@ -322,6 +391,7 @@ impl App {
             key_teleop: KeyTeleop::default(),
             key_channel: KEY_CHANNEL.to_string(),
             operator: String::new(),
+            attached: None,
             teleop: Teleop::new(TeleopConfig::default()),
             active_cluster: None,
             now,
@@ -341,7 +411,8 @@ impl App {
 
     /// The current layout.
     pub fn areas(&self) -> Areas {
-        Areas::compute(Rect::new(0, 0, self.size.0, self.size.1), self.side)
+        let table = self.robots_view == RobotsView::Table;
+        Areas::compute(Rect::new(0, 0, self.size.0, self.size.1), self.side, table)
     }
 
     pub fn robot(&self, name: &str) -> Option<&RobotView> {
@@ -402,12 +473,13 @@ impl App {
             Action::Click { col, row, add } => self.click(col, row, add),
             Action::Drag { col, row } => self.drag(col, row),
             Action::MouseUp => self.drag_from = None,
+            Action::Hover { col, row } => self.hover(col, row),
             Action::Scroll { col, row, steps } => self.scroll(col, row, steps),
             Action::Zoom(f) => self.viewport.zoom(f),
             Action::Pan(dx, dy) => self.viewport.pan_cells(dx, dy),
             Action::FitFleet => self.fit_fleet(),
-            Action::FocusNext => self.set_focus(self.focus.next()),
-            Action::FocusPrev => self.set_focus(self.focus.prev()),
+            Action::FocusNext => self.step_focus(Focus::next),
+            Action::FocusPrev => self.step_focus(Focus::prev),
             Action::MakeCluster => self.make_cluster(),
             Action::WaypointMode(on) => self.set_waypoint_mode(on),
             Action::AddWaypoint(w) => self.add_waypoint(w),
@@ -423,7 +495,7 @@ impl App {
                 s.pop();
             }),
             Action::PromptSubmit => self.submit_prompt(),
-            Action::PromptCancel => self.prompt = None,
+            Action::PromptCancel => self.cancel_prompt(),
             Action::HistoryPrev => self.history_step(-1),
             Action::HistoryNext => self.history_step(1),
             Action::CommandResult(r) => self.command_result(r),
@@ -438,6 +510,15 @@ impl App {
             Action::DriveStop => self.drive_stop(),
             Action::Pad(ev) => self.pad(&ev),
             Action::Log(level, text) => self.log(level, text),
+            Action::ToggleTable => self.toggle_table(),
+            Action::SortBy(c) => self.sort_by(c),
+            Action::SortStep(n) => self.sort_by(self.table.sort.step(n)),
+            Action::SortReverse => self.sort_by(self.table.sort),
+            Action::OpenFilter => self.open_filter(),
+            Action::ClearFilter => self.set_filter(String::new()),
+            Action::TableMove(n) => self.table_move(n),
+            Action::ToggleDetail => self.table.detail = !self.table.detail,
+            Action::CloseDetail => self.table.detail = false,
         }
     }
 
@@ -470,9 +551,9 @@ impl App {
         }
     }
 
-    /// Takes the core's state as it is: the e-stop, robots, channels and
-    /// (when the source keeps them) clusters; fits the map to the first
-    /// robots seen.
+    /// Takes the core's state as it is: the e-stop, robots (in natural
+    /// name order: robot_2 before robot_10), channels and (when the source
+    /// keeps them) clusters; fits the map to the first robots seen.
     fn apply_snapshot(&mut self, s: FleetSnapshot) {
         self.estop = s.estop;
         self.security = s.security;
@@ -480,20 +561,27 @@ impl App {
         self.replay = s.replay;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
+        // Already in order from the station: a stable sort then costs one
+        // comparison per robot.
+        self.robots.sort_by(|a, b| natural_cmp(&a.name, &b.name));
         self.channels = s.channels;
         if let Some(c) = s.clusters {
             self.clusters = c;
         }
         self.selection
             .retain(|n| self.robots.iter().any(|r| &r.name == n));
+        self.refresh_rows();
         if first && !self.fitted_once {
             self.fitted_once = true;
             self.fit_fleet();
         }
     }
 
+    /// Fits the map to the fleet (as the map view lays it out, also while
+    /// the table hides the map).
     fn fit_fleet(&mut self) {
-        let inner = self.areas().map_inner();
+        let area = Rect::new(0, 0, self.size.0, self.size.1);
+        let inner = Areas::compute(area, self.side, false).map_inner();
         let mut pts: Vec<(f64, f64)> = self.robots.iter().map(|r| (r.pose.x, r.pose.y)).collect();
         if let Some(a) = self.arena {
             pts.push((a.min_x, a.min_y));
@@ -501,6 +589,16 @@ impl App {
         }
         pts.extend(self.waypoints.iter().map(|w| (w.x, w.y)));
         self.viewport.fit(pts, inner.width, inner.height, 1.0);
+    }
+
+    /// The next (or previous) panel; the map is skipped while the table
+    /// hides it.
+    fn step_focus(&mut self, step: fn(Focus) -> Focus) {
+        let mut f = step(self.focus);
+        if f == Focus::Map && self.robots_view == RobotsView::Table {
+            f = step(f);
+        }
+        self.set_focus(f);
     }
 
     fn set_focus(&mut self, f: Focus) {
@@ -513,37 +611,58 @@ impl App {
         };
     }
 
+    /// Robots in the order the robots panel shows them: the table's rows
+    /// (sorted and filtered) in the table view, else the fleet in name
+    /// order. Next and previous follow it.
+    fn display_order(&self) -> Vec<String> {
+        match self.robots_view {
+            RobotsView::Table => self
+                .table
+                .rows
+                .iter()
+                .map(|&i| self.robots[i].name.clone())
+                .collect(),
+            RobotsView::Cards => self.robots.iter().map(|r| r.name.clone()).collect(),
+        }
+    }
+
     fn select(&mut self, s: Select) {
-        let names: Vec<String> = self.robots.iter().map(|r| r.name.clone()).collect();
+        let names = self.display_order();
         let idx_of = |n: &str| names.iter().position(|x| x == n);
+        let known = |n: &str| self.robots.iter().any(|r| r.name == n);
+        let mut acted_on = None;
         match s {
             Select::Only(n) => {
                 self.selection.clear();
-                if idx_of(&n).is_some() {
-                    self.selection.insert(n);
+                if known(&n) {
+                    self.selection.insert(n.clone());
+                    acted_on = Some(n);
                 }
             }
             Select::Toggle(n) => {
-                if !self.selection.remove(&n) && idx_of(&n).is_some() {
-                    self.selection.insert(n);
+                if !self.selection.remove(&n) && known(&n) {
+                    self.selection.insert(n.clone());
                 }
+                acted_on = Some(n);
             }
-            Select::Next | Select::Prev | Select::AddNext => {
+            Select::Next | Select::Prev | Select::AddNext | Select::AddPrev => {
                 if names.is_empty() {
                     return;
                 }
-                let last = self.selection.iter().filter_map(|n| idx_of(n)).max();
-                let i = match (&s, last) {
-                    (Select::Prev, Some(i)) => (i + names.len() - 1) % names.len(),
-                    (Select::Prev, None) => names.len() - 1,
-                    (_, Some(i)) => (i + 1) % names.len(),
-                    (_, None) => 0,
+                let picked = self.selection.iter().filter_map(|n| idx_of(n));
+                let (first, last) = (picked.clone().min(), picked.max());
+                let n = names.len();
+                let i = match (&s, first, last) {
+                    (Select::Prev | Select::AddPrev, Some(i), _) => (i + n - 1) % n,
+                    (Select::Prev | Select::AddPrev, None, _) => n - 1,
+                    (_, _, Some(i)) => (i + 1) % n,
+                    (_, _, None) => 0,
                 };
-                if s != Select::AddNext {
+                if !matches!(s, Select::AddNext | Select::AddPrev) {
                     self.selection.clear();
                 }
                 self.selection.insert(names[i].clone());
-                self.route_cursor.0 = i;
+                acted_on = Some(names[i].clone());
             }
             Select::All => self.selection = names.iter().cloned().collect(),
             Select::Clear => self.selection.clear(),
@@ -554,6 +673,12 @@ impl App {
                 }
             }
         }
+        if let Some(name) = acted_on {
+            if let Some(i) = self.robots.iter().position(|r| r.name == name) {
+                self.route_cursor.0 = i;
+            }
+            self.table.cursor = Some(name);
+        }
         self.keep_selection_visible();
     }
 
@@ -563,6 +688,10 @@ impl App {
     }
 
     fn keep_selection_visible(&mut self) {
+        if self.robots_view == RobotsView::Table {
+            self.keep_cursor_visible();
+            return;
+        }
         let Some(area) = self.areas().cards else {
             return;
         };
@@ -637,9 +766,12 @@ impl App {
             .collect()
     }
 
+    /// Waypoint mode places waypoints with clicks on the map, so it brings
+    /// the map back from the table.
     fn set_waypoint_mode(&mut self, on: bool) {
         self.waypoint_mode = on;
         if on {
+            self.robots_view = RobotsView::Cards;
             self.set_focus(Focus::Waypoints);
         }
     }

@@ -1,13 +1,13 @@
 //! Fixed fleets with known values, for screen snapshots, benchmarks and
 //! trying the UI without a router. Deterministic: no clock, no randomness.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use mech_proto::{Computation, ControlMode, FailsafeState, Health, MissionProgress, Velocity};
 
 use super::app::{Action, App};
 use super::view::{
-    ArenaBounds, ChannelView, FleetSnapshot, LinkState, RobotView, RouteView, Security,
+    ArenaBounds, ChannelView, FleetSnapshot, LinkQuality, LinkState, RobotView, RouteView, Security,
 };
 
 const PLATFORMS: [&str; 3] = ["diff-drive", "kiwi", "quadcopter"];
@@ -32,6 +32,16 @@ pub fn fleet(n: usize) -> FleetSnapshot {
             vy: 0.0,
             vz: 0.0,
             wz: 0.0,
+        };
+        r.quality = LinkQuality {
+            rx_hz: 21.0 - (i % 5) as f64,
+            tx_hz: 4.0 + (i % 3) as f64 * 10.0,
+            loss: Some((i % 5) as f64 * 0.06),
+            rtt: Some(Duration::from_micros(300 + 700 * (i % 7) as u64)),
+            window: Duration::from_secs(5),
+            received: 1000 + i as u64,
+            sent: 200 + i as u64,
+            lost: (i % 5) as u64 * 60,
         };
         match i % 4 {
             0 => {

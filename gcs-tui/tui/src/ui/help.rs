@@ -24,7 +24,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("n p", "select next / previous robot"),
     ("N", "add the next robot to the selection"),
     ("a", "select all robots"),
-    ("Esc", "leave waypoint mode, else clear the selection"),
+    (
+        "Esc",
+        "leave a mode, detail or filter; else clear selection",
+    ),
     (
         "click",
         "select a robot (map or card); Shift/Ctrl+click adds",
@@ -46,11 +49,41 @@ pub const KEYS: &[(&str, &str)] = &[
     ("arrows, drag", "pan the map (map panel focused)"),
     ("0  z", "fit the fleet in view"),
     (
+        "pointer on a robot",
+        "name it on the map, even where a crowd hides names",
+    ),
+    (
         "Routes: ↑↓ ←→",
         "move the cursor: robot row, channel column",
     ),
     ("Routes: Enter", "route that robot to that channel"),
     ("Routes: click", "pick a cell; click it again to route"),
+    ("v", "fleet table in place of cards and map, and back"),
+    ("/", "filter the table: name, route or state (Esc clears)"),
+    (
+        "table: ↑↓",
+        "select the previous / next row (Shift+↑↓ adds it)",
+    ),
+    (
+        "table: PgUp PgDn",
+        "a page up / down (Home End: first / last row)",
+    ),
+    (
+        "table: < > r",
+        "sort by the previous / next column; r reverses",
+    ),
+    (
+        "table: Space",
+        "add or remove the cursor's robot from the selection",
+    ),
+    (
+        "table: Enter Esc",
+        "the robot's detail (card, events, counters); back",
+    ),
+    (
+        "table: click",
+        "header: sort by it (again: reverse); row: select",
+    ),
     (
         "o",
         "selected robots: waypoint navigation onboard <-> offboard",

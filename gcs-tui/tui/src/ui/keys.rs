@@ -8,7 +8,7 @@ use crossterm::event::{
     Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers, MouseButton, MouseEvent, MouseEventKind,
 };
 
-use super::app::{Action, App, Focus, Prompt, Select};
+use super::app::{Action, App, Focus, Prompt, RobotsView, Select};
 use crate::gamepad::DriveKey;
 
 /// Actions for one terminal event.
@@ -40,6 +40,7 @@ pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
     }
     teleop_key(app, key.code)
         .or_else(|| waypoint_mode_key(app, key.code))
+        .or_else(|| table_key(app, key))
         .or_else(|| panel_key(app, key.code))
         .or_else(|| global_key(app, key.code))
         .into_iter()
@@ -104,6 +105,37 @@ fn waypoint_mode_key(app: &App, code: KeyCode) -> Option<Action> {
     }
 }
 
+/// Keys of the fleet table, when it has the focus: rows select as the
+/// cards' arrows do (Shift adds), a page or the ends, Space marks, Enter
+/// shows the robot in detail, `<` `>` `r` sort, Esc leaves the detail,
+/// then clears the filter (then falls through to clearing the selection).
+fn table_key(app: &App, key: &KeyEvent) -> Option<Action> {
+    if app.robots_view != RobotsView::Table || app.focus != Focus::Cards {
+        return None;
+    }
+    let shift = key.modifiers.contains(KeyModifiers::SHIFT);
+    let page = app.table_page() as i32;
+    let a = match key.code {
+        KeyCode::Up if shift => Action::Select(Select::AddPrev),
+        KeyCode::Down if shift => Action::Select(Select::AddNext),
+        KeyCode::Up => Action::TableMove(-1),
+        KeyCode::Down => Action::TableMove(1),
+        KeyCode::PageUp => Action::TableMove(-page),
+        KeyCode::PageDown => Action::TableMove(page),
+        KeyCode::Home => Action::TableMove(i32::MIN),
+        KeyCode::End => Action::TableMove(i32::MAX),
+        KeyCode::Char(' ') => Action::Select(Select::Toggle(app.table.cursor.clone()?)),
+        KeyCode::Enter => Action::ToggleDetail,
+        KeyCode::Char('<') => Action::SortStep(-1),
+        KeyCode::Char('>') => Action::SortStep(1),
+        KeyCode::Char('r') => Action::SortReverse,
+        KeyCode::Esc if app.table.detail => Action::CloseDetail,
+        KeyCode::Esc if !app.table.filter.is_empty() => Action::ClearFilter,
+        _ => return None,
+    };
+    Some(a)
+}
+
 /// Keys of the focused panel: the routing-table cursor, the card
 /// selection, the waypoint list.
 fn panel_key(app: &App, code: KeyCode) -> Option<Action> {
@@ -146,6 +178,8 @@ fn global_key(app: &App, code: KeyCode) -> Option<Action> {
         KeyCode::Char('t') => Action::ToggleKeyTeleop,
         KeyCode::Char('o') => Action::ToggleNav,
         KeyCode::Char('R') => Action::ToggleRecording,
+        KeyCode::Char('v') => Action::ToggleTable,
+        KeyCode::Char('/') => Action::OpenFilter,
         KeyCode::Left => Action::Pan(-4.0, 0.0),
         KeyCode::Right => Action::Pan(4.0, 0.0),
         KeyCode::Up => Action::Pan(0.0, 2.0),
@@ -184,6 +218,10 @@ pub fn on_mouse(app: &App, m: &MouseEvent) -> Option<Action> {
             row: m.row,
         }),
         MouseEventKind::Up(_) => Some(Action::MouseUp),
+        MouseEventKind::Moved => Some(Action::Hover {
+            col: m.column,
+            row: m.row,
+        }),
         MouseEventKind::ScrollUp => Some(Action::Scroll {
             col: m.column,
             row: m.row,

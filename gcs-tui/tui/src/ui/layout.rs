@@ -9,7 +9,7 @@ use ratatui::layout::{Constraint, Layout, Rect};
 pub const WIDE_MIN: (u16, u16) = (120, 36);
 
 /// Lines per robot card, so scrolling and clicks land on the card drawn.
-pub const CARD_HEIGHT: usize = 3;
+pub const CARD_HEIGHT: usize = 4;
 
 /// Width of the routing table's robot-name column (a space follows it).
 pub const ROUTE_NAME_W: usize = 9;
@@ -32,7 +32,10 @@ pub struct Areas {
     pub cards: Option<Rect>,
     pub waypoints: Option<Rect>,
     pub routes: Option<Rect>,
-    /// The map including its border.
+    /// The fleet table, in the table view: where the cards and the map
+    /// are otherwise.
+    pub table: Option<Rect>,
+    /// The map including its border; empty in the table view.
     pub map: Rect,
     pub log: Rect,
     /// Key hints or the command line.
@@ -43,7 +46,10 @@ pub struct Areas {
 
 impl Areas {
     /// Lays out `area`; on a small terminal the side column shows `side`.
-    pub fn compute(area: Rect, side: SidePanel) -> Areas {
+    /// With `table`, the fleet table takes the place of the cards and the
+    /// map (on a small terminal, of the map only when the side column
+    /// shows another panel).
+    pub fn compute(area: Rect, side: SidePanel, table: bool) -> Areas {
         let wide = area.width >= WIDE_MIN.0 && area.height >= WIDE_MIN.1;
         let log_h = if wide { 7 } else { 2 };
         let [status, body, log, bottom] = Layout::vertical([
@@ -65,12 +71,51 @@ impl Areas {
             let [wp, routes] =
                 Layout::vertical([Constraint::Percentage(40), Constraint::Percentage(60)])
                     .areas(right);
+            let (cards, table, map) = if table {
+                let [both, _] =
+                    Layout::horizontal([Constraint::Min(10), Constraint::Length(right_w)])
+                        .areas(body);
+                (None, Some(both), Rect::default())
+            } else {
+                (Some(left), None, map)
+            };
             Areas {
                 status,
-                cards: Some(left),
+                cards,
                 waypoints: Some(wp),
                 routes: Some(routes),
+                table,
                 map,
+                log,
+                bottom,
+                wide,
+            }
+        } else if table {
+            let (waypoints, routes, table) = match side {
+                SidePanel::Cards => (None, None, body),
+                other => {
+                    let left_w = if other == SidePanel::Routes {
+                        (area.width / 2).clamp(20, 44)
+                    } else {
+                        (area.width * 2 / 5).clamp(20, 40)
+                    };
+                    let [left, rest] =
+                        Layout::horizontal([Constraint::Length(left_w), Constraint::Min(10)])
+                            .areas(body);
+                    if other == SidePanel::Routes {
+                        (None, Some(left), rest)
+                    } else {
+                        (Some(left), None, rest)
+                    }
+                }
+            };
+            Areas {
+                status,
+                cards: None,
+                waypoints,
+                routes,
+                table: Some(table),
+                map: Rect::default(),
                 log,
                 bottom,
                 wide,
@@ -94,6 +139,7 @@ impl Areas {
                 cards,
                 waypoints,
                 routes,
+                table: None,
                 map,
                 log,
                 bottom,
@@ -165,7 +211,7 @@ mod tests {
 
     #[test]
     fn small_terminal_shares_the_side_column() {
-        let a = Areas::compute(Rect::new(0, 0, 80, 24), SidePanel::Routes);
+        let a = Areas::compute(Rect::new(0, 0, 80, 24), SidePanel::Routes, false);
         assert!(!a.wide);
         assert!(a.cards.is_none() && a.waypoints.is_none());
         assert!(a.routes.is_some());
@@ -174,8 +220,23 @@ mod tests {
 
     #[test]
     fn large_terminal_shows_everything() {
-        let a = Areas::compute(Rect::new(0, 0, 160, 48), SidePanel::Cards);
+        let a = Areas::compute(Rect::new(0, 0, 160, 48), SidePanel::Cards, false);
         assert!(a.wide);
         assert!(a.cards.is_some() && a.waypoints.is_some() && a.routes.is_some());
+        assert!(a.table.is_none());
+    }
+
+    #[test]
+    fn the_table_takes_the_cards_and_the_map() {
+        let body = |a: &Areas| a.table.expect("the table shown");
+        let a = Areas::compute(Rect::new(0, 0, 200, 50), SidePanel::Cards, true);
+        assert!(a.cards.is_none() && a.map.is_empty());
+        assert_eq!((body(&a).x, body(&a).width), (0, 150));
+        assert!(a.routes.is_some() && a.waypoints.is_some(), "routing stays");
+        let a = Areas::compute(Rect::new(0, 0, 80, 24), SidePanel::Cards, true);
+        assert_eq!(body(&a).width, 80, "small: the whole width");
+        let a = Areas::compute(Rect::new(0, 0, 80, 24), SidePanel::Routes, true);
+        assert!(a.routes.is_some());
+        assert_eq!(body(&a).width, 40, "small: beside the routing table");
     }
 }

@@ -1,6 +1,8 @@
-//! The arena map: a braille canvas in metres with grid and scale, arena
-//! bounds, robots with heading lines and recent paths, selection rings,
-//! clusters joined to their centre, and numbered waypoint flags.
+//! The arena map: a braille canvas in metres with grid, scale and metre
+//! ticks on the axes, arena bounds, robots with heading lines and recent
+//! paths, selection rings, clusters joined to their centre, and numbered
+//! waypoint flags; every robot marked and labelled where a label fits
+//! (see [`super::labels`]), with a count of the labels left out.
 
 use std::collections::HashMap;
 
@@ -13,6 +15,7 @@ use ratatui::widgets::canvas::{Canvas, Context, Painter, Shape};
 use ratatui::widgets::{Block, Widget};
 
 use super::app::{App, Focus};
+use super::labels::{self, Kind, MapText};
 use super::theme::Theme;
 use super::view::{ArenaBounds, ClusterControlView, ClusterOnScreen, RobotView};
 use super::viewport::Projection;
@@ -49,6 +52,14 @@ pub fn format_length(m: f64) -> String {
     } else {
         format!("{} mm", (m * 1000.0).round())
     }
+}
+
+/// The text of `app`'s map as its panel draws it now (its inner area,
+/// projection and grid step): see [`labels`].
+pub fn map_text(app: &App) -> MapText {
+    let inner = app.areas().map_inner();
+    let proj = app.viewport.project(inner.width, inner.height);
+    labels::layout(app, &proj, grid_step(proj.metres_per_dot * 16.0))
 }
 
 /// Dots painted straight from world coordinates through the projection, so
@@ -129,7 +140,11 @@ impl Widget for MapPanel<'_> {
         let proj = app.viewport.project(inner.width, inner.height);
         let m = proj.metres_per_dot;
         let step = grid_step(m * 16.0);
+        let text = labels::layout(app, &proj, step);
         let mut title = format!(" Map  grid {} ", format_length(step));
+        if text.hidden > 0 {
+            title.push_str(&format!("│ {} labels hidden ", text.hidden));
+        }
         if app.waypoint_mode {
             title.push_str("│ WAYPOINT MODE: click to place, Esc leaves ");
         }
@@ -144,14 +159,14 @@ impl Widget for MapPanel<'_> {
             .marker(Marker::Braille)
             .x_bounds(proj.x_bounds())
             .y_bounds(proj.y_bounds())
-            .paint(|ctx| paint(ctx, app, &proj, step, &t));
+            .paint(|ctx| paint(ctx, app, &proj, step, &text, &t));
         canvas.render(area, buf);
     }
 }
 
 /// The map's content, bottom to top: grid, then arena, paths, waypoint
-/// legs, clusters and robots, then the labels.
-fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) {
+/// legs, clusters and robots, then the text laid out in `text`.
+fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, text: &MapText, t: &Theme) {
     paint_grid(ctx, proj, step, t);
     ctx.layer();
     if let Some(a) = app.arena {
@@ -177,9 +192,8 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, t: &Theme) 
     }
     paint_clusters(ctx, app, proj, t);
     paint_robots(ctx, app, proj, t);
-    // Labels last, so they sit on top.
-    label_waypoints(ctx, app, proj, t);
-    label_robots(ctx, app, proj, t);
+    // Text last, so it sits on top; the marks over everything.
+    print_text(ctx, app, proj, text, t);
 }
 
 /// A small cross at every grid intersection, the axes through the origin
@@ -255,13 +269,17 @@ fn paint_clusters(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     let by_name: HashMap<&str, &RobotView> =
         app.robots.iter().map(|r| (r.name.as_str(), r)).collect();
     for c in &app.clusters {
-        paint_cluster(ctx, c, &by_name, proj, t);
+        let centre = labels::cluster_centre(app, c);
+        paint_cluster(ctx, c, centre, &by_name, proj, t);
     }
 }
 
+/// A cluster's members joined to its `centre` (the controller's measured
+/// pose, or the members' centroid), and what its controller reports.
 fn paint_cluster(
     ctx: &mut Context,
     c: &ClusterOnScreen,
+    centre: Option<(f64, f64)>,
     by_name: &HashMap<&str, &RobotView>,
     proj: &Projection,
     t: &Theme,
@@ -272,20 +290,10 @@ fn paint_cluster(
         .filter_map(|n| by_name.get(n.as_str()))
         .map(|r| (r.pose.x, r.pose.y))
         .collect();
-    if pos.is_empty() {
+    let Some((cx, cy)) = centre else {
         return;
-    }
-    // The controller's measured cluster pose when it runs the cluster,
-    // else the members' centroid.
-    let control = c.control.as_ref();
-    let (cx, cy) = match control.and_then(|k| k.measured) {
-        Some((x, y, _)) => (x, y),
-        None => (
-            pos.iter().map(|p| p.0).sum::<f64>() / pos.len() as f64,
-            pos.iter().map(|p| p.1).sum::<f64>() / pos.len() as f64,
-        ),
     };
-    if let Some(k) = control {
+    if let Some(k) = c.control.as_ref() {
         paint_cluster_control(ctx, k, by_name, proj, t);
     }
     for p in &pos {
@@ -297,13 +305,6 @@ fn paint_cluster(
             every: 2,
         });
     }
-    label(
-        ctx,
-        proj,
-        (cx, cy),
-        0,
-        TextLine::from(format!("✚{}", c.name)).bold(),
-    );
 }
 
 /// Slot targets, each joined to its member by a sparse line, and the
@@ -325,12 +326,10 @@ fn paint_cluster_control(
                 every: 3,
             });
         }
-        label(ctx, proj, (s.x, s.y), 0, TextLine::from("◇"));
     }
     let m = proj.metres_per_dot;
     if let Some(desired) = k.desired {
         ctx.draw(&Segment::heading(proj, desired, 8.0 * m, t.cluster(), 1));
-        label(ctx, proj, (desired.0, desired.1), 0, TextLine::from("⊕"));
     }
     if let Some(measured) = k.measured {
         ctx.draw(&Segment::heading(proj, measured, 6.0 * m, t.cluster(), 2));
@@ -360,49 +359,44 @@ fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     }
 }
 
-/// Numbered flags on the waypoints.
-fn label_waypoints(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
-    for (k, w) in app.waypoints.iter().enumerate() {
-        label(
+/// The laid-out text: flags, cluster glyphs, ticks and labels, then every
+/// robot's mark on top (ringed and reversed when selected).
+fn print_text(ctx: &mut Context, app: &App, proj: &Projection, text: &MapText, t: &Theme) {
+    for p in &text.texts {
+        let style = match p.kind {
+            Kind::Robot(i) if app.selection.contains(&app.robots[i].name) => {
+                Style::new().fg(t.robot(i)).patch(t.title())
+            }
+            Kind::Robot(i) => Style::new().fg(t.robot(i)),
+            Kind::Waypoint(_) => Style::new().fg(t.waypoint()).bold(),
+            Kind::Cluster => Style::new().bold(),
+            Kind::Slot => Style::new(),
+            Kind::Tick => Style::new().fg(t.grid()),
+        };
+        print_at(
             ctx,
             proj,
-            (w.x, w.y),
-            0,
-            TextLine::styled(format!("⚑{}", k + 1), Style::new().fg(t.waypoint()).bold()),
+            p.col,
+            p.row,
+            TextLine::styled(p.text.clone(), style),
         );
     }
-}
-
-/// Each robot's dot (ringed when selected) and name beside it.
-fn label_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
-    for (i, r) in app.robots.iter().enumerate() {
-        let selected = app.selection.contains(&r.name);
+    for &(col, row, i) in &text.marks {
+        let selected = app.selection.contains(&app.robots[i].name);
         let mut style = Style::new().fg(t.robot(i));
         if selected {
             style = style.patch(t.selected());
         }
         let glyph = if selected { "◉" } else { "●" };
-        let at = (r.pose.x, r.pose.y);
-        label(ctx, proj, at, 0, TextLine::styled(glyph, style));
-        label(
-            ctx,
-            proj,
-            at,
-            2,
-            TextLine::styled(r.name.clone(), Style::new().fg(t.robot(i))),
-        );
+        print_at(ctx, proj, col, row, TextLine::styled(glyph, style));
     }
 }
 
-/// Prints a label in the cell containing world point `at`, `dx` cells to
-/// the right; nothing if that cell is off the map.
-fn label(ctx: &mut Context, proj: &Projection, at: (f64, f64), dx: u16, line: TextLine<'static>) {
-    if let Some((c, r)) = proj.world_to_cell(at.0, at.1) {
-        let c = c.saturating_add(dx);
-        if c < proj.width {
-            let (x, y) = proj.label_anchor(c, r);
-            ctx.print(x, y, line);
-        }
+/// Prints a line of text starting in cell (`col`, `row`) of the map.
+fn print_at(ctx: &mut Context, proj: &Projection, col: u16, row: u16, line: TextLine<'static>) {
+    if col < proj.width && row < proj.height {
+        let (x, y) = proj.label_anchor(col, row);
+        ctx.print(x, y, line);
     }
 }
 

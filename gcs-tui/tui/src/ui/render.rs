@@ -5,20 +5,23 @@ use ratatui::layout::Rect;
 use ratatui::widgets::Widget;
 
 use super::app::App;
+use super::app::RobotsView;
 use super::cards::CardsPanel;
+use super::detail::DetailPanel;
 use super::events::EventsPanel;
 use super::help::HelpOverlay;
 use super::layout::Areas;
 use super::map::MapPanel;
 use super::routes::RoutesPanel;
 use super::status::{BottomBar, EStopBanner, PromptErrorBox, StatusBar};
+use super::table::TablePanel;
 use super::theme::Theme;
 use super::waypoints::WaypointPanel;
 
 impl Widget for &App {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let theme = Theme::new(self.monochrome);
-        let a = Areas::compute(area, self.side);
+        let a = Areas::compute(area, self.side, self.robots_view == RobotsView::Table);
         StatusBar { app: self, theme }.render(a.status, buf);
         if let Some(r) = a.cards {
             CardsPanel { app: self, theme }.render(r, buf);
@@ -29,7 +32,16 @@ impl Widget for &App {
         if let Some(r) = a.routes {
             RoutesPanel { app: self, theme }.render(r, buf);
         }
-        MapPanel { app: self, theme }.render(a.map, buf);
+        if let Some(r) = a.table {
+            if self.table.detail {
+                DetailPanel { app: self, theme }.render(r, buf);
+            } else {
+                TablePanel { app: self, theme }.render(r, buf);
+            }
+        }
+        if !a.map.is_empty() {
+            MapPanel { app: self, theme }.render(a.map, buf);
+        }
         EventsPanel {
             app: self,
             theme,
@@ -48,11 +60,12 @@ impl Widget for &App {
             PromptErrorBox { error: e, theme }.render(r, buf);
         }
         if self.estop {
+            let over = a.table.unwrap_or(a.map);
             let r = Rect {
-                x: a.map.x,
-                y: a.map.y,
-                width: a.map.width,
-                height: 3.min(a.map.height),
+                x: over.x,
+                y: over.y,
+                width: over.width,
+                height: 3.min(over.height),
             };
             EStopBanner { theme }.render(r, buf);
         }

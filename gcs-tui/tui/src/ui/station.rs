@@ -39,6 +39,9 @@ pub struct RunOptions {
     pub startup: Vec<String>,
     /// Dead-man, buttons, rate, shaping and limits of the gamepads.
     pub teleop: crate::gamepad::TeleopConfig,
+    /// The station attached to (`gcs.sock`, `host:7701`); None when the TUI
+    /// runs its own (embedded).
+    pub attached: Option<String>,
 }
 
 impl Default for RunOptions {
@@ -50,6 +53,7 @@ impl Default for RunOptions {
             gamepads: true,
             startup: Vec::new(),
             teleop: crate::gamepad::TeleopConfig::default(),
+            attached: None,
         }
     }
 }
@@ -145,6 +149,7 @@ fn station_app(welcome: &Welcome, options: &RunOptions, size: (u16, u16)) -> App
     app.teleop.set_channel_prefix(&welcome.pads);
     app.key_channel = welcome.keys.clone();
     app.operator = welcome.operator.clone();
+    app.attached = options.attached.clone();
     app.update(Action::Resize(size.0, size.1));
     app.update(Action::FitFleet);
     app

@@ -1,4 +1,5 @@
-//! The status bar (router, counts, pads, teleop, e-stop), the bottom line
+//! The status bar (router, counts, pads, teleop, e-stop, and whether this
+//! TUI is attached or embedded, as which operator), the bottom line
 //! (key hints or the prompt), the error box under a bad command line, and
 //! the e-stop banner.
 
@@ -7,7 +8,7 @@ use ratatui::layout::Rect;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Clear, Paragraph, Widget};
 
-use super::app::{App, Prompt, PromptError};
+use super::app::{App, Prompt, PromptError, RobotsView};
 use super::theme::Theme;
 use super::view::{LinkState, Security};
 
@@ -20,73 +21,113 @@ pub struct StatusBar<'a> {
 
 impl Widget for StatusBar<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
-        let app = self.app;
-        let t = self.theme;
-        let count = |l: LinkState| app.robots.iter().filter(|r| r.link == l).count();
-        let estop = if app.estop {
-            Span::styled(" E-STOP ENGAGED ", t.alarm())
+        let wide = wide_line(self.app, &self.theme);
+        let line = if wide.width() <= usize::from(area.width) {
+            wide
         } else {
-            Span::raw(" e-stop off ")
+            narrow_line(self.app, &self.theme)
         };
-        // Unsigned on the network is an alarm; the loopback demo is said
-        // plainly; refusals are counted.
-        let security = match app.security {
-            Security::Authenticated => Span::raw(""),
-            Security::LoopbackOnly => Span::raw(" unsigned, loopback │"),
-            Security::Unauthenticated => Span::styled(" UNAUTHENTICATED ", t.alarm()),
-        };
-        let rejected = if app.rejected > 0 {
-            Span::styled(format!(" rejected {} ", app.rejected), t.warn())
-        } else {
-            Span::raw("")
-        };
-        let pads = app.pads();
-        let teleop = if app.key_teleop_on {
-            format!("{} ON", app.key_channel)
-        } else {
-            "key off".to_string()
-        };
-        // A replay shows where it is instead of a router.
-        let source = app
-            .replay
-            .map_or_else(|| app.router_addr.clone(), |c| c.label());
-        let line = if area.width >= 110 {
-            Line::from(vec![
-                Span::styled(" MECH ", t.title()),
-                Span::raw(format!(
-                    "│ {} │ robots {} ({} ok {} stale {} lost) │ sel {} │ pads {} │ {} │",
-                    source,
-                    app.robots.len(),
-                    count(LinkState::Connected),
-                    count(LinkState::Stale),
-                    count(LinkState::Lost),
-                    app.selection.len(),
-                    pads.len(),
-                    teleop,
-                )),
-                estop,
-                security,
-                rejected,
-                Span::raw("│ ? help"),
-            ])
-        } else {
-            Line::from(vec![
-                estop,
-                security,
-                rejected,
-                Span::raw(format!(
-                    "│ {} │ {}/{} ok │ sel {} │ pads {} │ {} │ ? help",
-                    source,
-                    count(LinkState::Connected),
-                    app.robots.len(),
-                    app.selection.len(),
-                    pads.len(),
-                    teleop,
-                )),
-            ])
-        };
-        Paragraph::new(line).style(t.bar()).render(area, buf);
+        Paragraph::new(line)
+            .style(self.theme.bar())
+            .render(area, buf);
     }
+}
+
+/// How this TUI reaches its station, and as whom: `attached gcs.sock as
+/// alice` or `embedded as alice`; `short`, for a narrow bar, `alice@gcs.sock`
+/// or `alice@embedded`.
+pub fn session(app: &App, short: bool) -> String {
+    // A replay has no station: where it is in the recording says more.
+    if let Some(clock) = app.replay {
+        return clock.label();
+    }
+    let at = app.attached.as_deref();
+    let op = app.operator.as_str();
+    match (short, at, op.is_empty()) {
+        (false, Some(a), false) => format!("attached {a} as {op}"),
+        (false, Some(a), true) => format!("attached {a}"),
+        (false, None, false) => format!("embedded as {op}"),
+        (false, None, true) | (true, None, true) => "embedded".into(),
+        (true, Some(a), false) => format!("{op}@{a}"),
+        (true, Some(a), true) => a.to_string(),
+        (true, None, false) => format!("{op}@embedded"),
+    }
+}
+
+/// The parts both bars share: e-stop, security, refusals, teleop.
+fn parts<'a>(app: &App, t: &Theme) -> (Span<'a>, Span<'a>, Span<'a>, String) {
+    let estop = if app.estop {
+        Span::styled(" E-STOP ENGAGED ", t.alarm())
+    } else {
+        Span::raw(" e-stop off ")
+    };
+    // Unsigned on the network is an alarm; the loopback demo is said
+    // plainly; refusals are counted.
+    let security = match app.security {
+        Security::Authenticated => Span::raw(""),
+        Security::LoopbackOnly => Span::raw(" unsigned, loopback │"),
+        Security::Unauthenticated => Span::styled(" UNAUTHENTICATED ", t.alarm()),
+    };
+    let rejected = if app.rejected > 0 {
+        Span::styled(format!(" rejected {} ", app.rejected), t.warn())
+    } else {
+        Span::raw("")
+    };
+    let teleop = if app.key_teleop_on {
+        format!("{} ON", app.key_channel)
+    } else {
+        "key off".to_string()
+    };
+    (estop, security, rejected, teleop)
+}
+
+/// The status bar when the terminal is wide enough for all of it.
+fn wide_line<'a>(app: &App, t: &Theme) -> Line<'a> {
+    let count = |l: LinkState| app.robots.iter().filter(|r| r.link == l).count();
+    let (estop, security, rejected, teleop) = parts(app, t);
+    Line::from(vec![
+        Span::styled(" MECH ", t.title()),
+        Span::raw(format!(
+            "│ {} │ robots {} ({} ok {} stale {} lost) │ sel {} │ pads {} │ {} │",
+            app.router_addr,
+            app.robots.len(),
+            count(LinkState::Connected),
+            count(LinkState::Stale),
+            count(LinkState::Lost),
+            app.selection.len(),
+            app.pads().len(),
+            teleop,
+        )),
+        estop,
+        security,
+        rejected,
+        Span::raw(format!("│ {} │ ? help", session(app, false))),
+    ])
+}
+
+/// The status bar on a narrow terminal: the e-stop first, the session in
+/// place of the router's address.
+fn narrow_line<'a>(app: &App, t: &Theme) -> Line<'a> {
+    let ok = app
+        .robots
+        .iter()
+        .filter(|r| r.link == LinkState::Connected)
+        .count();
+    let (estop, security, rejected, teleop) = parts(app, t);
+    Line::from(vec![
+        estop,
+        security,
+        rejected,
+        Span::raw(format!(
+            "│ {} │ {}/{} ok │ sel {} │ pads {} │ {} │ ? help",
+            session(app, true),
+            ok,
+            app.robots.len(),
+            app.selection.len(),
+            app.pads().len(),
+            teleop,
+        )),
+    ])
 }
 
 /// Bottom line: prompt when typing, otherwise key hints.
@@ -110,6 +151,12 @@ impl Widget for BottomBar<'_> {
                 Span::raw(s.as_str()),
                 Span::styled(" ", t.selected()),
             ]),
+            Some(Prompt::Filter(s)) => Line::from(vec![
+                Span::raw("/"),
+                Span::raw(s.as_str()),
+                Span::styled(" ", t.selected()),
+                Span::styled("  name, route or state │ Enter keep │ Esc clear", t.dim()),
+            ]),
             None if self.app.waypoint_mode => Line::styled(
                 "WAYPOINTS click map │ e type x,y │ ⌫ remove │ Del clear │ Enter send │ Esc done │ X E-STOP",
                 t.dim(),
@@ -118,8 +165,12 @@ impl Widget for BottomBar<'_> {
                 "TELEOP key/0 arrows/WASD drive │ Q E strafe │ Space stop │ t off │ X E-STOP",
                 t.warn(),
             ),
+            None if self.app.robots_view == RobotsView::Table => Line::styled(
+                "v map │ ↑↓ select │ Space mark │ Enter detail │ / filter │ < > sort │ r reverse │ Tab panel │ ? help │ X E-STOP",
+                t.dim(),
+            ),
             None => Line::styled(
-                "q quit │ ? help │ : cmd │ X E-STOP │ n/p select │ f waypoints │ c cluster │ Tab panel │ t teleop │ +/- zoom │ 0 fit",
+                "q quit │ ? help │ : cmd │ X E-STOP │ n/p select │ v table │ / filter │ f waypoints │ c cluster │ Tab panel │ t teleop │ +/- zoom │ 0 fit",
                 t.dim(),
             ),
         };
@@ -169,5 +220,54 @@ impl Widget for EStopBanner {
         .style(self.theme.alarm())
         .block(block)
         .render(area, buf);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ui::fixture;
+
+    /// The status bar of `app` on a `width`-column terminal, as text.
+    fn bar(app: &App, width: u16) -> String {
+        let area = Rect::new(0, 0, width, 1);
+        let mut buf = Buffer::empty(area);
+        StatusBar {
+            app,
+            theme: Theme::new(true),
+        }
+        .render(area, &mut buf);
+        (0..width).map(|x| buf[(x, 0)].symbol()).collect()
+    }
+
+    #[test]
+    fn the_bar_says_attached_or_embedded_and_as_whom_at_any_width() {
+        let mut app = fixture::app(6, 80, 24);
+        app.operator = "alice".into();
+        assert!(bar(&app, 200).contains("│ embedded as alice │ ? help"));
+        assert!(bar(&app, 80).contains("│ alice@embedded │"));
+        app.attached = Some("gcs.sock".into());
+        let wide = bar(&app, 200);
+        assert!(
+            wide.contains("│ attached gcs.sock as alice │ ? help"),
+            "{wide}"
+        );
+        assert!(wide.contains("127.0.0.1:7700"), "{wide}");
+        let narrow = bar(&app, 80);
+        assert!(narrow.contains("│ alice@gcs.sock │"), "{narrow}");
+        assert!(
+            narrow.trim_end().ends_with("? help"),
+            "80 columns fit: {narrow}"
+        );
+        // Too narrow for the long form: the short one, not a cut-off line.
+        let mid = bar(&app, 120);
+        assert!(
+            mid.contains("alice@gcs.sock") && mid.contains("? help"),
+            "{mid}"
+        );
+        app.operator.clear();
+        assert_eq!(session(&app, false), "attached gcs.sock");
+        app.attached = None;
+        assert_eq!(session(&app, true), "embedded");
     }
 }

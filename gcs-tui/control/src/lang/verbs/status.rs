@@ -1,7 +1,9 @@
 //! `status [TARGET]`: one line per robot (link, pose, speed, mode, route,
-//! failsafe), for every robot when no target is given, after a summary that
-//! says whether the station authenticates and what it refused.
+//! failsafe, and the link's rates, loss and round trip), for every robot in
+//! natural name order when no target is given, after a summary that says
+//! whether the station authenticates and what it refused.
 
+use mech_core::LinkQuality;
 use mech_core::fleet::{MissionDelivery, Robot};
 
 use super::channel_name;
@@ -29,7 +31,11 @@ impl Status {
     pub(super) async fn apply(&self, ctx: &mut Context, _at: Span) -> Result<Outcome, LangError> {
         let robots = match &self.target {
             Some(t) => ctx.resolve(t)?,
-            None => ctx.gcs.with_fleet(|f| f.robots.keys().cloned().collect()),
+            None => ctx.gcs.with_fleet(|f| {
+                let mut names: Vec<String> = f.robots.keys().cloned().collect();
+                names.sort_by(|a, b| mech_core::names::natural_cmp(a, b));
+                names
+            }),
         };
         let details = ctx.gcs.with_fleet(|f| {
             robots
@@ -100,8 +106,23 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.stale)
     } else {
         String::new()
-    } + &links(r)
+    } + &link_quality(&r.quality)
+        + &links(r)
         + &lost_mission(r)
+}
+
+/// ` link rx 21.0/s tx 4.0/s loss 0.0% rtt 0.42ms`, once measured.
+fn link_quality(q: &LinkQuality) -> String {
+    if !q.measured() {
+        return String::new();
+    }
+    format!(
+        " link rx {:.1}/s tx {:.1}/s loss {} rtt {}",
+        q.rx_hz,
+        q.tx_hz,
+        q.loss_text(),
+        q.rtt_text()
+    )
 }
 
 /// A mission the robot lost (registered again without it: its agent

@@ -156,6 +156,7 @@ impl Tables {
             None => Err(DropReason::UnknownRobot),
             Some(r) if r.route.as_deref() == Some(channel) => {
                 r.traffic.forwarded += 1;
+                r.meter.sent();
                 r.links.target(now, timeout).ok_or(DropReason::UnknownRobot)
             }
             Some(r) => {

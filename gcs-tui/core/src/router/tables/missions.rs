@@ -34,6 +34,7 @@ impl Tables {
         };
         if let (Some(b), Some(to)) = (self.seal(&region, &robot), to) {
             out.owned.push((to, b));
+            self.count_sent(&robot);
         }
         self.missions
             .retain(|p| !(p.robot == robot && p.id == mission.id));
@@ -133,6 +134,7 @@ impl Tables {
         for (to, robot, region) in due {
             if let Some(b) = self.seal(&region, &robot) {
                 out.owned.push((to, b));
+                self.count_sent(&robot);
             }
         }
     }

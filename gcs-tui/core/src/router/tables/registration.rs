@@ -6,6 +6,7 @@ use mech_proto::{Body, Bye, Heartbeat, Hello, Route, Welcome};
 use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
+use super::link_quality::LinkMeter;
 use super::links::Links;
 use super::{Delivery, Incoming, Outbox, Peer, RobotEntry, Tables};
 use crate::counters::Traffic;
@@ -26,17 +27,19 @@ impl Tables {
             let why = format!("Hello for {} sent by {}", hello.name, m.header.sender);
             return self.bad(m.from, why, events);
         }
-        self.register(hello, m.from, m.now, out, events);
+        self.register(hello, m.header.seq, m.from, m.now, out, events);
         Delivery::Consumed
     }
 
     /// Registers a robot (again, after a restart or from a new address: its
     /// id and route are kept, but it must confirm the route), welcomes it
     /// with its id and route on the link the Hello came on, and gives it a
-    /// latched e-stop.
+    /// latched e-stop. `seq` is the Hello's sequence number: a robot numbers
+    /// its messages afresh when it registers again.
     pub(super) fn register(
         &mut self,
         hello: Hello,
+        seq: u32,
         from: Peer,
         now: Instant,
         out: &mut Outbox,
@@ -52,6 +55,11 @@ impl Tables {
         let Some(entry) = self.robots.get_mut(&hello.name) else {
             return;
         };
+        if known {
+            entry.meter.renumbered(seq);
+        } else {
+            entry.meter.received(seq);
+        }
         entry.route_sent = now;
         // An agent that restarted has forgotten its route: it must confirm it.
         if known {
@@ -81,11 +89,11 @@ impl Tables {
         self.estop_newcomer(&name, now, out);
     }
 
-    /// A robot's first registration: a new id, and the configured default
-    /// route (none unless configured, so it holds still).
+    /// A robot's first registration: its id (see [`Tables::id_for`]), and
+    /// the configured default route (none unless configured, so it holds
+    /// still).
     fn enrol(&mut self, hello: &Hello, from: Peer, now: Instant, events: &mut Vec<Event>) {
-        let id = self.next_id;
-        self.next_id = self.next_id.wrapping_add(1).max(1);
+        let id = self.id_for(&hello.name);
         let route = self.config.default_route.clone();
         let epoch = u32::from(route.is_some());
         self.robots.insert(
@@ -104,6 +112,7 @@ impl Tables {
                     received: 1,
                     ..Traffic::default()
                 },
+                meter: LinkMeter::new(now),
             },
         );
         info!(robot = %hello.name, platform = %hello.platform, %from, id, "robot registered");
@@ -113,6 +122,20 @@ impl Tables {
                 channel: route,
                 epoch,
             });
+        }
+    }
+
+    /// The id a newly registered robot gets: the number its name ends with
+    /// (`robot_12` is #12), so the id the operator reads agrees with the
+    /// name whatever order robots register in; when the name has no number
+    /// in `1..=65535` or another robot holds it, the highest id no robot
+    /// holds (65535, 65534...), which stays clear of the small numbers names
+    /// carry.
+    fn id_for(&self, name: &str) -> u16 {
+        let taken = |id: u16| self.robots.values().any(|r| r.id == id);
+        match crate::names::trailing_number(name) {
+            Some(n) if !taken(n) => n,
+            _ => (1..=u16::MAX).rev().find(|&id| !taken(id)).unwrap_or(0),
         }
     }
 
@@ -137,10 +160,11 @@ impl Tables {
     }
 
     /// Liveness: any message from a registered robot's name over UDP or
-    /// a radio.
+    /// a radio; its sequence number `seq` goes to the link measurement.
     pub(super) fn seen_robot(
         &mut self,
         sender: &str,
+        seq: u32,
         from: Peer,
         now: Instant,
         events: &mut Vec<Event>,
@@ -148,6 +172,7 @@ impl Tables {
         if let Some(r) = self.robots.get_mut(sender) {
             r.last_seen = now;
             r.traffic.received += 1;
+            r.meter.received(seq);
             if let Some(old) = r.links.heard(from, now) {
                 info!(robot = sender, %old, new = %from, "robot moved to a new address");
             }
@@ -192,7 +217,8 @@ impl Tables {
     }
 
     /// The router's heartbeat to every robot, every `heartbeat_period`, on
-    /// each of its links: a robot with two links hears which are alive.
+    /// each of its links (a robot with two links hears which are alive),
+    /// remembered so the robot's echo of it times the round trip.
     pub(super) fn send_heartbeats(&mut self, now: Instant, out: &mut Outbox) {
         let period = self.config.heartbeat_period;
         let mut due = Vec::new();
@@ -202,9 +228,14 @@ impl Tables {
                 due.extend(r.links.all().map(|peer| (name.clone(), peer)));
             }
         }
+        let uptime_ms = now.saturating_duration_since(self.started).as_millis() as u64;
         for (name, peer) in due {
-            let body = Body::Heartbeat(Heartbeat { uptime_ms: 0 });
+            let body = Body::Heartbeat(Heartbeat::new(uptime_ms));
             if let Some(b) = self.make(&name, body) {
+                let seq = self.seq;
+                if let Some(r) = self.robots.get_mut(&name) {
+                    r.meter.beat_sent(seq, now);
+                }
                 out.owned.push((peer, b));
             }
         }

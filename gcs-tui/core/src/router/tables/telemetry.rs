@@ -62,6 +62,7 @@ impl Tables {
         match self.target(&fix.robot, m.now) {
             Some(to) => {
                 self.pass_on(m.bytes, to, &fix.robot, out);
+                self.count_sent(&fix.robot);
                 Delivery::Consumed
             }
             None => {

@@ -1,10 +1,12 @@
-//! The mouse on the App: a click, drag or wheel resolved against the same
-//! layout the screen was drawn with (map, cards, waypoints, routing table).
+//! The mouse on the App: a click, drag, wheel or hover resolved against
+//! the same layout the screen was drawn with (map, cards, fleet table,
+//! waypoints, routing table).
 
 use mech_proto::Waypoint;
 use ratatui::layout::Position;
 
 use super::{App, Focus, Select};
+use crate::ui::columns;
 use crate::ui::layout::{TableWindow, inner};
 use crate::ui::view::RobotView;
 
@@ -63,6 +65,11 @@ impl App {
             }
             return;
         }
+        if let Some(table) = areas.table.filter(|a| a.contains(pos)) {
+            self.set_focus(Focus::Cards);
+            self.click_table(inner(table), col, row, add);
+            return;
+        }
         if let Some(cards) = areas.cards.filter(|a| a.contains(pos)) {
             self.focus = Focus::Cards;
             let inner = inner(cards);
@@ -99,6 +106,40 @@ impl App {
         }
     }
 
+    /// A click in the table: on the header, sorts by that column; on a row,
+    /// selects its robot (`add`: adds or removes it).
+    fn click_table(&mut self, inner: ratatui::layout::Rect, col: u16, row: u16, add: bool) {
+        if self.table.detail || row < inner.y || col < inner.x {
+            return;
+        }
+        let shown = columns::visible(usize::from(inner.width));
+        if row == inner.y {
+            if let Some(c) = columns::column_at(&shown, usize::from(col - inner.x)) {
+                self.sort_by(c);
+            }
+            return;
+        }
+        let at = self.table.scroll + usize::from(row - inner.y - 1);
+        if let Some(name) = self
+            .table
+            .rows
+            .get(at)
+            .map(|&i| self.robots[i].name.clone())
+        {
+            self.select(if add {
+                Select::Toggle(name)
+            } else {
+                Select::Only(name)
+            });
+        }
+    }
+
+    /// The pointer over the map: the robot under it is labelled whatever
+    /// the crowd around it.
+    pub(super) fn hover(&mut self, col: u16, row: u16) {
+        self.hover = self.robot_at_cell(col, row).map(|r| r.name.clone());
+    }
+
     pub(super) fn drag(&mut self, col: u16, row: u16) {
         let Some((c0, r0)) = self.drag_from else {
             return;
@@ -111,6 +152,14 @@ impl App {
 
     pub(super) fn scroll(&mut self, col: u16, row: u16, steps: i32) {
         let factor = 1.25f64.powi(steps);
+        let over_table = self
+            .areas()
+            .table
+            .is_some_and(|a| a.contains(Position::new(col, row)));
+        if over_table {
+            self.scroll_table(-3 * steps);
+            return;
+        }
         match self.map_point(col, row) {
             Some((x, y)) => self.viewport.zoom_about(factor, x, y),
             None => {

@@ -1,5 +1,6 @@
 //! The one-line prompt on the App: the `:` command line with its history
-//! and the results the core sends back, and `x,y[,t]` waypoint entry.
+//! and the results the core sends back, `x,y[,t]` waypoint entry, and the
+//! fleet table's `/` filter (applied as it is typed).
 
 use mech_proto::Waypoint;
 
@@ -11,10 +12,24 @@ impl App {
         self.history_pos = None;
     }
 
-    /// Changes the text of the open prompt, if any.
+    /// Changes the text of the open prompt, if any; a filter applies at
+    /// once.
     pub(super) fn edit_prompt(&mut self, edit: impl FnOnce(&mut String)) {
-        if let Some(Prompt::Command(s) | Prompt::Waypoint(s)) = &mut self.prompt {
-            edit(s);
+        match &mut self.prompt {
+            Some(Prompt::Command(s) | Prompt::Waypoint(s)) => edit(s),
+            Some(Prompt::Filter(s)) => {
+                edit(s);
+                let filter = s.clone();
+                self.set_filter(filter);
+            }
+            None => {}
+        }
+    }
+
+    /// Esc on a prompt: closes it; on the filter, also clears the filter.
+    pub(super) fn cancel_prompt(&mut self) {
+        if let Some(Prompt::Filter(_)) = self.prompt.take() {
+            self.set_filter(String::new());
         }
     }
 
@@ -35,6 +50,8 @@ impl App {
                 self.prompt_error = None;
                 self.outbox.push(Request::Exec(line));
             }
+            // The filter is already applied: Enter keeps it.
+            Some(Prompt::Filter(_)) => {}
             Some(Prompt::Waypoint(text)) => match parse_waypoint(&text) {
                 Ok(w) => {
                     self.prompt_error = None;

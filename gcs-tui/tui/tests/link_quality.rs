@@ -1,0 +1,181 @@
+//! Link quality as the router measures it, over real loopback sockets: a
+//! small userspace UDP proxy in front of one simulated robot drops a fifth
+//! of what that robot sends, and the router's figure for it must read that
+//! loss while the robots talking to it directly read none.
+//!
+//! The proxy drops in the robot -> router direction only: that is the
+//! direction the router measures loss in (from the gaps in the robot's own
+//! sequence numbers), so the reading can be checked against exactly what
+//! was dropped. The router -> robot direction passes untouched, so the
+//! robot keeps hearing the router's heartbeats and stays registered.
+//!
+//! It drops one datagram in every five, at a random place within each
+//! block of five: exactly 20 % over any stretch of whole blocks, in no
+//! fixed pattern. (Independent 20 % coin flips would scatter the count over
+//! the router's five-second window by about four points either way, which a
+//! check at +/- 5 points would trip on now and then.)
+
+#![allow(clippy::unwrap_used)]
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use mech_agent::AgentSettings;
+use mech_agent::platform::PlatformSpec;
+use mech_agent::runtime::{self, Io, Ticker};
+use mech_agent::sim::{Arena, SimAgent, SimFleet, SimFleetOptions};
+use mech_core::{CoreConfig, Gcs, LinkQuality};
+use rand::Rng;
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+
+/// Datagrams the proxy passed on and dropped, robot -> router.
+#[derive(Debug, Default)]
+struct ProxyCounts {
+    passed: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// A UDP proxy between one robot and the router: the robot sends to
+/// `front`, the proxy sends on from `back` (so the router sees `back` as
+/// the robot's address) and relays the router's replies to the robot.
+async fn lossy_proxy(
+    router: SocketAddr,
+    counts: Arc<ProxyCounts>,
+    mut stop: watch::Receiver<bool>,
+) -> SocketAddr {
+    let front = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let back = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let addr = front.local_addr().unwrap();
+    tokio::spawn(async move {
+        let mut robot: Option<SocketAddr> = None;
+        let (mut up, mut down) = (vec![0u8; 65_536], vec![0u8; 65_536]);
+        let (mut in_block, mut drop_at) = (0u32, rand::rng().random_range(0..5));
+        loop {
+            tokio::select! {
+                _ = stop.changed() => return,
+                got = front.recv_from(&mut up) => {
+                    let Ok((n, from)) = got else { continue };
+                    robot = Some(from);
+                    let drop_it = in_block == drop_at;
+                    in_block += 1;
+                    if in_block == 5 {
+                        in_block = 0;
+                        drop_at = rand::rng().random_range(0..5);
+                    }
+                    if drop_it {
+                        counts.dropped.fetch_add(1, Ordering::Relaxed);
+                    } else {
+                        counts.passed.fetch_add(1, Ordering::Relaxed);
+                        let _ = back.send_to(&up[..n], router).await;
+                    }
+                }
+                got = back.recv_from(&mut down) => {
+                    let (Ok((n, _)), Some(to)) = (got, robot) else { continue };
+                    let _ = front.send_to(&down[..n], to).await;
+                }
+            }
+        }
+    });
+    addr
+}
+
+/// One simulated diff-drive robot named `name`, talking to `router`.
+async fn robot(name: &str, router: SocketAddr, stop: watch::Receiver<bool>) {
+    let sim = SimAgent::new(
+        AgentSettings::new(name),
+        &PlatformSpec::diff_drive(),
+        Arena::default().start_pose(0, 1),
+        None,
+        mech_proto::unix_micros(),
+    );
+    let io = Io::Udp {
+        socket: UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+        router,
+    };
+    let origin = tokio::time::Instant::now();
+    let ticker = Ticker::Own(Duration::from_millis(50));
+    tokio::spawn(runtime::drive(sim, io, ticker, origin, stop));
+}
+
+fn quality(gcs: &Gcs, robot: &str) -> Option<LinkQuality> {
+    gcs.with_fleet(|f| f.robot(robot).map(|r| r.quality))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
+    let mut config = CoreConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.unwrap();
+    let router = gcs.router().udp_addr();
+    let (stop, stopped) = watch::channel(false);
+
+    let options = SimFleetOptions {
+        noise: false,
+        ..SimFleetOptions::default()
+    };
+    let fleet = SimFleet::spawn(3, router, Arena::default(), options)
+        .await
+        .unwrap();
+    let counts = Arc::new(ProxyCounts::default());
+    let proxy = lossy_proxy(router, counts.clone(), stopped.clone()).await;
+    robot("robot_9", proxy, stopped.clone()).await;
+
+    // Until robot_9's figures cover the router's full five seconds.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    let lossy = loop {
+        if let Some(q) = quality(&gcs, "robot_9").filter(|q| q.window >= Duration::from_secs(5)) {
+            break q;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "robot_9's link measured over 5 s: {:?}",
+            quality(&gcs, "robot_9")
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    let (passed, dropped) = (
+        counts.passed.load(Ordering::Relaxed),
+        counts.dropped.load(Ordering::Relaxed),
+    );
+    let loss = lossy.loss.expect("robot_9 sent in the window");
+    println!(
+        "robot_9 behind the proxy: loss {:.1}% ({dropped} of {} dropped so far), rx {:.1}/s, tx {:.1}/s, rtt {}",
+        loss * 100.0,
+        passed + dropped,
+        lossy.rx_hz,
+        lossy.tx_hz,
+        lossy.rtt_text()
+    );
+    assert!(
+        (loss - 0.20).abs() <= 0.05,
+        "robot_9 reads 20 % +/- 5: {lossy:?}"
+    );
+    assert!(lossy.rtt.is_some(), "echoes get through: {lossy:?}");
+
+    for name in fleet.names() {
+        let q = quality(&gcs, &name).expect("registered");
+        let loss = q.loss.expect("it sent in the window");
+        println!(
+            "{name} direct: loss {:.1}%, rx {:.1}/s, rtt {}",
+            loss * 100.0,
+            q.rx_hz,
+            q.rtt_text()
+        );
+        assert!(loss < 0.01, "{name} reads about 0: {q:?}");
+        // Telemetry at 20 Hz and a heartbeat a second, four fifths of it
+        // for the robot behind the proxy.
+        assert!(
+            (lossy.rx_hz / q.rx_hz - 0.8).abs() < 0.1,
+            "{name} {:.1}/s, robot_9 {:.1}/s",
+            q.rx_hz,
+            lossy.rx_hz
+        );
+    }
+    let _ = stop.send(true);
+    fleet.shutdown().await;
+    gcs.shutdown().await;
+}
