@@ -118,6 +118,10 @@ pub struct Robot {
     pub estop_ack: Option<(bool, u32)>,
     /// Messages the robot reports it ignored as stale (telemetry).
     pub stale: u32,
+    /// The station this robot belongs to when it is another station's,
+    /// shown here read-only through a bridge (`mech-zenoh`); `None` for
+    /// this station's own robots. Only that station routes it.
+    pub remote: Option<String>,
 }
 
 impl Robot {
@@ -151,6 +155,7 @@ impl Robot {
             traffic: Traffic::default(),
             estop_ack: None,
             stale: 0,
+            remote: None,
         }
     }
 
@@ -181,6 +186,12 @@ impl Robot {
             }
             _ => false,
         }
+    }
+
+    /// Whether this station's router drives the robot (not another
+    /// station's, shown read-only).
+    pub fn is_local(&self) -> bool {
+        self.remote.is_none()
     }
 
     /// Whether the robot obeys `kind` commands.
