@@ -2,7 +2,7 @@
 //! failsafe), for every robot when no target is given, after a summary that
 //! says whether the station authenticates and what it refused.
 
-use mech_core::fleet::Robot;
+use mech_core::fleet::{Fleet, Robot};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target, failsafe_name};
@@ -28,7 +28,7 @@ impl Status {
 
     pub(super) async fn apply(&self, ctx: &mut Context, _at: Span) -> Result<Outcome, LangError> {
         let robots = match &self.target {
-            Some(t) => ctx.resolve(t)?,
+            Some(t) => ctx.resolve_shown(t)?,
             None => ctx.gcs.with_fleet(|f| f.robots.keys().cloned().collect()),
         };
         let details = ctx.gcs.with_fleet(|f| {
@@ -53,13 +53,31 @@ impl Status {
         };
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}",
+                "{} robots; station {}{refused}{}",
                 details.len(),
-                router.security().as_str()
+                router.security().as_str(),
+                ctx.gcs.with_fleet(stations),
             ),
             details,
         })
     }
+}
+
+/// Other stations seen through a bridge, with their state and how many of
+/// their robots are shown: `; stations site-b connected (2 robots)`.
+fn stations(f: &Fleet) -> String {
+    if f.stations.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = f
+        .stations
+        .iter()
+        .map(|(name, link)| {
+            let n = f.robots_of(name).count();
+            format!("{name} {} ({n} robots)", link.as_str())
+        })
+        .collect();
+    format!("; stations {}", each.join(", "))
 }
 
 fn status_line(r: &Robot) -> String {
@@ -85,5 +103,8 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.stale)
     } else {
         String::new()
+    } + &match &r.remote {
+        Some(station) => format!(" remote {station} (read-only)"),
+        None => String::new(),
     }
 }
