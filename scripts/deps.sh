@@ -2,8 +2,8 @@
 # Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
 # pkg-config (gilrs, serialport), socat (serial-link tests over a
 # pseudo-terminal pair), tmux (the end-to-end TUI test), and Python's msgpack
-# (the documented Python controller is run by the tests). Does nothing when
-# they are already there.
+# and eclipse-zenoh (the documented Python controller and Zenoh reader are
+# run by the tests). Does nothing when they are already there.
 set -euo pipefail
 need=()
 for pkg in libudev-dev pkg-config socat tmux; do
@@ -21,4 +21,11 @@ if command -v python3 >/dev/null && ! python3 -c 'import msgpack' 2>/dev/null; t
     echo "installing: python msgpack"
     python3 -m pip install --quiet --disable-pip-version-check msgpack 2>/dev/null \
         || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages msgpack
+fi
+# Python's Zenoh (the version of the Rust crate): the documented reader of
+# MECH's robots on Zenoh runs in the tests.
+if command -v python3 >/dev/null && ! python3 -c 'import zenoh' 2>/dev/null; then
+    echo "installing: python eclipse-zenoh"
+    python3 -m pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.2' 2>/dev/null \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages 'eclipse-zenoh==1.10.2'
 fi

@@ -5,3 +5,4 @@ mod cluster_script;
 mod script;
 mod signed;
 mod tui;
+mod zenoh;

@@ -488,3 +488,30 @@ async fn a_typed_estop_acts_at_once_whatever_the_command_queue_is_doing() {
     spawner.shutdown().await;
     gcs.shutdown().await;
 }
+
+#[test]
+fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
+    let mut fleet = mech_core::Fleet::new(Default::default());
+    let info = mech_core::fleet::RemoteInfo {
+        id: 4,
+        platform: "kiwi".into(),
+        capabilities: vec![],
+        motors: 3,
+        max_speed: 1.0,
+        max_yaw_rate: 1.0,
+    };
+    fleet.remote_info("site-b", "robot_9", &info);
+    fleet.remote_link("site-b", "robot_9", LinkState::Connected);
+    let snap = snapshot(&fleet, vec![]);
+    assert_eq!(snap.robots[0].remote.as_deref(), Some("site-b"));
+    let mut app = App::new("127.0.0.1:7700", Instant::now());
+    app.update(Action::Resize(120, 36));
+    app.update(Action::Fleet(snap));
+    app.update(Action::FitFleet);
+    let mut term = ratatui::Terminal::new(ratatui::backend::TestBackend::new(120, 36)).unwrap();
+    term.draw(|f| f.render_widget(&app, f.area())).unwrap();
+    let screen = term.backend().to_string();
+    assert!(screen.contains("robot_9@site-b"), "{screen}");
+    assert!(screen.contains("kiwi remote"), "the card says so: {screen}");
+    assert!(screen.contains('○'), "a hollow mark on the map: {screen}");
+}

@@ -54,6 +54,69 @@ fn declare_err(what: &'static str) -> impl Fn(zenoh::Error) -> BridgeError {
     }
 }
 
+/// What a bridge declared on the session besides its token: the four
+/// halves' subscribers and queryables.
+#[derive(Debug)]
+struct Declared {
+    answers: Queryable<()>,
+    intake: Option<Intake>,
+    route_requests: Option<Queryable<()>>,
+    remote: Remote,
+}
+
+impl Declared {
+    async fn new(
+        session: &Session,
+        config: &ZenohConfig,
+        gcs: &Gcs,
+        stats: &Arc<Stats>,
+        origin_us: u64,
+    ) -> Result<Declared, BridgeError> {
+        let station = config.station.as_str();
+        let answers = answers::declare(session, station, gcs.clone(), origin_us)
+            .await
+            .map_err(declare_err("the state queryable"))?;
+        let intake = match config.commands {
+            true => Some(
+                inbound::declare(session, station, &config.identity, gcs.clone(), stats.clone())
+                    .await
+                    .map_err(declare_err("the command subscriber"))?,
+            ),
+            false => None,
+        };
+        let route_requests = match config.route_requests {
+            RouteRequests::Off => None,
+            policy => Some(
+                routes::declare(session, station, gcs.clone(), policy, stats.clone())
+                    .await
+                    .map_err(declare_err("the route request queryable"))?,
+            ),
+        };
+        let remote = remote::declare(session, station, gcs.clone(), stats.clone())
+            .await
+            .map_err(declare_err("the subscribers to other stations"))?;
+        Ok(Declared {
+            answers,
+            intake,
+            route_requests,
+            remote,
+        })
+    }
+
+    async fn undeclare(self) {
+        if let Some(intake) = self.intake {
+            intake.task.abort();
+            let _ = intake.subscriber.undeclare().await;
+        }
+        let _ = self.remote.state.undeclare().await;
+        let _ = self.remote.liveliness.undeclare().await;
+        let _ = self.answers.undeclare().await;
+        if let Some(q) = self.route_requests {
+            let _ = q.undeclare().await;
+        }
+    }
+}
+
 /// A running bridge. Dropping it without [`Bridge::shutdown`] leaves the
 /// session open until the process ends.
 #[derive(Debug)]
@@ -62,10 +125,7 @@ pub struct Bridge {
     station: String,
     stats: Arc<Stats>,
     publishing: JoinHandle<()>,
-    intake: Option<Intake>,
-    remote: Remote,
-    answers: Queryable<()>,
-    route_requests: Option<Queryable<()>>,
+    declared: Declared,
     token: LivelinessToken,
     requester: Arc<RouteRequester>,
 }
@@ -92,34 +152,14 @@ impl Bridge {
         let out = Outbound::new(session.clone(), station, gcs.clone(), stats.clone());
         let origin_us = out.origin_us;
         let publishing = tokio::spawn(out.run(events));
-        let answers = answers::declare(&session, station, gcs.clone(), origin_us)
-            .await
-            .map_err(declare_err("the state queryable"))?;
-        let intake = match config.commands {
-            true => Some(
-                inbound::declare(
-                    &session,
-                    station,
-                    &config.identity,
-                    gcs.clone(),
-                    stats.clone(),
-                )
-                .await
-                .map_err(declare_err("the command subscriber"))?,
-            ),
-            false => None,
+        let declared = match Declared::new(&session, config, gcs, &stats, origin_us).await {
+            Ok(d) => d,
+            Err(e) => {
+                publishing.abort();
+                let _ = session.close().await;
+                return Err(e);
+            }
         };
-        let route_requests = match config.route_requests {
-            RouteRequests::Off => None,
-            policy => Some(
-                routes::declare(&session, station, gcs.clone(), policy, stats.clone())
-                    .await
-                    .map_err(declare_err("the route request queryable"))?,
-            ),
-        };
-        let remote = remote::declare(&session, station, gcs.clone(), stats.clone())
-            .await
-            .map_err(declare_err("the subscribers to other stations"))?;
         let requester = Arc::new(RouteRequester::new(session.clone(), station, operator));
         info!(station, "on the Zenoh network");
         Ok(Bridge {
@@ -127,10 +167,7 @@ impl Bridge {
             station: station.to_string(),
             stats,
             publishing,
-            intake,
-            remote,
-            answers,
-            route_requests,
+            declared,
             token,
             requester,
         })
@@ -160,16 +197,7 @@ impl Bridge {
     /// lost at once.
     pub async fn shutdown(self) {
         self.publishing.abort();
-        if let Some(intake) = self.intake {
-            intake.task.abort();
-            let _ = intake.subscriber.undeclare().await;
-        }
-        let _ = self.remote.state.undeclare().await;
-        let _ = self.remote.liveliness.undeclare().await;
-        let _ = self.answers.undeclare().await;
-        if let Some(q) = self.route_requests {
-            let _ = q.undeclare().await;
-        }
+        self.declared.undeclare().await;
         let _ = self.token.undeclare().await;
         if let Err(e) = self.session.close().await {
             warn!(error = %e, "closing the Zenoh session");

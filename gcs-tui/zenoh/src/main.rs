@@ -245,3 +245,31 @@ impl Station {
         Ok(code)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_example_configuration_reads_with_paths_beside_it() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/site-a.toml");
+        let (config, zenoh) = read(&path).unwrap();
+        zenoh.validate().unwrap();
+        assert_eq!(zenoh.station, "site-a");
+        assert_eq!(zenoh.route_requests, mech_zenoh::RouteRequests::Signed);
+        let bridge = config.auth.keys.iter().find(|k| k.name == "zenoh").unwrap();
+        assert!(bridge.file.starts_with(path.parent().unwrap()));
+        assert_eq!(config.router.udp.port(), 7400);
+    }
+
+    #[test]
+    fn a_bad_zenoh_section_names_itself() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.toml");
+        std::fs::write(&path, "[zenoh]\nstaton = \"a\"\n").unwrap();
+        let e = format!("{:#}", read(&path).unwrap_err());
+        assert!(e.contains("[zenoh]") && e.contains("staton"), "{e}");
+        std::fs::write(&path, "[router]\nudpp = 1\n").unwrap();
+        assert!(read(&path).is_err(), "the station's sections are checked too");
+    }
+}

@@ -60,7 +60,7 @@ pub(crate) async fn declare(
     let state = session
         .declare_subscriber(format!("{}/*/*/*", keys::ROOT))
         .allowed_origin(Locality::Remote)
-        .callback(move |sample| h.state(&sample))
+        .callback(move |sample| h.state(&sample, true))
         .await?;
     let liveliness = session
         .liveliness()
@@ -72,8 +72,9 @@ pub(crate) async fn declare(
 }
 
 impl Hearing {
-    /// A state sample of another station's robot.
-    fn state(&self, sample: &Sample) {
+    /// A state sample of another station's robot: `live` as published, or
+    /// not (the latest, answered to a query: its age says nothing).
+    fn state(&self, sample: &Sample, live: bool) {
         let key = sample.key_expr().as_str();
         let (station, robot, topic) = match keys::parse(key) {
             Ok(Key::State {
@@ -89,7 +90,7 @@ impl Hearing {
         }
         let bytes = sample.payload().to_bytes();
         let applied = match topic {
-            Topic::Telemetry => self.telemetry(station, robot, &bytes),
+            Topic::Telemetry => self.telemetry(station, robot, &bytes, live),
             Topic::Info => self.info(station, robot, &bytes),
             Topic::Link => self.link(station, robot, &bytes),
             Topic::Route => self.route(station, robot, &bytes),
@@ -104,16 +105,27 @@ impl Hearing {
         }
     }
 
-    fn telemetry(&self, station: &str, robot: &str, bytes: &[u8]) -> Result<bool, PayloadError> {
+    fn telemetry(
+        &self,
+        station: &str,
+        robot: &str,
+        bytes: &[u8],
+        live: bool,
+    ) -> Result<bool, PayloadError> {
         let msg: TelemetryMsg = from_json("telemetry", bytes)?;
         msg.origin.check("telemetry", station, robot)?;
         let t = msg.telemetry()?;
-        let age = mech_proto::unix_micros().saturating_sub(msg.stamp_us);
-        self.stats.record_age(Duration::from_micros(age));
         let at = self.gcs.router().elapsed();
-        Ok(self
+        let applied = self
             .gcs
-            .update_fleet(|f| f.remote_telemetry(station, robot, &t, at)))
+            .update_fleet(|f| f.remote_telemetry(station, robot, &t, at));
+        if live {
+            // From its station's router receiving it to this station's model.
+            let age = mech_proto::unix_micros().saturating_sub(msg.stamp_us);
+            self.stats.record_age(Duration::from_micros(age));
+            Stats::bump(&self.stats.remote_telemetry);
+        }
+        Ok(applied)
     }
 
     fn info(&self, station: &str, robot: &str, bytes: &[u8]) -> Result<bool, PayloadError> {
@@ -175,7 +187,7 @@ impl Hearing {
         };
         while let Ok(reply) = replies.recv_async().await {
             if let Ok(sample) = reply.result() {
-                self.state(sample);
+                self.state(sample, false);
             }
         }
     }

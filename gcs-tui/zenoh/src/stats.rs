@@ -31,6 +31,8 @@ pub struct Stats {
     pub route_requests_refused: AtomicU64,
     /// Updates about other stations' robots applied to the fleet model.
     pub remote_updates: AtomicU64,
+    /// Of those, telemetry samples.
+    pub remote_telemetry: AtomicU64,
     /// Router events this bridge's subscription missed (it lagged).
     pub events_missed: AtomicU64,
     ages: Mutex<VecDeque<u32>>,
@@ -53,6 +55,7 @@ pub struct StatsSnapshot {
     pub route_requests_done: u64,
     pub route_requests_refused: u64,
     pub remote_updates: u64,
+    pub remote_telemetry: u64,
     pub events_missed: u64,
     /// Remote telemetry age (its station received it -> it is in this
     /// station's fleet model): p50, p95, p99, max, microseconds.
@@ -104,6 +107,7 @@ impl Stats {
             route_requests_done: get(&self.route_requests_done),
             route_requests_refused: get(&self.route_requests_refused),
             remote_updates: get(&self.remote_updates),
+            remote_telemetry: get(&self.remote_telemetry),
             events_missed: get(&self.events_missed),
             remote_age_us: self.age_percentiles(),
         }

@@ -79,6 +79,7 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
         Span::raw(format!(" #{} ", r.id)),
         Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
+        Span::styled(if r.remote.is_some() { " remote" } else { "" }, t.dim()),
     ]));
     out.push(Line::raw(format!(
         " x{:6.2} y{:6.2} z{:5.2} {:4.0}° {:.2}m/s",

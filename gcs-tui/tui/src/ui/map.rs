@@ -381,7 +381,12 @@ fn label_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
         if selected {
             style = style.patch(t.selected());
         }
-        let glyph = if selected { "◉" } else { "●" };
+        // Another station's robot (read-only) is a hollow mark.
+        let glyph = match (selected, r.remote.is_some()) {
+            (true, _) => "◉",
+            (false, true) => "○",
+            (false, false) => "●",
+        };
         let at = (r.pose.x, r.pose.y);
         label(ctx, proj, at, 0, TextLine::styled(glyph, style));
         label(

@@ -95,6 +95,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             battery: r.battery,
             mission: r.mission,
             trail: recent_path(r),
+            remote: r.remote.clone(),
         })
         .collect();
     FleetSnapshot {

@@ -54,6 +54,9 @@ pub struct RobotView {
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
     pub trail: Vec<(f64, f64)>,
+    /// The other station this robot belongs to (shown read-only, through
+    /// a bridge); `None` for this station's robots.
+    pub remote: Option<String>,
 }
 
 impl RobotView {
@@ -90,6 +93,7 @@ impl RobotView {
             battery: None,
             mission: None,
             trail: Vec::new(),
+            remote: None,
         }
     }
 }

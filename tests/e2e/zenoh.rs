@@ -1,0 +1,183 @@
+//! Two `mech-zenoh` stations end to end, each a real process with its own
+//! simulated fleet, meeting over Zenoh on loopback: each sees the other's
+//! robots; site-b routes a robot of site-a by asking it; the documented
+//! Python reader (`docs/examples/zenoh_telemetry.py`, no MECH code) reads
+//! site-a's robots off the network; site-b freezes (SIGSTOP: no goodbye,
+//! its connection stays open but silent), and site-a shows its robots lost
+//! when the Zenoh lease runs out.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// A child process, killed when the test ends however it ends.
+struct Running(Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A Zenoh endpoint on loopback with a port nobody holds now.
+fn free_endpoint() -> String {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
+    format!("tcp/127.0.0.1:{}", l.local_addr().expect("bound").port())
+}
+
+/// Starts `mech-zenoh` as `station` with two simulated robots, running
+/// `script`; its stdout lines arrive on the returned channel.
+fn start(
+    station: &str,
+    args: &[&str],
+    script: &str,
+    logs: &Path,
+) -> (Running, mpsc::Receiver<String>) {
+    let mut child = Command::new(mech_e2e::binary("mech-zenoh"))
+        .args(["--station", station, "--demo", "2", "--script", "-"])
+        .args(["--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
+        .args(args)
+        .env("XDG_STATE_HOME", logs)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mech-zenoh starts (scripts/test.sh builds it)");
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin.write_all(script.as_bytes()).expect("script written");
+    drop(stdin);
+    let stdout = child.stdout.take().expect("stdout");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (Running(child), rx)
+}
+
+/// Reads lines until one contains every one of `wanted`; all lines read.
+fn read_until(rx: &mpsc::Receiver<String>, wanted: &[&str], what: &str) -> Vec<String> {
+    let mut seen = Vec::new();
+    loop {
+        match rx.recv_timeout(Duration::from_secs(60)) {
+            Ok(line) => {
+                let done = wanted.iter().all(|w| line.contains(w));
+                seen.push(line);
+                if done {
+                    return seen;
+                }
+            }
+            Err(e) => panic!("{what}: {e} after {seen:#?}"),
+        }
+    }
+}
+
+const SITE_A: &str = "
+wait robots 2 20s
+wait connected robot_1@site-b 30s
+wait connected robot_2@site-b 30s
+status
+wait route robot_1 ext/b 30s
+wait lost robot_2@site-b 30s
+expect link robot_1@site-b lost
+expect route robot_1 ext/b
+";
+
+const SITE_B: &str = "
+wait robots 2 20s
+wait connected robot_1@site-a 30s
+route robot_1@site-a ext/b
+wait route robot_1@site-a ext/b 30s
+sleep 120s
+";
+
+#[test]
+fn two_stations_share_their_fleets_and_a_python_program_reads_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("site-a.toml");
+    std::fs::write(&config, "[zenoh]\nroute_requests = \"unsigned\"\n").unwrap();
+    let (a_end, b_end) = (free_endpoint(), free_endpoint());
+    let a_args = ["--config", config.to_str().unwrap(), "--listen", &a_end];
+    let (mut a, a_out) = start("site-a", &a_args, SITE_A, dir.path());
+    let b_args = ["--listen", &b_end, "--connect", &a_end];
+    let (b, b_out) = start("site-b", &b_args, SITE_B, dir.path());
+
+    let b_lines = read_until(&b_out, &["\"line\":5,", "\"ok\":true"], "site-b's route");
+    let routed = b_lines
+        .iter()
+        .find(|l| l.contains("\"line\":4,"))
+        .expect("the route result");
+    assert!(
+        routed.contains("\"ok\":true") && routed.contains("of station site-a routed to ext/b"),
+        "{routed}"
+    );
+
+    let reader = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples/zenoh_telemetry.py");
+    let out = Command::new("python3")
+        .arg(reader)
+        .args([a_end.as_str(), "site-a", "10"])
+        .output()
+        .expect("python3 runs (scripts/deps.sh installs eclipse-zenoh)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("site-a/robot_1 is a "), "{text}");
+    assert!(text.contains("mech/site-a/robot_2 appeared"), "{text}");
+    let samples = text.lines().filter(|l| l.contains(" x=")).count();
+    assert!(samples >= 10, "{text}");
+    assert!(text.contains("site-a/robot_1 x=") && text.contains("channel=ext/b"), "{text}");
+
+    let frozen = Instant::now();
+    let stop = Command::new("kill")
+        .args(["-STOP", &b.0.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(stop.success());
+    let a_lines = read_until(&a_out, &["\"line\":7,"], "site-b lost at site-a");
+    println!(
+        "site-b frozen -> its robots lost at site-a after {:?} (lease 1 s)",
+        frozen.elapsed()
+    );
+    let mut a_lines = a_lines;
+    a_lines.extend(read_until(&a_out, &["\"type\":\"zenoh\""], "site-a's end"));
+    drop(b);
+    let status = a.0.wait().expect("site-a exits");
+    let all = a_lines.join("\n");
+    assert!(status.success(), "{all}");
+    let listing = a_lines
+        .iter()
+        .find(|l| l.contains("\"command\":\"status\""))
+        .expect("the status result");
+    assert!(
+        listing.contains("robot_2@site-b") && listing.contains("remote site-b (read-only)"),
+        "{listing}"
+    );
+    let zenoh = a_lines.last().unwrap();
+    assert!(zenoh.contains("\"route_requests_done\":1"), "{zenoh}");
+}
+
+#[test]
+fn the_zenoh_page_shows_the_tested_reader() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let page = std::fs::read_to_string(root.join("docs/zenoh.md")).unwrap();
+    let file = std::fs::read_to_string(root.join("docs/examples/zenoh_telemetry.py")).unwrap();
+    let section = &page[page
+        .find("## Reading MECH from Python")
+        .expect("the section")..];
+    let start = section.find("```python\n").expect("a python block") + "```python\n".len();
+    let end = start + section[start..].find("```").expect("the block's end");
+    assert_eq!(
+        &section[start..end],
+        file,
+        "docs/zenoh.md and zenoh_telemetry.py differ"
+    );
+}
