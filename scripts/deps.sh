@@ -1,12 +1,18 @@
 #!/usr/bin/env bash
 # Installs what MECH needs on a fresh Debian/Ubuntu machine: libudev-dev +
 # pkg-config (gilrs, serialport), socat (serial-link tests over a
-# pseudo-terminal pair), tmux (the end-to-end TUI test), and Python's msgpack
-# and eclipse-zenoh (the documented Python controller and Zenoh reader are
-# run by the tests). Does nothing when they are already there.
+# pseudo-terminal pair), nftables and iproute2 (the fault-injection suite's
+# packet loss in network namespaces), tmux (the end-to-end TUI test), strace
+# (the replay test checks that a replay opens no socket), GNU Octave with its
+# instrument-control package (the tests run the Octave example; about a
+# minute to install once, without recommended packages), Python's msgpack
+# (the Python client and the documented controller), pymavlink (the fake
+# autopilot the MAVLink tests fly against), Python's mcap (the recording
+# test reads recordings with it) and eclipse-zenoh (the documented reader of
+# MECH's robots on Zenoh). Does nothing when they are already there.
 set -euo pipefail
 need=()
-for pkg in libudev-dev pkg-config socat tmux; do
+for pkg in libudev-dev pkg-config socat nftables iproute2 tmux strace octave octave-instrument-control; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then
@@ -14,18 +20,31 @@ if [ ${#need[@]} -gt 0 ]; then
     sudo_cmd=""
     [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
     $sudo_cmd apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${need[@]}" >/dev/null
+    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
 fi
-# Python's msgpack: the documented Python controller runs in the tests.
-if command -v python3 >/dev/null && ! python3 -c 'import msgpack' 2>/dev/null; then
-    echo "installing: python msgpack"
-    python3 -m pip install --quiet --disable-pip-version-check msgpack 2>/dev/null \
-        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages msgpack
-fi
-# Python's Zenoh (the version of the Rust crate): the documented reader of
-# MECH's robots on Zenoh runs in the tests.
-if command -v python3 >/dev/null && ! python3 -c 'import zenoh' 2>/dev/null; then
-    echo "installing: python eclipse-zenoh"
-    python3 -m pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.2' 2>/dev/null \
-        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages 'eclipse-zenoh==1.10.2'
+# Python packages the tests use, each only when missing.
+pip_install() {
+    python3 -m pip install --quiet --disable-pip-version-check "$1" 2>/dev/null \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages "$1"
+}
+if command -v python3 >/dev/null; then
+    if ! python3 -c 'import msgpack' 2>/dev/null; then
+        echo "installing: python msgpack"
+        pip_install msgpack
+    fi
+    if ! python3 -c 'import pymavlink' 2>/dev/null; then
+        echo "installing: python pymavlink"
+        pip_install pymavlink==2.4.50
+    fi
+    # Python's mcap (with its zstd and lz4): an independent reader of recordings.
+    if ! python3 -c 'import mcap' 2>/dev/null; then
+        echo "installing: python mcap"
+        pip_install mcap
+    fi
+    # Python's Zenoh, the version of the Rust crate: the documented reader
+    # of MECH's robots on Zenoh runs in the tests.
+    if ! python3 -c 'import zenoh' 2>/dev/null; then
+        echo "installing: python eclipse-zenoh"
+        pip_install eclipse-zenoh==1.10.2
+    fi
 fi

@@ -1,4 +1,7 @@
-//! Shared helpers for the end-to-end tests: where the built binaries are.
+//! Shared helpers for the end-to-end and fault-injection tests: where the
+//! built binaries are, and the [`harness`] that runs them under faults.
+
+pub mod harness;
 
 use std::path::PathBuf;
 

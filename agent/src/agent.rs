@@ -10,18 +10,21 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use mech_proto::{
-    Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope, FailsafeState, Header,
-    Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice, NoticeCode, Route, RouteAck,
-    Telemetry, Velocity,
+    AutopilotRequest, Body, Bye, Command, CommandKind, Computation, EStop, EStopAck, Envelope,
+    FailsafeState, Header, Health, Heartbeat, Hello, Level, Mission, MissionAck, Notice,
+    NoticeCode, Route, RouteAck, Telemetry, Twist, Velocity, VelocitySource,
 };
+use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use crate::auth::{Checked, RobotAuth};
 use crate::control::{Controller, Gains, MissionRun, Mode};
 use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::filter::MedianFilter;
-use crate::hal::PositionSample;
+use crate::fusion::{FusionCounters, FusionSettings, PoseFusion};
+use crate::hal::{EdgeCount, PositionSample};
 use crate::order::{CommandOrder, is_older};
 use crate::platform::Platform;
+use crate::wheels::{WheelSettings, Wheels};
 
 /// Settings of the agent core (the parts of the robot config it uses).
 #[derive(Debug, Clone, PartialEq)]
@@ -31,8 +34,11 @@ pub struct AgentSettings {
     pub failsafe: FailsafeConfig,
     /// Telemetry period (default 50 ms = 20 Hz).
     pub telemetry_period: Duration,
-    /// Period of `Hello` while unregistered and of the agent's `Heartbeat`.
+    /// Period of the agent's `Heartbeat`.
     pub hello_period: Duration,
+    /// Period of `Hello` while unregistered: short, so a robot is back
+    /// within a fraction of a second of its station.
+    pub hello_retry: Duration,
     /// Answer a rejected command with `Notice{NotRouted}` (at most one a
     /// second), so a controller learns why it is ignored.
     pub notify_not_routed: bool,
@@ -47,6 +53,19 @@ pub struct AgentSettings {
     /// A position older than this marks health `Degraded`.
     pub position_stale_after: Duration,
     pub gains: Gains,
+    /// Wheel encoders (`[encoders]`): measured velocity, closed-loop wheel
+    /// speed, stall detection, and odometry fused with the position source.
+    /// `None`: velocity is reported from the commanded outputs and the
+    /// outputs are open loop.
+    pub wheels: Option<WheelSettings>,
+    /// Noise figures of the odometry + position fusion (used with `wheels`
+    /// and a position source).
+    pub fusion: FusionSettings,
+    /// Whether an autopilot (PX4, ArduPilot) flies the vehicle: operators'
+    /// autopilot requests are then queued for it
+    /// ([`Agent::take_autopilot_requests`]); without one they are answered
+    /// as unsupported.
+    pub autopilot: bool,
 }
 
 impl AgentSettings {
@@ -56,12 +75,16 @@ impl AgentSettings {
             failsafe: FailsafeConfig::default(),
             telemetry_period: Duration::from_millis(50),
             hello_period: Duration::from_secs(1),
+            hello_retry: Duration::from_millis(250),
             notify_not_routed: true,
             filter_window: 9,
             external_position: false,
             has_position: true,
             position_stale_after: Duration::from_secs(1),
             gains: Gains::default(),
+            wheels: None,
+            fusion: FusionSettings::default(),
+            autopilot: false,
         }
     }
 }
@@ -94,6 +117,18 @@ pub struct Counters {
     pub driver_faults: u64,
     /// Position fixes used.
     pub position_samples: u64,
+    /// Times a wheel stalled (driven without turning) and the outputs were
+    /// zeroed.
+    pub stalls: u64,
+    /// Commands obeyed.
+    pub commands: u64,
+    /// Times the router said it did not know this robot (it restarted),
+    /// and the robot registered again at once.
+    pub reregistered: u64,
+    /// When the failsafe last stopped the robot, and when it last obeyed a
+    /// new e-stop: the robot's clock, µs since the Unix epoch (0: never).
+    pub tripped_at_us: u64,
+    pub estopped_at_us: u64,
 }
 
 /// The result of one control period.
@@ -113,6 +148,13 @@ pub struct Agent {
     failsafe: Failsafe,
     filter: MedianFilter,
     estimate: Option<PositionSample>,
+    /// Encoders: speeds, speed loops, stall watch (with `[encoders]`).
+    wheels: Option<Wheels>,
+    /// Odometry fused with fixes (with encoders and a position source).
+    fusion: Option<PoseFusion>,
+    /// Each wheel's effect on the body displacement (the platform's
+    /// odometry, one column per wheel), for the odometry covariance.
+    wheel_jacobian: Option<DMatrix<f64>>,
     registered: bool,
     route: Route,
     /// Whether a route has been applied at all (epoch 0 is a valid epoch).
@@ -142,6 +184,8 @@ pub struct Agent {
     version: String,
     /// Signing and checking, when the robot has a key.
     auth: Option<RobotAuth>,
+    /// Operators' autopilot requests not yet taken by the vehicle.
+    autopilot_requests: Vec<AutopilotRequest>,
 }
 
 impl Agent {
@@ -154,8 +198,23 @@ impl Agent {
     ) -> Agent {
         let controller = Controller::new(platform, settings.gains, settings.has_position);
         let motors = controller.platform().motors();
+        let p = controller.platform();
+        let wheels = settings
+            .wheels
+            .zip(p.max_wheel_speed())
+            .map(|(w, max)| Wheels::new(w, motors, max));
+        let fusion = (wheels.is_some() && settings.has_position).then(|| {
+            PoseFusion::new(FusionSettings {
+                restart_after: settings.filter_window,
+                ..settings.fusion
+            })
+        });
+        let wheel_jacobian = wheels.as_ref().and_then(|_| wheel_jacobian(p));
         Agent {
             filter: MedianFilter::new(settings.filter_window),
+            wheels,
+            fusion,
+            wheel_jacobian,
             failsafe: Failsafe::new(settings.failsafe),
             controller,
             estimate: None,
@@ -177,11 +236,14 @@ impl Agent {
             last_not_routed_notice: None,
             last_driver_fault: None,
             actuator_fault_until: None,
-            last_state: FailsafeState::Ok,
+            // Nothing heard from a router yet: not a trip when the first tick
+            // finds the router lost.
+            last_state: FailsafeState::RouterLost,
             outputs: vec![0.0; motors],
             counters: Counters::default(),
             version: env!("CARGO_PKG_VERSION").to_string(),
             auth: None,
+            autopilot_requests: Vec::new(),
             settings,
         }
     }
@@ -201,11 +263,23 @@ impl Agent {
     /// Encodes a message to send, signed when the robot has a key. The
     /// header's stamp is the robot's clock reading.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
+        self.encode_on(env, 0, out)
+    }
+
+    /// Like [`Agent::encode`], for the robot's link number `link` (its
+    /// place in the config's link list): each link is its own signed
+    /// stream, so a message sent on two links is never taken for a replay.
+    pub fn encode_on(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
         mech_proto::encode_into(env, out)?;
-        if let Some(auth) = self.auth.as_mut() {
-            if let Err(e) = auth.seal(out, env.header.stamp_us) {
-                return Err(mech_proto::Error::Encode(e.to_string()));
-            }
+        if let Some(auth) = self.auth.as_mut()
+            && let Err(e) = auth.seal(out, env.header.stamp_us, link)
+        {
+            return Err(mech_proto::Error::Encode(e.to_string()));
         }
         Ok(())
     }
@@ -239,9 +313,21 @@ impl Agent {
         self.controller.mode()
     }
 
-    /// The filtered position estimate.
+    /// The position estimate: the median of the fixes, or, with encoders,
+    /// odometry fused with them (its `stamp` is always the newest fix's).
     pub fn estimate(&self) -> Option<PositionSample> {
         self.estimate
+    }
+
+    /// What the odometry fusion did with the fixes (zero without encoders).
+    pub fn fusion_counters(&self) -> FusionCounters {
+        self.fusion.as_ref().map(|f| f.counters).unwrap_or_default()
+    }
+
+    /// Each wheel's measured rim speed (m/s), while encoder readings are
+    /// fresh.
+    pub fn wheel_speeds(&self, now: Duration) -> Option<Vec<f64>> {
+        self.wheels.as_ref().and_then(|w| w.speeds(now))
     }
 
     /// The outputs of the last tick.
@@ -256,9 +342,12 @@ impl Agent {
 
     /// The failsafe state now.
     pub fn failsafe_state(&self, now: Duration) -> FailsafeState {
-        let state =
-            self.failsafe
-                .state(now, !self.route.channel.is_empty(), self.mission_running());
+        // A mission on the routed channel is the robot's controller, running
+        // or done: silence on that channel is not a fault.
+        let mission_controls = self.mission_running() || self.mission_done_on_route();
+        let state = self
+            .failsafe
+            .state(now, !self.route.channel.is_empty(), mission_controls);
         let faulted = self.actuator_fault_until.is_some_and(|t| now < t);
         if faulted && state != FailsafeState::EStopped {
             FailsafeState::Fault
@@ -281,10 +370,52 @@ impl Agent {
         }
     }
 
-    /// A position measurement from the robot's own source.
+    /// A position measurement from the robot's own source: through the
+    /// median filter, and with encoders, into the odometry fusion.
     pub fn observe_position(&mut self, sample: PositionSample) {
         self.counters.position_samples += 1;
-        self.estimate = Some(self.filter.push(sample));
+        let median = self.filter.push(sample);
+        self.estimate = Some(match self.fusion.as_mut() {
+            None => median,
+            Some(fusion) => {
+                fusion.correct(&sample, &median, sample.stamp);
+                fused(fusion, median)
+            }
+        });
+    }
+
+    /// One reading of every wheel encoder (motor order), taken at `now`,
+    /// before this period's [`Agent::tick`]: measured speeds for telemetry
+    /// and the speed loops, odometry for the pose, the stall watch. A
+    /// reading that does not fit the robot is a driver fault (the notice is
+    /// returned).
+    pub fn observe_wheels(&mut self, counts: &[EdgeCount], now: Duration) -> Option<Envelope> {
+        let wheels = self.wheels.as_mut()?;
+        let step = match wheels.observe(counts, &self.outputs, now) {
+            Ok(step) => step,
+            Err(e) => return self.driver_fault(&format!("encoders: {e}"), now),
+        };
+        let sigma = wheels.settings().metres_per_edge() / 2.0;
+        let (Some(fusion), Some(jacobian)) = (self.fusion.as_mut(), &self.wheel_jacobian) else {
+            return None;
+        };
+        // The platform's odometry is linear in the wheel speeds, so it turns
+        // each wheel's travel into the body's displacement too.
+        let d = self.controller.platform().wheel_odometry(&step.travel)?;
+        let relative = self.settings.fusion.odometry_sigma;
+        let variances: Vec<f64> = step
+            .travel
+            .iter()
+            .map(|t| (relative * t.abs() + sigma).powi(2))
+            .collect();
+        let wheel_cov = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(variances));
+        let body = jacobian * wheel_cov * jacobian.transpose();
+        let cov = Matrix3::from_fn(|r, c| body[(r, c)]);
+        fusion.predict(Vector3::new(d.vx, d.vy, d.wz), cov, now);
+        if let Some(e) = self.estimate {
+            self.estimate = Some(fused(fusion, e));
+        }
+        None
     }
 
     /// An actuator or position driver failed; health becomes `Fault` for a
@@ -320,6 +451,16 @@ impl Agent {
     /// Decodes and handles one received datagram or frame; undecodable bytes
     /// are counted and dropped.
     pub fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        // A radio is a broadcast medium: frames for other robots are
+        // skipped before they are checked (they are signed for those
+        // robots, not refused forgeries).
+        if let Ok(head) = mech_proto::peek(bytes) {
+            let dest = head.destination;
+            if !(dest.is_empty() || dest == mech_proto::BROADCAST || dest == self.settings.name) {
+                self.counters.not_for_me += 1;
+                return Vec::new();
+            }
+        }
         let env = match mech_proto::decode(bytes) {
             Ok(env) => env,
             Err(_) => {
@@ -377,6 +518,16 @@ impl Agent {
             }
             Body::Mission(m) => self.mission_received(&channel, m, now, &mut out),
             Body::EStop(e) => self.estop_received(e, now, &mut out),
+            Body::Bye(bye) if sender == mech_proto::ROUTER => self.router_left(&bye.reason),
+            Body::Autopilot(r) => self.autopilot_received(r, now, &mut out),
+            Body::Notice(n) if n.code == NoticeCode::UnknownRobot && self.registered => {
+                // The router restarted and forgot this robot: register now
+                // rather than after the router timeout.
+                tracing::info!(robot = %self.settings.name, "the router does not know this robot; registering again");
+                self.counters.reregistered += 1;
+                self.registered = false;
+                self.next_hello = now;
+            }
             Body::PositionFix(fix)
                 if self.settings.external_position && fix.robot == self.settings.name =>
             {
@@ -390,6 +541,14 @@ impl Agent {
             _ => {}
         }
         out
+    }
+
+    /// The router said it is stopping: it is lost now, not after the
+    /// router timeout (the failsafe acts on the next tick, and the robot
+    /// registers again once a router answers).
+    fn router_left(&mut self, reason: &str) {
+        tracing::warn!(robot = %self.settings.name, reason = %truncate(reason), "the router is stopping");
+        self.failsafe.router_gone();
     }
 
     /// Registered (again): the Welcome's route is applied whatever its
@@ -426,6 +585,9 @@ impl Agent {
             return;
         }
         self.last_estop_id = Some(e.id);
+        if e.engage && !self.failsafe.estopped() {
+            self.counters.estopped_at_us = self.stamp_origin_us + now.as_micros() as u64;
+        }
         if e.engage {
             self.failsafe.engage_estop(e.id);
             self.controller.idle();
@@ -440,11 +602,67 @@ impl Agent {
         out.push(self.envelope(mech_proto::ROUTER, ack, now));
     }
 
+    /// An operator's request to the autopilot: queued for the vehicle,
+    /// unless the robot has no autopilot or is e-stopped and the request
+    /// could start it moving (arm, offboard, take off); a refusal is a
+    /// notice in the station's event log.
+    fn autopilot_received(&mut self, r: AutopilotRequest, now: Duration, out: &mut Vec<Envelope>) {
+        if r.robot != self.settings.name {
+            self.counters.not_for_me += 1;
+            return;
+        }
+        let refusal = if !self.settings.autopilot {
+            Some(format!(
+                "{} has no autopilot: {} refused",
+                self.settings.name,
+                r.action.as_str()
+            ))
+        } else if self.failsafe.estopped() && r.action.starts_motion() {
+            Some(format!(
+                "{} is e-stopped: {} refused until release",
+                self.settings.name,
+                r.action.as_str()
+            ))
+        } else {
+            None
+        };
+        match refusal {
+            Some(text) => {
+                self.counters.refused += 1;
+                out.push(self.notice(Level::Warn, NoticeCode::Unsupported, &text, now));
+            }
+            None => self.autopilot_requests.push(r),
+        }
+    }
+
+    /// The autopilot requests received since the last call, oldest first,
+    /// for the vehicle to carry out.
+    pub fn take_autopilot_requests(&mut self) -> Vec<AutopilotRequest> {
+        std::mem::take(&mut self.autopilot_requests)
+    }
+
+    /// A notice from this robot to the router (the station's event log).
+    pub fn notice(
+        &mut self,
+        level: Level,
+        code: NoticeCode,
+        text: &str,
+        now: Duration,
+    ) -> Envelope {
+        let body = Body::Notice(Notice {
+            level,
+            code,
+            text: truncate(text),
+        });
+        self.envelope(mech_proto::ROUTER, body, now)
+    }
+
     /// One control period: failsafe, controller, actuator outputs, and the
     /// periodic messages that are due (Hello, Heartbeat, Telemetry).
     pub fn tick(&mut self, now: Duration) -> Tick {
         let mut outgoing = Vec::new();
         self.register(now, &mut outgoing);
+        self.watch_stall(now, &mut outgoing);
         let drive = self.judge_failsafe(now);
         self.control(drive, now);
         if self.registered {
@@ -458,7 +676,7 @@ impl Agent {
 
     /// Registration: after the router is lost, register again (it may have
     /// restarted, or the robot moved); while unregistered, Hello every
-    /// `hello_period` (with a key, ask the station's time first: signed
+    /// `hello_retry` (with a key, ask the station's time first: signed
     /// stamps need it).
     fn register(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if self.registered && self.failsafe.router_lost(now) {
@@ -469,13 +687,30 @@ impl Agent {
             }
         }
         if !self.registered && now >= self.next_hello {
-            self.next_hello = now + self.settings.hello_period;
+            self.next_hello = now + self.settings.hello_retry;
             let body = match self.auth.as_mut() {
                 Some(auth) if !auth.synced() => Body::TimeRequest(auth.time_request()),
                 _ => Body::Hello(self.hello()),
             };
             outgoing.push(self.envelope(mech_proto::ROUTER, body, now));
         }
+    }
+
+    /// A wheel driven without turning for the stall time: outputs held at
+    /// zero as for an actuator fault, and the GCS told which wheel.
+    fn watch_stall(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
+        let Some(stall) = self.wheels.as_mut().and_then(Wheels::take_stall) else {
+            return;
+        };
+        self.counters.stalls += 1;
+        let text = format!(
+            "{} stalled: driven at {:.0}% for {:.2} s without an encoder edge; outputs zeroed",
+            self.controller.platform().motor_name(stall.wheel),
+            stall.output.abs() * 100.0,
+            stall.for_time.as_secs_f64(),
+        );
+        tracing::error!(robot = %self.settings.name, "{text}");
+        outgoing.extend(self.actuator_fault(&text, now));
     }
 
     /// The failsafe's verdict for this period: whether the robot may drive.
@@ -486,6 +721,7 @@ impl Agent {
         let drive = self.failsafe.may_drive(state, mission_running);
         if state != FailsafeState::Ok && self.last_state == FailsafeState::Ok {
             self.counters.failsafe_trips += 1;
+            self.counters.tripped_at_us = self.stamp_origin_us + now.as_micros() as u64;
         }
         if state != self.last_state {
             tracing::info!(robot = %self.settings.name, from = ?self.last_state, to = ?state, "failsafe");
@@ -510,6 +746,9 @@ impl Agent {
         );
         if !drive || (needs_position && self.estimate.is_none()) {
             self.outputs.resize(motors, 0.0);
+            if let Some(w) = self.wheels.as_mut() {
+                w.reset_loops();
+            }
             return;
         }
         let pose = self.estimate.map(|e| e.pose).unwrap_or_default();
@@ -518,17 +757,18 @@ impl Agent {
             .get_mut(&self.route.channel)
             .filter(|m| !m.paused);
         let out = self.controller.update(&pose, now, mission);
-        self.outputs.extend_from_slice(out);
+        match self.wheels.as_mut() {
+            // Each output asks for a wheel speed; the speed loops deliver it.
+            Some(w) => self.outputs.extend(w.close_loop(out, now)),
+            None => self.outputs.extend_from_slice(out),
+        }
     }
 
     /// The heartbeat and telemetry that are due.
     fn report(&mut self, now: Duration, outgoing: &mut Vec<Envelope>) {
         if now >= self.next_heartbeat {
             self.next_heartbeat = now + self.settings.hello_period;
-            let hb = Body::Heartbeat(Heartbeat {
-                uptime_ms: now.as_millis() as u64,
-            });
-            outgoing.push(self.envelope(mech_proto::ROUTER, hb, now));
+            outgoing.push(self.heartbeat(now));
         }
         if now >= self.next_telemetry {
             // Stay on the grid so the rate does not drift with jitter.
@@ -538,14 +778,22 @@ impl Agent {
         }
     }
 
-    /// The robot's telemetry now. `velocity` is the twist the current
-    /// outputs produce (the platform's forward kinematics, which is what a
-    /// robot without wheel encoders knows of its motion), turned from the
-    /// body frame into the world frame by the estimated heading, as the
-    /// protocol specifies.
+    /// The robot's telemetry now. `velocity` is the twist the wheel
+    /// encoders measure while their readings are fresh, otherwise the twist
+    /// the current outputs produce (the platform's forward kinematics, which
+    /// is what a robot without encoders knows of its motion); either is
+    /// turned from the body frame into the world frame by the estimated
+    /// heading, as the protocol specifies, and `velocity_source` says which.
     pub fn telemetry(&self, now: Duration) -> Telemetry {
         let state = self.failsafe_state(now);
-        let twist = self.controller.platform().motion(&self.outputs);
+        let platform = self.controller.platform();
+        let (twist, velocity_source) = match self
+            .wheel_speeds(now)
+            .and_then(|speeds| platform.wheel_odometry(&speeds))
+        {
+            Some(measured) => (measured, VelocitySource::Measured),
+            None => (platform.motion(&self.outputs), VelocitySource::Commanded),
+        };
         let stale = self.settings.has_position
             && self
                 .estimate
@@ -586,6 +834,7 @@ impl Agent {
                 .get(&self.route.channel)
                 .map(MissionRun::progress),
             stale: self.stale_total(),
+            velocity_source,
         }
     }
 
@@ -594,6 +843,16 @@ impl Agent {
         let c = &self.counters;
         let n = c.stale_commands + c.stale_estops + c.stale_routes + c.stale_missions;
         u32::try_from(n).unwrap_or(u32::MAX)
+    }
+
+    /// A heartbeat: sent every `hello_period`, and by a robot with several
+    /// links on each link it is not using, so the router hears which are
+    /// alive.
+    pub fn heartbeat(&mut self, now: Duration) -> Envelope {
+        let hb = Body::Heartbeat(Heartbeat {
+            uptime_ms: now.as_millis() as u64,
+        });
+        self.envelope(mech_proto::ROUTER, hb, now)
     }
 
     /// The `Bye` sent when the agent shuts down.
@@ -615,6 +874,14 @@ impl Agent {
                 .is_some_and(|m| !m.paused && !m.finished())
     }
 
+    /// The routed channel's mission is finished: the robot holds at its
+    /// last waypoint, as told.
+    fn mission_done_on_route(&self) -> bool {
+        self.missions
+            .get(&self.route.channel)
+            .is_some_and(|m| !m.paused && m.finished())
+    }
+
     fn apply_route(&mut self, route: Route, now: Duration, out: &mut Vec<Envelope>) {
         let changed = !self.routed_once
             || route.channel != self.route.channel
@@ -629,10 +896,10 @@ impl Agent {
             self.route.epoch = route.epoch;
             // Re-routing to a channel resumes its paused mission, but not
             // while e-stopped: missions stay paused through a release.
-            if !self.failsafe.estopped() {
-                if let Some(m) = self.missions.get_mut(&self.route.channel) {
-                    m.paused = false;
-                }
+            if !self.failsafe.estopped()
+                && let Some(m) = self.missions.get_mut(&self.route.channel)
+            {
+                m.paused = false;
             }
         }
         self.resume_mission(now);
@@ -713,7 +980,10 @@ impl Agent {
             }
         }
         match self.controller.command(cmd) {
-            Ok(()) => self.failsafe.channel_heard(now),
+            Ok(()) => {
+                self.counters.commands += 1;
+                self.failsafe.channel_heard(now);
+            }
             Err(e) => {
                 self.counters.refused += 1;
                 let notice = Body::Notice(Notice {
@@ -816,6 +1086,34 @@ impl Agent {
     }
 }
 
+/// The estimate with the fused planar pose; height, quality and stamp stay
+/// the median filter's (odometry is planar, and the stamp says how fresh the
+/// fixes are).
+fn fused(fusion: &PoseFusion, mut estimate: PositionSample) -> PositionSample {
+    if let Some(p) = fusion.pose() {
+        estimate.pose = mech_proto::Pose {
+            z: estimate.pose.z,
+            ..p
+        };
+        estimate.has_heading = true;
+    }
+    estimate
+}
+
+/// The platform's odometry as a matrix: column `i` is the body displacement
+/// (forward, left, heading) of one metre of wheel `i`'s travel.
+fn wheel_jacobian(platform: &dyn Platform) -> Option<DMatrix<f64>> {
+    let n = platform.motors();
+    let mut j = DMatrix::zeros(3, n);
+    for i in 0..n {
+        let mut unit = vec![0.0; n];
+        unit[i] = 1.0;
+        let Twist { vx, vy, wz, .. } = platform.wheel_odometry(&unit)?;
+        j.set_column(i, &Vector3::new(vx, vy, wz));
+    }
+    Some(j)
+}
+
 /// Cuts free text to the protocol's limit on a character boundary.
 fn truncate(text: &str) -> String {
     let mut end = text.len().min(mech_proto::MAX_TEXT_LEN);
@@ -896,7 +1194,7 @@ mod tests {
     }
 
     #[test]
-    fn says_hello_every_second_until_welcomed() {
+    fn says_hello_every_quarter_second_until_welcomed() {
         let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
         let hellos = |t: &Tick| {
             t.outgoing
@@ -905,8 +1203,8 @@ mod tests {
                 .count()
         };
         assert_eq!(hellos(&a.tick(ms(0))), 1);
-        assert_eq!(hellos(&a.tick(ms(500))), 0);
-        let t = a.tick(ms(1000));
+        assert_eq!(hellos(&a.tick(ms(200))), 0);
+        let t = a.tick(ms(250));
         assert_eq!(hellos(&t), 1);
         let Body::Hello(h) = &t.outgoing[0].body else {
             panic!()
@@ -1002,6 +1300,48 @@ mod tests {
     }
 
     #[test]
+    fn a_router_that_does_not_know_the_robot_gets_a_hello_at_once() {
+        let mut a = routed("joy/0");
+        let t = a.tick(ms(100));
+        assert!(!t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))));
+        let notice = Body::Notice(Notice {
+            level: Level::Warn,
+            code: NoticeCode::UnknownRobot,
+            text: "send Hello".into(),
+        });
+        a.handle(msg("", notice), ms(110));
+        assert!(!a.registered());
+        let t = a.tick(ms(120));
+        assert!(
+            t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+            "Hello at the next period, not after the router timeout"
+        );
+        assert_eq!(a.counters().reregistered, 1);
+    }
+
+    #[test]
+    fn frames_for_other_robots_on_a_shared_radio_are_skipped() {
+        let mut a = routed("joy/0");
+        let other = Envelope::new(
+            Header {
+                destination: "r2".into(),
+                channel: "joy/0".into(),
+                ..Header::default()
+            },
+            twist(0.5),
+        );
+        a.handle_bytes(&mech_proto::encode(&other).unwrap(), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.counters().not_for_me, 1);
+        assert_eq!(a.counters().commands, 0);
+        a.handle_bytes(
+            &mech_proto::encode(&msg("joy/0", twist(0.5))).unwrap(),
+            ms(30),
+        );
+        assert_eq!(a.counters().commands, 1);
+    }
+
+    #[test]
     fn router_loss_stops_and_re_registers() {
         let mut a = routed("joy/0");
         let mut now = ms(0);
@@ -1027,6 +1367,35 @@ mod tests {
         assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
         assert!(!a.registered());
         assert!(stopped.unwrap() <= ms(100) + ms(500) + PERIOD);
+    }
+
+    #[test]
+    fn a_router_bye_stops_at_once_and_registers_again() {
+        let mut a = routed("joy/0");
+        let now = ms(100);
+        a.handle(msg("joy/0", twist(0.2)), now);
+        assert!(moving(&a.tick(now).outputs));
+        // A Bye from anyone but the router is not the router leaving.
+        let bye = |sender: &str| {
+            let mut m = msg(
+                "",
+                Body::Bye(Bye {
+                    reason: "stopping".into(),
+                }),
+            );
+            m.header.sender = sender.into();
+            m
+        };
+        a.handle(bye("ctl"), now);
+        assert_ne!(a.failsafe_state(now), FailsafeState::RouterLost);
+        a.handle(bye(mech_proto::ROUTER), now);
+        assert_eq!(a.failsafe_state(now), FailsafeState::RouterLost);
+        let t = a.tick(now + PERIOD);
+        assert!(!moving(&t.outputs), "stops on the next tick");
+        assert!(
+            t.outgoing.iter().any(|e| matches!(e.body, Body::Hello(_))),
+            "asks to register again at once"
+        );
     }
 
     #[test]
@@ -1128,6 +1497,27 @@ mod tests {
             Some((1, 0, 1))
         );
         assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    #[test]
+    fn a_finished_mission_holds_without_reading_as_channel_silence() {
+        let mut a = routed("wp/gcs");
+        // The robot is at the origin: a waypoint there is reached at once.
+        a.handle(msg("wp/gcs", Body::Mission(mission_to(1, 0.0))), ms(10));
+        let mut now = ms(10);
+        while now < ms(2000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(!moving(&a.tick(now).outputs), "holds at the waypoint");
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(tel.mission.map(|m| (m.next, m.total)), Some((1, 1)));
+        assert_eq!(tel.failsafe, FailsafeState::Ok, "done, not silent");
+        // A controller that goes quiet on a channel without a mission still
+        // reads as silent.
+        let mut b = routed("joy/0");
+        router_heartbeat(&mut b, ms(2000));
+        assert_eq!(b.failsafe_state(ms(2000)), FailsafeState::ChannelSilent);
     }
 
     #[test]
@@ -1328,6 +1718,39 @@ mod tests {
     }
 
     #[test]
+    fn an_encoder_reading_that_does_not_fit_the_robot_is_a_driver_fault() {
+        let mut s = AgentSettings::new("r1");
+        s.wheels = Some(WheelSettings {
+            counting: crate::hal::Counting::Quadrature,
+            counts_per_revolution: 1440.0,
+            wheel_radius: 0.03,
+            speed_loop: None,
+            stall: crate::wheels::StallSettings::default(),
+        });
+        let mut a = Agent::new(s, PlatformSpec::diff_drive().build(), 0);
+        let notice = a.observe_wheels(&[EdgeCount::default()], ms(0)).unwrap();
+        assert!(
+            matches!(&notice.body, Body::Notice(n) if n.code == NoticeCode::DriverFault && n.text.contains("1 encoder readings for 2 wheels"))
+        );
+        assert_eq!(a.counters().driver_faults, 1);
+        // A robot without [encoders] ignores readings.
+        let mut plain = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        assert!(
+            plain
+                .observe_wheels(&[EdgeCount::default()], ms(0))
+                .is_none()
+        );
+        assert_eq!(
+            plain.telemetry(ms(0)).velocity_source,
+            VelocitySource::Commanded
+        );
+    }
+
+    #[test]
     fn external_position_fixes_feed_the_filter_only_when_configured() {
         for external in [false, true] {
             let mut s = AgentSettings::new("r1");
@@ -1403,10 +1826,13 @@ mod loss_tests {
                 // Router heartbeats every 240 ms and controller commands every
                 // 40 ms (on the 20 ms control grid), each lost with
                 // probability 0.3.
-                if now.as_millis() % 240 == 0 && !rng.random_bool(0.3) {
+                if now.as_millis().is_multiple_of(240) && !rng.random_bool(0.3) {
                     a.handle(env("", Body::Heartbeat(Heartbeat { uptime_ms: 0 })), now);
                 }
-                if now < stop_publishing && now.as_millis() % 40 == 0 && !rng.random_bool(0.3) {
+                if now < stop_publishing
+                    && now.as_millis().is_multiple_of(40)
+                    && !rng.random_bool(0.3)
+                {
                     a.handle(
                         env(
                             "joy/0",

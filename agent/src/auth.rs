@@ -92,10 +92,11 @@ impl RobotAuth {
     }
 
     /// Signs an encoded message (nil `auth` element) with station time
-    /// `local_us` + offset.
-    pub fn seal(&mut self, bytes: &mut Vec<u8>, local_us: u64) -> Result<(), AuthError> {
+    /// `local_us` + offset, as sent on the robot's link number `link`.
+    pub fn seal(&mut self, bytes: &mut Vec<u8>, local_us: u64, link: u8) -> Result<(), AuthError> {
         let stamp = self.stamper.next(local_us);
-        self.key.seal(bytes, 0, stamp)
+        self.key
+            .seal(bytes, link & !mech_proto::auth::FROM_ROUTER, stamp)
     }
 
     /// Checks a received message whose decoded form is `sender` + `body`,
@@ -182,7 +183,7 @@ mod tests {
         assert_eq!(auth.check(&b, "router", &body, 100), Checked::Synced);
         // Our stamps are station time now.
         let mut mine = mech_proto::encode(&Envelope::new(Header::default(), hb.clone())).unwrap();
-        auth.seal(&mut mine, 150).unwrap();
+        auth.seal(&mut mine, 150, 0).unwrap();
         let (_, tag) = split(&mine).unwrap();
         assert_eq!(tag.unwrap().stamp_us, 1_700_000_000_000_050);
         let (b, body) = router_msg(&key, hb.clone(), 1_700_000_000_000_001);
@@ -206,7 +207,7 @@ mod tests {
         );
         // The robot's own message, sent back to it.
         let mut mine = mech_proto::encode(&Envelope::new(Header::default(), hb.clone())).unwrap();
-        auth.seal(&mut mine, 300).unwrap();
+        auth.seal(&mut mine, 300, 0).unwrap();
         assert_eq!(
             auth.check(&mine, "router", &hb, 300),
             Checked::Reject,

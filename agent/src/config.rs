@@ -1,5 +1,6 @@
 //! The robot's TOML configuration: name, platform and geometry, drivers and
-//! pins, link, failsafe, filter, control gains and the simulated start pose.
+//! pins, link, failsafe, filter, control gains, wheel encoders and the
+//! simulated start pose.
 //!
 //! Errors name the file, line and column and say what was expected, using
 //! the `toml` crate's spans.
@@ -14,9 +15,13 @@ use toml::Spanned;
 
 use crate::agent::AgentSettings;
 use crate::control::Gains;
+use crate::drivers::edge_counter::EncoderPins;
 use crate::drivers::l298::{DutyRange, L298Pins};
 use crate::failsafe::{FailsafeConfig, FailsafeToml};
+use crate::fusion::FusionSettings;
+use crate::hal::Counting;
 use crate::platform::PlatformSpec;
+use crate::wheels::{PiGains, StallSettings, WheelSettings};
 
 /// A whole robot config file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -34,6 +39,14 @@ pub struct RobotConfig {
     pub platform: Spanned<Kind<PlatformSpec>>,
     #[serde(default = "spanned_default")]
     pub link: Spanned<Kind<LinkConfig>>,
+    /// Several links to the router (`[[links]]`, instead of `[link]`), in
+    /// order of preference: the robot uses the first that is alive and
+    /// fails over to the next (Wi-Fi first, then a radio).
+    #[serde(default)]
+    pub links: Vec<Spanned<Kind<LinkConfig>>>,
+    /// `[failover]`: when a link counts as alive.
+    #[serde(default)]
+    pub failover: FailoverConfig,
     #[serde(default = "spanned_default")]
     pub failsafe: Spanned<FailsafeToml>,
     #[serde(default = "spanned_default")]
@@ -50,6 +63,14 @@ pub struct RobotConfig {
     /// robot runs unsigned and only an unauthenticated station accepts it.
     #[serde(default)]
     pub auth: Option<AuthConfig>,
+    /// `[encoders]`: wheel encoders, for measured velocity, closed-loop
+    /// wheel speed, stall detection and odometry between position fixes.
+    #[serde(default)]
+    pub encoders: Option<Spanned<EncoderConfig>>,
+    /// `[autopilot]`: a PX4 or ArduPilot autopilot flies the vehicle
+    /// (`docs/autopilots.md`); it then also gives the position.
+    #[serde(default)]
+    pub autopilot: Option<Spanned<crate::autopilot::AutopilotConfig>>,
 }
 
 /// `[auth]`: signing and checking with the router.
@@ -99,7 +120,33 @@ pub enum LinkConfig {
         port: String,
         #[serde(default = "default_radio_baud")]
         baud: u32,
+        /// Most telemetry messages per second sent over this link (the
+        /// station shows each radio robot's budget); unset: the robot's
+        /// `telemetry_rate_hz`.
+        #[serde(default)]
+        telemetry_rate_hz: Option<f64>,
     },
+}
+
+/// `[failover]`: for a robot with several links.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FailoverConfig {
+    /// A link counts as alive while the router was heard on it within this
+    /// (seconds); the router's heartbeat comes every 0.25 s on each link.
+    pub link_timeout: f64,
+    /// Period of the heartbeat sent on each link not in use, so the router
+    /// knows it is there (seconds).
+    pub probe_period: f64,
+}
+
+impl Default for FailoverConfig {
+    fn default() -> Self {
+        FailoverConfig {
+            link_timeout: 0.6,
+            probe_period: 0.25,
+        }
+    }
 }
 
 fn default_router() -> SocketAddr {
@@ -211,6 +258,103 @@ pub struct FilterConfig {
 impl Default for FilterConfig {
     fn default() -> Self {
         FilterConfig { window: 9 }
+    }
+}
+
+/// `[encoders]`: one encoder per wheel, in the platform's motor order.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderConfig {
+    /// `quadrature` (channels A and B) or `single-channel` (A only; the
+    /// direction is taken from the commanded output).
+    pub kind: Counting,
+    /// BCM GPIO numbers of each wheel's channels, in motor order.
+    pub channels: Vec<EncoderPins>,
+    /// Edges counted per wheel revolution: every edge of every channel (a
+    /// 360-line quadrature encoder gives 1440, a 20-slot disc on one
+    /// channel 40), times the gear ratio if the encoder is on the motor.
+    pub counts_per_revolution: f64,
+    /// Wheel radius, m.
+    pub wheel_radius: f64,
+    /// Turn on the inputs' pull-up resistors (open-collector sensors).
+    #[serde(default = "yes")]
+    pub pull_up: bool,
+    /// Close the wheel speed loop (PI per wheel); `false` only measures.
+    #[serde(default = "yes")]
+    pub closed_loop: bool,
+    /// Speed loop gains, per unit of speed error as a fraction of
+    /// `max_wheel_speed` (and per second for `ki`).
+    #[serde(default = "default_kp")]
+    pub kp: f64,
+    #[serde(default = "default_ki")]
+    pub ki: f64,
+    /// Smallest output that must turn a wheel, fraction of full.
+    #[serde(default = "default_stall_output")]
+    pub stall_output: f64,
+    /// Seconds such an output may give no edge before the wheel is stalled.
+    #[serde(default = "default_stall_time")]
+    pub stall_time: f64,
+    /// Standard deviation of a position fix, m (the position source's
+    /// accuracy; weighs fixes against odometry).
+    #[serde(default = "default_position_sigma")]
+    pub position_sigma: f64,
+    /// Standard deviation of a measured heading, rad.
+    #[serde(default = "default_heading_sigma")]
+    pub heading_sigma: f64,
+    /// Standard deviation of a wheel's travel as a fraction of it (slip,
+    /// radius error).
+    #[serde(default = "default_odometry_sigma")]
+    pub odometry_sigma: f64,
+}
+
+fn default_kp() -> f64 {
+    PiGains::default().kp
+}
+fn default_ki() -> f64 {
+    PiGains::default().ki
+}
+fn default_stall_output() -> f64 {
+    StallSettings::default().output
+}
+fn default_stall_time() -> f64 {
+    StallSettings::default().time.as_secs_f64()
+}
+fn default_position_sigma() -> f64 {
+    FusionSettings::default().position_sigma
+}
+fn default_heading_sigma() -> f64 {
+    FusionSettings::default().heading_sigma
+}
+fn default_odometry_sigma() -> f64 {
+    FusionSettings::default().odometry_sigma
+}
+
+impl EncoderConfig {
+    /// The settings of the agent core's wheel layer.
+    pub fn wheel_settings(&self) -> WheelSettings {
+        WheelSettings {
+            counting: self.kind,
+            counts_per_revolution: self.counts_per_revolution,
+            wheel_radius: self.wheel_radius,
+            speed_loop: self.closed_loop.then_some(PiGains {
+                kp: self.kp,
+                ki: self.ki,
+            }),
+            stall: StallSettings {
+                output: self.stall_output,
+                time: Duration::from_secs_f64(self.stall_time),
+            },
+        }
+    }
+
+    /// The noise figures of the odometry fusion.
+    pub fn fusion_settings(&self) -> FusionSettings {
+        FusionSettings {
+            position_sigma: self.position_sigma,
+            heading_sigma: self.heading_sigma,
+            odometry_sigma: self.odometry_sigma,
+            ..FusionSettings::default()
+        }
     }
 }
 
@@ -329,8 +473,36 @@ impl RobotConfig {
             .validate()
             .map_err(|m| (at(self.platform.span()), format!("[platform]: {m}")))?;
         self.validate_failsafe()?;
+        self.validate_links()?;
         self.validate_filter()?;
-        self.validate_actuators()
+        self.validate_actuators()?;
+        self.validate_encoders()?;
+        self.validate_autopilot()
+    }
+
+    /// An autopilot gives the position and takes the place of actuators.
+    fn validate_autopilot(&self) -> Result<(), Problem> {
+        let Some(autopilot) = &self.autopilot else {
+            return Ok(());
+        };
+        let problem = |message: String| (at(autopilot.span()), message);
+        autopilot.get_ref().validate().map_err(problem)?;
+        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
+            return Err(problem(
+                "[autopilot] gives the position: leave out [position]".to_string(),
+            ));
+        }
+        if !matches!(self.actuators(), ActuatorConfig::None) {
+            return Err(problem(
+                "[autopilot] flies the vehicle: leave out [actuators]".to_string(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `[autopilot]` section, if any.
+    pub fn autopilot(&self) -> Option<&crate::autopilot::AutopilotConfig> {
+        self.autopilot.as_ref().map(|a| a.get_ref())
     }
 
     fn validate_rates(&self) -> Result<(), Problem> {
@@ -361,6 +533,47 @@ impl RobotConfig {
                     format!("[failsafe] `{what}` = {v}: expected seconds in (0, 3600]"),
                 ));
             }
+        }
+        Ok(())
+    }
+
+    fn validate_links(&self) -> Result<(), Problem> {
+        if !self.links.is_empty() && !self.link.span().is_empty() {
+            return Err((
+                at(self.link.span()),
+                "give either [link] or [[links]], not both".to_string(),
+            ));
+        }
+        if self.links.len() > 8 {
+            return Err((at(self.links[8].span()), "at most 8 links".to_string()));
+        }
+        for link in &self.links {
+            if let LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } = &link.get_ref().0
+            {
+                if !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0) {
+                    return Err((
+                        at(link.span()),
+                        format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
+                    ));
+                }
+            }
+        }
+        let f = self.failover;
+        let timeout_ok =
+            f.link_timeout.is_finite() && f.link_timeout > 0.0 && f.link_timeout <= 60.0;
+        let probe_ok =
+            f.probe_period.is_finite() && f.probe_period > 0.0 && f.probe_period < f.link_timeout;
+        if !(timeout_ok && probe_ok) {
+            return Err((
+                None,
+                format!(
+                    "[failover] link_timeout = {} and probe_period = {}: expected 0 < probe_period < link_timeout <= 60 s",
+                    f.link_timeout, f.probe_period
+                ),
+            ));
         }
         Ok(())
     }
@@ -412,12 +625,102 @@ impl RobotConfig {
         Ok(())
     }
 
+    /// Encoders need a wheeled platform, one encoder per wheel with the
+    /// channels its kind uses, GPIO pins of their own, and numbers in range.
+    fn validate_encoders(&self) -> Result<(), Problem> {
+        let Some(spanned) = &self.encoders else {
+            return Ok(());
+        };
+        let e = spanned.get_ref();
+        let problem = |message: String| (at(spanned.span()), format!("[encoders] {message}"));
+        let platform = self.platform().build();
+        if platform.max_wheel_speed().is_none() {
+            return Err(problem(format!(
+                "need a wheeled platform (diff-drive, kiwi); a {}'s outputs are not wheels",
+                platform.name()
+            )));
+        }
+        let wheels = platform.motors();
+        if e.channels.len() != wheels {
+            return Err(problem(format!(
+                "`channels`: {} encoders for a platform with {wheels} wheels",
+                e.channels.len()
+            )));
+        }
+        let quadrature = e.kind == Counting::Quadrature;
+        if let Some(i) = e.channels.iter().position(|c| c.b.is_some() != quadrature) {
+            let expected = if quadrature {
+                "quadrature encoders need pins `a` and `b`"
+            } else {
+                "single-channel encoders have pin `a` only"
+            };
+            return Err(problem(format!("`channels`: wheel {}: {expected}", i + 1)));
+        }
+        let mut pins: Vec<u8> = e
+            .channels
+            .iter()
+            .flat_map(|c| [Some(c.a), c.b])
+            .flatten()
+            .collect();
+        if let ActuatorConfig::L298 { channels, .. } = self.actuators() {
+            pins.extend(channels.iter().flat_map(|c| [c.in1, c.in2, c.enable]));
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        if let Some(pin) = pins.iter().find(|p| !seen.insert(**p)) {
+            return Err(problem(format!(
+                "`channels`: GPIO {pin} is used twice (encoders and actuators need a pin each)"
+            )));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        for (v, what) in [
+            (e.counts_per_revolution, "counts_per_revolution"),
+            (e.wheel_radius, "wheel_radius"),
+            (e.position_sigma, "position_sigma"),
+            (e.heading_sigma, "heading_sigma"),
+            (e.odometry_sigma, "odometry_sigma"),
+        ] {
+            if !positive(v) {
+                return Err(problem(format!(
+                    "`{what}` = {v}: expected a positive number"
+                )));
+            }
+        }
+        for (v, what) in [(e.kp, "kp"), (e.ki, "ki")] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(problem(format!("`{what}` = {v}: expected a gain >= 0")));
+            }
+        }
+        if !(positive(e.stall_output) && e.stall_output <= 1.0) {
+            return Err(problem(format!(
+                "`stall_output` = {}: expected a fraction of full output in (0, 1]",
+                e.stall_output
+            )));
+        }
+        if !(positive(e.stall_time) && e.stall_time <= 60.0) {
+            return Err(problem(format!(
+                "`stall_time` = {}: expected seconds in (0, 60]",
+                e.stall_time
+            )));
+        }
+        Ok(())
+    }
+
     pub fn platform(&self) -> &PlatformSpec {
         &self.platform.get_ref().0
     }
 
     pub fn link(&self) -> &LinkConfig {
         &self.link.get_ref().0
+    }
+
+    /// Every link to the router, in order of preference: `[[links]]`, or
+    /// the one `[link]`.
+    pub fn links(&self) -> Vec<&LinkConfig> {
+        if self.links.is_empty() {
+            vec![self.link()]
+        } else {
+            self.links.iter().map(|l| &l.get_ref().0).collect()
+        }
     }
 
     pub fn actuators(&self) -> &ActuatorConfig {
@@ -448,7 +751,16 @@ impl RobotConfig {
         s.external_position = !simulated && matches!(position, PositionConfig::External);
         s.has_position = simulated || !matches!(position, PositionConfig::None);
         s.gains = self.control;
+        if let Some(e) = &self.encoders {
+            s.wheels = Some(e.get_ref().wheel_settings());
+            s.fusion = e.get_ref().fusion_settings();
+        }
         s
+    }
+
+    /// The `[encoders]` section, if the robot has encoders.
+    pub fn encoders(&self) -> Option<&EncoderConfig> {
+        self.encoders.as_ref().map(Spanned::get_ref)
     }
 }
 
@@ -645,6 +957,103 @@ mod tests {
         );
         let e = error("name = \"r1\"\n");
         assert!(e.contains("platform"), "{e}");
+    }
+
+    const L298_DIFF_DRIVE: &str = "name = \"r1\"\n[platform]\nkind = \"diff-drive\"\ntrack_width = 0.15\nmax_wheel_speed = 0.45\n[actuators]\nkind = \"l298\"\nchannels = [{ in1 = 6, in2 = 12, enable = 20 }, { in1 = 13, in2 = 19, enable = 26 }]\n";
+
+    #[test]
+    fn encoders_become_wheel_and_fusion_settings() {
+        let text = format!(
+            "{L298_DIFF_DRIVE}[encoders]\nkind = \"single-channel\"\nchannels = [{{ a = 17 }}, {{ a = 27 }}]\ncounts_per_revolution = 40\nwheel_radius = 0.033\nclosed_loop = false\nstall_time = 0.8\nposition_sigma = 0.08\n"
+        );
+        let c = RobotConfig::parse(&text, "r1.toml").unwrap();
+        let s = c.agent_settings(false);
+        let w = s.wheels.unwrap();
+        assert_eq!(w.counting, Counting::SingleChannel);
+        assert_eq!(w.speed_loop, None);
+        assert_eq!(w.stall.time, Duration::from_millis(800));
+        assert_eq!(w.stall.output, StallSettings::default().output);
+        assert_eq!(s.fusion.position_sigma, 0.08);
+        assert!(
+            RobotConfig::parse(L298_DIFF_DRIVE, "r1.toml")
+                .unwrap()
+                .agent_settings(false)
+                .wheels
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn encoder_mistakes_are_named() {
+        let encoders = |body: &str| error(&format!("{L298_DIFF_DRIVE}\n[encoders]\n{body}"));
+        let quad = "kind = \"quadrature\"\ncounts_per_revolution = 1440\nwheel_radius = 0.033\n";
+        let e = encoders(&format!("{quad}channels = [{{ a = 17, b = 18 }}]\n"));
+        assert!(e.contains("1 encoders for a platform with 2 wheels"), "{e}");
+        let e = encoders(&format!(
+            "{quad}channels = [{{ a = 17, b = 18 }}, {{ a = 22 }}]\n"
+        ));
+        assert!(
+            e.contains("wheel 2: quadrature encoders need pins `a` and `b`"),
+            "{e}"
+        );
+        let e = encoders(&format!(
+            "{quad}channels = [{{ a = 17, b = 18 }}, {{ a = 22, b = 26 }}]\n"
+        ));
+        assert!(e.contains("GPIO 26 is used twice"), "{e}");
+        let e = encoders(
+            "kind = \"single-channel\"\ncounts_per_revolution = 40\nwheel_radius = -1\nchannels = [{ a = 17 }, { a = 22 }]\n",
+        );
+        // The line of the key at fault.
+        assert!(
+            e.starts_with("bad.toml:13:1:") && e.contains("`wheel_radius` = -1"),
+            "{e}"
+        );
+        let e = encoders(&format!(
+            "{quad}channels = [{{ a = 17, b = 18 }}, {{ a = 22, b = 23 }}]\nstall_output = 1.5\n"
+        ));
+        assert!(e.contains("`stall_output` = 1.5"), "{e}");
+        let e = encoders("kind = \"optical\"\n");
+        assert!(e.contains("optical") && e.contains("single-channel"), "{e}");
+        let e = error(&format!(
+            "name = \"q\"\n[platform]\nkind = \"quadcopter\"\nmax_speed = 1\nmax_climb = 1\nmax_yaw_rate = 1\n[encoders]\n{quad}channels = []\n"
+        ));
+        assert!(e.contains("need a wheeled platform"), "{e}");
+    }
+
+    #[test]
+    fn several_links_in_order_of_preference_or_one_link_but_not_both() {
+        let two = format!(
+            "{MINIMAL}[[links]]\nkind = \"udp\"\nrouter = \"10.0.0.1:7400\"\n\
+             [[links]]\nkind = \"serial\"\nport = \"/dev/ttyUSB0\"\ntelemetry_rate_hz = 5\n"
+        );
+        let c = RobotConfig::parse(&two, "r1.toml").unwrap();
+        let links = c.links();
+        assert_eq!(links.len(), 2);
+        assert!(matches!(links[0], LinkConfig::Udp { .. }));
+        assert!(matches!(
+            links[1],
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(5.0),
+                baud: 57_600,
+                ..
+            }
+        ));
+        assert_eq!(c.failover, FailoverConfig::default());
+        assert_eq!(
+            RobotConfig::parse(MINIMAL, "r1.toml")
+                .unwrap()
+                .links()
+                .len(),
+            1
+        );
+        let both = format!("{two}[link]\nkind = \"udp\"\n");
+        assert!(
+            error(&both).contains("either [link] or [[links]]"),
+            "{}",
+            error(&both)
+        );
+        let bad = format!("{MINIMAL}[failover]\nlink_timeout = 0.2\nprobe_period = 0.5\n");
+        assert!(error(&bad).contains("probe_period"), "{}", error(&bad));
     }
 
     #[test]

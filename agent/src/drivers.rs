@@ -10,10 +10,13 @@
 //! - [`pozyx`]: Pozyx UWB tag over its serial text protocol.
 //! - [`nmea_gps`]: NMEA GPS receivers, converted to a local metric frame
 //!   (feature `serial`).
+//! - [`edge_counter`]: a wheel encoder's count from its pin changes
+//!   (quadrature or single-channel); `rpi` feeds it from GPIO interrupts.
 //!
 //! Positions sent by the GCS (`PositionFix`, the "external" source) need no
 //! driver: the agent core takes them when configured to.
 
+pub mod edge_counter;
 pub mod l298;
 #[cfg(feature = "serial")]
 pub mod nmea_gps;

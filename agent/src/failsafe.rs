@@ -79,6 +79,11 @@ impl Failsafe {
         self.last_router = Some(now);
     }
 
+    /// The router said goodbye: it counts as lost from now on.
+    pub fn router_gone(&mut self) {
+        self.last_router = None;
+    }
+
     /// A command on the routed channel was accepted, or the route changed
     /// (which restarts the channel-silence timer).
     pub fn channel_heard(&mut self, now: Duration) {

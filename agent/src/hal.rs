@@ -7,6 +7,8 @@
 //!   whole set of outputs, in motor order.
 //! - [`OutputPin`] and [`PwmPin`]: what an H-bridge needs.
 //! - [`PositionSource`]: pose + timestamp + quality.
+//! - [`Encoder`]: one wheel's edge count with the time of its newest edge;
+//!   [`WheelEncoders`]: every wheel's, in motor order.
 //! - [`DatagramLink`]: a message-per-datagram link (UDP). A byte-stream link
 //!   (a serial port) is plain [`std::io::Read`] + [`std::io::Write`], framed by
 //!   [`crate::drivers::serial_link::SerialLink`].
@@ -212,6 +214,74 @@ pub trait PositionSource: ErrorType {
     /// Takes the next measurement. Blocking sources (serial devices) block
     /// for at most one measurement period; `Ok(None)` means no new fix yet.
     fn read(&mut self, now: Duration) -> Result<Option<PositionSample>, Self::Error>;
+}
+
+/// How an encoder's edges are counted, which decides who knows the
+/// direction of rotation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Counting {
+    /// Two channels 90 degrees apart (A and B): every edge of either is
+    /// counted, up or down, so the count is signed (forward positive).
+    Quadrature,
+    /// One channel: every edge of it is counted, always up. The direction is
+    /// not measured; the agent takes it from the output it commanded (the
+    /// 2017 robots' optical encoders were of this kind).
+    SingleChannel,
+}
+
+/// One wheel's encoder reading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EdgeCount {
+    /// Edges counted since the encoder was opened: signed (forward
+    /// positive) for [`Counting::Quadrature`], never decreasing for
+    /// [`Counting::SingleChannel`]. Wrapping is the reader's concern only
+    /// after 2^63 edges.
+    pub edges: i64,
+    /// Agent clock time of the newest edge (`None` before the first). Speed
+    /// is edges over the time between edges, not over the control period, so
+    /// a wheel giving one edge every few periods is still measured smoothly.
+    pub last_edge: Option<Duration>,
+}
+
+/// One wheel's rotation sensor: an optical or magnetic encoder whose edges
+/// are counted (by GPIO interrupts on a Pi, by a counter chip, by the
+/// simulator).
+pub trait Encoder: ErrorType {
+    /// The count now. Never blocks: edges are counted as they happen.
+    fn read(&mut self, now: Duration) -> Result<EdgeCount, Self::Error>;
+}
+
+/// Every wheel encoder of a robot, in the platform's motor order: what the
+/// agent reads each control period.
+pub trait WheelEncoders {
+    /// One reading per wheel.
+    fn read_all(&mut self, now: Duration) -> Result<Vec<EdgeCount>, HalError>;
+}
+
+/// Reads a list of [`Encoder`]s as one robot's [`WheelEncoders`].
+#[derive(Debug)]
+pub struct EncoderSet<E> {
+    encoders: Vec<E>,
+}
+
+impl<E: Encoder> EncoderSet<E> {
+    pub fn new(encoders: Vec<E>) -> EncoderSet<E> {
+        EncoderSet { encoders }
+    }
+}
+
+impl<E: Encoder> WheelEncoders for EncoderSet<E> {
+    fn read_all(&mut self, now: Duration) -> Result<Vec<EdgeCount>, HalError> {
+        self.encoders
+            .iter_mut()
+            .enumerate()
+            .map(|(i, e)| {
+                e.read(now)
+                    .map_err(|err| HalError::new(err.kind(), format!("encoder {}: {err:?}", i + 1)))
+            })
+            .collect()
+    }
 }
 
 /// A datagram link: one message per datagram (UDP to the router).

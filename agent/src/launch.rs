@@ -9,11 +9,12 @@ use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use crate::agent::Agent;
+use crate::agent::{Agent, Counters};
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
-use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource};
+use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource, WheelEncoders};
+use crate::links::LinkChoice;
 use crate::runtime::{self, HardwareVehicle, Io, Ticker};
-use crate::sim::{SimAgent, UwbNoise, UwbNoiseModel};
+use crate::sim::{SimAgent, SimEncoderModel, UwbNoise, UwbNoiseModel};
 
 /// Why a robot could not be brought up.
 #[derive(Debug, thiserror::Error)]
@@ -24,10 +25,14 @@ pub enum LaunchError {
     Serial { port: String, message: String },
     #[error("actuators: {0}")]
     Actuators(String),
+    #[error("encoders: {0}")]
+    Encoders(String),
     #[error("this build has no {feature} support; rebuild with `--features {feature}`")]
     Feature { feature: &'static str },
     #[error("key: {0}")]
     Key(String),
+    #[error("autopilot: {0}")]
+    Autopilot(String),
 }
 
 /// Command-line overrides of the config.
@@ -40,12 +45,12 @@ pub struct Overrides {
 }
 
 /// Runs the robot until `shutdown` turns true, then zeroes the actuators and
-/// says `Bye`.
+/// says `Bye`; returns the agent's counters.
 pub async fn run(
     config: RobotConfig,
     overrides: Overrides,
     shutdown: watch::Receiver<bool>,
-) -> Result<(), LaunchError> {
+) -> Result<Counters, LaunchError> {
     let key = config.key().map_err(LaunchError::Key)?;
     let router_name = config
         .auth
@@ -63,7 +68,7 @@ pub async fn run(
         simulated,
         "agent starting"
     );
-    if simulated {
+    let counters = if simulated {
         let s = config.sim;
         let noise = s
             .noise
@@ -75,41 +80,107 @@ pub async fn run(
             heading: s.heading,
         };
         let mut sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
+        if let Some(e) = config.encoders() {
+            // The configured encoders' resolution and kind, on simulated
+            // wheels with the simulator's slip and noise.
+            let model = SimEncoderModel {
+                counting: e.kind,
+                counts_per_revolution: e.counts_per_revolution,
+                wheel_radius: e.wheel_radius,
+                ..SimEncoderModel::default()
+            };
+            sim = sim.with_encoders(model, s.seed);
+        }
         if let Some(key) = key {
             sim.agent = sim.agent.with_key(key, &router_name);
         }
-        runtime::drive(sim, io, ticker, origin, shutdown).await;
+        runtime::drive(sim, io, ticker, origin, shutdown).await
     } else {
+        let mut settings = settings;
+        if config.autopilot().is_some() {
+            // The autopilot's estimate is already filtered.
+            settings.autopilot = true;
+            settings.has_position = true;
+            settings.filter_window = 1;
+        }
         let mut agent = Agent::new(settings, config.platform().build(), stamp_origin);
         if let Some(key) = key {
             agent = agent.with_key(key, &router_name);
         }
+        if let Some(autopilot) = config.autopilot() {
+            let vehicle = open_autopilot(autopilot, agent)?;
+            return Ok(runtime::drive(vehicle, io, ticker, origin, shutdown).await);
+        }
         let actuators = open_actuators(&config)?;
         let positions = open_position(&config, origin)?;
+        let encoders = open_encoders(&config, origin)?;
         runtime::drive(
             HardwareVehicle {
                 agent,
                 actuators,
                 positions,
+                encoders,
             },
             io,
             ticker,
             origin,
             shutdown,
         )
-        .await;
-    }
+        .await
+    };
     tracing::info!("agent stopped");
-    Ok(())
+    Ok(counters)
 }
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {
-    // `--router` turns any robot into a UDP one (bench testing a radio robot).
-    let router = match config.link() {
-        LinkConfig::Udp { router } => Some(overrides.router.unwrap_or(*router)),
-        LinkConfig::Serial { .. } => overrides.router,
+    let links = config.links();
+    let caps: Vec<Option<std::time::Duration>> = links
+        .iter()
+        .map(|l| match l {
+            LinkConfig::Serial {
+                telemetry_rate_hz: Some(hz),
+                ..
+            } => Some(std::time::Duration::from_secs_f64(1.0 / hz)),
+            _ => None,
+        })
+        .collect();
+    if let ([only], false) = (links.as_slice(), caps[0].is_some()) {
+        return open_one(only, overrides.router, true).await;
+    }
+    let mut ios = Vec::with_capacity(links.len());
+    for link in &links {
+        ios.push(open_one(link, overrides.router, links.len() == 1).await?);
+    }
+    let f = config.failover;
+    let choice = LinkChoice::new(
+        caps,
+        std::time::Duration::from_secs_f64(f.link_timeout),
+        std::time::Duration::from_secs_f64(f.probe_period),
+    );
+    tracing::info!(
+        links = ios.len(),
+        "links in order of preference, with failover"
+    );
+    Ok(Io::Failover {
+        closed: vec![false; ios.len()],
+        links: ios,
+        choice,
+    })
+}
+
+/// Opens one link. `--router` sets the router of a UDP link, and turns a
+/// lone serial link into a UDP one (bench testing a radio robot).
+async fn open_one(
+    link: &LinkConfig,
+    router: Option<SocketAddr>,
+    alone: bool,
+) -> Result<Io, LaunchError> {
+    let router = match link {
+        LinkConfig::Udp { router: configured } => Some(router.unwrap_or(*configured)),
+        LinkConfig::Serial { .. } if alone => router,
+        LinkConfig::Serial { .. } => None,
     };
-    match (router, config.link()) {
+    match (router, link) {
         (Some(router), _) => {
             let local = if router.ip().is_loopback() {
                 SocketAddr::from(([127, 0, 0, 1], 0))
@@ -120,7 +191,7 @@ async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, La
             tracing::info!(%router, local = ?socket.local_addr().ok(), "UDP link");
             Ok(Io::Udp { socket, router })
         }
-        (None, LinkConfig::Serial { port, baud }) => open_serial(port, *baud),
+        (None, LinkConfig::Serial { port, baud, .. }) => open_serial(port, *baud),
         (None, LinkConfig::Udp { .. }) => {
             Err(LaunchError::Udp(std::io::ErrorKind::InvalidInput.into()))
         }
@@ -139,6 +210,29 @@ fn open_serial(port: &str, baud: u32) -> Result<Io, LaunchError> {
 #[cfg(not(feature = "serial"))]
 fn open_serial(_port: &str, _baud: u32) -> Result<Io, LaunchError> {
     Err(LaunchError::Feature { feature: "serial" })
+}
+
+#[cfg(feature = "mavlink")]
+fn open_autopilot(
+    config: &crate::autopilot::AutopilotConfig,
+    agent: Agent,
+) -> Result<
+    crate::autopilot::vehicle::AutopilotVehicle<crate::autopilot::link::MavlinkLink>,
+    LaunchError,
+> {
+    use crate::autopilot::{link::MavlinkLink, session::Session, vehicle::AutopilotVehicle};
+    tracing::info!(link = %config.link, "autopilot link");
+    let link =
+        MavlinkLink::open(&config.link).map_err(|e| LaunchError::Autopilot(e.to_string()))?;
+    Ok(AutopilotVehicle::new(agent, Session::new(config), link))
+}
+
+#[cfg(not(feature = "mavlink"))]
+fn open_autopilot(
+    _config: &crate::autopilot::AutopilotConfig,
+    _agent: Agent,
+) -> Result<HardwareVehicle, LaunchError> {
+    Err(LaunchError::Feature { feature: "mavlink" })
 }
 
 fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, LaunchError> {
@@ -163,6 +257,33 @@ fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, Lau
         }
         #[cfg(not(feature = "rpi"))]
         ActuatorConfig::L298 { .. } => Err(LaunchError::Feature { feature: "rpi" }),
+    }
+}
+
+/// Opens the wheel encoders of `[encoders]` (GPIO interrupts on a Pi).
+fn open_encoders(
+    config: &RobotConfig,
+    #[cfg_attr(not(feature = "rpi"), allow(unused_variables))] origin: Instant,
+) -> Result<Option<Box<dyn WheelEncoders + Send>>, LaunchError> {
+    let Some(e) = config.encoders() else {
+        return Ok(None);
+    };
+    #[cfg(feature = "rpi")]
+    {
+        let encoders = crate::drivers::rpi::encoders::open_encoders(
+            &e.channels,
+            e.kind,
+            e.pull_up,
+            origin.into_std(),
+        )
+        .map_err(|err| LaunchError::Encoders(err.to_string()))?;
+        tracing::info!(wheels = e.channels.len(), kind = ?e.kind, "wheel encoders");
+        Ok(Some(Box::new(encoders)))
+    }
+    #[cfg(not(feature = "rpi"))]
+    {
+        let _ = e;
+        Err(LaunchError::Feature { feature: "rpi" })
     }
 }
 

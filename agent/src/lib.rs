@@ -6,10 +6,13 @@
 //! its controller, the router or an e-stop says so.
 //!
 //! - [`hal`]: hardware traits (motor, digital and PWM pins, position source,
-//!   datagram link); [`drivers`]: L298, UDP and serial links, Pozyx, NMEA
-//!   GPS, external positions.
+//!   wheel encoder, datagram link); [`drivers`]: L298, UDP and serial
+//!   links, Pozyx, NMEA GPS, external positions, encoder edge counting.
 //! - [`platform`]: differential drive, kiwi, quadcopter.
+//! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
+//! - [`wheels`], [`fusion`]: wheel encoders (measured speed, closed-loop
+//!   wheel speed, stall detection) and odometry fused with position fixes.
 //! - [`agent`]: the socket-free core; [`runtime`]: the tokio loop around it.
 //! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
 //!   [`launch`]: bringing a robot up from its config.
@@ -19,18 +22,22 @@
 
 pub mod agent;
 pub mod auth;
+pub mod autopilot;
 pub mod clock;
 pub mod config;
 pub mod control;
 pub mod drivers;
 pub mod failsafe;
 pub mod filter;
+pub mod fusion;
 pub mod hal;
 pub mod launch;
+pub mod links;
 pub mod order;
 pub mod platform;
 pub mod runtime;
 pub mod sim;
+pub mod wheels;
 
 pub use agent::{Agent, AgentSettings, Counters, Tick};
 pub use clock::{Clock, ManualClock, MonotonicClock};

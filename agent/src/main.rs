@@ -101,7 +101,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             let _ = stop.send(true);
         });
-        launch::run(
+        let counters = launch::run(
             config,
             Overrides {
                 sim: cli.sim,
@@ -110,6 +110,26 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             shutdown,
         )
         .await
-        .context("running the agent")
+        .context("running the agent")?;
+        report(&counters);
+        Ok(())
     })
+}
+
+/// The agent's counters, as one line on stdout when it stops (for logs
+/// and the fault-injection tests).
+fn report(c: &mech_agent::agent::Counters) {
+    println!(
+        "{{\"agent_counters\":{{\"commands\":{},\"failsafe_trips\":{},\"stale_commands\":{},\"stale_estops\":{},\"not_routed\":{},\"ignored_estopped\":{},\"bad_messages\":{},\"reregistered\":{},\"tripped_at_us\":{},\"estopped_at_us\":{}}}}}",
+        c.commands,
+        c.failsafe_trips,
+        c.stale_commands,
+        c.stale_estops,
+        c.not_routed,
+        c.ignored_estopped,
+        c.bad_messages,
+        c.reregistered,
+        c.tripped_at_us,
+        c.estopped_at_us
+    );
 }

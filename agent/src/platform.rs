@@ -56,6 +56,28 @@ pub trait Platform: Debug + Send {
     /// kinematics, used by the simulator and for velocity telemetry).
     fn motion(&self, outputs: &[f64]) -> Twist;
 
+    /// Rim speed of a wheel at full output, m/s, for a platform whose
+    /// outputs drive wheels (`None` otherwise: a quadcopter's outputs are
+    /// velocity setpoints). Wheel encoders measure this speed, so it is what
+    /// turns an output into a wheel speed setpoint for closed-loop control
+    /// and what makes odometry possible.
+    fn max_wheel_speed(&self) -> Option<f64> {
+        None
+    }
+
+    /// The body twist that measured wheel rim speeds (m/s, motor order)
+    /// produce: odometry. Unlike [`Platform::motion`], nothing is clamped to
+    /// the outputs' range (a wheel may turn faster than its nominal top
+    /// speed). `None` for a platform without wheels.
+    fn wheel_odometry(&self, _wheel_speeds: &[f64]) -> Option<Twist> {
+        None
+    }
+
+    /// What to call motor `index` in a fault text ("left wheel").
+    fn motor_name(&self, index: usize) -> String {
+        format!("motor {}", index + 1)
+    }
+
     /// Command kinds this platform obeys.
     fn capabilities(&self) -> Vec<CommandKind> {
         CommandKind::ALL.to_vec()

@@ -11,31 +11,44 @@ use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::agent::Agent;
-use crate::hal::{Actuators, PositionSample};
+use crate::agent::{Agent, Counters};
+use crate::hal::{Actuators, PositionSample, WheelEncoders};
+use crate::links::LinkChoice;
 
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
 pub trait Vehicle: Send {
     /// Handles one received datagram.
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope>;
-    /// Encodes a message to send (signed, when the robot has a key).
-    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error>;
+    /// Encodes a message to send on the robot's link number `link`
+    /// (signed, when the robot has a key).
+    fn encode(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error>;
     /// Handles one received message.
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope>;
     /// One control period; returns messages to send.
     fn tick(&mut self, now: Duration) -> Vec<Envelope>;
     /// Zeroes the actuators and returns the `Bye` to send.
     fn stop(&mut self, now: Duration) -> Envelope;
+    /// A heartbeat (a probe on a link not in use).
+    fn heartbeat(&mut self, now: Duration) -> Envelope;
+    /// The agent's counters.
+    fn counters(&self) -> Counters;
 }
 
-/// A robot with real actuators and (optionally) a position source read by
-/// its own thread.
+/// A robot with real actuators, (optionally) a position source read by its
+/// own thread, and (optionally) wheel encoders.
 pub struct HardwareVehicle {
     pub agent: Agent,
     pub actuators: Box<dyn Actuators + Send>,
     /// Samples (or driver error texts) from the position thread.
     pub positions: Option<std::sync::mpsc::Receiver<Result<PositionSample, String>>>,
+    /// Wheel encoders, read once per control period.
+    pub encoders: Option<Box<dyn WheelEncoders + Send>>,
 }
 
 impl std::fmt::Debug for HardwareVehicle {
@@ -50,14 +63,36 @@ impl Vehicle for HardwareVehicle {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         self.agent.handle_bytes(bytes, now)
     }
-    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
-        self.agent.encode(env, out)
+    fn encode(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
+        self.agent.encode_on(env, link, out)
     }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         self.agent.handle(env, now)
     }
+    fn heartbeat(&mut self, now: Duration) -> Envelope {
+        self.agent.heartbeat(now)
+    }
+    fn counters(&self) -> Counters {
+        self.agent.counters()
+    }
     fn tick(&mut self, now: Duration) -> Vec<Envelope> {
         let mut extra = Vec::new();
+        // Odometry first: fixes are then compared with the pose at their
+        // own (earlier) time.
+        if let Some(encoders) = self.encoders.as_mut() {
+            match encoders.read_all(now) {
+                Ok(counts) => extra.extend(self.agent.observe_wheels(&counts, now)),
+                Err(e) => {
+                    tracing::warn!(error = %e, "encoders");
+                    extra.extend(self.agent.driver_fault(&format!("encoders: {e}"), now));
+                }
+            }
+        }
         if let Some(rx) = &self.positions {
             while let Ok(sample) = rx.try_recv() {
                 match sample {
@@ -106,6 +141,14 @@ pub enum Io {
         incoming: mpsc::Receiver<Vec<u8>>,
         outgoing: std::sync::mpsc::Sender<Vec<u8>>,
     },
+    /// Several links (each `Udp` or `Frames`), in order of preference,
+    /// with failover between them ([`LinkChoice`]).
+    Failover {
+        links: Vec<Io>,
+        choice: LinkChoice,
+        /// Links whose receiving side has ended.
+        closed: Vec<bool>,
+    },
 }
 
 /// What paces the control periods.
@@ -119,7 +162,8 @@ pub enum Ticker {
 }
 
 enum Incoming {
-    Bytes(Vec<u8>),
+    /// A message, and the link it came on (0 for a single link).
+    Bytes(Vec<u8>, usize),
     Ignored,
     Closed,
 }
@@ -133,6 +177,14 @@ thread_local! {
 impl Io {
     async fn recv(&mut self) -> Incoming {
         match self {
+            Io::Failover { links, closed, .. } => recv_any(links, closed).await,
+            single => single.recv_one().await,
+        }
+    }
+
+    /// Receives on a single link (`Udp` or `Frames`).
+    async fn recv_one(&mut self) -> Incoming {
+        match self {
             Io::Udp { socket, router } => loop {
                 if socket.readable().await.is_err() {
                     return Incoming::Closed;
@@ -140,7 +192,9 @@ impl Io {
                 let got = RECV_BUF.with(|b| {
                     let mut b = b.borrow_mut();
                     match socket.try_recv_from(&mut b) {
-                        Ok((n, from)) if from == *router => Some(Incoming::Bytes(b[..n].to_vec())),
+                        Ok((n, from)) if from == *router => {
+                            Some(Incoming::Bytes(b[..n].to_vec(), 0))
+                        }
                         Ok(_) => Some(Incoming::Ignored),
                         Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => None,
                         // ICMP port unreachable while the router is down.
@@ -152,9 +206,10 @@ impl Io {
                 }
             },
             Io::Frames { incoming, .. } => match incoming.recv().await {
-                Some(bytes) => Incoming::Bytes(bytes),
+                Some(bytes) => Incoming::Bytes(bytes, 0),
                 None => Incoming::Closed,
             },
+            Io::Failover { .. } => Incoming::Closed,
         }
     }
 
@@ -167,6 +222,54 @@ impl Io {
             }
             Io::Frames { outgoing, .. } => {
                 let _ = outgoing.send(bytes.to_vec());
+            }
+            Io::Failover { .. } => {
+                tracing::warn!("a message for several links needs its link chosen");
+            }
+        }
+    }
+}
+
+/// One link's receive in progress.
+type Receiving<'a> = std::pin::Pin<Box<dyn std::future::Future<Output = Incoming> + Send + 'a>>;
+
+/// The next message on any of `links` (and which); a link whose
+/// receiving side ended is marked in `closed` and no longer waited on.
+async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
+    use std::future::Future;
+    use std::pin::Pin;
+    use std::task::Poll;
+    loop {
+        if closed.iter().all(|c| *c) {
+            return Incoming::Closed;
+        }
+        let mut waits: Vec<(usize, Receiving<'_>)> = links
+            .iter_mut()
+            .enumerate()
+            .filter(|(i, _)| !closed[*i])
+            .map(|(i, l)| {
+                (
+                    i,
+                    Box::pin(l.recv_one()) as Pin<Box<dyn Future<Output = _> + Send>>,
+                )
+            })
+            .collect();
+        let (i, got) = std::future::poll_fn(|cx| {
+            for (i, w) in waits.iter_mut() {
+                if let Poll::Ready(got) = w.as_mut().poll(cx) {
+                    return Poll::Ready((*i, got));
+                }
+            }
+            Poll::Pending
+        })
+        .await;
+        drop(waits);
+        match got {
+            Incoming::Bytes(b, _) => return Incoming::Bytes(b, i),
+            Incoming::Ignored => return Incoming::Ignored,
+            Incoming::Closed => {
+                tracing::warn!(link = i, "a link closed; carrying on with the others");
+                closed[i] = true;
             }
         }
     }
@@ -191,14 +294,15 @@ async fn next_tick(
 }
 
 /// Runs `vehicle` until `shutdown` turns true (or its sender is dropped),
-/// then zeroes its actuators and sends `Bye`. `origin` is agent time zero.
+/// then zeroes its actuators and sends `Bye`; returns the agent's
+/// counters. `origin` is agent time zero.
 pub async fn drive<V: Vehicle>(
     mut vehicle: V,
     mut io: Io,
     ticker: Ticker,
     origin: Instant,
     mut shutdown: watch::Receiver<bool>,
-) {
+) -> Counters {
     let (mut own, mut shared) = match ticker {
         Ticker::Own(period) => {
             let mut i = tokio::time::interval_at(origin, period);
@@ -215,32 +319,89 @@ pub async fn drive<V: Vehicle>(
                 continue;
             }
             now = next_tick(&mut own, &mut shared, origin) => match now {
-                Some(now) => vehicle.tick(now),
+                Some(now) => {
+                    let out = vehicle.tick(now);
+                    probe(&mut vehicle, &mut io, now, &mut buf).await;
+                    out
+                }
                 None => break,
             },
             incoming = io.recv() => {
                 let now = origin.elapsed();
                 match incoming {
-                    Incoming::Bytes(b) => vehicle.handle_bytes(&b, now),
+                    Incoming::Bytes(b, link) => {
+                        if let Io::Failover { choice, .. } = &mut io {
+                            if from_router(&b) {
+                                choice.heard(link, now);
+                            }
+                        }
+                        vehicle.handle_bytes(&b, now)
+                    }
                     Incoming::Ignored => continue,
                     Incoming::Closed => break,
                 }
             }
         };
+        let now = origin.elapsed();
         for env in &out {
-            send(&mut vehicle, &mut io, env, &mut buf).await;
+            send(&mut vehicle, &mut io, env, now, &mut buf).await;
         }
     }
-    let bye = vehicle.stop(origin.elapsed());
-    send(&mut vehicle, &mut io, &bye, &mut buf).await;
+    let now = origin.elapsed();
+    let bye = vehicle.stop(now);
+    send(&mut vehicle, &mut io, &bye, now, &mut buf).await;
+    vehicle.counters()
 }
 
-/// Encodes (and signs) one message and sends it to the router.
-async fn send<V: Vehicle>(vehicle: &mut V, io: &mut Io, env: &Envelope, buf: &mut Vec<u8>) {
-    buf.clear();
-    match vehicle.encode(env, buf) {
-        Ok(()) => io.send(buf).await,
-        Err(e) => tracing::warn!(error = %e, "cannot encode"),
+/// Whether a message came from the router: on a shared radio a robot also
+/// hears the other robots, whose messages are addressed to the router and
+/// say nothing about whether the router is there.
+fn from_router(bytes: &[u8]) -> bool {
+    mech_proto::peek(bytes).is_ok_and(|h| h.destination != mech_proto::ROUTER)
+}
+
+/// With several links, a heartbeat on each link not in use, when due.
+async fn probe<V: Vehicle>(vehicle: &mut V, io: &mut Io, now: Duration, buf: &mut Vec<u8>) {
+    let Io::Failover { links, choice, .. } = io else {
+        return;
+    };
+    for i in choice.probes_due(now) {
+        let hb = vehicle.heartbeat(now);
+        buf.clear();
+        if vehicle.encode(&hb, i as u8, buf).is_ok() {
+            links[i].send(buf).await;
+        }
+    }
+}
+
+/// Encodes (and signs) one message and sends it to the router: on the one
+/// link, or with several on the link in use (every link when none is),
+/// each copy signed for its link.
+async fn send<V: Vehicle>(
+    vehicle: &mut V,
+    io: &mut Io,
+    env: &Envelope,
+    now: Duration,
+    buf: &mut Vec<u8>,
+) {
+    let Io::Failover { links, choice, .. } = io else {
+        buf.clear();
+        match vehicle.encode(env, 0, buf) {
+            Ok(()) => io.send(buf).await,
+            Err(e) => tracing::warn!(error = %e, "cannot encode"),
+        }
+        return;
+    };
+    let telemetry = matches!(env.body, mech_proto::Body::Telemetry(_));
+    for i in choice.targets(now) {
+        if telemetry && !choice.telemetry_allowed(i, now) {
+            continue;
+        }
+        buf.clear();
+        match vehicle.encode(env, i as u8, buf) {
+            Ok(()) => links[i].send(buf).await,
+            Err(e) => tracing::warn!(error = %e, "cannot encode"),
+        }
     }
 }
 
@@ -281,6 +442,66 @@ mod tests {
         )
     }
 
+    /// Encoders that count `per_read` edges on each wheel per reading, or
+    /// fail while `broken`.
+    #[derive(Debug, Default)]
+    struct Odometer {
+        edges: i64,
+        broken: bool,
+    }
+
+    impl crate::hal::WheelEncoders for Odometer {
+        fn read_all(&mut self, now: Duration) -> Result<Vec<crate::hal::EdgeCount>, HalError> {
+            if self.broken {
+                return Err(HalError::new(ErrorKind::NotConnected, "cable"));
+            }
+            self.edges += 10;
+            let count = crate::hal::EdgeCount {
+                edges: self.edges,
+                last_edge: Some(now),
+            };
+            Ok(vec![count; 2])
+        }
+    }
+
+    #[test]
+    fn hardware_vehicle_reads_its_encoders_each_period() {
+        let mut settings = AgentSettings::new("r1");
+        settings.wheels = Some(crate::wheels::WheelSettings {
+            counting: crate::hal::Counting::Quadrature,
+            counts_per_revolution: 1000.0,
+            wheel_radius: 0.1 / std::f64::consts::TAU,
+            speed_loop: None,
+            stall: crate::wheels::StallSettings::default(),
+        });
+        let agent = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+        let mut v = HardwareVehicle {
+            agent,
+            actuators: Box::new(Bench::default()),
+            positions: None,
+            encoders: Some(Box::new(Odometer::default())),
+        };
+        let ms = Duration::from_millis;
+        v.tick(ms(0));
+        v.tick(ms(20));
+        // 10 edges of 0.1 mm in 20 ms on both wheels: 0.05 m/s forward.
+        let t = v.agent.telemetry(ms(20));
+        assert_eq!(t.velocity_source, mech_proto::VelocitySource::Measured);
+        assert!((t.velocity.vx - 0.05).abs() < 1e-9, "{:?}", t.velocity);
+        v.encoders = Some(Box::new(Odometer {
+            edges: 0,
+            broken: true,
+        }));
+        let out = v.tick(ms(40));
+        assert!(
+            out.iter()
+                .any(|e| matches!(&e.body, Body::Notice(n) if n.text.contains("encoders")))
+        );
+        // No fresh reading for long: back to the commanded velocity.
+        let t = v.agent.telemetry(ms(1000));
+        assert_eq!(t.velocity_source, mech_proto::VelocitySource::Commanded);
+    }
+
     #[test]
     fn hardware_vehicle_writes_outputs_feeds_positions_and_reports_faults() {
         let bench = Bench::default();
@@ -295,6 +516,7 @@ mod tests {
             agent,
             actuators: Box::new(bench),
             positions: Some(rx),
+            encoders: None,
         };
         let ms = Duration::from_millis;
         let route = Route {

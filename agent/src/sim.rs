@@ -1,9 +1,10 @@
 //! The simulator: simulated vehicles ([`SimRobot`]), UWB-like position noise
-//! ([`UwbNoise`]), simulated agents running the real agent core
-//! ([`SimAgent`]) and whole fleets of them on UDP ([`SimFleet`]), as used by
-//! `mech-agent --sim` and `mech-gcs --demo`.
+//! ([`UwbNoise`]), wheel encoders ([`SimEncoders`]), simulated agents
+//! running the real agent core ([`SimAgent`]) and whole fleets of them on
+//! UDP ([`SimFleet`]), as used by `mech-agent --sim` and `mech-gcs --demo`.
 
 pub mod agent;
+pub mod encoder;
 pub mod noise;
 pub mod robot;
 pub mod trial;
@@ -17,6 +18,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 pub use agent::SimAgent;
+pub use encoder::{SimEncoderModel, SimEncoders};
 pub use noise::{UwbNoise, UwbNoiseModel};
 pub use robot::SimRobot;
 
@@ -178,7 +180,7 @@ impl SimFleet {
             let io = runtime::Io::Udp { socket, router };
             let shutdown_rx = shutdown_rx.clone();
             agents.push(tokio::spawn(async move {
-                runtime::drive(sim, io, ticker, origin, shutdown_rx).await;
+                let _ = runtime::drive(sim, io, ticker, origin, shutdown_rx).await;
             }));
             names.push(name);
         }

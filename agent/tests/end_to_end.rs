@@ -242,7 +242,7 @@ mod serial {
             let mut frame = Vec::new();
             write_serial_frame(env, &mut frame).unwrap();
             self.sent += 1;
-            if self.sent % 2 == 0 {
+            if self.sent.is_multiple_of(2) {
                 let mut corrupt = frame.clone();
                 corrupt[frame.len() / 2] ^= 0x5a;
                 self.writer
@@ -312,10 +312,10 @@ mod serial {
                 }
                 decoder.push(&buf[..n]);
                 while let Some(m) = decoder.next_message() {
-                    if let Ok(env) = m {
-                        if tx.send(env).is_err() {
-                            return;
-                        }
+                    if let Ok(env) = m
+                        && tx.send(env).is_err()
+                    {
+                        return;
                     }
                 }
             }

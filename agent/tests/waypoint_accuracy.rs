@@ -50,3 +50,46 @@ fn the_median_filter_is_what_makes_it_accurate() {
         "unfiltered p95 {raw_p95} vs filtered {filtered_p95}"
     );
 }
+
+#[test]
+fn odometry_with_uwb_keeps_the_pose_error_below_uwb_alone() {
+    // The same runs on the same simulated robots, once positioned by UWB
+    // alone (median filter), once with wheel encoders fused with the UWB
+    // fixes, at 50 Hz and at 10 Hz fixes.
+    use mech_agent::sim::SimEncoderModel;
+    use std::time::Duration;
+    for spec in [PlatformSpec::diff_drive(), PlatformSpec::kiwi()] {
+        for fix_period in [Duration::ZERO, Duration::from_millis(100)] {
+            let run = |encoders: bool| {
+                let results: Vec<_> = (0..8)
+                    .map(|i| {
+                        let mut t = standard_trial(spec.clone(), i);
+                        t.fix_period = fix_period;
+                        if encoders {
+                            t = t.with_encoders(SimEncoderModel::default());
+                        }
+                        t.run()
+                    })
+                    .collect();
+                assert!(results.iter().all(|r| r.finished), "{spec:?}: {results:?}");
+                let rms: Vec<f64> = results.iter().map(|r| r.pose_rms).collect();
+                let finals: Vec<f64> = results.iter().map(|r| r.final_error).collect();
+                (median_p95(&rms).0, median_p95(&finals).0)
+            };
+            let (uwb, uwb_final) = run(false);
+            let (fused, fused_final) = run(true);
+            println!(
+                "{spec:?} fixes every {fix_period:?}: pose rms {:.1} mm UWB only, {:.1} mm with odometry; final {:.1} / {:.1} mm",
+                uwb * 1000.0,
+                fused * 1000.0,
+                uwb_final * 1000.0,
+                fused_final * 1000.0
+            );
+            assert!(fused < uwb, "{spec:?} {fix_period:?}: {fused} vs {uwb}");
+            assert!(
+                fused_final <= 0.050,
+                "{spec:?} {fix_period:?}: final {fused_final}"
+            );
+        }
+    }
+}

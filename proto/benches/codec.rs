@@ -57,6 +57,7 @@ fn bench(c: &mut Criterion) {
                 total: 5,
             }),
             stale: 0,
+            velocity_source: mech_proto::VelocitySource::Measured,
         }),
     );
     for (name, env) in [("command", &command), ("telemetry", &telemetry)] {

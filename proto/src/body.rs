@@ -132,6 +132,19 @@ pub enum Health {
     Fault = 2,
 }
 
+/// Where a robot's reported velocity comes from, so the station can tell a
+/// robot that drives from one whose wheel is stuck.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+#[repr(u8)]
+pub enum VelocitySource {
+    /// The twist the current actuator outputs should produce (the platform's
+    /// forward kinematics): what a robot without wheel encoders knows.
+    #[default]
+    Commanded = 0,
+    /// Measured by wheel encoders.
+    Measured = 1,
+}
+
 /// Progress of the mission the robot holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MissionProgress {
@@ -168,6 +181,11 @@ pub struct Telemetry {
     /// elements reads as 0 here.
     #[serde(default)]
     pub stale: u32,
+    /// Whether `velocity` was measured (wheel encoders) or follows from the
+    /// commanded outputs. Added to version 1 at the end: telemetry without
+    /// it reads as commanded.
+    #[serde(default)]
+    pub velocity_source: VelocitySource,
 }
 
 /// One point of a [`Mission`]: position in metres and an optional arrival time
@@ -429,6 +447,79 @@ pub struct Time {
     pub station_us: u64,
 }
 
+/// What an operator asks a robot's autopilot (PX4, ArduPilot) to do. The
+/// agent never arms, disarms or changes the autopilot's mode by itself:
+/// only on one of these.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize_repr, Deserialize_repr)]
+#[repr(u8)]
+pub enum AutopilotAction {
+    /// Stop the motors (refused by the autopilot in flight).
+    Disarm = 0,
+    /// Start the motors.
+    Arm = 1,
+    /// Hand control to the agent: PX4 OFFBOARD, ArduPilot GUIDED.
+    Offboard = 2,
+    /// The autopilot holds where it is on its own: PX4 Hold (AUTO.LOITER),
+    /// ArduCopter LOITER, ArduRover HOLD.
+    Hold = 3,
+    /// Land where it is: PX4 AUTO.LAND, ArduCopter LAND.
+    Land = 4,
+    /// Climb to `altitude` metres above home (MAV_CMD_NAV_TAKEOFF).
+    Takeoff = 5,
+}
+
+impl AutopilotAction {
+    /// Every action, in wire order.
+    pub const ALL: [AutopilotAction; 6] = [
+        AutopilotAction::Disarm,
+        AutopilotAction::Arm,
+        AutopilotAction::Offboard,
+        AutopilotAction::Hold,
+        AutopilotAction::Land,
+        AutopilotAction::Takeoff,
+    ];
+
+    /// The name used in the command language and in notices.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AutopilotAction::Disarm => "disarm",
+            AutopilotAction::Arm => "arm",
+            AutopilotAction::Offboard => "offboard",
+            AutopilotAction::Hold => "hold",
+            AutopilotAction::Land => "land",
+            AutopilotAction::Takeoff => "takeoff",
+        }
+    }
+
+    /// Parses the name given by [`AutopilotAction::as_str`].
+    pub fn parse(name: &str) -> Option<AutopilotAction> {
+        AutopilotAction::ALL
+            .into_iter()
+            .find(|a| a.as_str() == name)
+    }
+
+    /// Whether the action can start the vehicle moving, and so is refused
+    /// while the robot is e-stopped.
+    pub fn starts_motion(self) -> bool {
+        matches!(
+            self,
+            AutopilotAction::Arm | AutopilotAction::Offboard | AutopilotAction::Takeoff
+        )
+    }
+}
+
+/// Operator -> router -> robot: a request to the robot's autopilot (arm,
+/// disarm, mode change, land, take off). Only an operator may send it; the
+/// router passes it to the named robot whatever its route, and the robot
+/// answers with a [`Notice`] saying what the autopilot did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AutopilotRequest {
+    pub robot: String,
+    pub action: AutopilotAction,
+    /// Metres above home for [`AutopilotAction::Takeoff`]; 0 otherwise.
+    pub altitude: f64,
+}
+
 tagged_enum! {
     /// Every MECH message body; the number is the envelope's kind field.
     #[derive(Debug, Clone, PartialEq)]
@@ -454,6 +545,7 @@ tagged_enum! {
         Bye(Bye) = 19,
         TimeRequest(TimeRequest) = 20,
         Time(Time) = 21,
+        Autopilot(AutopilotRequest) = 22,
     }
 }
 
@@ -542,6 +634,7 @@ impl Body {
             Body::PositionFix(p) => p.validate(),
             Body::Bye(b) => text(&b.reason, "bye reason"),
             Body::TimeRequest(_) | Body::Time(_) => Ok(()),
+            Body::Autopilot(a) => a.validate(),
         }
     }
 }
@@ -693,6 +786,20 @@ impl Formation {
         for o in &self.offsets {
             finite(o.x, "offset x")?;
             finite(o.y, "offset y")?;
+        }
+        Ok(())
+    }
+}
+
+impl AutopilotRequest {
+    fn validate(&self) -> Result<(), Error> {
+        nonempty_name(&self.robot, "robot name")?;
+        finite(self.altitude, "altitude")?;
+        if self.action == AutopilotAction::Takeoff && self.altitude <= 0.0 {
+            return Err(Error::invalid(format!(
+                "takeoff altitude {} m must be positive",
+                self.altitude
+            )));
         }
         Ok(())
     }

@@ -26,11 +26,12 @@ mod units;
 
 pub use body::Body;
 pub use body::{
-    Bye, Channel as ChannelInfo, Channels, ChannelsRequest, ClusterCommand, ClusterGoal,
-    ClusterPose, ClusterVelocity, Computation, ControlMode, EStop, EStopAck, FailsafeState,
-    FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello, Level, Mission, MissionAck,
-    MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix, RobotCommand, Route, RouteAck,
-    Subscribe, Telemetry, Time, TimeRequest, Velocity, Waypoint, Welcome,
+    AutopilotAction, AutopilotRequest, Bye, Channel as ChannelInfo, Channels, ChannelsRequest,
+    ClusterCommand, ClusterGoal, ClusterPose, ClusterVelocity, Computation, ControlMode, EStop,
+    EStopAck, FailsafeState, FleetCommand, Formation, FormationKind, Health, Heartbeat, Hello,
+    Level, Mission, MissionAck, MissionProgress, Notice, NoticeCode, Offset, Pose, PositionFix,
+    RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity,
+    VelocitySource, Waypoint, Welcome,
 };
 pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,

@@ -84,6 +84,7 @@ fn samples() -> Vec<Envelope> {
                 actuators: vec![0.1, -0.1],
                 mission: None,
                 stale: 0,
+                velocity_source: mech_proto::VelocitySource::Measured,
             }),
         ),
         Envelope::new(

@@ -241,3 +241,42 @@ fn the_signed_twist_matches_the_documented_bytes() {
         Some(TWIST_TAG[2..].to_vec())
     );
 }
+
+#[rustfmt::skip]
+const AUTOPILOT_TAKEOFF: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x16,                                     // kind 22 = Autopilot
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa3, b'g', b'c', b's',                   // sender "gcs" (an operator)
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // destination "router"
+    0xa0,                                     // channel "" (not a command)
+    0x93,                                     // body: fixarray, 3 fields
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', //   robot "robot_1"
+    0x05,                                     //   action 5 = takeoff
+    0xcb, 0x40, 0x04, 0, 0, 0, 0, 0, 0,       //   altitude float64 2.5 m
+    0xc0,                                     // auth: nil
+];
+
+#[test]
+fn an_autopilot_request_has_the_documented_bytes() {
+    use mech_proto::{AutopilotAction, AutopilotRequest};
+    let takeoff = Envelope::new(
+        header("gcs", "router", ""),
+        Body::Autopilot(AutopilotRequest {
+            robot: "robot_1".into(),
+            action: AutopilotAction::Takeoff,
+            altitude: 2.5,
+        }),
+    );
+    assert_eq!(encode(&takeoff).as_deref(), Ok(AUTOPILOT_TAKEOFF));
+    assert_eq!(decode(AUTOPILOT_TAKEOFF), Ok(takeoff));
+    // A takeoff to no height, and an unknown action, are refused.
+    let mut flat = AUTOPILOT_TAKEOFF.to_vec();
+    flat[31..39].copy_from_slice(&0.0f64.to_be_bytes());
+    assert!(decode(&flat).is_err());
+    let mut unknown = AUTOPILOT_TAKEOFF.to_vec();
+    unknown[29] = 0x06;
+    assert!(decode(&unknown).is_err());
+}

@@ -106,7 +106,7 @@ fn body() -> impl Strategy<Value = Body> {
         fraction(),
         vec(unit(), 0..8),
         proptest::option::of((any::<u32>(), any::<u32>(), any::<u32>())),
-        any::<u32>(),
+        (any::<u32>(), any::<bool>()),
     )
         .prop_map(
             |(
@@ -119,7 +119,7 @@ fn body() -> impl Strategy<Value = Body> {
                 q,
                 actuators,
                 mission,
-                stale,
+                (stale, measured),
             )| {
                 Body::Telemetry(Telemetry {
                     pose,
@@ -152,6 +152,11 @@ fn body() -> impl Strategy<Value = Body> {
                     actuators,
                     mission: mission.map(|(id, next, total)| MissionProgress { id, next, total }),
                     stale,
+                    velocity_source: if measured {
+                        VelocitySource::Measured
+                    } else {
+                        VelocitySource::Commanded
+                    },
                 })
             },
         );
@@ -307,6 +312,19 @@ fn body() -> impl Strategy<Value = Body> {
         any::<u64>().prop_map(|nonce| Body::TimeRequest(TimeRequest { nonce })),
         (any::<u64>(), any::<u64>())
             .prop_map(|(nonce, station_us)| Body::Time(Time { nonce, station_us })),
+        (name(), 0..6usize, 0.1f64..500.0).prop_map(|(robot, action, altitude)| {
+            let action = AutopilotAction::ALL[action];
+            let altitude = if action == AutopilotAction::Takeoff {
+                altitude
+            } else {
+                0.0
+            };
+            Body::Autopilot(AutopilotRequest {
+                robot,
+                action,
+                altitude,
+            })
+        }),
     ]
 }
 
@@ -470,41 +488,62 @@ fn every_known_kind_round_trips_through_each_framing() {
     }
 }
 
-#[test]
-fn telemetry_from_before_the_stale_count_still_decodes() {
-    // Telemetry as version 1 first defined it: 11 fields, no stale count.
-    let mut env = Envelope::new(
+/// Telemetry in the shape `fields` elements long (11: before the stale
+/// count, 12: before the velocity source), built by hand as an older agent
+/// wrote it, with the stale count 7 when it has one.
+fn older_telemetry(fields: u8) -> Vec<u8> {
+    let env = Envelope::new(
         Header {
             sender: "robot_1".into(),
             ..Header::default()
         },
-        Body::Telemetry(Telemetry {
-            pose: Pose::default(),
-            velocity: Velocity::default(),
-            mode: ControlMode::Idle,
-            channel: String::new(),
-            computation: Computation::Onboard,
-            failsafe: FailsafeState::Ok,
-            health: Health::Ok,
-            battery: None,
-            position_quality: 1.0,
-            actuators: vec![],
-            mission: None,
-            stale: 7,
-        }),
+        Body::Telemetry(telemetry_with(7, VelocitySource::Measured)),
     );
     let bytes = encode(&env).unwrap();
-    // Body: [pose .. mission, stale] -> drop the last field and fix the
-    // array length (0x9c = 12 elements -> 0x9b = 11).
-    let at = bytes.iter().position(|b| *b == 0x9c).unwrap();
+    // Body: [pose .. mission, stale, velocity_source] -> keep the first
+    // `fields` elements and fix the array length (0x9d = 13 elements).
+    let at = bytes.iter().position(|b| *b == 0x9d).unwrap();
     let mut old = bytes.clone();
-    old[at] = 0x9b;
-    let stale_at = old.len() - 2; // [..., stale 0x07, auth nil]
-    assert_eq!(old[stale_at], 0x07);
-    old.remove(stale_at);
-    let Body::Telemetry(t) = &mut env.body else {
-        unreachable!()
+    old[at] = 0x90 | fields;
+    // [..., stale 0x07, velocity source 0x01, auth nil]
+    let tail = old.len() - 3;
+    assert_eq!(&old[tail..], &[0x07, 0x01, 0xc0]);
+    old.drain(tail + usize::from(fields - 11)..old.len() - 1);
+    old
+}
+
+fn telemetry_with(stale: u32, velocity_source: VelocitySource) -> Telemetry {
+    Telemetry {
+        pose: Pose::default(),
+        velocity: Velocity::default(),
+        mode: ControlMode::Idle,
+        channel: String::new(),
+        computation: Computation::Onboard,
+        failsafe: FailsafeState::Ok,
+        health: Health::Ok,
+        battery: None,
+        position_quality: 1.0,
+        actuators: vec![],
+        mission: None,
+        stale,
+        velocity_source,
+    }
+}
+
+#[test]
+fn telemetry_from_before_the_stale_count_still_decodes() {
+    // Telemetry as version 1 first defined it: 11 fields, no stale count.
+    let Body::Telemetry(t) = decode(&older_telemetry(11)).unwrap().body else {
+        panic!("not telemetry")
     };
-    t.stale = 0;
-    assert_eq!(decode(&old).unwrap(), env);
+    assert_eq!(t, telemetry_with(0, VelocitySource::Commanded));
+}
+
+#[test]
+fn telemetry_from_before_the_velocity_source_reads_as_commanded() {
+    // 12 fields: the stale count, no velocity source.
+    let Body::Telemetry(t) = decode(&older_telemetry(12)).unwrap().body else {
+        panic!("not telemetry")
+    };
+    assert_eq!(t, telemetry_with(7, VelocitySource::Commanded));
 }

@@ -1,8 +1,16 @@
 //! End-to-end tests: the real binaries, over real sockets.
 
+mod autopilot;
 mod cli;
 mod cluster_script;
+mod octave;
+mod python;
+mod radio;
+mod record;
 mod script;
+mod serve;
 mod signed;
+mod station;
+mod tmux;
 mod tui;
 mod zenoh;

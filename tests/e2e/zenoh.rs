@@ -134,7 +134,10 @@ fn two_stations_share_their_fleets_and_a_python_program_reads_them() {
     assert!(text.contains("mech/site-a/robot_2 appeared"), "{text}");
     let samples = text.lines().filter(|l| l.contains(" x=")).count();
     assert!(samples >= 10, "{text}");
-    assert!(text.contains("site-a/robot_1 x=") && text.contains("channel=ext/b"), "{text}");
+    assert!(
+        text.contains("site-a/robot_1 x=") && text.contains("channel=ext/b"),
+        "{text}"
+    );
 
     let frozen = Instant::now();
     let stop = Command::new("kill")
@@ -143,10 +146,10 @@ fn two_stations_share_their_fleets_and_a_python_program_reads_them() {
         .expect("kill runs");
     assert!(stop.success());
     let a_lines = read_until(&a_out, &["\"line\":7,"], "site-b lost at site-a");
-    println!(
-        "site-b frozen -> its robots lost at site-a after {:?} (lease 1 s)",
-        frozen.elapsed()
-    );
+    let took = frozen.elapsed();
+    println!("site-b frozen -> its robots lost at site-a after {took:?} (lease 1 s)");
+    // Generous for a loaded 2-core machine; the figure is printed above.
+    assert!(took < Duration::from_secs(5), "{took:?}");
     let mut a_lines = a_lines;
     a_lines.extend(read_until(&a_out, &["\"type\":\"zenoh\""], "site-a's end"));
     drop(b);

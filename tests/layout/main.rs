@@ -382,18 +382,37 @@ fn the_default_build_leaves_zenoh_out() {
         .expect("the workspace lists its default members")..];
     let defaults = &defaults[..defaults.find(']').unwrap()];
     assert!(!defaults.contains("zenoh"), "{defaults}");
-    for krate in ["mech-gcs", "mech-agent", "mech-control", "mech-core", "mech-e2e"] {
+    for krate in [
+        "mech-gcs",
+        "mech-agent",
+        "mech-control",
+        "mech-core",
+        "mech-e2e",
+    ] {
         let out = Command::new(&cargo)
             .current_dir(workspace())
-            .args(["tree", "-p", krate, "-e", "normal,build,dev", "--prefix", "none"])
+            .args([
+                "tree",
+                "-p",
+                krate,
+                "-e",
+                "normal,build,dev",
+                "--prefix",
+                "none",
+            ])
             .output()
             .expect("cargo tree runs");
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let tree = String::from_utf8_lossy(&out.stdout);
         assert!(
-            !tree.lines().any(|l| l.starts_with("zenoh ") || l.starts_with("mech-zenoh ")),
+            !tree
+                .lines()
+                .any(|l| l.starts_with("zenoh ") || l.starts_with("mech-zenoh ")),
             "{krate} depends on zenoh"
         );
     }
 }
-

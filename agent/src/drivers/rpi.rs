@@ -1,7 +1,10 @@
 //! Raspberry Pi GPIO through rppal: digital outputs and software PWM for
-//! the L298 driver. Pin numbers are BCM GPIO numbers (the 2017 config used
+//! the L298 driver, and wheel encoder inputs counted by interrupt
+//! ([`encoders`]). Pin numbers are BCM GPIO numbers (the 2017 config used
 //! physical board pins: board 38/37 = BCM 20/26, 31/32 = BCM 6/12, 33/35 =
 //! BCM 13/19).
+
+pub mod encoders;
 
 use rppal::gpio::Gpio;
 

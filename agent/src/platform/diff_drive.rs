@@ -25,6 +25,18 @@ impl DiffDrive {
     }
 }
 
+impl DiffDrive {
+    /// Body twist from left and right rim speeds, m/s.
+    fn wheels_to_twist(&self, left: f64, right: f64) -> Twist {
+        Twist {
+            vx: (left + right) / 2.0,
+            vy: 0.0,
+            vz: 0.0,
+            wz: (right - left) / self.track_width,
+        }
+    }
+}
+
 impl Platform for DiffDrive {
     fn name(&self) -> &'static str {
         "diff-drive"
@@ -59,12 +71,23 @@ impl Platform for DiffDrive {
 
     fn motion(&self, outputs: &[f64]) -> Twist {
         let get = |i: usize| outputs.get(i).copied().unwrap_or(0.0).clamp(-1.0, 1.0);
-        let (left, right) = (get(0) * self.max_wheel_speed, get(1) * self.max_wheel_speed);
-        Twist {
-            vx: (left + right) / 2.0,
-            vy: 0.0,
-            vz: 0.0,
-            wz: (right - left) / self.track_width,
+        self.wheels_to_twist(get(0) * self.max_wheel_speed, get(1) * self.max_wheel_speed)
+    }
+
+    fn max_wheel_speed(&self) -> Option<f64> {
+        Some(self.max_wheel_speed)
+    }
+
+    fn wheel_odometry(&self, wheel_speeds: &[f64]) -> Option<Twist> {
+        let get = |i: usize| wheel_speeds.get(i).copied().unwrap_or(0.0);
+        Some(self.wheels_to_twist(get(0), get(1)))
+    }
+
+    fn motor_name(&self, index: usize) -> String {
+        match index {
+            0 => "left wheel".to_string(),
+            1 => "right wheel".to_string(),
+            _ => format!("motor {}", index + 1),
         }
     }
 
@@ -128,6 +151,16 @@ mod tests {
             let back = dd.motion(&out);
             prop_assert!((back.vx - vx).abs() < 1e-9);
             prop_assert!((back.wz - wz).abs() < 1e-9);
+        }
+
+        #[test]
+        fn odometry_of_wheel_speeds_is_the_motion_of_their_outputs(l in -1.0f64..1.0, r in -1.0f64..1.0) {
+            let dd = robot();
+            let max = dd.max_wheel_speed;
+            prop_assert_eq!(dd.wheel_odometry(&[l * max, r * max]), Some(dd.motion(&[l, r])));
+            // Beyond full output, measured speeds are not clamped.
+            let fast = dd.wheel_odometry(&[2.0 * max, 2.0 * max]).unwrap();
+            prop_assert!((fast.vx - 2.0 * max).abs() < 1e-12);
         }
 
         #[test]

@@ -48,6 +48,19 @@ impl Kiwi {
     }
 }
 
+impl Kiwi {
+    /// Body twist from the three rim speeds, m/s.
+    fn wheels_to_twist(&self, wheels: Vector3<f64>) -> Twist {
+        let t = self.forward * wheels;
+        Twist {
+            vx: t[0],
+            vy: t[1],
+            vz: 0.0,
+            wz: t[2],
+        }
+    }
+}
+
 impl Platform for Kiwi {
     fn name(&self) -> &'static str {
         "kiwi"
@@ -79,13 +92,24 @@ impl Platform for Kiwi {
 
     fn motion(&self, outputs: &[f64]) -> Twist {
         let get = |i: usize| outputs.get(i).copied().unwrap_or(0.0).clamp(-1.0, 1.0);
-        let wheels = Vector3::new(get(0), get(1), get(2)) * self.max_wheel_speed;
-        let t = self.forward * wheels;
-        Twist {
-            vx: t[0],
-            vy: t[1],
-            vz: 0.0,
-            wz: t[2],
+        self.wheels_to_twist(Vector3::new(get(0), get(1), get(2)) * self.max_wheel_speed)
+    }
+
+    fn max_wheel_speed(&self) -> Option<f64> {
+        Some(self.max_wheel_speed)
+    }
+
+    fn wheel_odometry(&self, wheel_speeds: &[f64]) -> Option<Twist> {
+        let get = |i: usize| wheel_speeds.get(i).copied().unwrap_or(0.0);
+        Some(self.wheels_to_twist(Vector3::new(get(0), get(1), get(2))))
+    }
+
+    fn motor_name(&self, index: usize) -> String {
+        match index {
+            0 => "left wheel".to_string(),
+            1 => "rear right wheel".to_string(),
+            2 => "front right wheel".to_string(),
+            _ => format!("motor {}", index + 1),
         }
     }
 }
@@ -115,6 +139,16 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn odometry_of_wheel_speeds_is_the_motion_of_their_outputs(a in -1.0f64..1.0, b in -1.0f64..1.0, c in -1.0f64..1.0) {
+            let k = Kiwi::new(0.1, 0.5);
+            let odometry = k.wheel_odometry(&[a * 0.5, b * 0.5, c * 0.5]).unwrap();
+            let motion = k.motion(&[a, b, c]);
+            prop_assert!((odometry.vx - motion.vx).abs() < 1e-12);
+            prop_assert!((odometry.vy - motion.vy).abs() < 1e-12);
+            prop_assert!((odometry.wz - motion.wz).abs() < 1e-12);
+        }
+
         #[test]
         fn twist_round_trips_within_limits(vx in -0.4f64..0.4, vy in -0.4f64..0.4, wz in -3.0f64..3.0) {
             let k = Kiwi::new(0.1, 0.5);

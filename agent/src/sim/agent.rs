@@ -1,6 +1,8 @@
 //! A simulated agent: the real [`Agent`] core driving a [`SimRobot`]
 //! instead of motors, fed with noisy positions of the simulated vehicle
-//! through the same median filter. Steppable without sockets or tokio:
+//! through the same median filter and, when the robot has encoders
+//! ([`SimAgent::with_encoders`]), with simulated wheel encoder counts.
+//! Steppable without sockets or tokio:
 //! call [`SimAgent::handle`] for each message and [`SimAgent::tick`] each
 //! control period with the simulated time.
 
@@ -8,10 +10,11 @@ use std::time::Duration;
 
 use mech_proto::{Envelope, Pose};
 
+use super::encoder::{SimEncoderModel, SimEncoders};
 use super::noise::UwbNoise;
 use super::robot::SimRobot;
 use crate::agent::{Agent, AgentSettings};
-use crate::hal::PositionSample;
+use crate::hal::{PositionSample, WheelEncoders};
 use crate::platform::PlatformSpec;
 use crate::runtime::Vehicle;
 
@@ -22,6 +25,11 @@ pub struct SimAgent {
     pub robot: SimRobot,
     /// `None`: perfect positions.
     noise: Option<UwbNoise>,
+    /// Wheel encoders, when the robot has them.
+    encoders: Option<SimEncoders>,
+    /// Time between position fixes (zero: one every tick).
+    fix_period: Duration,
+    next_fix: Duration,
     last_tick: Option<Duration>,
 }
 
@@ -37,8 +45,26 @@ impl SimAgent {
             agent: Agent::new(settings, platform.build(), stamp_origin_us),
             robot: SimRobot::new(platform, pose),
             noise,
+            encoders: None,
+            fix_period: Duration::ZERO,
+            next_fix: Duration::ZERO,
             last_tick: None,
         }
+    }
+
+    /// Gives the simulated wheels encoders of `model` (seeded). The agent
+    /// uses them if its settings have `wheels` (`[encoders]`).
+    pub fn with_encoders(mut self, model: SimEncoderModel, seed: u64) -> SimAgent {
+        let wheels = self.robot.wheel_speeds().len();
+        self.encoders = (wheels > 0).then(|| SimEncoders::new(model, wheels, seed));
+        self
+    }
+
+    /// One position fix every `period` instead of every tick (a UWB tag at
+    /// 10 Hz under a 50 Hz control loop).
+    pub fn with_fix_period(mut self, period: Duration) -> SimAgent {
+        self.fix_period = period;
+        self
     }
 
     /// Handles one message from the router.
@@ -60,18 +86,32 @@ impl SimAgent {
         self.last_tick = Some(now);
         let outputs = self.agent.outputs().to_vec();
         self.robot.step_outputs(&outputs, dt);
-        let truth = self.robot.pose();
-        let pose = match &mut self.noise {
-            Some(n) => n.measure(&truth),
-            None => truth,
-        };
-        self.agent.observe_position(PositionSample {
-            pose,
-            stamp: now,
-            quality: 1.0,
-            has_heading: true,
-        });
-        self.agent.tick(now).outgoing
+        let mut notices = Vec::new();
+        if let Some(e) = self.encoders.as_mut() {
+            if dt > 0.0 {
+                e.advance(self.robot.wheel_travel(), now);
+            }
+            if let Ok(counts) = e.read_all(now) {
+                notices.extend(self.agent.observe_wheels(&counts, now));
+            }
+        }
+        if now >= self.next_fix {
+            self.next_fix = now + self.fix_period;
+            let truth = self.robot.pose();
+            let pose = match &mut self.noise {
+                Some(n) => n.measure(&truth),
+                None => truth,
+            };
+            self.agent.observe_position(PositionSample {
+                pose,
+                stamp: now,
+                quality: 1.0,
+                has_heading: true,
+            });
+        }
+        let mut out = self.agent.tick(now).outgoing;
+        out.extend(notices);
+        out
     }
 
     /// The `Bye` sent on shutdown.
@@ -86,8 +126,19 @@ impl Vehicle for SimAgent {
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         SimAgent::handle_bytes(self, bytes, now)
     }
-    fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
-        self.agent.encode(env, out)
+    fn encode(
+        &mut self,
+        env: &Envelope,
+        link: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), mech_proto::Error> {
+        self.agent.encode_on(env, link, out)
+    }
+    fn heartbeat(&mut self, now: Duration) -> Envelope {
+        self.agent.heartbeat(now)
+    }
+    fn counters(&self) -> crate::agent::Counters {
+        self.agent.counters()
     }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         SimAgent::handle(self, env, now)

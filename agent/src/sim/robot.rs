@@ -1,6 +1,11 @@
 //! A simulated vehicle: a platform's forward kinematics, actuator limits and
 //! a first-order actuator response, integrated in the arena frame.
 //!
+//! A wheeled platform's wheels are simulated one by one (each motor lags its
+//! output, scaled by the battery's charge; a jammed wheel does not turn), so
+//! simulated encoders can measure them; other platforms lag as a whole
+//! twist.
+//!
 //! [`SimRobot`] also carries the same onboard [`Controller`] the agent uses,
 //! so a fleet controller can be simulated in lock-step without any agent:
 //!
@@ -49,6 +54,15 @@ pub struct SimRobot {
     pose: Pose,
     /// Actual body-frame velocity, lagging the commanded one.
     twist: Twist,
+    /// Actual rim speed of each wheel, m/s (wheeled platforms).
+    wheels: Vec<f64>,
+    /// Rim travel of each wheel during the last step, m.
+    wheel_travel: Vec<f64>,
+    /// Wheels that are jammed (do not turn whatever their output).
+    jammed: Vec<bool>,
+    /// Motor gain: the battery's charge as a fraction of the voltage at
+    /// which the platform's top speeds hold (1 = full).
+    battery: f64,
     outputs: Vec<f64>,
     response_time: f64,
     time: Duration,
@@ -66,6 +80,10 @@ impl SimRobot {
             mission: None,
             pose,
             twist: Twist::default(),
+            wheels: vec![0.0; motors],
+            wheel_travel: vec![0.0; motors],
+            jammed: vec![false; motors],
+            battery: 1.0,
             outputs: vec![0.0; motors],
             response_time: DEFAULT_RESPONSE_TIME,
             time: Duration::ZERO,
@@ -100,6 +118,40 @@ impl SimRobot {
     /// Simulated time so far.
     pub fn time(&self) -> Duration {
         self.time
+    }
+
+    /// Sets the battery's charge: every motor turns at `charge` times the
+    /// speed its output would give on a full battery (a DC motor's speed
+    /// follows its voltage). Clamped to `[0, 1]`.
+    pub fn set_battery(&mut self, charge: f64) {
+        self.battery = if charge.is_nan() {
+            1.0
+        } else {
+            charge.clamp(0.0, 1.0)
+        };
+    }
+
+    /// Jams wheel `index` (it stops at once and turns no more) or frees it.
+    pub fn set_jammed(&mut self, index: usize, jammed: bool) {
+        if let Some(j) = self.jammed.get_mut(index) {
+            *j = jammed;
+        }
+    }
+
+    /// Actual rim speed of each wheel, m/s (empty for a platform without
+    /// wheels).
+    pub fn wheel_speeds(&self) -> &[f64] {
+        if self.platform.max_wheel_speed().is_some() {
+            &self.wheels
+        } else {
+            &[]
+        }
+    }
+
+    /// Rim travel of each wheel during the last step, m (what an encoder on
+    /// it measures, before slip).
+    pub fn wheel_travel(&self) -> &[f64] {
+        &self.wheel_travel
     }
 
     /// Gives the onboard controller a command (any mode; the mode changes
@@ -141,17 +193,24 @@ impl SimRobot {
         self.outputs.clear();
         self.outputs
             .extend(outputs.iter().map(|u| crate::hal::clamp_output(*u)));
-        let target = self.platform.motion(&self.outputs);
         let a = if self.response_time > 0.0 {
             1.0 - (-dt / self.response_time).exp()
         } else {
             1.0
         };
-        let t = &mut self.twist;
-        t.vx += (target.vx - t.vx) * a;
-        t.vy += (target.vy - t.vy) * a;
-        t.vz += (target.vz - t.vz) * a;
-        t.wz += (target.wz - t.wz) * a;
+        match self.platform.max_wheel_speed() {
+            Some(max) => self.step_wheels(max, a, dt),
+            None => {
+                let driven: Vec<f64> = self.outputs.iter().map(|u| u * self.battery).collect();
+                let target = self.platform.motion(&driven);
+                let t = &mut self.twist;
+                t.vx += (target.vx - t.vx) * a;
+                t.vy += (target.vy - t.vy) * a;
+                t.vz += (target.vz - t.vz) * a;
+                t.wz += (target.wz - t.wz) * a;
+            }
+        }
+        let t = &self.twist;
         let mid = self.pose.heading + t.wz * dt / 2.0;
         let (s, c) = mid.sin_cos();
         self.pose.x += (t.vx * c - t.vy * s) * dt;
@@ -160,6 +219,25 @@ impl SimRobot {
             self.pose.z = (self.pose.z + t.vz * dt).max(0.0);
         }
         self.pose.heading = wrap_angle(self.pose.heading + t.wz * dt);
+    }
+
+    /// Each wheel's motor lags toward its output's speed (`a` is the lag's
+    /// step fraction); the body moves as the wheels turn.
+    fn step_wheels(&mut self, max_wheel_speed: f64, a: f64, dt: f64) {
+        for (i, w) in self.wheels.iter_mut().enumerate() {
+            let target =
+                self.outputs.get(i).copied().unwrap_or(0.0) * self.battery * max_wheel_speed;
+            *w = if self.jammed.get(i).copied().unwrap_or(false) {
+                0.0
+            } else {
+                *w + (target - *w) * a
+            };
+        }
+        self.wheel_travel.clear();
+        self.wheel_travel.extend(self.wheels.iter().map(|w| w * dt));
+        if let Some(t) = self.platform.wheel_odometry(&self.wheels) {
+            self.twist = t;
+        }
     }
 
     /// Telemetry as an agent would report it (true pose, no failsafe).
@@ -182,6 +260,8 @@ impl SimRobot {
             actuators: self.outputs.clone(),
             mission: self.mission.as_ref().map(MissionRun::progress),
             stale: 0,
+            // The true motion: what ideal encoders would measure.
+            velocity_source: mech_proto::VelocitySource::Measured,
         }
     }
 

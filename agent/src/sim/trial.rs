@@ -1,17 +1,21 @@
 //! Repeatable waypoint trials: one simulated agent (real core, UWB-like
-//! noise, median filter) driven through a mission exactly as the router
-//! would drive it, stepped in simulated time. Used by the accuracy
-//! benchmark (`cargo run --release -p mech-agent --example waypoint_accuracy`)
-//! and its test.
+//! noise, median filter; optionally wheel encoders, odometry fused with the
+//! fixes and closed-loop wheel speed) driven through a mission exactly as
+//! the router would drive it, stepped in simulated time. Used by the
+//! accuracy benchmark (`cargo run --release -p mech-agent --example
+//! waypoint_accuracy`) and its test.
 
 use std::time::Duration;
 
 use mech_proto::{Body, Envelope, Header, Heartbeat, Mission, Pose, Route, Waypoint, Welcome};
 
 use super::agent::SimAgent;
+use super::encoder::SimEncoderModel;
 use super::noise::{UwbNoise, UwbNoiseModel};
 use crate::agent::AgentSettings;
+use crate::fusion::FusionSettings;
 use crate::platform::PlatformSpec;
+use crate::wheels::{PiGains, StallSettings, WheelSettings};
 
 /// Outcome of one trial.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +26,11 @@ pub struct TrialResult {
     pub finished: bool,
     /// Simulated time taken, s.
     pub seconds: f64,
+    /// Root mean square of the agent's planar pose error (estimate against
+    /// truth) over the run, m.
+    pub pose_rms: f64,
+    /// 95th percentile of that error over the run, m.
+    pub pose_p95: f64,
 }
 
 /// Parameters of a trial.
@@ -38,6 +47,13 @@ pub struct Trial {
     /// Give up after this much simulated time.
     pub timeout: Duration,
     pub filter_window: usize,
+    /// Wheel encoders on the simulated robot, and the agent configured to
+    /// use them (odometry fusion, closed-loop wheel speed); `None`: UWB only.
+    pub encoders: Option<SimEncoderModel>,
+    /// The simulated battery's charge (motor gain, 1 = full).
+    pub battery: f64,
+    /// Time between position fixes (zero: one every control period).
+    pub fix_period: Duration,
 }
 
 impl Trial {
@@ -54,15 +70,52 @@ impl Trial {
             control_period: Duration::from_millis(20),
             timeout: Duration::from_secs(120),
             filter_window: 9,
+            encoders: None,
+            battery: 1.0,
+            fix_period: Duration::ZERO,
         }
+    }
+
+    /// The same trial on a robot with wheel encoders of `model`, the agent
+    /// using them (the fusion told the UWB noise's standard deviations, as
+    /// a robot's config would be).
+    pub fn with_encoders(mut self, model: SimEncoderModel) -> Trial {
+        self.encoders = Some(model);
+        self
+    }
+
+    fn settings(&self) -> AgentSettings {
+        let mut settings = AgentSettings::new("trial");
+        settings.filter_window = self.filter_window;
+        settings.wheels = self.encoders.map(|m| WheelSettings {
+            counting: m.counting,
+            counts_per_revolution: m.counts_per_revolution,
+            wheel_radius: m.wheel_radius,
+            speed_loop: Some(PiGains::default()),
+            stall: StallSettings::default(),
+        });
+        let noise = self.noise.unwrap_or(UwbNoiseModel {
+            sigma: 0.005,
+            heading_sigma: 0.005,
+            ..UwbNoiseModel::default()
+        });
+        settings.fusion = FusionSettings {
+            position_sigma: noise.sigma,
+            heading_sigma: noise.heading_sigma,
+            ..FusionSettings::default()
+        };
+        settings
     }
 
     /// Runs the trial.
     pub fn run(&self) -> TrialResult {
-        let mut settings = AgentSettings::new("trial");
-        settings.filter_window = self.filter_window;
         let noise = self.noise.map(|m| UwbNoise::new(m, self.seed));
-        let mut sim = SimAgent::new(settings, &self.platform, self.start, noise, 0);
+        let mut sim = SimAgent::new(self.settings(), &self.platform, self.start, noise, 0)
+            .with_fix_period(self.fix_period);
+        if let Some(model) = self.encoders {
+            sim = sim.with_encoders(model, self.seed.wrapping_mul(31));
+        }
+        sim.robot.set_battery(self.battery);
         let msg = |channel: &str, body: Body| {
             Envelope::new(
                 Header {
@@ -102,6 +155,7 @@ impl Trial {
         sim.handle(msg("wp/gcs", Body::Mission(mission)), now);
         let mut next_heartbeat = Duration::ZERO;
         let mut finished_at = None;
+        let mut pose_errors = Vec::new();
         while now < self.timeout {
             now += self.control_period;
             if now >= next_heartbeat {
@@ -109,6 +163,10 @@ impl Trial {
                 next_heartbeat = now + Duration::from_millis(250);
             }
             sim.tick(now);
+            if let Some(e) = sim.agent.estimate() {
+                let truth = sim.robot.pose();
+                pose_errors.push((e.pose.x - truth.x).hypot(e.pose.y - truth.y));
+            }
             let done = sim.agent.mission("wp/gcs").is_some_and(|m| m.finished());
             match finished_at {
                 None if done => finished_at = Some(now),
@@ -129,10 +187,17 @@ impl Trial {
         } else {
             0.0
         };
+        let pose_rms = if pose_errors.is_empty() {
+            f64::NAN
+        } else {
+            (pose_errors.iter().map(|e| e * e).sum::<f64>() / pose_errors.len() as f64).sqrt()
+        };
         TrialResult {
             final_error: ((p.x - target.x).powi(2) + (p.y - target.y).powi(2) + dz * dz).sqrt(),
             finished: finished_at.is_some(),
             seconds: finished_at.unwrap_or(now).as_secs_f64(),
+            pose_rms,
+            pose_p95: median_p95(&pose_errors).1,
         }
     }
 }

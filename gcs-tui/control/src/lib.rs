@@ -29,6 +29,7 @@ mod geometry;
 mod hub;
 pub mod lang;
 mod offboard;
+pub mod playback;
 pub mod script;
 mod spec;
 mod tracking;

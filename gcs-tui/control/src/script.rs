@@ -16,6 +16,7 @@ use std::sync::{Arc, Mutex};
 use serde_json::{Value, json};
 
 use crate::lang::{Executor, LangError, Outcome, Statement, parse_script};
+use mech_core::router::Subscription;
 use mech_core::{Event, Gcs, LinkState, Stamped};
 
 /// How a script run ended.
@@ -43,14 +44,15 @@ impl ScriptOutcome {
 /// A line-oriented JSON sink shared by the event printer and the runner.
 pub type Sink = Arc<Mutex<Box<dyn Write + Send>>>;
 
-fn emit(sink: &Sink, value: &Value) {
+pub(crate) fn emit(sink: &Sink, value: &Value) {
     let mut w = mech_core::sync::lock(sink);
     // Output is best effort: a closed stdout must not stop the robots' script.
     let _ = writeln!(w, "{value}");
     let _ = w.flush();
 }
 
-fn secs(d: std::time::Duration) -> f64 {
+/// Seconds, rounded to the microsecond, as the JSON lines print them.
+pub fn secs(d: std::time::Duration) -> f64 {
     (d.as_secs_f64() * 1e6).round() / 1e6
 }
 
@@ -71,6 +73,10 @@ pub fn event_json(s: &Stamped) -> Value {
             "known": known,
         }),
         Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
+        Event::Links { robot, links } => json!({
+            "robot": robot, "udp": links.udp, "radio": links.radio, "active": links.active,
+            "radio_budget_hz": links.radio_budget_hz,
+        }),
         Event::Telemetry {
             robot,
             telemetry: t,
@@ -141,9 +147,14 @@ pub fn event_json(s: &Stamped) -> Value {
 }
 
 fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
+    result_json_at(secs(gcs.router().elapsed()), stmt, outcome)
+}
+
+/// The JSON line of a command's result at `t` seconds of station time.
+pub fn result_json_at(t: f64, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
     let mut v = json!({
         "type": "result",
-        "t": secs(gcs.router().elapsed()),
+        "t": t,
         "line": stmt.span.line,
         "command": stmt.text,
         "ok": outcome.is_ok(),
@@ -164,6 +175,32 @@ fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError
     v
 }
 
+/// Runs `stmt`, handing `on_event` every event of `events` that arrives
+/// meanwhile and then those it caused synchronously (route changes,
+/// e-stops), so they come before its result.
+pub async fn execute_with_events(
+    executor: &mut Executor,
+    stmt: &Statement,
+    events: &mut Subscription,
+    mut on_event: impl FnMut(&Stamped),
+) -> Result<Outcome, LangError> {
+    let result = {
+        let run = executor.execute(stmt);
+        tokio::pin!(run);
+        loop {
+            tokio::select! {
+                biased;
+                r = &mut run => break r,
+                Some(ev) = events.recv() => on_event(&ev),
+            }
+        }
+    };
+    while let Some(ev) = events.try_recv() {
+        on_event(&ev);
+    }
+    result
+}
+
 /// Rejections by reason, and their total.
 fn rejected_json(r: &mech_core::counters::Rejections) -> Value {
     let mut v = json!({"total": r.total()});
@@ -173,6 +210,14 @@ fn rejected_json(r: &mech_core::counters::Rejections) -> Value {
         }
     }
     v
+}
+
+/// A recording's file and what it lost so far.
+fn recording_json(r: &mech_core::RecordingStatus) -> Value {
+    json!({
+        "file": r.file.display().to_string(), "messages": r.messages,
+        "queued": r.queued, "dropped": r.dropped, "error": r.error,
+    })
 }
 
 /// Runs `source` against `gcs` with `executor`, writing JSON lines to `sink`.
@@ -202,22 +247,10 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         commands: statements.len(),
     };
     for (i, stmt) in statements.iter().enumerate() {
-        // Events are printed while the command runs, and those it caused
-        // synchronously (route changes, e-stops) before its result.
-        let result = {
-            let run = executor.execute(stmt);
-            tokio::pin!(run);
-            loop {
-                tokio::select! {
-                    biased;
-                    r = &mut run => break r,
-                    Some(ev) = events.recv() => emit(&sink, &event_json(&ev)),
-                }
-            }
-        };
-        while let Some(ev) = events.try_recv() {
-            emit(&sink, &event_json(&ev));
-        }
+        let result = execute_with_events(executor, stmt, &mut events, |ev| {
+            emit(&sink, &event_json(ev))
+        })
+        .await;
         emit(&sink, &result_json(gcs, stmt, result.as_ref()));
         if let Err(error) = result {
             outcome = ScriptOutcome::Failed {
@@ -245,16 +278,17 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         (f.local_robots().filter(connected).count(), remote.count())
     });
     let counters = gcs.router().counters();
-    emit(
-        &sink,
-        &json!({
-            "type": "summary", "ok": ok, "commands": ran, "error": error,
-            "connected_robots": robots, "connected_remote_robots": remote,
-            "received": counters.received, "forwarded": counters.forwarded,
-            "bad_packets": counters.dropped.bad_packet,
-            "authenticated": gcs.router().authenticated(),
-            "rejected": rejected_json(&counters.rejected),
-        }),
-    );
+    let mut summary = json!({
+        "type": "summary", "ok": ok, "commands": ran, "error": error,
+        "connected_robots": robots, "connected_remote_robots": remote,
+        "received": counters.received, "forwarded": counters.forwarded,
+        "bad_packets": counters.dropped.bad_packet,
+        "authenticated": gcs.router().authenticated(),
+        "rejected": rejected_json(&counters.rejected),
+    });
+    if let (Some(r), Value::Object(m)) = (gcs.recording(), &mut summary) {
+        m.insert("recording".into(), recording_json(&r));
+    }
+    emit(&sink, &summary);
     outcome
 }

@@ -80,6 +80,7 @@ async fn bare_agent(router: SocketAddr, seen: mpsc::UnboundedSender<(Instant, En
                     actuators: vec![0.0; 3],
                     mission: mission.filter(|_| channel == "wp/gcs"),
                     stale: 0,
+                    velocity_source: mech_proto::VelocitySource::Commanded,
                 };
                 let _ = socket.send_to(&send(Body::Telemetry(t)), router).await;
             }

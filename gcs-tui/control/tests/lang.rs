@@ -49,7 +49,7 @@ async fn route_then_wait_for_the_acknowledgement() {
     gcs.shutdown().await;
 }
 
-#[tokio::test(start_paused = true)]
+#[tokio::test]
 async fn wait_times_out_with_the_reason() {
     let (gcs, mut exec, _robot) = setup().await;
     let err = exec
@@ -226,4 +226,66 @@ async fn an_invalid_script_runs_nothing() {
         "nothing ran"
     );
     gcs.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn record_starts_reports_and_stops_a_recording_with_the_commands_in_it() {
+    let (gcs, exec, _robot) = setup().await;
+    let dir = tempfile::tempdir().unwrap();
+    let mut exec = exec.with_source("script");
+    let status = exec.execute_line("record").await.unwrap();
+    assert_eq!(status.summary, "not recording");
+    let err = exec.execute_line("record start").await.unwrap_err();
+    assert!(err.message.contains("record start FILE"), "{err}");
+    let err = exec.execute_line("record pause").await.unwrap_err();
+    assert!(err.message.contains("start, stop or nothing"), "{err}");
+    let file = dir.path().join("a.mcap");
+    let started = exec
+        .execute_line(&format!("record start {}", file.display()))
+        .await
+        .unwrap();
+    assert!(started.summary.starts_with("recording to"), "{started:?}");
+    let again = exec.execute_line("record start other.mcap").await;
+    assert!(again.unwrap_err().message.contains("already recording"));
+    exec.execute_line("route robot_1 joy/0").await.unwrap();
+    let status = exec.execute_line("status").await.unwrap();
+    assert!(status.summary.contains("; recording "), "{status:?}");
+    let stopped = exec.execute_line("record stop").await.unwrap();
+    assert!(stopped.summary.contains("0 dropped"), "{stopped:?}");
+    assert!(exec.execute_line("record stop").await.is_err());
+    gcs.shutdown().await;
+    let replay = mech_core::replay::Replay::open(&file).unwrap();
+    let commands: Vec<String> = replay
+        .entries()
+        .filter_map(|e| match e {
+            mech_core::replay::Entry::Operator(o) => Some(format!("{} {}", o.source, o.text)),
+            _ => None,
+        })
+        .collect();
+    // The start is in it (recorded once it ran), and the refused second
+    // start; the stop is not (the file was finished by then).
+    let start = format!("script record start {}", file.display());
+    assert_eq!(
+        commands,
+        [
+            start.as_str(),
+            "script record start other.mcap",
+            "script route robot_1 joy/0",
+            "script status"
+        ]
+    );
+}
+
+/// With a recording directory, `record start` writes rotating files there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn record_start_without_a_file_uses_the_recording_directory() {
+    let (gcs, exec, _robot) = setup().await;
+    let dir = tempfile::tempdir().unwrap();
+    let mut exec = exec.with_record_dir(dir.path().to_owned());
+    let started = exec.execute_line("record start").await.unwrap();
+    assert!(started.summary.contains("mech-"), "{started:?}");
+    exec.execute_line("record stop").await.unwrap();
+    gcs.shutdown().await;
+    let files: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(files.len(), 1);
 }

@@ -11,7 +11,10 @@
 //! (c) switch latency: route change to the first forwarded message of the
 //!     new channel;
 //! (d) telemetry fan-out: 1,000 robots at 50 Hz into the router, fleet model
-//!     plus one in-process subscriber, counting every drop.
+//!     plus one in-process subscriber, counting every drop;
+//! (r) recording: the router threads' CPU time per message with and
+//!     without a recording (1,000 robots at 50 Hz; 100 at 20 Hz), the
+//!     recorder thread's, and the file size per robot-hour.
 
 #![allow(clippy::unwrap_used)]
 
@@ -123,6 +126,7 @@ fn telemetry(name: &str, x: f64) -> Vec<u8> {
         actuators: vec![0.1, 0.1],
         mission: None,
         stale: 0,
+        velocity_source: mech_proto::VelocitySource::Commanded,
     };
     env(name, "router", "", 0, Body::Telemetry(t))
 }
@@ -484,6 +488,11 @@ fn main() {
     } else {
         rt.block_on(gcs.shutdown());
     }
+    if phase('r') {
+        let stolen = steal_jiffies();
+        recording_cost(&rt);
+        report_steal(stolen);
+    }
 }
 
 /// (a) and (b) on a router of their own, with or without authentication.
@@ -780,27 +789,13 @@ fn switching(
     println!("  old-channel messages forwarded after a switch: {late_old} (must be 0)");
 }
 
-/// (d) telemetry fan-out.
-fn fanout(rt: &tokio::runtime::Runtime, gcs: Gcs, addr: SocketAddr) {
-    let router = gcs.router().clone();
-    // (d) telemetry fan-out
-    const ROBOTS: usize = 1000;
-    const RATE_HZ: u64 = 50;
-    let mut sub = router.subscribe(65_536, true);
-    let counted = Arc::new(AtomicU64::new(0));
-    let reader = {
-        let counted = counted.clone();
-        rt.spawn(async move {
-            while let Some(ev) = sub.recv().await {
-                if matches!(ev.event, Event::Telemetry { .. }) {
-                    counted.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            sub.dropped()
-        })
-    };
-    const THREADS: usize = 4;
-    let robots: Vec<(String, UdpSocket)> = (0..ROBOTS)
+/// Threads sending telemetry in [`send_telemetry`].
+const THREADS: usize = 4;
+
+/// `n` robots `sim_0`.. registered with the router at `addr`, each with its
+/// own socket.
+fn register_robots(addr: SocketAddr, n: usize) -> Vec<(String, UdpSocket)> {
+    (0..n)
         .map(|i| {
             let name = format!("sim_{i}");
             let s = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -811,11 +806,12 @@ fn fanout(rt: &tokio::runtime::Runtime, gcs: Gcs, addr: SocketAddr) {
             }
             (name, s)
         })
-        .collect();
-    std::thread::sleep(Duration::from_millis(300));
-    let registered = gcs.with_fleet(|f| f.robots.len());
-    let before = router.counters();
-    let run = Duration::from_secs(5);
+        .collect()
+}
+
+/// Every robot sends telemetry at `rate_hz` for `run`, spread over the
+/// period by [`THREADS`] threads; returns how many were sent.
+fn send_telemetry(robots: Vec<(String, UdpSocket)>, rate_hz: u64, run: Duration) -> u64 {
     let sent = Arc::new(AtomicU64::new(0));
     let mut groups: Vec<Vec<(String, UdpSocket)>> = (0..THREADS).map(|_| Vec::new()).collect();
     for (i, r) in robots.into_iter().enumerate() {
@@ -829,7 +825,7 @@ fn fanout(rt: &tokio::runtime::Runtime, gcs: Gcs, addr: SocketAddr) {
             let sent = sent.clone();
             std::thread::spawn(move || {
                 let msgs: Vec<Vec<u8>> = group.iter().map(|(n, _)| telemetry(n, 1.0)).collect();
-                let period = Duration::from_nanos(1_000_000_000 / RATE_HZ);
+                let period = Duration::from_nanos(1_000_000_000 / rate_hz);
                 // Each thread's robots send spread over the period, in slices.
                 let slices = 10usize;
                 let per_slice = group.len().div_ceil(slices);
@@ -856,10 +852,139 @@ fn fanout(rt: &tokio::runtime::Runtime, gcs: Gcs, addr: SocketAddr) {
     for h in handles {
         h.join().unwrap();
     }
+    sent.load(Ordering::Relaxed)
+}
+
+/// CPU time of the threads named `name`, seconds.
+fn threads_cpu(name: &str) -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    tasks
+        .flatten()
+        .filter(|t| {
+            std::fs::read_to_string(t.path().join("comm")).is_ok_and(|c| c.trim_end() == name)
+        })
+        .map(|t| stat_cpu(&std::fs::read_to_string(t.path().join("stat")).unwrap_or_default()))
+        .sum()
+}
+
+/// One telemetry load on a fresh router, recording to `file` or not.
+struct LoadRun {
+    sent: u64,
+    received: u64,
+    secs: f64,
+    router_cpu: f64,
+    recorder_cpu: f64,
+    status: Option<mech_core::RecordingStatus>,
+}
+
+fn telemetry_load(
+    rt: &tokio::runtime::Runtime,
+    robots: usize,
+    rate_hz: u64,
+    record: Option<&std::path::Path>,
+) -> LoadRun {
+    let gcs = rt.block_on(Gcs::start(config())).unwrap();
+    let addr = gcs.router().udp_addr();
+    if let Some(f) = record {
+        gcs.start_recording(mech_core::RecordTarget::File(f.to_owned()))
+            .unwrap();
+    }
+    let socks = register_robots(addr, robots);
+    std::thread::sleep(Duration::from_millis(500));
+    let before = gcs.router().counters().received;
+    let (cpu0, rec0) = (router_cpu(), threads_cpu("mech-record"));
+    let start = Instant::now();
+    let sent = send_telemetry(socks, rate_hz, Duration::from_secs(6));
+    std::thread::sleep(Duration::from_millis(300));
+    let secs = start.elapsed().as_secs_f64();
+    let router_cpu = router_cpu() - cpu0;
+    let recorder_cpu = threads_cpu("mech-record") - rec0;
+    let received = gcs.router().counters().received - before;
+    let status = rt.block_on(gcs.stop_recording());
+    rt.block_on(gcs.shutdown());
+    LoadRun {
+        sent,
+        received,
+        secs,
+        router_cpu,
+        recorder_cpu,
+        status,
+    }
+}
+
+/// (r) what recording costs: the same telemetry load without and with a
+/// recording, the router threads' CPU time, the recorder thread's, and
+/// the file's size per robot-hour.
+fn recording_cost(rt: &tokio::runtime::Runtime) {
+    let dir = tempfile::tempdir().unwrap();
+    println!("(r) recording cost: telemetry into a fresh router, without and with recording");
+    for (robots, hz) in [(1000usize, 50u64), (100, 20)] {
+        let plain = telemetry_load(rt, robots, hz, None);
+        let file = dir.path().join(format!("bench-{robots}.mcap"));
+        let rec = telemetry_load(rt, robots, hz, Some(&file));
+        let status = rec.status.clone().unwrap_or_default();
+        let size = std::fs::metadata(&file).map_or(0, |m| m.len());
+        let per_msg = |r: &LoadRun| r.router_cpu / r.received.max(1) as f64 * 1e6;
+        println!(
+            "  {robots} robots at {hz} Hz: router CPU {:.2} us/msg ({:.0}% of a core) without, {:.2} us/msg ({:.0}%) recording: +{:.1}%",
+            per_msg(&plain),
+            plain.router_cpu / plain.secs * 100.0,
+            per_msg(&rec),
+            rec.router_cpu / rec.secs * 100.0,
+            (per_msg(&rec) / per_msg(&plain) - 1.0) * 100.0
+        );
+        println!(
+            "    recorder thread {:.0}% of a core ({:.2} us/msg); sent {} / {}, router received {} / {}; recorded {} messages, dropped {}",
+            rec.recorder_cpu / rec.secs * 100.0,
+            rec.recorder_cpu / rec.received.max(1) as f64 * 1e6,
+            plain.sent,
+            rec.sent,
+            plain.received,
+            rec.received,
+            status.messages,
+            status.dropped
+        );
+        let robot_hours = robots as f64 * rec.secs / 3600.0;
+        println!(
+            "    file {:.1} MB for {:.1} s: {:.1} MB per robot-hour at {hz} Hz (zstd chunks)",
+            size as f64 / 1e6,
+            rec.secs,
+            size as f64 / 1e6 / robot_hours
+        );
+    }
+}
+
+/// (d) telemetry fan-out.
+fn fanout(rt: &tokio::runtime::Runtime, gcs: Gcs, addr: SocketAddr) {
+    let router = gcs.router().clone();
+    // (d) telemetry fan-out
+    const ROBOTS: usize = 1000;
+    const RATE_HZ: u64 = 50;
+    let mut sub = router.subscribe(65_536, true);
+    let counted = Arc::new(AtomicU64::new(0));
+    let reader = {
+        let counted = counted.clone();
+        rt.spawn(async move {
+            while let Some(ev) = sub.recv().await {
+                if matches!(ev.event, Event::Telemetry { .. }) {
+                    counted.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            sub.dropped()
+        })
+    };
+    let robots = register_robots(addr, ROBOTS);
+    std::thread::sleep(Duration::from_millis(300));
+    let registered = gcs.with_fleet(|f| f.robots.len());
+    let before = router.counters();
+    let run = Duration::from_secs(5);
+    let start = Instant::now();
+    let sent = send_telemetry(robots, RATE_HZ, run);
     std::thread::sleep(Duration::from_millis(300));
     let elapsed = start.elapsed().as_secs_f64() - 0.3;
     let after = router.counters();
-    let sent = sent.load(Ordering::Relaxed);
     let routed_in = after.received - before.received;
     let seen = counted.load(Ordering::Relaxed);
     let fleet_robots = gcs.with_fleet(|f| {

@@ -43,7 +43,8 @@ pub enum AuthMode {
 }
 
 /// How exposed a running station is, for the status bar and `status`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Security {
     /// Every message from the network must be signed by a listed key.
     #[default]
@@ -277,6 +278,7 @@ impl Identity {
                 matches!(role, Role::Controller | Role::Operator)
             }
             Body::EStop(e) => role == Role::Operator || (e.engage && role == Role::Estop),
+            Body::Autopilot(_) => role == Role::Operator,
             Body::Welcome(_) | Body::Route(_) | Body::Channels(_) | Body::Time(_) => false,
         };
         if ok {

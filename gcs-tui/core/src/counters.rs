@@ -96,7 +96,10 @@ impl Drops {
 }
 
 /// Rejection reasons, as counted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
 pub enum RejectReason {
     Unsigned,
     UnknownKey,

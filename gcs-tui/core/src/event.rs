@@ -9,11 +9,13 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
+use serde::{Deserialize, Serialize};
 
 use crate::counters::RejectReason;
 
 /// How recently the router heard from a robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LinkState {
     /// Heard within `stale_after`.
     #[default]
@@ -40,9 +42,87 @@ impl LinkState {
     }
 }
 
+/// Where a robot was heard from: a UDP address, or a serial radio (the
+/// router's serial endpoint, by port). Recorded as `{"udp": "ADDR"}` or
+/// `{"radio": "PORT"}`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LinkAddr {
+    Udp(SocketAddr),
+    /// A radio on the station's serial port with this path.
+    Radio(String),
+}
+
+impl std::fmt::Display for LinkAddr {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LinkAddr::Udp(a) => write!(f, "{a}"),
+            LinkAddr::Radio(port) => write!(f, "radio {port}"),
+        }
+    }
+}
+
+/// Which of a robot's links the router hears now, which one it sends on,
+/// and the robot's share of its radio.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct RobotLinks {
+    /// Heard over UDP (Wi-Fi, Ethernet) within the router's link timeout.
+    pub udp: bool,
+    /// The radio (serial port) the robot is heard on within the link
+    /// timeout.
+    pub radio: Option<String>,
+    /// The link commands go out on now: `"udp"`, `"radio"`, or `""` when
+    /// the robot is heard on neither.
+    pub active: &'static str,
+    /// Telemetry messages per second this robot may send over its radio:
+    /// its share of the radio's bandwidth (`None` without a radio).
+    pub radio_budget_hz: Option<f64>,
+}
+
+/// [`RobotLinks`] as a recording holds it (the active link's name owned).
+#[derive(Deserialize)]
+struct RecordedLinks {
+    udp: bool,
+    radio: Option<String>,
+    active: String,
+    radio_budget_hz: Option<f64>,
+}
+
+impl<'de> Deserialize<'de> for RobotLinks {
+    /// An active link the router never names reads as none.
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let r = RecordedLinks::deserialize(d)?;
+        Ok(RobotLinks {
+            udp: r.udp,
+            radio: r.radio,
+            active: ["udp", "radio"]
+                .into_iter()
+                .find(|l| *l == r.active)
+                .unwrap_or(""),
+            radio_budget_hz: r.radio_budget_hz,
+        })
+    }
+}
+
+impl RobotLinks {
+    /// How a card or a status line names the live links: `wifi+radio`,
+    /// `radio`, `wifi`, or `none`; the active one is starred when both live.
+    pub fn label(&self) -> String {
+        match (self.udp, self.radio.is_some()) {
+            (true, true) if self.active == "radio" => "wifi+radio*".into(),
+            (true, true) => "wifi*+radio".into(),
+            (true, false) => "wifi".into(),
+            (false, true) => "radio".into(),
+            (false, false) => "none".into(),
+        }
+    }
+}
+
 /// Something the router did or saw. Subscribers receive them in order, each
-/// wrapped in a [`Stamped`].
-#[derive(Debug, Clone, PartialEq)]
+/// wrapped in a [`Stamped`]. Recordings store them as JSON objects tagged
+/// with [`Event::name`] (a test keeps the two the same).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
     /// The router is bound and running.
     Listening {
@@ -56,9 +136,11 @@ pub enum Event {
         /// capabilities and limits.
         hello: Hello,
         id: u16,
-        addr: SocketAddr,
+        addr: LinkAddr,
         known: bool,
     },
+    /// A robot's live links changed (or its radio budget did).
+    Links { robot: String, links: RobotLinks },
     /// A robot's link state changed.
     Link { robot: String, state: LinkState },
     /// A robot sent telemetry.
@@ -97,14 +179,17 @@ pub enum Event {
         reason: String,
     },
     /// E-stop engaged (`engage`) or released, for every robot.
+    #[serde(rename = "estop")]
     EStop { engage: bool, id: u32 },
     /// One robot acknowledged the e-stop or release `id`.
+    #[serde(rename = "estop_acked")]
     EStopAcked {
         robot: String,
         engage: bool,
         id: u32,
     },
     /// Every robot known when it was sent acknowledged e-stop/release `id`.
+    #[serde(rename = "estop_complete")]
     EStopComplete { engage: bool, id: u32 },
     /// A channel published for the first time, or got a new publisher.
     ChannelPublisher { channel: String, publisher: String },
@@ -136,6 +221,7 @@ impl Event {
             Event::Listening { .. } => "listening",
             Event::Registered { .. } => "registered",
             Event::Link { .. } => "link",
+            Event::Links { .. } => "links",
             Event::Telemetry { .. } => "telemetry",
             Event::RouteChanged { .. } => "route_changed",
             Event::RouteAcked { .. } => "route_acked",

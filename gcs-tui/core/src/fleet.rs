@@ -16,14 +16,14 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{Hello, Notice, Telemetry, Waypoint};
+use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use remote::{RemoteInfo, remote_name};
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
 
 use crate::counters::{ChannelStatus, Counters};
-use crate::event::{Event, EventSink, LinkState, Stamped};
+use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 use crate::sync::lock;
 
 /// A named set of robots.
@@ -188,8 +188,9 @@ impl Fleet {
                 id,
                 addr,
                 known,
-            } => self.registered(hello, *id, *addr, *known),
+            } => self.registered(hello, *id, addr, *known),
             Event::Link { robot, state } => self.link(robot, *state),
+            Event::Links { robot, links } => self.links(robot, links),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
             Event::RouteChanged {
                 robot,
@@ -249,15 +250,18 @@ impl Fleet {
         );
     }
 
-    fn registered(&mut self, hello: &Hello, id: u16, addr: SocketAddr, known: bool) {
+    fn registered(&mut self, hello: &Hello, id: u16, addr: &LinkAddr, known: bool) {
         let robot = &hello.name;
         let r = self
             .robots
             .entry(robot.clone())
-            .or_insert_with(|| Robot::new(robot, id, addr));
-        let moved = r.addr != addr;
+            .or_insert_with(|| Robot::new(robot, id, addr.clone()));
+        let moved = r.addr != *addr;
         r.id = id;
-        r.addr = addr;
+        r.addr = addr.clone();
+        // A robot registering again may have restarted and lost its
+        // mission: the next telemetry says (see `telemetry`).
+        r.registrations += 1;
         r.platform = hello.platform.clone();
         r.capabilities = hello.capabilities.clone();
         r.motors = hello.motors;
@@ -271,6 +275,16 @@ impl Fleet {
             (true, false) => format!("{robot} re-registered"),
         };
         self.log(Severity::Info, text);
+    }
+
+    fn links(&mut self, robot: &str, links: &RobotLinks) {
+        let Some(r) = self.robots.get_mut(robot) else {
+            return;
+        };
+        let was = std::mem::replace(&mut r.links, links.clone());
+        if was.label() != links.label() {
+            self.log(Severity::Info, format!("{robot} links {}", links.label()));
+        }
     }
 
     fn link(&mut self, robot: &str, state: LinkState) {
@@ -303,6 +317,11 @@ impl Fleet {
         r.actuators.clone_from(&t.actuators);
         r.mission = t.mission;
         r.stale = t.stale;
+        r.velocity_source = t.velocity_source;
+        if t.health != Health::Fault && t.failsafe != FailsafeState::Fault {
+            r.fault = None;
+        }
+        let lost = r.mission_lost();
         let far = r
             .path
             .back()
@@ -316,6 +335,15 @@ impl Fleet {
             while r.path.len() > history {
                 r.path.pop_front();
             }
+        }
+        if let Some(id) = lost {
+            self.log(
+                Severity::Warn,
+                format!(
+                    "{robot} registered again without mission {id} (its agent restarted?): \
+                     it holds still; send the mission again to resume"
+                ),
+            );
         }
     }
 
@@ -442,6 +470,11 @@ impl Fleet {
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {
+        if notice.code == NoticeCode::DriverFault {
+            if let Some(r) = self.robots.get_mut(from) {
+                r.fault = Some(notice.text.clone());
+            }
+        }
         let severity = match notice.level {
             mech_proto::Level::Debug => Severity::Debug,
             mech_proto::Level::Info => Severity::Info,
@@ -489,7 +522,7 @@ mod tests {
                 agent_version: "t".into(),
             },
             id: 1,
-            addr: "127.0.0.1:9000".parse().unwrap(),
+            addr: LinkAddr::Udp("127.0.0.1:9000".parse().unwrap()),
             known: false,
         }
     }
@@ -518,7 +551,62 @@ mod tests {
             actuators: vec![0.1, 0.2],
             mission,
             stale: 0,
+            velocity_source: mech_proto::VelocitySource::Commanded,
         }
+    }
+
+    #[test]
+    fn a_driver_fault_text_is_kept_while_telemetry_reports_the_fault() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let faulted = Telemetry {
+            failsafe: FailsafeState::Fault,
+            health: Health::Fault,
+            velocity_source: mech_proto::VelocitySource::Measured,
+            ..telemetry(0.0, None)
+        };
+        let telemetry_event = |t: &Telemetry| Event::Telemetry {
+            robot: "robot_1".into(),
+            telemetry: t.clone(),
+        };
+        f.apply(&at(1, telemetry_event(&faulted)));
+        f.apply(&at(
+            2,
+            Event::Notice {
+                from: "robot_1".into(),
+                notice: Notice {
+                    level: mech_proto::Level::Error,
+                    code: NoticeCode::DriverFault,
+                    text: "left wheel stalled: driven at 60% for 0.50 s".into(),
+                },
+            },
+        ));
+        f.apply(&at(3, telemetry_event(&faulted)));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(
+            r.fault.as_deref(),
+            Some("left wheel stalled: driven at 60% for 0.50 s")
+        );
+        assert_eq!(r.velocity_source, mech_proto::VelocitySource::Measured);
+        // Other notices are only logged.
+        f.apply(&at(
+            4,
+            Event::Notice {
+                from: "robot_1".into(),
+                notice: Notice {
+                    level: mech_proto::Level::Warn,
+                    code: NoticeCode::NotRouted,
+                    text: "not routed".into(),
+                },
+            },
+        ));
+        assert!(f.robot("robot_1").unwrap().fault.is_some());
+        f.apply(&at(5, telemetry_event(&telemetry(0.0, None))));
+        assert_eq!(
+            f.robot("robot_1").unwrap().fault,
+            None,
+            "cleared with the fault"
+        );
     }
 
     #[test]
@@ -634,6 +722,101 @@ mod tests {
             !f.robot("robot_1").unwrap().arrived(),
             "an older mission finishing is not arrival"
         );
+    }
+
+    #[test]
+    fn a_robot_registering_again_without_its_mission_is_reported_and_the_mission_lost() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let wp = Waypoint {
+            x: 1.0,
+            y: 0.0,
+            z: 0.0,
+            time: None,
+        };
+        f.apply(&at(
+            1,
+            Event::MissionSent {
+                robot: "robot_1".into(),
+                channel: "joy/0".into(),
+                id: 7,
+                waypoints: vec![wp],
+                looped: false,
+            },
+        ));
+        f.apply(&at(
+            2,
+            Event::MissionAcked {
+                robot: "robot_1".into(),
+                id: 7,
+                accepted: true,
+                reason: String::new(),
+            },
+        ));
+        let running = Some(MissionProgress {
+            id: 7,
+            next: 0,
+            total: 1,
+        });
+        let tm = |mission| Event::Telemetry {
+            robot: "robot_1".into(),
+            telemetry: telemetry(0.5, mission),
+        };
+        f.apply(&at(3, tm(running)));
+        // Registered again (a link outage) and still holding it: fine.
+        f.apply(&at(4, registered("robot_1")));
+        f.apply(&at(5, tm(running)));
+        let delivery = |f: &Fleet| {
+            f.robot("robot_1")
+                .unwrap()
+                .waypoints
+                .sent
+                .clone()
+                .unwrap()
+                .delivery
+        };
+        assert_eq!(delivery(&f), MissionDelivery::Acked);
+        // Its agent restarted: registered, reporting no mission.
+        f.apply(&at(6, registered("robot_1")));
+        f.apply(&at(7, tm(None)));
+        assert_eq!(delivery(&f), MissionDelivery::Lost);
+        let warned = f
+            .log
+            .iter()
+            .filter(|l| l.severity == Severity::Warn && l.text.contains("without mission 7"))
+            .count();
+        f.apply(&at(8, tm(None)));
+        assert_eq!(warned, 1);
+        assert_eq!(
+            f.log
+                .iter()
+                .filter(|l| l.text.contains("without mission 7"))
+                .count(),
+            1,
+            "said once"
+        );
+    }
+
+    #[test]
+    fn live_links_reach_the_robot_and_changes_are_logged() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let links = RobotLinks {
+            udp: false,
+            radio: Some("/dev/ttyUSB0".into()),
+            active: "radio",
+            radio_budget_hz: Some(14.0),
+        };
+        f.apply(&at(
+            1,
+            Event::Links {
+                robot: "robot_1".into(),
+                links: links.clone(),
+            },
+        ));
+        assert_eq!(f.robot("robot_1").unwrap().links, links);
+        assert_eq!(links.label(), "radio");
+        assert!(f.log.back().unwrap().text.contains("links radio"));
     }
 
     #[test]

@@ -12,6 +12,8 @@
 //! - [`counters`]: traffic counters and live channels;
 //! - [`router`]: the UDP/TCP router with live controller switching;
 //! - [`fleet`]: the fleet model, an [`EventSink`] fed by the router;
+//! - [`record`]: recording what the router sees to MCAP;
+//! - [`replay`]: reading a recording back, as events and fleet models;
 //! - [`station`]: [`Gcs`], the router and fleet model started together.
 //!
 //! Start a [`Gcs`], read the fleet with [`Gcs::snapshot`] /
@@ -24,15 +26,19 @@ pub mod config;
 pub mod counters;
 pub mod event;
 pub mod fleet;
+pub mod record;
+pub mod replay;
 pub mod router;
 pub mod station;
 pub mod sync;
 
 pub use config::ConfigError;
 pub use counters::{ChannelStatus, Counters, DropReason, Drops, Traffic};
-pub use event::{Event, EventSink, LinkState, Stamped};
+pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 pub use fleet::{Fleet, FleetConfig};
+pub use record::{RecordConfig, RecordTarget, RecordingStatus};
 pub use router::{
-    Delivery, Publisher, Router, RouterConfig, RouterError, RouterHandle, Subscription,
+    Delivery, Publisher, RadioStatus, Router, RouterConfig, RouterError, RouterHandle,
+    SerialEndpoint, Subscription,
 };
 pub use station::{CoreConfig, Gcs};

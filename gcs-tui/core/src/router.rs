@@ -15,6 +15,7 @@ mod batch;
 mod bus;
 mod config;
 mod net;
+mod radio;
 mod rate;
 mod tables;
 
@@ -32,8 +33,11 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 pub use bus::Subscription;
-pub use config::RouterConfig;
+pub use config::{RouterConfig, SerialEndpoint};
 pub use tables::Delivery;
+pub(crate) use tables::Peer;
+pub use tables::tap::OperatorRecord;
+pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
 
 use crate::auth::{Identity, Keyring, Rejection, Role, Security};
 use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};
@@ -42,7 +46,8 @@ use crate::sync::lock;
 use batch::{RecvBatch, SendBatch};
 use bus::EventBus;
 use mech_proto::auth::Tag;
-use tables::{Outbox, Peer, Tables};
+use radio::RadioQueue;
+use tables::{Outbox, Tables};
 
 /// Why a router call failed.
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +64,8 @@ pub enum RouterError {
     Encode(#[from] mech_proto::Error),
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),
+    #[error("cannot open the radio on {port}: {message}")]
+    Serial { port: String, message: String },
 }
 
 /// State shared by the router's tasks and handles.
@@ -74,6 +81,8 @@ struct Shared {
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
     tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    /// Outgoing queues of the serial radios, by place in `router.serial`.
+    radios: Vec<Arc<RadioQueue>>,
     next_conn: AtomicU64,
     subscriber_queue: usize,
     /// Set once by [`Router::shutdown`]: every task watches it and stops,
@@ -122,9 +131,19 @@ impl Shared {
         // in the order the tables made them (a mission is "sent" before
         // its acknowledgement, whichever worker handles the ack).
         for e in events.drain(..) {
-            self.bus.emit(e);
+            self.emit(&tables, e);
         }
         delivery
+    }
+
+    /// Emits an event to the fleet model and subscribers and offers it to
+    /// the recorder's tap; called holding the tables (so the recording has
+    /// messages and events in the order the tables made them).
+    fn emit(&self, tables: &Tables, e: Event) {
+        let stamped = self.bus.emit(e);
+        if let Some(tap) = &tables.tap {
+            tap.offer(Tapped::Event(stamped));
+        }
     }
 
     /// Sends the outbox: `raw` targets get `raw`, `owned` ones their own
@@ -173,8 +192,15 @@ impl Shared {
 
     /// Sends to a peer that is not a UDP address: a TCP peer gets a
     /// length-prefixed frame through its bounded queue (a full queue drops
-    /// and counts, never waits); in-process publishers get nothing.
+    /// and counts, never waits), a radio gets the message in its priority
+    /// queue; in-process publishers get nothing.
     fn send_other(&self, peer: Peer, bytes: &[u8]) {
+        if let Peer::Serial(port) = peer {
+            if let Some(q) = self.radios.get(usize::from(port)) {
+                q.push(bytes);
+            }
+            return;
+        }
         let Peer::Tcp(conn) = peer else { return };
         let tx = lock(&self.tcp_peers).get(&conn).cloned();
         let Some(tx) = tx else { return };
@@ -215,7 +241,7 @@ impl Shared {
                 decided.owned.push(bytes);
             }
             for e in decided.events.drain(..) {
-                self.bus.emit(e);
+                self.emit(&tables, e);
             }
         }
     }
@@ -254,6 +280,51 @@ impl Shared {
         }
     }
 
+    /// Decides one message received on a radio, from the port's reader
+    /// thread, and sends what was decided without waiting (a full UDP
+    /// buffer is retried briefly, then counted).
+    fn decide_frame(&self, bytes: &[u8], from: Peer) {
+        if self.stopped() {
+            return;
+        }
+        let mut out = Outbox::default();
+        let mut events = Vec::new();
+        self.decide(bytes, from, Instant::now(), &mut out, &mut events);
+        for peer in out.raw.drain(..) {
+            self.send_now(peer, bytes);
+        }
+        for (peer, b) in std::mem::take(&mut out.owned) {
+            self.send_now(peer, &b);
+        }
+    }
+
+    /// Sends from a plain thread: UDP without blocking for long, others
+    /// through their queues.
+    fn send_now(&self, peer: Peer, bytes: &[u8]) {
+        let Peer::Udp(addr) = peer else {
+            return self.send_other(peer, bytes);
+        };
+        let to = SockaddrStorage::from(addr);
+        for _ in 0..FULL_BUFFER_TRIES {
+            match sendto(self.udp.as_raw_fd(), bytes, &to, MsgFlags::MSG_DONTWAIT) {
+                Ok(_) => return,
+                Err(nix::errno::Errno::EAGAIN) => std::thread::yield_now(),
+                Err(_) => break,
+            }
+        }
+        lock(&self.tables).count_send_failure(false);
+    }
+
+    /// Counts a frame from a radio that failed its checksum or framing.
+    fn count_bad_frame(&self, from: Peer, error: String) {
+        let mut events = Vec::new();
+        let mut tables = lock(&self.tables);
+        tables.count_bad(from, error, &mut events);
+        for e in events {
+            self.bus.emit(e);
+        }
+    }
+
     /// Runs a table operation that may produce messages and events.
     async fn apply<R>(
         &self,
@@ -265,7 +336,7 @@ impl Shared {
             let mut tables = lock(&self.tables);
             let r = f(&mut tables, Instant::now(), &mut out, &mut events);
             for e in events {
-                self.bus.emit(e);
+                self.emit(&tables, e);
             }
             r
         };
@@ -313,6 +384,8 @@ pub struct Router {
     /// The UDP workers' threads and their sockets (shut down for reading
     /// to wake them when the router stops).
     workers: Vec<(std::thread::JoinHandle<()>, Arc<std::net::UdpSocket>)>,
+    /// The radios' reader and writer threads.
+    radio_threads: Vec<std::thread::JoinHandle<()>>,
 }
 
 impl Router {
@@ -332,7 +405,10 @@ impl Router {
         let workers = config.udp_workers;
         let tick = config.tick;
         let name = config.name.clone();
+        let serial = config.serial.clone();
+        let ports = open_radios(&serial)?;
         let shared = Arc::new(Shared {
+            radios: serial.iter().map(|_| Arc::default()).collect(),
             subscriber_queue: config.subscriber_queue,
             tables: Mutex::new(Tables::new(config, auth)),
             bus: EventBus::new(Instant::now(), sink),
@@ -364,6 +440,7 @@ impl Router {
                 })?;
             threads.push((thread, socket));
         }
+        let radio_threads = start_radios(&shared, &serial, ports)?;
         tasks.push(tokio::spawn(net::timers(shared.clone(), tick)));
         if let Some(listener) = tcp {
             tasks.push(tokio::spawn(net::tcp_accept(shared.clone(), listener)));
@@ -372,6 +449,7 @@ impl Router {
             handle: RouterHandle { shared },
             tasks,
             workers: threads,
+            radio_threads,
         })
     }
 
@@ -382,10 +460,12 @@ impl Router {
     /// Stops routing and waits until every router task has ended: the UDP
     /// workers, the timers, the TCP acceptor and every TCP peer (their
     /// connections are closed), then closes subscriptions. From then on
-    /// nothing is forwarded, from any peer or handle. Agents see the router
-    /// lost (their failsafe stops them) within their router timeout.
+    /// nothing is forwarded, from any peer or handle. Every registered robot
+    /// is told first (`Bye`), so its failsafe stops it at once rather than
+    /// after its router timeout.
     pub async fn shutdown(self) {
         let shared = &self.handle.shared;
+        shared.apply(|t, _, out, _| t.farewell(out)).await;
         shared.stop.send_replace(true);
         for (thread, socket) in self.workers {
             // Wakes the worker out of its receive at once.
@@ -403,10 +483,95 @@ impl Router {
                 tracing::warn!(error = %e, "a router task ended abnormally");
             }
         }
+        for q in &shared.radios {
+            q.close();
+        }
+        for thread in self.radio_threads {
+            // Readers notice the stop within their port's read timeout.
+            if tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .is_err()
+            {
+                tracing::warn!("a radio thread ended abnormally");
+            }
+        }
         lock(&shared.tcp_peers).clear();
         shared.bus.close();
         tracing::info!("router stopped");
     }
+}
+
+/// A radio's port, opened: the reader's and the writer's handles.
+type RadioPort = (
+    Box<dyn std::io::Read + Send>,
+    Box<dyn std::io::Write + Send>,
+);
+
+/// Opens every configured radio (before anything starts, so a missing
+/// device is a clear error at startup).
+#[cfg(feature = "serial")]
+fn open_radios(serial: &[SerialEndpoint]) -> Result<Vec<RadioPort>, RouterError> {
+    serial
+        .iter()
+        .map(|s| {
+            let err = |e: serialport::Error| RouterError::Serial {
+                port: s.port.clone(),
+                message: e.to_string(),
+            };
+            let port = serialport::new(&s.port, s.baud)
+                .timeout(Duration::from_millis(50))
+                .open()
+                .map_err(err)?;
+            let writer = port.try_clone().map_err(err)?;
+            Ok((
+                Box::new(port) as Box<dyn std::io::Read + Send>,
+                Box::new(writer) as _,
+            ))
+        })
+        .collect()
+}
+
+#[cfg(not(feature = "serial"))]
+fn open_radios(serial: &[SerialEndpoint]) -> Result<Vec<RadioPort>, RouterError> {
+    match serial.first() {
+        None => Ok(Vec::new()),
+        Some(s) => Err(RouterError::Serial {
+            port: s.port.clone(),
+            message: "this build has no serial support (feature `serial`)".into(),
+        }),
+    }
+}
+
+/// Starts a reader and a writer thread per radio.
+fn start_radios(
+    shared: &Arc<Shared>,
+    serial: &[SerialEndpoint],
+    ports: Vec<RadioPort>,
+) -> Result<Vec<std::thread::JoinHandle<()>>, RouterError> {
+    let mut threads = Vec::new();
+    for (i, ((read, write), s)) in ports.into_iter().zip(serial).enumerate() {
+        let spawn_err = |source| RouterError::Serial {
+            port: s.port.clone(),
+            message: format!("cannot start its thread: {source}"),
+        };
+        let (sh, name) = (shared.clone(), s.port.clone());
+        let index = i as u16;
+        threads.push(
+            std::thread::Builder::new()
+                .name(format!("mech-radio-rx-{i}"))
+                .spawn(move || radio::reader(sh, index, read, name))
+                .map_err(spawn_err)?,
+        );
+        let (q, name, baud) = (shared.radios[i].clone(), s.port.clone(), s.baud);
+        threads.push(
+            std::thread::Builder::new()
+                .name(format!("mech-radio-tx-{i}"))
+                .spawn(move || radio::writer(q, write, baud, name))
+                .map_err(spawn_err)?,
+        );
+        tracing::info!(port = %s.port, baud = s.baud, "radio open");
+    }
+    Ok(threads)
 }
 
 /// Binds the configured endpoints: one UDP socket per worker, all on the
@@ -425,6 +590,13 @@ async fn bind(
         addr,
         source,
     };
+    if config.udp.port() != 0 {
+        // The group's sockets share their port with any socket that asks
+        // (`SO_REUSEPORT`), a second station's included, which would then
+        // receive part of this one's traffic. A plain socket binds only a
+        // free port: if it cannot, another program (or station) has it.
+        drop(std::net::UdpSocket::bind(config.udp).map_err(|e| bind_err(config.udp, e))?);
+    }
     let first = bind_udp(config.udp, config.socket_buffer).map_err(|e| bind_err(config.udp, e))?;
     // Port 0 picks a port once; the rest of the group joins that one.
     let addr = first.local_addr().map_err(|e| bind_err(config.udp, e))?;
@@ -479,6 +651,22 @@ fn bind_udp(addr: SocketAddr, buffer: usize) -> std::io::Result<std::net::UdpSoc
     // costs a timer per datagram); shutdown wakes it.
     socket.bind(&addr.into())?;
     Ok(socket.into())
+}
+
+/// One serial radio at the station, as [`RouterHandle::radios`] reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RadioStatus {
+    pub port: String,
+    pub baud: u32,
+    /// Frames and bytes sent.
+    pub frames: u64,
+    pub bytes: u64,
+    /// Messages replaced in the queue by a newer one (newest wins).
+    pub replaced: u64,
+    /// Messages dropped because the queue was full.
+    pub dropped: u64,
+    /// Messages waiting to be sent.
+    pub waiting: usize,
 }
 
 /// A cheap, cloneable handle to a running router: publish, route, send
@@ -540,7 +728,7 @@ impl RouterHandle {
         channel: &str,
         mut mission: Mission,
     ) -> Result<u32, RouterError> {
-        let known = lock(&self.shared.tables).robot_addr(robot).is_some();
+        let known = lock(&self.shared.tables).knows_robot(robot);
         if !known {
             return Err(RouterError::UnknownRobot(robot.to_string()));
         }
@@ -657,6 +845,32 @@ impl RouterHandle {
         r
     }
 
+    /// The identity a key id belongs to (`None` when unknown or when the
+    /// router runs unauthenticated): the station checks an attaching
+    /// operator's key with it.
+    pub fn identity(&self, key_id: u32) -> Option<Identity> {
+        lock(&self.shared.tables).identity(key_id)
+    }
+
+    /// Every serial radio: what it sent and what waits.
+    pub fn radios(&self) -> Vec<RadioStatus> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let config = lock(&self.shared.tables).radio_config();
+        config
+            .into_iter()
+            .zip(&self.shared.radios)
+            .map(|(s, q)| RadioStatus {
+                port: s.port,
+                baud: s.baud,
+                frames: q.counters.frames.load(Relaxed),
+                bytes: q.counters.bytes.load(Relaxed),
+                replaced: q.counters.replaced.load(Relaxed),
+                dropped: q.counters.dropped.load(Relaxed),
+                waiting: q.len(),
+            })
+            .collect()
+    }
+
     /// A copy of every counter.
     pub fn counters(&self) -> Counters {
         lock(&self.shared.tables).counters()
@@ -665,6 +879,31 @@ impl RouterHandle {
     /// Time since the router started.
     pub fn elapsed(&self) -> Duration {
         self.shared.bus.elapsed()
+    }
+
+    /// When the router started (router time 0).
+    pub(crate) fn started(&self) -> Instant {
+        self.shared.bus.start()
+    }
+
+    /// Puts `tap` on the router (or takes it off with `None`, returning
+    /// the one that was on). `begin` runs holding the tables, just before
+    /// the tap goes on, with the count of messages received so far: what
+    /// it queues comes before every message and event the tap sees.
+    pub(crate) fn set_tap(&self, tap: Option<Tap>, begin: impl FnOnce(u64)) -> Option<Tap> {
+        let mut tables = lock(&self.shared.tables);
+        begin(tables.counters_received());
+        std::mem::replace(&mut tables.tap, tap)
+    }
+
+    /// Records an operator command in the recording, if one is being made
+    /// (in order with the router's messages and events).
+    pub fn record_operator(&self, mut record: OperatorRecord) {
+        let tables = lock(&self.shared.tables);
+        if let Some(tap) = &tables.tap {
+            record.at = self.shared.bus.elapsed();
+            tap.offer(Tapped::Operator(record));
+        }
     }
 
     /// Runs an encoded message through the router as if it had arrived from

@@ -2,6 +2,7 @@
 //! together and shared by everything above them (command language,
 //! controllers, TUI, scripts).
 
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use mech_proto::{Mission, Waypoint};
@@ -10,17 +11,19 @@ use serde::Deserialize;
 use crate::auth::{AuthConfig, AuthMode, DEFAULT_WINDOW, Keyring};
 use crate::config::ConfigError;
 use crate::fleet::{Fleet, FleetConfig};
+use crate::record::{RecordConfig, RecordError, RecordTarget, Recorder, RecordingStatus};
 use crate::router::{Router, RouterConfig, RouterError, RouterHandle};
 use crate::sync::lock;
 
-/// The core's sections of the configuration: `[router]`, `[fleet]` and
-/// `[auth]`.
+/// The core's sections of the configuration: `[router]`, `[fleet]`,
+/// `[auth]` and `[record]`.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CoreConfig {
     pub router: RouterConfig,
     pub fleet: FleetConfig,
     pub auth: AuthConfig,
+    pub record: RecordConfig,
 }
 
 impl CoreConfig {
@@ -30,6 +33,7 @@ impl CoreConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.router.validate()?;
         self.fleet.validate()?;
+        self.record.validate()?;
         self.auth.validate()
     }
 
@@ -62,6 +66,7 @@ pub struct Gcs {
     fleet: Arc<Mutex<Fleet>>,
     config: Arc<CoreConfig>,
     running: Arc<Mutex<Option<Router>>>,
+    recorder: Arc<Mutex<Option<Recorder>>>,
 }
 
 impl Gcs {
@@ -75,6 +80,7 @@ impl Gcs {
             fleet,
             config: Arc::new(config),
             running: Arc::new(Mutex::new(Some(router))),
+            recorder: Arc::new(Mutex::new(None)),
         })
     }
 
@@ -147,11 +153,53 @@ impl Gcs {
             .await
     }
 
-    /// Stops the router. Other clones then see a stopped router.
+    /// Starts recording everything the router sees to `target` (see
+    /// [`crate::record`]); returns the first file. One recording at a time.
+    pub fn start_recording(&self, target: RecordTarget) -> Result<PathBuf, RecordError> {
+        let mut slot = lock(&self.recorder);
+        if let Some(r) = slot.as_ref().filter(|r| r.status().active) {
+            return Err(RecordError::AlreadyRecording(r.status().file));
+        }
+        let recorder = Recorder::start(
+            target,
+            &self.config.record,
+            self.fleet.clone(),
+            &self.router,
+        )?;
+        recorder.attach(&self.router, &self.fleet);
+        let file = recorder.status().file;
+        *slot = Some(recorder);
+        Ok(file)
+    }
+
+    /// Starts recording into the configured `[record]` directory (or
+    /// `log_dir`), in rotating files capped by `max_file_mb` and `keep`:
+    /// what `serve` records by default.
+    pub fn start_default_recording(&self, log_dir: &Path) -> Result<PathBuf, RecordError> {
+        self.start_recording(self.config.record.rotating(log_dir))
+    }
+
+    /// Stops recording: what is queued is written and the file finished.
+    /// Returns how it went, or `None` if nothing was recording.
+    pub async fn stop_recording(&self) -> Option<RecordingStatus> {
+        let recorder = lock(&self.recorder).take()?;
+        let router = self.router.clone();
+        let finished = tokio::task::spawn_blocking(move || recorder.finish(&router)).await;
+        finished.ok()
+    }
+
+    /// How the recording is going, if there is one.
+    pub fn recording(&self) -> Option<RecordingStatus> {
+        lock(&self.recorder).as_ref().map(Recorder::status)
+    }
+
+    /// Stops the router, then finishes the recording (so it holds
+    /// everything the router did). Other clones then see a stopped router.
     pub async fn shutdown(&self) {
         let router = lock(&self.running).take();
         if let Some(r) = router {
             r.shutdown().await;
         }
+        self.stop_recording().await;
     }
 }

@@ -268,7 +268,10 @@ async fn a_hello_cannot_take_over_a_robots_address() {
     let r = s.rejected();
     assert_eq!((r.replay, r.not_permitted), (1, 1), "{r:?}");
     tokio::time::sleep(Duration::from_millis(200)).await;
-    assert_eq!(s.gcs.snapshot().robot("robot_1").unwrap().addr, addr);
+    assert_eq!(
+        s.gcs.snapshot().robot("robot_1").unwrap().addr,
+        mech_core::LinkAddr::Udp(addr)
+    );
     let mut matlab = s.peer("matlab").await;
     matlab.command("robot_1", "ext/matlab", 0.3).await;
     let got = robot
@@ -588,4 +591,30 @@ async fn what_the_router_signed_cannot_be_sent_back_to_it() {
     attacker.send_raw(&buf[..n]).await;
     assert!(s.rejections_reach(1).await);
     assert_eq!(s.rejected().bad_tag, 1);
+}
+
+#[tokio::test]
+async fn only_an_operator_reaches_a_robots_autopilot_whatever_its_route() {
+    let s = station().await;
+    let robot = s.robot("robot_1", "ext/matlab").await;
+    let arm = Body::Autopilot(mech_proto::AutopilotRequest {
+        robot: "robot_1".into(),
+        action: mech_proto::AutopilotAction::Arm,
+        altitude: 0.0,
+    });
+    // The controller the robot obeys may drive it, but not arm it.
+    let mut matlab = s.peer("matlab").await;
+    matlab.send("router", "", arm.clone()).await;
+    assert!(s.rejections_reach(1).await);
+    assert_eq!(s.rejected().not_permitted, 1);
+    // The operator may, whatever channel the robot is routed to; the robot
+    // gets it signed with its own key.
+    let mut alice = s.peer("alice").await;
+    alice.send("router", "", arm.clone()).await;
+    let got = robot
+        .recv_matching(|e| matches!(e.body, Body::Autopilot(_)))
+        .await;
+    assert_eq!(got.body, arm);
+    // Had the controller's request gone through, it would have come first.
+    assert_eq!(got.header.sender, "alice");
 }

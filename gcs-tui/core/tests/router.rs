@@ -65,7 +65,7 @@ async fn registration_routes_to_none_and_tracks_the_robot() {
     assert_eq!(w.route.robot, "robot_1");
     let fleet = gcs.snapshot();
     let r = fleet.robot("robot_1").unwrap();
-    assert_eq!(r.addr, robot.addr());
+    assert_eq!(r.addr, mech_core::LinkAddr::Udp(robot.addr()));
     assert_eq!(r.link, LinkState::Connected);
     assert_eq!(r.platform, "diff-drive");
     assert_eq!(r.route.requested, None);
@@ -135,7 +135,10 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
     );
     let fleet = gcs.snapshot();
     assert_eq!(fleet.robots.len(), 1, "same robot, not a duplicate");
-    assert_eq!(fleet.robot("robot_1").unwrap().addr, second.addr());
+    assert_eq!(
+        fleet.robot("robot_1").unwrap().addr,
+        mech_core::LinkAddr::Udp(second.addr())
+    );
     let mut pad = Peer::new("gamepad", gcs.router().udp_addr()).await;
     let seq = pad.command("robot_1", "joy/0", 0.3).await;
     let got = second
@@ -937,4 +940,36 @@ async fn after_shutdown_a_connected_tcp_controller_reaches_no_robot() {
         late.is_empty(),
         "commands after shutdown reached the robot: {late:?}"
     );
+}
+
+#[tokio::test]
+async fn a_second_station_cannot_share_the_port_of_a_running_one() {
+    let first = gcs().await;
+    let addr = first.router().udp_addr();
+    let mut c = config();
+    c.router.udp = addr;
+    let second = Gcs::start(c).await;
+    let err = second.expect_err("the port is the first station's");
+    assert!(err.to_string().contains(&addr.to_string()), "{err}");
+    // Once the first one has stopped and gone, the port is free again.
+    first.shutdown().await;
+    drop(first);
+    let mut c = config();
+    c.router.udp = addr;
+    let third = Gcs::start(c).await.unwrap();
+    third.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_stopping_station_says_bye_to_its_robots() {
+    let gcs = gcs().await;
+    let mut robot = Peer::new("robot_1", gcs.router().udp_addr()).await;
+    robot.register().await;
+    gcs.shutdown().await;
+    let bye = tokio::time::timeout(
+        Duration::from_secs(5),
+        robot.recv_matching(|m| matches!(m.body, Body::Bye(_))),
+    )
+    .await;
+    assert!(bye.is_ok(), "the robot was told");
 }

@@ -1,6 +1,7 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
-//! sections each layer owns: `[router]`, `[fleet]` and `[auth]` (mech-core),
-//! `[[cluster]]` (mech-control), `[log]` and `[gamepad]` (this binary).
+//! sections each layer owns: `[router]`, `[fleet]`, `[auth]` and `[record]`
+//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[gamepad]` and
+//! `[station]` (this binary).
 //! Every field has a default, so an empty file (or none) gives a working
 //! ground station on port 7400.
 
@@ -8,11 +9,12 @@ use std::path::{Path, PathBuf};
 
 use mech_control::ClusterSpec;
 use mech_core::auth::AuthConfig;
-use mech_core::{CoreConfig, FleetConfig, RouterConfig};
+use mech_core::{CoreConfig, FleetConfig, RecordConfig, RouterConfig};
 use serde::Deserialize;
 
 use crate::gamepad::GamepadConfig;
 use crate::logging::LogConfig;
+use crate::station::StationConfig;
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -45,6 +47,10 @@ pub struct GcsConfig {
     pub cluster: Vec<ClusterSpec>,
     /// Gamepad teleop: shaping, dead-man and other buttons, rate, limits.
     pub gamepad: GamepadConfig,
+    /// Recordings: directory, file size cap, rotation, queue.
+    pub record: RecordConfig,
+    /// Where a served station listens for TUIs and scripts.
+    pub station: StationConfig,
 }
 
 impl GcsConfig {
@@ -85,6 +91,7 @@ impl GcsConfig {
             router: self.router.clone(),
             fleet: self.fleet.clone(),
             auth: self.auth.clone(),
+            record: self.record.clone(),
         }
     }
 
@@ -96,6 +103,7 @@ impl GcsConfig {
                 .map_err(|e| mech_core::ConfigError(format!("cluster {:?}: {e}", c.name)))?;
         }
         self.gamepad.teleop()?;
+        self.station.validate()?;
         Ok(())
     }
 }

@@ -86,3 +86,15 @@ pub fn simulator() -> Box<dyn SimSpawner> {
         mech_agent::sim::SimFleetOptions::default(),
     ))
 }
+
+/// The arena the demo's simulated fleet is spread over (the agent
+/// simulator's default, the 2017 lab's Pozyx area), for the map outline.
+pub fn demo_arena() -> crate::view::ArenaBounds {
+    let a = mech_agent::sim::Arena::default();
+    crate::view::ArenaBounds {
+        min_x: a.min_x,
+        min_y: a.min_y,
+        max_x: a.max_x,
+        max_y: a.max_y,
+    }
+}

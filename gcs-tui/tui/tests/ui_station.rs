@@ -1,98 +1,128 @@
-//! The station's link to the core, without a terminal: a real router and
-//! simulated agents, the App fed from the fleet model, and the App's
-//! requests carried back to the router.
+//! The TUI's link to a station, without a terminal: a real station
+//! (router, simulated agents) attached in process over the attach
+//! protocol, the App fed from what the station sends, and the App's
+//! requests carried back as protocol messages.
 
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use mech_core::{CoreConfig, Gcs};
-use mech_gcs::ui::{Action, App, CoreLink, LinkState, Select, snapshot};
+use mech_gcs::station::client::{AttachOptions, attach_stream};
+use mech_gcs::station::wire::{FromStation, Streams};
+use mech_gcs::station::{Station, StationConfig};
+use mech_gcs::ui::{Action, App, LinkState, Select, StationLink};
 use mech_proto::Waypoint;
+use tokio::sync::mpsc;
 
-async fn refresh(app: &mut App, gcs: &Gcs) {
-    // Channels first: the router's tables must not be locked while the
-    // fleet model is (the router locks them the other way round).
-    let channels = gcs.router().channels();
-    let snap = gcs.with_fleet(|f| snapshot(f, channels));
-    app.update(Action::Tick(Instant::now()));
-    app.update(Action::Fleet(snap));
+/// A station with simulated robots, and a TUI's App attached to it.
+struct Rig {
+    station: Station,
+    link: StationLink,
+    from: mpsc::Receiver<FromStation>,
+    app: App,
 }
 
-/// Polls the fleet into the App until `pred` holds (the simulated agents
-/// run in real time); panics after `timeout`.
-async fn wait_for(
-    app: &mut App,
-    gcs: &Gcs,
-    what: &str,
-    timeout: Duration,
-    pred: impl Fn(&App) -> bool,
-) {
-    let start = Instant::now();
-    loop {
-        refresh(app, gcs).await;
-        if pred(app) {
-            return;
+impl Rig {
+    /// A station on loopback with `n` simulated robots, every one
+    /// connected and placed in the App.
+    async fn start(n: usize) -> Rig {
+        let mut config = CoreConfig::default();
+        config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+        config.router.tcp = None;
+        let gcs = Gcs::start(config).await.expect("router starts");
+        let station = Station::start(
+            gcs,
+            &[],
+            Some(mech_gcs::sim::simulator()),
+            &StationConfig::default(),
+        );
+        let opts = AttachOptions {
+            stream: Streams {
+                snapshots: true,
+                log: true,
+                events: false,
+            },
+            ..AttachOptions::default()
+        };
+        let attached = attach_stream(station.attach_local(), opts)
+            .await
+            .expect("attached");
+        let mut rig = Rig {
+            station,
+            link: StationLink::new(attached.to),
+            from: attached.from,
+            app: App::new(attached.welcome.router, Instant::now()),
+        };
+        rig.link.exec(format!("spawn {n}"));
+        rig.wait_for("connected robots", Duration::from_secs(10), |a| {
+            a.robots.len() == n
+                && a.robots
+                    .iter()
+                    .all(|r| r.link == LinkState::Connected && r.pose.x != 0.0)
+        })
+        .await;
+        rig
+    }
+
+    /// What the station sent so far, into the App.
+    fn pump(&mut self) {
+        while let Ok(m) = self.from.try_recv() {
+            self.link.receive(m, &mut self.app);
         }
-        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        self.app.update(Action::Tick(Instant::now()));
+    }
+
+    /// The App's requests, to the station.
+    fn carry_all(&mut self) {
+        for req in self.app.take_requests() {
+            self.link.carry(req, &mut self.app);
+        }
+    }
+
+    /// Pumps until `pred` holds (the simulated agents run in real time);
+    /// panics after `timeout`.
+    async fn wait_for(&mut self, what: &str, timeout: Duration, pred: impl Fn(&App) -> bool) {
+        let start = Instant::now();
+        loop {
+            self.pump();
+            if pred(&self.app) {
+                return;
+            }
+            assert!(start.elapsed() < timeout, "timed out waiting for {what}");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    async fn stop(self) {
+        self.station.shutdown().await;
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn app_requests_reach_simulated_robots() {
-    let mut config = CoreConfig::default();
-    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
-    config.router.tcp = None;
-    let gcs = Gcs::start(config).await.expect("router starts");
-    let mut spawner = mech_gcs::sim::simulator();
-    let names = spawner
-        .spawn(2, gcs.router().udp_addr(), gcs.router().clone())
-        .await
-        .expect("simulated agents start");
-    assert_eq!(names, ["robot_1", "robot_2"]);
-
-    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
-    let control = mech_control::ControlHub::new(gcs.clone());
-    let mut link = CoreLink::new(gcs.clone(), lines, control);
-    let mut app = App::new(gcs.router().udp_addr().to_string(), Instant::now());
-    wait_for(
-        &mut app,
-        &gcs,
-        "two connected robots",
-        Duration::from_secs(10),
-        |a| {
-            a.robots.len() == 2
-                && a.robots
-                    .iter()
-                    .all(|r| r.link == LinkState::Connected && r.pose.x != 0.0)
-        },
-    )
-    .await;
+    let mut rig = Rig::start(2).await;
     assert!(
-        app.robots.iter().any(|r| r.platform == "kiwi"),
+        rig.app.robots.iter().any(|r| r.platform == "kiwi"),
         "mixed platforms"
     );
 
     // A waypoint 0.3 m ahead of robot_1, sent and routed from the App.
-    let p = app.robot("robot_1").expect("robot_1").pose;
-    app.update(Action::Select(Select::Only("robot_1".into())));
-    app.update(Action::AddWaypoint(Waypoint {
+    let p = rig.app.robot("robot_1").expect("robot_1").pose;
+    rig.app
+        .update(Action::Select(Select::Only("robot_1".into())));
+    rig.app.update(Action::AddWaypoint(Waypoint {
         x: p.x + 0.3,
         y: p.y,
         z: 0.0,
         time: None,
     }));
-    app.update(Action::SendWaypoints);
-    app.update(Action::Route {
+    rig.app.update(Action::SendWaypoints);
+    rig.app.update(Action::Route {
         robot: "robot_1".into(),
         channel: "wp/gcs".into(),
     });
-    for req in app.take_requests() {
-        link.carry(req, &mut app).await;
-    }
-    wait_for(
-        &mut app,
-        &gcs,
+    rig.carry_all();
+    rig.wait_for(
         "route acknowledged and mission done",
         Duration::from_secs(20),
         |a| {
@@ -103,7 +133,7 @@ async fn app_requests_reach_simulated_robots() {
         },
     )
     .await;
-    let r = app.robot("robot_1").expect("robot_1");
+    let r = rig.app.robot("robot_1").expect("robot_1");
     assert!(
         (r.pose.x - (p.x + 0.3)).abs() < 0.15,
         "arrived near the waypoint: {:?}",
@@ -119,53 +149,48 @@ async fn app_requests_reach_simulated_robots() {
         passes(p.x, p.y) && passes(r.pose.x, r.pose.y),
         "the trail runs from the start to the robot: {trail:?}"
     );
+    // Every command is in the event log under the operator who sent it.
+    assert!(
+        rig.app
+            .log
+            .iter()
+            .any(|l| l.text.ends_with("> route robot_1 wp/gcs")),
+        "{:?}",
+        rig.app.log
+    );
+
+    // A typed command's result comes after what it logged.
+    rig.link.exec("route robot_2 joy/7".into());
+    rig.wait_for("robot_2's route result", Duration::from_secs(5), |a| {
+        a.log.iter().any(|l| l.text == "robot_2 routed to joy/7")
+    })
+    .await;
+    let at = |text: &str| rig.app.log.iter().position(|l| l.text == text);
+    let (logged, result) = (
+        at("robot_2 routed to joy/7 (pending)"),
+        at("robot_2 routed to joy/7"),
+    );
+    assert!(logged.is_some() && logged < result, "{:?}", rig.app.log);
 
     // E-stop from the App latches every robot.
-    app.update(Action::EStop);
-    for req in app.take_requests() {
-        link.carry(req, &mut app).await;
-    }
-    wait_for(
-        &mut app,
-        &gcs,
-        "every robot e-stopped",
-        Duration::from_secs(10),
-        |a| {
-            a.estop
-                && a.robots
-                    .iter()
-                    .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
-        },
-    )
+    rig.app.update(Action::EStop);
+    rig.carry_all();
+    rig.wait_for("every robot e-stopped", Duration::from_secs(10), |a| {
+        a.estop
+            && a.robots
+                .iter()
+                .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
+    })
     .await;
-
-    spawner.shutdown().await;
-    gcs.shutdown().await;
+    rig.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
     use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
 
-    let mut config = CoreConfig::default();
-    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
-    config.router.tcp = None;
-    let gcs = Gcs::start(config).await.expect("router starts");
-    let mut spawner = mech_gcs::sim::simulator();
-    spawner
-        .spawn(1, gcs.router().udp_addr(), gcs.router().clone())
-        .await
-        .expect("simulated agent starts");
-    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
-    let control = mech_control::ControlHub::new(gcs.clone());
-    let mut link = CoreLink::new(gcs.clone(), lines, control);
-    let mut app = App::new("router", Instant::now());
-    wait_for(&mut app, &gcs, "robot_1", Duration::from_secs(10), |a| {
-        a.robot("robot_1").is_some_and(|r| r.pose.x != 0.0)
-    })
-    .await;
-
-    app.update(Action::Route {
+    let mut rig = Rig::start(1).await;
+    rig.app.update(Action::Route {
         robot: "robot_1".into(),
         channel: "joy/0".into(),
     });
@@ -174,16 +199,14 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
         PadEventKind::ButtonPressed(PadButton::LeftBumper),
         PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0),
     ] {
-        app.update(Action::Pad(PadEvent::new(0, ev)));
+        rig.app.update(Action::Pad(PadEvent::new(0, ev)));
     }
     // Keep the pad publishing at its rate while the robot drives.
     let start = Instant::now();
     loop {
-        for req in app.take_requests() {
-            link.carry(req, &mut app).await;
-        }
-        refresh(&mut app, &gcs).await;
-        let r = app.robot("robot_1").expect("robot_1");
+        rig.carry_all();
+        rig.pump();
+        let r = rig.app.robot("robot_1").expect("robot_1");
         if r.route.acknowledged && r.speed() > 0.05 {
             break;
         }
@@ -196,17 +219,15 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
 
     // Re-route away while the dead-man is still held: the pad keeps
     // publishing on joy/0, but robot_1 must come to rest.
-    app.update(Action::Route {
+    rig.app.update(Action::Route {
         robot: "robot_1".into(),
         channel: String::new(),
     });
     let start = Instant::now();
     loop {
-        for req in app.take_requests() {
-            link.carry(req, &mut app).await;
-        }
-        refresh(&mut app, &gcs).await;
-        let r = app.robot("robot_1").expect("robot_1");
+        rig.carry_all();
+        rig.pump();
+        let r = rig.app.robot("robot_1").expect("robot_1");
         if r.route.acknowledged && r.route.channel.is_empty() && r.speed() < 0.01 {
             break;
         }
@@ -217,73 +238,32 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert!(
-        app.pads()[0].enabled,
+        rig.app.pads()[0].enabled,
         "the pad was still driving its channel"
     );
-    spawner.shutdown().await;
-    gcs.shutdown().await;
-}
-
-/// A real router and `n` simulated agents, the App fed from the fleet
-/// model, and a link whose controllers are shared with a command-language
-/// executor, as in the station.
-async fn station(
-    n: usize,
-) -> (
-    Gcs,
-    Box<dyn mech_control::lang::exec::SimSpawner>,
-    mech_control::lang::Executor,
-    CoreLink,
-    App,
-) {
-    let mut config = CoreConfig::default();
-    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
-    config.router.tcp = None;
-    let gcs = Gcs::start(config).await.expect("router starts");
-    let mut spawner = mech_gcs::sim::simulator();
-    spawner
-        .spawn(n, gcs.router().udp_addr(), gcs.router().clone())
-        .await
-        .expect("simulated agents start");
-    let executor = mech_control::lang::Executor::new(gcs.clone());
-    let (lines, _rx) = tokio::sync::mpsc::unbounded_channel();
-    let link = CoreLink::new(gcs.clone(), lines, executor.control().clone());
-    let mut app = App::new("router", Instant::now());
-    wait_for(
-        &mut app,
-        &gcs,
-        "connected robots",
-        Duration::from_secs(10),
-        |a| a.robots.len() == n && a.robots.iter().all(|r| r.pose.x != 0.0),
-    )
-    .await;
-    (gcs, spawner, executor, link, app)
-}
-
-async fn carry_all(app: &mut App, link: &mut CoreLink) {
-    for req in app.take_requests() {
-        link.carry(req, app).await;
-    }
+    rig.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
 
-    let (gcs, mut spawner, mut executor, mut link, mut app) = station(3).await;
-    app.update(Action::Select(Select::Only("robot_1".into())));
-    app.update(Action::Select(Select::Toggle("robot_2".into())));
-    app.update(Action::MakeCluster);
+    let mut rig = Rig::start(3).await;
+    rig.app
+        .update(Action::Select(Select::Only("robot_1".into())));
+    rig.app
+        .update(Action::Select(Select::Toggle("robot_2".into())));
+    rig.app.update(Action::MakeCluster);
     for r in ["robot_1", "robot_2"] {
-        app.update(Action::Route {
+        rig.app.update(Action::Route {
             robot: r.into(),
             channel: "fleet/c1".into(),
         });
     }
-    carry_all(&mut app, &mut link).await;
+    rig.carry_all();
     let start: Vec<_> = ["robot_1", "robot_2", "robot_3"]
         .iter()
-        .map(|r| app.robot(r).expect("robot").pose)
+        .map(|r| rig.app.robot(r).expect("robot").pose)
         .collect();
 
     // Pad: steering-throttle -> ... -> cluster (four Selects), dead-man,
@@ -293,14 +273,14 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     events.push(PadEventKind::ButtonPressed(PadButton::LeftBumper));
     events.push(PadEventKind::AxisChanged(PadAxis::LeftStickY, 1.0));
     for ev in events {
-        app.update(Action::Pad(PadEvent::new(0, ev)));
+        rig.app.update(Action::Pad(PadEvent::new(0, ev)));
     }
     let t0 = Instant::now();
     loop {
-        carry_all(&mut app, &mut link).await;
-        refresh(&mut app, &gcs).await;
+        rig.carry_all();
+        rig.pump();
         let moved = ["robot_1", "robot_2"].iter().zip(&start).all(|(r, p)| {
-            let q = app.robot(r).expect("member").pose;
+            let q = rig.app.robot(r).expect("member").pose;
             (q.x - p.x).hypot(q.y - p.y) > 0.3
         });
         if moved {
@@ -309,25 +289,28 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
         assert!(
             t0.elapsed() < Duration::from_secs(15),
             "members move under the pad: {:?}",
-            app.robots
+            rig.app.robots
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    let view = executor
+    let view = rig
+        .station
         .control()
         .cluster_view("c1")
-        .expect("the executor's hub runs c1");
+        .expect("the station's hub runs c1");
     assert!(view.status.slots.len() == 2, "{view:?}");
-    // What the station copies into the App for the map and routes panel.
-    let channels = gcs.router().channels();
-    let mut snap = gcs.with_fleet(|f| snapshot(f, channels));
-    mech_gcs::ui::apply_control(&mut snap, &executor.control().snapshot());
-    app.update(Action::Fleet(snap));
-    let c1 = app.clusters.iter().find(|c| c.name == "c1").expect("c1");
-    let ctl = c1.control.as_ref().expect("controller status copied");
-    assert_eq!(ctl.slots.len(), 2);
-    assert!(ctl.desired.is_some() && ctl.measured.is_some());
-    let r3 = app.robot("robot_3").expect("robot_3");
+    // The station copies the controller's report into its snapshots, for
+    // the map and routes panel.
+    rig.wait_for("c1's controller status", Duration::from_secs(5), |a| {
+        a.clusters.iter().any(|c| {
+            c.name == "c1"
+                && c.control.as_ref().is_some_and(|ctl| {
+                    ctl.slots.len() == 2 && ctl.desired.is_some() && ctl.measured.is_some()
+                })
+        })
+    })
+    .await;
+    let r3 = rig.app.robot("robot_3").expect("robot_3");
     assert!(
         r3.speed() < 0.02,
         "robot_3 is not in the cluster and stays put: {r3:?}"
@@ -338,11 +321,11 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     // members come to rest.
     let t0 = Instant::now();
     loop {
-        app.take_requests();
-        refresh(&mut app, &gcs).await;
+        rig.app.take_requests();
+        rig.pump();
         if ["robot_1", "robot_2"]
             .iter()
-            .all(|r| app.robot(r).expect("member").speed() < 0.02)
+            .all(|r| rig.app.robot(r).expect("member").speed() < 0.02)
         {
             break;
         }
@@ -354,17 +337,17 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     }
 
     // Releasing the dead-man holds the cluster too.
-    app.update(Action::Pad(PadEvent::new(
+    rig.app.update(Action::Pad(PadEvent::new(
         0,
         PadEventKind::ButtonReleased(PadButton::LeftBumper),
     )));
     let t0 = Instant::now();
     loop {
-        carry_all(&mut app, &mut link).await;
-        refresh(&mut app, &gcs).await;
+        rig.carry_all();
+        rig.pump();
         if ["robot_1", "robot_2"]
             .iter()
-            .all(|r| app.robot(r).expect("member").speed() < 0.02)
+            .all(|r| rig.app.robot(r).expect("member").speed() < 0.02)
         {
             break;
         }
@@ -373,61 +356,54 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     }
 
     // The command line's `cluster-move` reaches the very controller the pad
-    // drove: the station's link and the executor share one hub.
-    executor
-        .execute_line("cluster-move c1 0.1 0 0")
-        .await
-        .expect("cluster-move runs");
-    // The status of the next control period is the first to show it.
+    // drove: every session of the station shares one hub.
+    rig.link.exec("cluster-move c1 0.1 0 0".into());
     let t0 = Instant::now();
     let motion = loop {
-        match link.control().cluster_view("c1") {
-            Some(v) => break Some(v.motion),
-            None if t0.elapsed() > Duration::from_secs(2) => break None,
-            None => tokio::time::sleep(Duration::from_millis(10)).await,
+        rig.pump();
+        match rig.station.control().cluster_view("c1") {
+            Some(v) if matches!(v.motion, mech_control::ClusterMotion::Velocity(_)) => {
+                break Some(v.motion);
+            }
+            _ if t0.elapsed() > Duration::from_secs(5) => break None,
+            _ => tokio::time::sleep(Duration::from_millis(10)).await,
         }
     };
     assert!(
         matches!(motion, Some(mech_control::ClusterMotion::Velocity(v)) if v.vx > 0.05),
         "{motion:?}"
     );
-    spawner.shutdown().await;
-    gcs.shutdown().await;
+    rig.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn nav_key_switches_the_route_to_offboard_and_back() {
-    let (gcs, mut spawner, _executor, mut link, mut app) = station(1).await;
-    let p = app.robot("robot_1").expect("robot_1").pose;
-    app.update(Action::Select(Select::Only("robot_1".into())));
+    let mut rig = Rig::start(1).await;
+    let p = rig.app.robot("robot_1").expect("robot_1").pose;
+    rig.app
+        .update(Action::Select(Select::Only("robot_1".into())));
     for (dx, dy) in [(0.3, 0.0), (0.3, 0.3), (0.0, 0.3), (0.0, 0.0)] {
-        app.update(Action::AddWaypoint(Waypoint {
+        rig.app.update(Action::AddWaypoint(Waypoint {
             x: p.x + dx,
             y: p.y + dy,
             z: 0.0,
             time: None,
         }));
     }
-    app.update(Action::SendWaypoints);
-    app.update(Action::Route {
+    rig.app.update(Action::SendWaypoints);
+    rig.app.update(Action::Route {
         robot: "robot_1".into(),
         channel: "wp/gcs".into(),
     });
-    carry_all(&mut app, &mut link).await;
-    wait_for(
-        &mut app,
-        &gcs,
-        "mission running onboard",
-        Duration::from_secs(10),
-        |a| {
-            let r = a.robot("robot_1").expect("robot_1");
-            r.route.channel == "wp/gcs" && r.route.acknowledged && r.mission.is_some()
-        },
-    )
+    rig.carry_all();
+    rig.wait_for("mission running onboard", Duration::from_secs(10), |a| {
+        let r = a.robot("robot_1").expect("robot_1");
+        r.route.channel == "wp/gcs" && r.route.acknowledged && r.mission.is_some()
+    })
     .await;
 
     let keys = mech_gcs::ui::keys::on_key(
-        &app,
+        &rig.app,
         &crossterm::event::KeyEvent::new(
             crossterm::event::KeyCode::Char('o'),
             crossterm::event::KeyModifiers::NONE,
@@ -435,58 +411,142 @@ async fn nav_key_switches_the_route_to_offboard_and_back() {
     );
     assert_eq!(keys, [Action::ToggleNav]);
     for a in keys {
-        app.update(a);
+        rig.app.update(a);
     }
-    carry_all(&mut app, &mut link).await;
-    wait_for(
-        &mut app,
-        &gcs,
-        "route offboard/robot_1",
-        Duration::from_secs(10),
-        |a| {
-            let r = a.robot("robot_1").expect("robot_1");
-            r.route.channel == "offboard/robot_1"
-                && r.route.acknowledged
-                && r.computation == mech_proto::Computation::Offboard
-        },
-    )
+    rig.carry_all();
+    rig.wait_for("route offboard/robot_1", Duration::from_secs(10), |a| {
+        let r = a.robot("robot_1").expect("robot_1");
+        r.route.channel == "offboard/robot_1"
+            && r.route.acknowledged
+            && r.computation == mech_proto::Computation::Offboard
+    })
     .await;
-    assert!(link.control().nav_view("robot_1").is_some());
+    assert!(rig.station.control().nav_view("robot_1").is_some());
 
-    app.update(Action::ToggleNav);
-    carry_all(&mut app, &mut link).await;
-    wait_for(
-        &mut app,
-        &gcs,
-        "route back to wp/gcs",
-        Duration::from_secs(10),
-        |a| {
-            let r = a.robot("robot_1").expect("robot_1");
-            r.route.channel == "wp/gcs" && r.route.acknowledged
-        },
-    )
+    rig.app.update(Action::ToggleNav);
+    rig.carry_all();
+    rig.wait_for("route back to wp/gcs", Duration::from_secs(10), |a| {
+        let r = a.robot("robot_1").expect("robot_1");
+        r.route.channel == "wp/gcs" && r.route.acknowledged
+    })
     .await;
-    assert!(link.control().nav_view("robot_1").is_none());
-    spawner.shutdown().await;
-    gcs.shutdown().await;
+    assert!(rig.station.control().nav_view("robot_1").is_none());
+    rig.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_typed_estop_acts_at_once_whatever_the_command_queue_is_doing() {
-    // The station's queue of typed lines is gone here (as if busy forever
-    // with a `wait`): `estop` and `release` must not depend on it.
-    let (gcs, mut spawner, _executor, mut link, mut app) = station(1).await;
-    link.carry(mech_gcs::ui::Request::Exec("estop".into()), &mut app)
+    // A `wait` that cannot finish holds the session's queue of lines:
+    // `estop` and `release` must not wait behind it.
+    let mut rig = Rig::start(1).await;
+    rig.app.update(Action::OpenCommandLine);
+    rig.link.exec("wait lost robot_1 60s".into());
+    rig.link.exec("estop".into());
+    rig.wait_for("the typed estop", Duration::from_secs(5), |a| a.estop)
         .await;
-    assert!(gcs.with_fleet(|f| f.estop.engaged), "typed estop engages");
-    link.carry(mech_gcs::ui::Request::Exec("release".into()), &mut app)
+    rig.link.exec("release".into());
+    rig.wait_for("the typed release", Duration::from_secs(5), |a| !a.estop)
         .await;
-    assert!(
-        !gcs.with_fleet(|f| f.estop.engaged),
-        "typed release releases"
+    let gcs = rig.station.gcs().clone();
+    assert!(!gcs.with_fleet(|f| f.estop.engaged));
+    rig.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_route_change_by_one_operator_reaches_the_others_snapshot_at_once() {
+    let rig = Rig::start(2).await;
+    let opts = || AttachOptions {
+        stream: Streams {
+            snapshots: true,
+            log: false,
+            events: false,
+        },
+        ..AttachOptions::default()
+    };
+    let a = attach_stream(rig.station.attach_local(), opts())
+        .await
+        .expect("a attached");
+    let mut b = attach_stream(rig.station.attach_local(), opts())
+        .await
+        .expect("b attached");
+    let mut latencies = Vec::new();
+    for i in 0..40u64 {
+        let channel = format!("joy/flip{}", i % 2);
+        let sent = Instant::now();
+        a.to.send(mech_gcs::station::wire::ToStation::Line {
+            id: i,
+            text: format!("route robot_2 {channel}"),
+        })
+        .expect("sent");
+        loop {
+            let m = tokio::time::timeout(Duration::from_secs(5), b.from.recv())
+                .await
+                .expect("b hears within 5 s")
+                .expect("b attached");
+            if let FromStation::Snapshot { fleet, .. } = m {
+                let r2 = fleet.robots.iter().find(|r| r.name == "robot_2");
+                if r2.is_some_and(|r| r.route.channel == channel) {
+                    latencies.push(sent.elapsed());
+                    break;
+                }
+            }
+        }
+    }
+    latencies.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "route change seen by another client: p50 {:.1} ms, p95 {:.1} ms, max {:.1} ms over {} changes",
+        ms(latencies[latencies.len() / 2]),
+        ms(latencies[latencies.len() * 95 / 100]),
+        ms(latencies[latencies.len() - 1]),
+        latencies.len()
     );
-    spawner.shutdown().await;
-    gcs.shutdown().await;
+    rig.stop().await;
+}
+
+#[test]
+fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
+    use mech_core::event::{Event, LinkAddr, RobotLinks, Stamped};
+    let mut fleet = mech_core::Fleet::new(mech_core::FleetConfig::default());
+    let hello = mech_proto::Hello {
+        name: "xbee_bot".into(),
+        platform: "diff-drive".into(),
+        capabilities: vec![],
+        motors: 2,
+        max_speed: 0.5,
+        max_yaw_rate: 2.0,
+        agent_version: "t".into(),
+    };
+    let at = |event| Stamped {
+        at: Duration::ZERO,
+        event,
+    };
+    fleet.apply(&at(Event::Registered {
+        hello,
+        id: 1,
+        addr: LinkAddr::Radio("/dev/ttyUSB0".into()),
+        known: false,
+    }));
+    fleet.apply(&at(Event::Links {
+        robot: "xbee_bot".into(),
+        links: RobotLinks {
+            udp: true,
+            radio: Some("/dev/ttyUSB0".into()),
+            active: "radio",
+            radio_budget_hz: Some(14.0),
+        },
+    }));
+    let mut app = App::new("127.0.0.1:7400", Instant::now());
+    app.update(Action::Fleet(mech_gcs::station::snapshot(
+        &fleet,
+        Vec::new(),
+    )));
+    let mut term =
+        ratatui::Terminal::new(ratatui::backend::TestBackend::new(120, 36)).expect("terminal");
+    term.draw(|f| f.render_widget(&app, f.area()))
+        .expect("draws");
+    let screen = term.backend().to_string();
+    assert!(screen.contains("wifi+radio* 14Hz"), "{screen}");
 }
 
 #[test]
@@ -502,7 +562,7 @@ fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
     };
     fleet.remote_info("site-b", "robot_9", &info);
     fleet.remote_link("site-b", "robot_9", LinkState::Connected);
-    let snap = snapshot(&fleet, vec![]);
+    let snap = mech_gcs::station::snapshot(&fleet, vec![]);
     assert_eq!(snap.robots[0].remote.as_deref(), Some("site-b"));
     let mut app = App::new("127.0.0.1:7700", Instant::now());
     app.update(Action::Resize(120, 36));
@@ -512,6 +572,9 @@ fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
     term.draw(|f| f.render_widget(&app, f.area())).unwrap();
     let screen = term.backend().to_string();
     assert!(screen.contains("robot_9@site-b"), "{screen}");
-    assert!(screen.contains("kiwi remote"), "the card says so: {screen}");
+    assert!(
+        screen.contains("robot_9@site-b remote Connected kiwi"),
+        "the card says so: {screen}"
+    );
     assert!(screen.contains('○'), "a hollow mark on the map: {screen}");
 }

@@ -42,6 +42,7 @@ fn telemetry(x: f64) -> Body {
             heading: 0.5,
         },
         velocity: Velocity::default(),
+        velocity_source: Default::default(),
         mode: ControlMode::Twist,
         channel: "joy/0".into(),
         computation: Computation::Onboard,
@@ -85,7 +86,9 @@ fn robots(router: SocketAddr, run: Duration) -> std::thread::JoinHandle<u64> {
             while start.elapsed() < run {
                 let (name, s) = &socks[sent as usize % ROBOTS];
                 let x = start.elapsed().as_secs_f64();
-                if s.send(&message(name, sent as u32 + 1, telemetry(x))).is_ok() {
+                if s.send(&message(name, sent as u32 + 1, telemetry(x)))
+                    .is_ok()
+                {
                     sent += 1;
                 }
                 next += gap;

@@ -86,6 +86,7 @@ fn last_telemetry(r: &Robot) -> Telemetry {
     Telemetry {
         pose: r.pose,
         velocity: r.velocity,
+        velocity_source: r.velocity_source,
         mode: r.mode,
         channel: r.reported_channel.clone().unwrap_or_default(),
         computation: r.computation,

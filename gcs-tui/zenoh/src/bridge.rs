@@ -78,9 +78,15 @@ impl Declared {
             .map_err(declare_err("the state queryable"))?;
         let intake = match config.commands {
             true => Some(
-                inbound::declare(session, station, &config.identity, gcs.clone(), stats.clone())
-                    .await
-                    .map_err(declare_err("the command subscriber"))?,
+                inbound::declare(
+                    session,
+                    station,
+                    &config.identity,
+                    gcs.clone(),
+                    stats.clone(),
+                )
+                .await
+                .map_err(declare_err("the command subscriber"))?,
             ),
             false => None,
         };

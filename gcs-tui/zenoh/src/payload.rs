@@ -16,7 +16,7 @@ mod route;
 use mech_core::fleet::{RemoteInfo, Robot, RouteState};
 use mech_proto::{
     CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
-    Velocity,
+    Velocity, VelocitySource,
 };
 use serde::{Deserialize, Serialize};
 
@@ -115,6 +115,10 @@ pub struct TelemetryMsg {
     pub pose: Pose,
     /// World frame m/s; `wz` rad/s.
     pub velocity: Velocity,
+    /// `measured` (wheel encoders) or `commanded` (what the outputs should
+    /// give); `commanded` when absent.
+    #[serde(default, with = "names::velocity_source")]
+    pub velocity_source: VelocitySource,
     #[serde(with = "names::mode")]
     pub mode: ControlMode,
     /// The channel the robot obeys; `null` = none.
@@ -141,6 +145,7 @@ impl TelemetryMsg {
             stamp_us,
             pose: t.pose,
             velocity: t.velocity,
+            velocity_source: t.velocity_source,
             mode: t.mode,
             channel: (!t.channel.is_empty()).then(|| t.channel.clone()),
             computation: t.computation,
@@ -159,6 +164,7 @@ impl TelemetryMsg {
         let t = Telemetry {
             pose: self.pose,
             velocity: self.velocity,
+            velocity_source: self.velocity_source,
             mode: self.mode,
             channel: self.channel.clone().unwrap_or_default(),
             computation: self.computation,
@@ -318,6 +324,7 @@ mod tests {
                 vz: 0.0,
                 wz: 0.5,
             },
+            velocity_source: VelocitySource::Measured,
             mode: ControlMode::SteeringThrottle,
             channel: "joy/0".into(),
             computation: Computation::Offboard,

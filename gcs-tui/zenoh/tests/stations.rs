@@ -196,33 +196,42 @@ async fn a_remote_robot_is_routed_only_with_an_operator_key_its_station_lists() 
     }
 }
 
+/// The bound the tests assert on "shows lost within 1 s": generous, for a
+/// loaded 2-core machine; the measured time is printed.
+const LOST_BOUND: Duration = Duration::from_secs(5);
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_station_or_robot_that_leaves_shows_lost() {
     let (mut a, b) = two_stations(1).await;
-    // robot_1 of site-a goes silent: site-a's router loses it (lost_after,
-    // 1 s) and withdraws its token; site-b follows at once.
+    // robot_1 of site-a stops (its agent says goodbye, or goes silent and
+    // site-a's router loses it after lost_after): site-a withdraws its
+    // token and site-b shows it lost.
+    let left = std::time::Instant::now();
     a.exec.shutdown().await;
-    let took = b
-        .until("robot_1@site-a lost", WAIT, |f| {
-            shown(f, "robot_1@site-a", LinkState::Lost)
-        })
-        .await;
-    println!("robot silent -> lost at the other station: {took:?} (router lost_after 1 s)");
+    b.until("robot_1@site-a lost", WAIT, |f| {
+        shown(f, "robot_1@site-a", LinkState::Lost)
+    })
+    .await;
+    let took = left.elapsed();
+    println!("robot left -> lost at the other station after {took:?}");
+    assert!(took < LOST_BOUND, "{took:?}");
     assert_eq!(
         b.gcs.with_fleet(|f| f.stations["site-a"]),
         LinkState::Connected
     );
 
+    let left = std::time::Instant::now();
     b.bridge.shutdown().await;
-    let took = a
-        .until("site-b and its robot lost", WAIT, |f| {
-            if f.stations.get("site-b") != Some(&LinkState::Lost) {
-                return Err("site-b not lost".into());
-            }
-            shown(f, "robot_1@site-b", LinkState::Lost)
-        })
-        .await;
-    println!("station left -> lost at the other station: {took:?}");
+    a.until("site-b and its robot lost", WAIT, |f| {
+        if f.stations.get("site-b") != Some(&LinkState::Lost) {
+            return Err("site-b not lost".into());
+        }
+        shown(f, "robot_1@site-b", LinkState::Lost)
+    })
+    .await;
+    let took = left.elapsed();
+    println!("station left -> it and its robot lost at the other station after {took:?}");
+    assert!(took < LOST_BOUND, "{took:?}");
     let mut b_exec = b.exec;
     b_exec.shutdown().await;
     b.gcs.shutdown().await;

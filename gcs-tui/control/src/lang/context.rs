@@ -47,19 +47,58 @@ pub trait RemoteRoutes: Send + Sync + std::fmt::Debug {
     ) -> BoxFuture<'_, Result<String, String>>;
 }
 
+/// One simulator shared by every executor of a station: `spawn` from any
+/// operator's session starts agents in it, and only the station stops them
+/// ([`SharedSpawner::shutdown_all`]); an executor's own shutdown (an
+/// operator detaching) leaves them running.
+#[derive(Debug, Clone)]
+pub struct SharedSpawner(Arc<tokio::sync::Mutex<Box<dyn SimSpawner>>>);
+
+impl SharedSpawner {
+    pub fn new(spawner: Box<dyn SimSpawner>) -> SharedSpawner {
+        SharedSpawner(Arc::new(tokio::sync::Mutex::new(spawner)))
+    }
+
+    /// Stops every agent any session spawned.
+    pub async fn shutdown_all(&self) {
+        self.0.lock().await.shutdown().await;
+    }
+}
+
+impl SimSpawner for SharedSpawner {
+    fn spawn(
+        &mut self,
+        count: usize,
+        addr: SocketAddr,
+        router: RouterHandle,
+    ) -> BoxFuture<'_, Result<Vec<String>, String>> {
+        let inner = self.0.clone();
+        Box::pin(async move { inner.lock().await.spawn(count, addr, router).await })
+    }
+
+    fn shutdown(&mut self) -> BoxFuture<'_, ()> {
+        Box::pin(async {})
+    }
+}
+
 /// The state behind an [`Executor`](super::Executor), handed to each verb's
 /// `apply`.
 #[derive(Debug)]
 pub(super) struct Context {
     pub(super) gcs: Gcs,
     pub(super) spawner: Option<Box<dyn SimSpawner>>,
-    /// One publisher per channel under [`SENDER`], so a channel's sequence
+    /// Who the commands are from: the sender name of everything this
+    /// context publishes ([`SENDER`] unless an operator's session says).
+    pub(super) sender: String,
+    /// One publisher per channel under `sender`, so a channel's sequence
     /// numbers run on from one command to the next.
     pub(super) publishers: Publishers,
     /// Fleet and offboard controllers started by this executor's commands.
     pub(super) control: ControlHub,
     /// Route requests to other stations, when a bridge is plugged in.
     pub(super) remote_routes: Option<Arc<dyn RemoteRoutes>>,
+    /// Where `record start` without a file records (rotating files).
+    pub(super) record_dir: Option<std::path::PathBuf>,
 }
 
 impl Context {
@@ -67,9 +106,11 @@ impl Context {
         Context {
             control: ControlHub::new(gcs.clone()),
             publishers: gcs.router().publishers(SENDER),
+            sender: SENDER.to_string(),
             gcs,
             spawner: None,
             remote_routes: None,
+            record_dir: None,
         }
     }
 

@@ -11,8 +11,9 @@ use crate::hub::ControlHub;
 use crate::spec::ClusterSpec;
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
+use mech_core::record::OperatorRecord;
 
-pub use super::context::{RemoteRoutes, SENDER, SimSpawner};
+pub use super::context::{RemoteRoutes, SENDER, SharedSpawner, SimSpawner};
 
 /// Executes command-language statements. Holds the publishers it created
 /// (one per channel, so sequence numbers continue), the controllers its
@@ -20,13 +21,30 @@ pub use super::context::{RemoteRoutes, SENDER, SimSpawner};
 #[derive(Debug)]
 pub struct Executor {
     ctx: Context,
+    /// Where commands come from, as recordings name it (`tui`, `script`).
+    source: String,
 }
 
 impl Executor {
     pub fn new(gcs: Gcs) -> Executor {
         Executor {
             ctx: Context::new(gcs),
+            source: "tui".into(),
         }
+    }
+
+    /// Names where this executor's commands come from in recordings
+    /// (`tui` unless told).
+    pub fn with_source(mut self, source: &str) -> Executor {
+        self.source = source.to_string();
+        self
+    }
+
+    /// Where `record start` without a file records (rotating files, with
+    /// the `[record]` size cap): the binary's log directory.
+    pub fn with_record_dir(mut self, dir: std::path::PathBuf) -> Executor {
+        self.ctx.record_dir = Some(dir);
+        self
     }
 
     /// Defines the clusters of the configuration (`[[cluster]]`) and their
@@ -37,6 +55,24 @@ impl Executor {
                 .gcs
                 .update_fleet(|f| f.log(Severity::Error, e.to_string()));
         }
+        self
+    }
+
+    /// Runs fleet and offboard controllers in `control` instead of a hub
+    /// of its own: every executor of a station shares one, so a cluster
+    /// started from one operator's command line is the same cluster for
+    /// all.
+    pub fn with_control(mut self, control: ControlHub) -> Executor {
+        self.ctx.control = control;
+        self
+    }
+
+    /// Publishes and sends missions as `sender` (an operator's name)
+    /// instead of [`SENDER`], so the router and the robots see who
+    /// commanded them.
+    pub fn with_sender(mut self, sender: &str) -> Executor {
+        self.ctx.publishers = self.ctx.gcs.router().publishers(sender);
+        self.ctx.sender = sender.to_string();
         self
     }
 
@@ -80,8 +116,23 @@ impl Executor {
 
     /// Runs one statement. Errors point at the statement or the argument at
     /// fault.
+    /// Each command and its outcome goes into the recording, if one is
+    /// being made.
     pub async fn execute(&mut self, stmt: &Statement) -> Result<Outcome, LangError> {
-        stmt.command.apply(&mut self.ctx, stmt.span).await
+        let result = stmt.command.apply(&mut self.ctx, stmt.span).await;
+        let summary = match &result {
+            Ok(o) => o.summary.clone(),
+            Err(e) => e.to_string(),
+        };
+        self.ctx.gcs.router().record_operator(OperatorRecord {
+            at: std::time::Duration::ZERO,
+            source: self.source.clone(),
+            line: stmt.span.line,
+            text: stmt.text.clone(),
+            ok: result.is_ok(),
+            summary,
+        });
+        result
     }
 }
 

@@ -110,9 +110,57 @@ fn lex_line(text: &str, line: usize) -> Result<Vec<Word>, LangError> {
     Ok(words)
 }
 
+/// `word` as the lexer reads it back as one word, literally: unchanged when
+/// it is a plain word, in quotes (escaped) when it is empty or has spaces,
+/// quotes or `#` in it. A program composing command lines from names (the
+/// TUI, a client) quotes each name with it. A plain word that is also a
+/// keyword (`none`, `all`) stays plain: write `"none"` to mean a name.
+pub fn quote(word: &str) -> std::borrow::Cow<'_, str> {
+    let plain = !word.is_empty()
+        && !word
+            .chars()
+            .any(|c| c.is_whitespace() || c.is_control() || c == '"' || c == '#');
+    if plain {
+        return word.into();
+    }
+    let mut q = String::with_capacity(word.len() + 2);
+    q.push('"');
+    for c in word.chars() {
+        match c {
+            '"' => q.push_str("\\\""),
+            '\\' => q.push_str("\\\\"),
+            '\n' => q.push_str("\\n"),
+            c => q.push(c),
+        }
+    }
+    q.push('"');
+    q.into()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quoted_words_read_back_as_themselves() {
+        for w in [
+            "robot_1",
+            "a b",
+            "",
+            "#x",
+            "say \"hi\"",
+            "back\\slash",
+            "two\nlines",
+            "none",
+        ] {
+            let line = format!("log {}", quote(w));
+            let words = &lex(&line, 1).unwrap()[0].words;
+            assert_eq!(words.len(), 2, "{line}");
+            assert_eq!(words[1].text, w, "{line}");
+        }
+        assert_eq!(quote("joy/0"), "joy/0");
+        assert_eq!(quote("none"), "none", "keywords are the caller's choice");
+    }
 
     #[test]
     fn words_comments_quotes_and_columns() {

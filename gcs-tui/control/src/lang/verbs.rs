@@ -4,6 +4,7 @@
 //! [`VERBS`] that the parser and `help` read, the [`Command`] enum with its
 //! dispatch, and the poll loop of the waiting verbs.
 
+pub mod autopilot;
 pub mod channels;
 pub mod cluster;
 pub mod cluster_expect;
@@ -22,6 +23,7 @@ pub mod log;
 pub mod mode;
 pub mod nav;
 pub mod nav_wait;
+pub mod record;
 pub mod route;
 pub mod send;
 pub mod sleep;
@@ -211,7 +213,7 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "nav",
-        usage: "nav ROBOT offboard|onboard",
+        usage: "nav ROBOT offboard|onboard|toggle",
         help: "switch waypoint navigation between the GCS loop and the robot, keeping progress",
         parse: |a| nav::Nav::parse(a).map(Command::Nav),
     },
@@ -220,6 +222,18 @@ pub static VERBS: &[Verb] = &[
         usage: "nav-wait ROBOT NEXT [TIMEOUT]",
         help: "wait until a robot's next waypoint index reaches NEXT (default 60s)",
         parse: |a| nav_wait::NavWait::parse(a).map(Command::NavWait),
+    },
+    Verb {
+        name: "record",
+        usage: "record start [FILE] | record stop | record",
+        help: "record everything the router sees to MCAP (no FILE: rotating files in the recording directory); `record` says how it goes",
+        parse: |a| record::Record::parse(a).map(Command::Record),
+    },
+    Verb {
+        name: "autopilot",
+        usage: "autopilot TARGET arm|disarm|offboard|hold|land | autopilot TARGET takeoff ALTITUDE",
+        help: "ask robots' autopilots (PX4, ArduPilot) to arm, disarm, change mode, land or take off",
+        parse: |a| autopilot::Autopilot::parse(a).map(Command::Autopilot),
     },
     Verb {
         name: "help",
@@ -261,6 +275,8 @@ pub enum Command {
     Follow(follow::Follow),
     Nav(nav::Nav),
     NavWait(nav_wait::NavWait),
+    Record(record::Record),
+    Autopilot(autopilot::Autopilot),
 }
 
 impl Command {
@@ -295,6 +311,8 @@ impl Command {
             Command::Follow(c) => c.apply(ctx, at).await,
             Command::Nav(c) => c.apply(ctx, at).await,
             Command::NavWait(c) => c.apply(ctx, at).await,
+            Command::Record(c) => c.apply(ctx, at).await,
+            Command::Autopilot(c) => c.apply(ctx, at).await,
         }
     }
 }
@@ -461,7 +479,7 @@ mod tests {
         assert_eq!(e.span.column, 14);
         assert!(e.message.contains("unknown formation"));
         let e = parse_line("nav robot_1 sideways").unwrap_err();
-        assert!(e.message.contains("offboard or onboard"));
+        assert!(e.message.contains("onboard or toggle"));
         let e = parse_line("cluster-waypoint c1 1").unwrap_err();
         assert!(e.message.contains("cluster waypoint"));
         assert!(parse_line("cluster-move c1 0.1").is_err());

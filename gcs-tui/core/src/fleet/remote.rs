@@ -11,7 +11,7 @@ use std::time::Duration;
 use mech_proto::{CommandKind, Telemetry};
 
 use super::{Fleet, Robot, RouteState, Severity};
-use crate::event::LinkState;
+use crate::event::{LinkAddr, LinkState};
 
 /// What another station says about one of its robots: its registration.
 #[derive(Debug, Clone, PartialEq)]
@@ -37,7 +37,7 @@ impl Fleet {
     /// `None` if one of this station's robots has that name already.
     fn remote_entry(&mut self, station: &str, robot: &str) -> Option<&mut Robot> {
         let name = remote_name(robot, station);
-        let nowhere = SocketAddr::from(([0, 0, 0, 0], 0));
+        let nowhere = LinkAddr::Udp(SocketAddr::from(([0, 0, 0, 0], 0)));
         let r = self.robots.entry(name.clone()).or_insert_with(|| {
             let mut r = Robot::new(&name, 0, nowhere);
             r.remote = Some(station.to_string());
@@ -181,7 +181,8 @@ mod tests {
     fn a_local_robot_keeps_its_name() {
         let mut f = Fleet::new(FleetConfig::default());
         let addr = SocketAddr::from(([127, 0, 0, 1], 9000));
-        f.robots.insert("a@b".into(), Robot::new("a@b", 1, addr));
+        f.robots
+            .insert("a@b".into(), Robot::new("a@b", 1, LinkAddr::Udp(addr)));
         assert!(!f.remote_info("b", "a", &info()));
         assert!(f.robot("a@b").unwrap().is_local());
         assert_eq!(f.robot("a@b").unwrap().platform, "");
@@ -220,6 +221,7 @@ mod tests {
                 heading: 0.3,
             },
             velocity: Default::default(),
+            velocity_source: Default::default(),
             mode: mech_proto::ControlMode::Twist,
             channel: "ext/x".into(),
             computation: Default::default(),

@@ -3,16 +3,15 @@
 //! mission and recent trail.
 
 use std::collections::VecDeque;
-use std::net::SocketAddr;
 use std::time::Duration;
 
 use mech_proto::{
     CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    Waypoint,
+    VelocitySource, Waypoint,
 };
 
 use crate::counters::Traffic;
-use crate::event::LinkState;
+use crate::event::{LinkAddr, LinkState, RobotLinks};
 
 /// A robot's entry in the routing table, as the GCS knows it.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -46,6 +45,9 @@ pub enum MissionDelivery {
     Refused(String),
     /// No acknowledgement in time.
     Failed(String),
+    /// Acknowledged, but the robot registered again without it (its agent
+    /// restarted): it is not running, and resumes only if sent again.
+    Lost,
 }
 
 /// A mission sent to a robot.
@@ -88,8 +90,15 @@ pub struct Robot {
     pub max_speed: f64,
     /// rad/s
     pub max_yaw_rate: f64,
-    pub addr: SocketAddr,
+    /// Where the robot registered from.
+    pub addr: LinkAddr,
     pub link: LinkState,
+    /// Which of its links (UDP, radio) the router hears now, and its radio
+    /// telemetry budget.
+    pub links: RobotLinks,
+    /// Times the robot registered (more than once: it restarted or lost
+    /// the router).
+    pub registrations: u32,
     /// Router time of the last telemetry.
     pub last_telemetry: Option<Duration>,
     pub pose: Pose,
@@ -118,6 +127,12 @@ pub struct Robot {
     pub estop_ack: Option<(bool, u32)>,
     /// Messages the robot reports it ignored as stale (telemetry).
     pub stale: u32,
+    /// Whether `velocity` was measured by wheel encoders or follows from
+    /// the commanded outputs (telemetry).
+    pub velocity_source: VelocitySource,
+    /// The robot's last driver fault notice ("left wheel stalled: ..."),
+    /// kept while its telemetry reports the fault.
+    pub fault: Option<String>,
     /// The station this robot belongs to when it is another station's,
     /// shown here read-only through a bridge (`mech-zenoh`); `None` for
     /// this station's own robots. Only that station routes it.
@@ -125,7 +140,7 @@ pub struct Robot {
 }
 
 impl Robot {
-    pub(super) fn new(name: &str, id: u16, addr: SocketAddr) -> Robot {
+    pub(super) fn new(name: &str, id: u16, addr: LinkAddr) -> Robot {
         Robot {
             name: name.to_string(),
             id,
@@ -136,6 +151,8 @@ impl Robot {
             max_yaw_rate: 0.0,
             addr,
             link: LinkState::Connected,
+            links: RobotLinks::default(),
+            registrations: 0,
             last_telemetry: None,
             pose: Pose::default(),
             velocity: Velocity::default(),
@@ -155,6 +172,8 @@ impl Robot {
             traffic: Traffic::default(),
             estop_ack: None,
             stale: 0,
+            velocity_source: VelocitySource::Commanded,
+            fault: None,
             remote: None,
         }
     }
@@ -192,6 +211,24 @@ impl Robot {
     /// station's, shown read-only).
     pub fn is_local(&self) -> bool {
         self.remote.is_none()
+    }
+
+    /// After a registration, the first telemetry tells whether the robot
+    /// still holds the mission it acknowledged: if not (its agent
+    /// restarted), the mission is marked lost and its id returned, once.
+    pub(super) fn mission_lost(&mut self) -> Option<u32> {
+        let sent = self.waypoints.sent.as_mut()?;
+        let held = self.mission.is_some_and(|p| p.id == sent.id);
+        let on_its_channel = self.reported_channel.as_deref() == Some(sent.channel.as_str());
+        if self.registrations > 1
+            && on_its_channel
+            && sent.delivery == MissionDelivery::Acked
+            && !held
+        {
+            sent.delivery = MissionDelivery::Lost;
+            return Some(sent.id);
+        }
+        None
     }
 
     /// Whether the robot obeys `kind` commands.

@@ -78,12 +78,18 @@ impl EventBus {
         Subscription { rx, dropped }
     }
 
+    /// When the router started.
+    pub(crate) fn start(&self) -> Instant {
+        self.start
+    }
+
     /// Time since the router started.
     pub(crate) fn elapsed(&self) -> Duration {
         Instant::now().saturating_duration_since(self.start)
     }
 
-    pub(crate) fn emit(&self, event: Event) {
+    /// Delivers `event` and returns it stamped.
+    pub(crate) fn emit(&self, event: Event) -> Arc<Stamped> {
         let stamped = Arc::new(Stamped {
             at: self.elapsed(),
             event,
@@ -104,6 +110,8 @@ impl EventBus {
                 Err(mpsc::error::TrySendError::Closed(_)) => false,
             }
         });
+        drop(subs);
+        stamped
     }
 
     /// Closes every subscription (after shutdown, `recv` returns `None`).

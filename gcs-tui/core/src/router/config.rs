@@ -66,6 +66,31 @@ pub struct RouterConfig {
     /// the system's `net.core.rmem_max`). Large, so that a burst of
     /// telemetry from a big fleet is queued rather than lost.
     pub socket_buffer: usize,
+    /// Serial radios (`[[router.serial]]`): one radio carries many robots.
+    pub serial: Vec<SerialEndpoint>,
+    /// A robot's link (UDP or radio) counts as live while the router has
+    /// heard from the robot on it within this (seconds). Commands go out
+    /// on UDP while it is live, else on the radio: so when Wi-Fi goes
+    /// silent the radio takes over after this long.
+    #[serde(with = "secs")]
+    pub link_timeout: Duration,
+}
+
+/// A serial port with a radio (XBee transparent mode, SiK, any UART) on it.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SerialEndpoint {
+    /// The device, e.g. `/dev/ttyUSB0`.
+    pub port: String,
+    /// The radio's serial rate, bits per second: also the air rate the
+    /// router paces its sending to, so that queues form here (where an
+    /// e-stop can jump them) and not in the radio.
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+}
+
+fn default_baud() -> u32 {
+    57_600
 }
 
 impl Default for RouterConfig {
@@ -80,7 +105,9 @@ impl Default for RouterConfig {
             route_retry: Duration::from_millis(100),
             mission_retry: Duration::from_millis(200),
             mission_give_up: Duration::from_secs(5),
-            estop_retry: Duration::from_millis(100),
+            // Short: each resend is another chance through a lossy link
+            // (at 50% loss, 20 tries a second miss with odds of 1e-6).
+            estop_retry: Duration::from_millis(50),
             tick: Duration::from_millis(20),
             subscriber_timeout: Duration::from_secs(5),
             channel_live_for: Duration::from_secs(3),
@@ -88,6 +115,8 @@ impl Default for RouterConfig {
             default_route: None,
             udp_workers: 2,
             socket_buffer: 4 << 20,
+            serial: Vec::new(),
+            link_timeout: Duration::from_millis(300),
         }
     }
 }
@@ -107,6 +136,7 @@ impl RouterConfig {
             ("route_retry", self.route_retry),
             ("mission_retry", self.mission_retry),
             ("estop_retry", self.estop_retry),
+            ("link_timeout", self.link_timeout),
         ] {
             if d.is_zero() {
                 return Err(ConfigError(format!("router.{name} must be positive")));
@@ -119,6 +149,17 @@ impl RouterConfig {
         }
         if self.udp_workers == 0 {
             return Err(ConfigError::new("router.udp_workers must be at least 1"));
+        }
+        for s in &self.serial {
+            if s.port.is_empty() || !(300..=4_000_000).contains(&s.baud) {
+                return Err(ConfigError(format!(
+                    "router.serial: port {:?} at {} baud: expected a device path and 300 to 4000000 baud",
+                    s.port, s.baud
+                )));
+            }
+        }
+        if self.serial.len() > usize::from(u16::MAX) {
+            return Err(ConfigError::new("router.serial: too many ports"));
         }
         if let Some(route) = &self.default_route {
             if !is_channel_name(route) {

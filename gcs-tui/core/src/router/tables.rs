@@ -12,17 +12,21 @@
 //! Bye, liveness, heartbeats), [`commands`] (commands, fleet and cluster
 //! commands: the hot path), [`routes`] (route changes and acks),
 //! [`missions`], [`estop`] and [`telemetry`] (telemetry, subscriptions,
-//! position fixes, channel discovery, notices). [`Tables::tick`] runs each
+//! position fixes, channel discovery, notices), [`autopilot`] (operators'
+//! requests to a robot's autopilot). [`Tables::tick`] runs each
 //! concern's timers.
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 
+mod autopilot;
 mod commands;
 mod estop;
 mod gate;
+mod links;
 mod missions;
 mod registration;
 mod routes;
+pub(crate) mod tap;
 mod telemetry;
 
 use mech_proto::{Body, Envelope, Header};
@@ -31,7 +35,9 @@ use tracing::{debug, warn};
 
 use super::config::RouterConfig;
 use super::rate::RateMeter;
+
 use mech_proto::auth::Stamper;
+use tap::{MessageTap, Tap};
 
 use crate::auth::Keyring;
 use crate::counters::{Counters, DropReason, Drops, Rejections, Traffic};
@@ -43,6 +49,9 @@ pub(crate) enum Peer {
     Udp(SocketAddr),
     /// A TCP connection, by the router's connection number.
     Tcp(u64),
+    /// A serial radio, by its place in `router.serial`: every robot on it
+    /// hears what is sent (the destination picks the robot).
+    Serial(u16),
     /// A publisher inside the GCS process.
     Local,
 }
@@ -52,6 +61,7 @@ impl std::fmt::Display for Peer {
         match self {
             Peer::Udp(a) => write!(f, "udp:{a}"),
             Peer::Tcp(n) => write!(f, "tcp#{n}"),
+            Peer::Serial(n) => write!(f, "radio#{n}"),
             Peer::Local => f.write_str("gcs"),
         }
     }
@@ -86,7 +96,8 @@ pub enum Delivery {
 #[derive(Debug)]
 struct RobotEntry {
     id: u16,
-    addr: SocketAddr,
+    /// Where the robot is heard (UDP, a radio), and so where to send.
+    links: links::Links,
     last_seen: Instant,
     link: LinkState,
     route: Option<String>,
@@ -161,6 +172,13 @@ pub(crate) struct Tables {
     reject_logged: HashMap<String, Instant>,
     /// When each key's last time request was answered.
     time_answers: HashMap<u32, Instant>,
+    /// The recorder's tap, while recording.
+    pub(super) tap: Option<Tap>,
+    /// Why the message being decided was refused or unreadable, kept for
+    /// the tap (only while recording).
+    refusal: Option<String>,
+    /// When each unknown robot was last told to register again.
+    unknown_told: HashMap<String, Instant>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -206,6 +224,9 @@ impl Tables {
             rejected: Rejections::default(),
             reject_logged: HashMap::new(),
             time_answers: HashMap::new(),
+            tap: None,
+            refusal: None,
+            unknown_told: HashMap::new(),
         }
     }
 
@@ -233,6 +254,7 @@ impl Tables {
 
     fn bad(&mut self, from: Peer, error: String, events: &mut Vec<Event>) -> Delivery {
         self.dropped.count(DropReason::BadPacket);
+        self.note_refusal(|| error.clone());
         let n = self.dropped.bad_packet;
         // Logged at warn for the 1st, 2nd, 4th, 8th... so a flood of garbage
         // cannot flood the log; every one is counted and reported as an event.
@@ -248,7 +270,15 @@ impl Tables {
         Delivery::Dropped(DropReason::BadPacket)
     }
 
-    /// Decides what to do with one received message.
+    /// Keeps why the message being decided was refused, for the tap.
+    fn note_refusal(&mut self, why: impl FnOnce() -> String) {
+        if self.tap.is_some() {
+            self.refusal = Some(why());
+        }
+    }
+
+    /// Decides what to do with one received message, and offers it with the
+    /// decision to the recorder's tap when recording.
     pub(crate) fn handle(
         &mut self,
         bytes: &[u8],
@@ -258,6 +288,29 @@ impl Tables {
         events: &mut Vec<Event>,
     ) -> Delivery {
         self.received += 1;
+        let delivery = self.decide(bytes, from, now, out, events);
+        if let Some(tap) = &self.tap {
+            tap.message(MessageTap {
+                now,
+                number: self.received,
+                from,
+                bytes,
+                delivery,
+                detail: self.refusal.take(),
+            });
+        }
+        delivery
+    }
+
+    /// The decision for one received message.
+    fn decide(
+        &mut self,
+        bytes: &[u8],
+        from: Peer,
+        now: Instant,
+        out: &mut Outbox,
+        events: &mut Vec<Event>,
+    ) -> Delivery {
         let head = match mech_proto::peek(bytes) {
             Ok(h) => h,
             Err(e) => return self.bad(from, e.to_string(), events),
@@ -298,8 +351,8 @@ impl Tables {
         if let Body::TimeRequest(request) = env.body {
             return self.answer_time(request, tag, sender, from, now, out);
         }
-        if let Peer::Udp(addr) = from {
-            self.seen_robot(sender, addr, now, events);
+        if matches!(from, Peer::Udp(_) | Peer::Serial(_)) {
+            self.seen_robot(sender, from, now, events);
         }
         let m = Incoming {
             header: &env.header,
@@ -320,7 +373,12 @@ impl Tables {
     ) -> Delivery {
         match body {
             Body::Hello(hello) => self.on_hello(m, hello, out, events),
-            Body::Heartbeat(_) => Delivery::Consumed,
+            Body::Heartbeat(_) => {
+                if !self.robots.contains_key(&m.header.sender) {
+                    self.unknown_robot(m, out);
+                }
+                Delivery::Consumed
+            }
             Body::Telemetry(t) => self.on_telemetry(m, t, out, events),
             Body::FleetCommand(fc) => self.on_fleet_command(m, fc, out, events),
             Body::Mission(mission) => self.on_mission(m, mission, out, events),
@@ -335,6 +393,7 @@ impl Tables {
             Body::Cluster(command) => self.on_cluster(m, command, events),
             Body::Bye(bye) => self.on_bye(m, bye, events),
             Body::TimeRequest(_) => Delivery::Consumed,
+            Body::Autopilot(request) => self.on_autopilot(m, request, out),
             Body::Command(_)
             | Body::Welcome(_)
             | Body::Route(_)
@@ -349,6 +408,7 @@ impl Tables {
     /// Timers: link states, heartbeats, retries, lapsed subscriptions.
     pub(crate) fn tick(&mut self, now: Instant, out: &mut Outbox, events: &mut Vec<Event>) {
         self.update_links(now, events);
+        self.report_links(now, events);
         self.send_heartbeats(now, out);
         self.retry_routes(now, out);
         self.retry_estop(now, out);
@@ -374,6 +434,11 @@ impl Tables {
             fanout_dropped: self.fanout_dropped,
             rejected: self.rejected,
         }
+    }
+
+    /// Messages received so far.
+    pub(crate) fn counters_received(&self) -> u64 {
+        self.received
     }
 
     pub(crate) fn rejections(&self) -> Rejections {
@@ -406,9 +471,19 @@ impl Tables {
         }
     }
 
-    /// Address of a registered robot.
-    pub(crate) fn robot_addr(&self, robot: &str) -> Option<SocketAddr> {
-        self.robots.get(robot).map(|r| r.addr)
+    /// The identity of a key id, when authenticating.
+    pub(crate) fn identity(&self, key_id: u32) -> Option<crate::auth::Identity> {
+        self.auth.as_ref()?.identity(key_id).cloned()
+    }
+
+    /// The configured serial radios.
+    pub(crate) fn radio_config(&self) -> Vec<super::config::SerialEndpoint> {
+        self.config.serial.clone()
+    }
+
+    /// Whether `robot` is registered.
+    pub(crate) fn knows_robot(&self, robot: &str) -> bool {
+        self.robots.contains_key(robot)
     }
 }
 
@@ -478,6 +553,22 @@ mod tests {
     }
 
     #[test]
+    fn a_stopping_router_says_bye_to_every_robot() {
+        let (mut t, robot) = registered(Instant::now());
+        let mut out = Outbox::default();
+        t.farewell(&mut out);
+        let byes: Vec<_> = out
+            .owned
+            .iter()
+            .map(|(p, b)| (*p, mech_proto::decode(b).unwrap()))
+            .filter(|(_, m)| matches!(m.body, Body::Bye(_)))
+            .collect();
+        assert_eq!(byes.len(), 1);
+        assert_eq!(byes[0].0, robot);
+        assert_eq!(byes[0].1.header.destination, "robot_1");
+    }
+
+    #[test]
     fn heartbeats_go_out_every_quarter_second() {
         let t0 = Instant::now();
         let (mut t, robot) = registered(t0);
@@ -544,6 +635,58 @@ mod tests {
             ev.iter()
                 .any(|e| matches!(e, Event::MissionFailed { id: 7, .. }))
         );
+    }
+
+    #[test]
+    fn a_robot_on_wifi_and_a_radio_is_commanded_on_the_live_link_and_estopped_on_both() {
+        let t0 = Instant::now();
+        let ms = |v| t0 + Duration::from_millis(v);
+        let (mut t, wifi) = registered(t0);
+        let radio = Peer::Serial(0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let hb = bytes(
+            "robot_1",
+            "router",
+            "",
+            Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 1 }),
+        );
+        t.handle(&hb, radio, ms(10), &mut out, &mut ev);
+        t.set_route("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);
+        let twist = bytes(
+            "pad",
+            "robot_1",
+            "joy/0",
+            Body::Command(mech_proto::Command::Twist(mech_proto::Twist {
+                vx: 0.1,
+                ..Default::default()
+            })),
+        );
+        let sent_to = |t: &mut Tables, at| {
+            let mut out = Outbox::default();
+            t.handle(&twist, Peer::Local, at, &mut out, &mut Vec::new());
+            out.raw
+        };
+        assert_eq!(sent_to(&mut t, ms(100)), vec![wifi], "UDP while live");
+        t.handle(&hb, radio, ms(350), &mut out, &mut ev);
+        assert_eq!(
+            sent_to(&mut t, ms(400)),
+            vec![radio],
+            "UDP silent 400 ms: the radio"
+        );
+        t.handle(&hb, wifi, ms(500), &mut out, &mut ev);
+        assert_eq!(sent_to(&mut t, ms(510)), vec![wifi], "UDP back");
+        let mut out = Outbox::default();
+        t.start_estop(true, ms(520), &mut out, &mut ev);
+        let estops: Vec<Peer> = out.owned.iter().map(|(p, _)| *p).collect();
+        assert_eq!(estops, vec![wifi, radio], "the e-stop on every link");
+        let mut ev = Vec::new();
+        t.tick(ms(530), &mut Outbox::default(), &mut ev);
+        let links = ev.iter().find_map(|e| match e {
+            Event::Links { links, .. } => Some(links.clone()),
+            _ => None,
+        });
+        let links = links.expect("a radio robot's links are reported");
+        assert!(links.udp && links.active == "udp" && links.radio.is_some());
     }
 
     #[test]

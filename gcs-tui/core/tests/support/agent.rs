@@ -78,6 +78,7 @@ pub fn telemetry(x: f64, y: f64, channel: &str, mission: Option<MissionProgress>
         actuators: vec![0.0, 0.0],
         mission,
         stale: 0,
+        velocity_source: mech_proto::VelocitySource::Commanded,
     }
 }
 

@@ -17,9 +17,15 @@ use thiserror::Error;
 pub struct PadId(pub usize);
 
 impl PadId {
-    /// The controller channel this pad publishes on.
+    /// The controller channel this pad publishes on: `joy/N`.
     pub fn channel(self) -> String {
-        format!("joy/{}", self.0)
+        self.channel_in("joy")
+    }
+
+    /// The channel under `prefix`: `PREFIX/N` (an attached operator's pads
+    /// are `joy/OPERATOR/N`).
+    pub fn channel_in(self, prefix: &str) -> String {
+        format!("{prefix}/{}", self.0)
     }
 }
 

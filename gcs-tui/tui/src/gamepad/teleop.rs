@@ -110,6 +110,8 @@ pub struct PadState {
     pub sticks: Sticks,
     /// Last output published, if any.
     pub last: Option<Mapped>,
+    /// The channel it publishes on.
+    channel: String,
     raw: RawAxes,
     last_sent: Option<Instant>,
     last_heading: f64,
@@ -118,9 +120,10 @@ pub struct PadState {
 impl PadState {
     /// A pad just plugged in: sticks centred, nothing published yet,
     /// enabled at once only when no dead-man is configured.
-    fn new(id: PadId, name: &str, config: &TeleopConfig) -> PadState {
+    fn new(id: PadId, name: &str, config: &TeleopConfig, channel: String) -> PadState {
         PadState {
             id,
+            channel,
             name: name.to_string(),
             mode: config.initial_mode,
             enabled: config.deadman.is_none(),
@@ -134,7 +137,7 @@ impl PadState {
 
     /// The channel this pad publishes on.
     pub fn channel(&self) -> String {
-        self.id.channel()
+        self.channel.clone()
     }
 }
 
@@ -163,10 +166,18 @@ pub struct TeleopOutput {
 }
 
 /// All connected pads and their publish logic.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Teleop {
     config: TeleopConfig,
     pads: BTreeMap<PadId, PadState>,
+    /// Channel prefix of the pads: pad N publishes on `PREFIX/N`.
+    prefix: String,
+}
+
+impl Default for Teleop {
+    fn default() -> Self {
+        Teleop::new(TeleopConfig::default())
+    }
 }
 
 impl Teleop {
@@ -174,7 +185,22 @@ impl Teleop {
         Self {
             config,
             pads: BTreeMap::new(),
+            prefix: "joy".into(),
         }
+    }
+
+    /// Pads publish on `PREFIX/N` from now on (the station names each
+    /// operator's pads); pads already connected keep their channel until
+    /// they reconnect.
+    pub fn set_channel_prefix(&mut self, prefix: &str) {
+        self.prefix = prefix.to_string();
+    }
+
+    /// The channel pad `id` publishes on.
+    fn channel_of(&self, id: PadId) -> String {
+        self.pads
+            .get(&id)
+            .map_or_else(|| id.channel_in(&self.prefix), PadState::channel)
     }
 
     pub fn config(&self) -> &TeleopConfig {
@@ -204,12 +230,13 @@ impl Teleop {
     /// A pad (re)appears and owns its channel; one that was already there
     /// under this id first publishes a stop.
     fn connect(&mut self, id: PadId, name: &str) -> Vec<TeleopOutput> {
-        let channel = id.channel();
         let mut out = Vec::new();
         if let Some(old) = self.pads.remove(&id) {
-            out.push(publish(&channel, Mapped::zero(old.mode)));
+            out.push(publish(&old.channel, Mapped::zero(old.mode)));
         }
-        self.pads.insert(id, PadState::new(id, name, &self.config));
+        let channel = id.channel_in(&self.prefix);
+        let pad = PadState::new(id, name, &self.config, channel.clone());
+        self.pads.insert(id, pad);
         out.push(TeleopOutput {
             channel,
             action: TeleopAction::Connected(name.to_string()),
@@ -222,7 +249,7 @@ impl Teleop {
         let Some(old) = self.pads.remove(&id) else {
             return Vec::new();
         };
-        let channel = id.channel();
+        let channel = old.channel;
         vec![
             publish(&channel, Mapped::zero(old.mode)),
             TeleopOutput {
@@ -236,10 +263,10 @@ impl Teleop {
     /// button, which stops the old mode's output before the new one's.
     fn press(&mut self, id: PadId, b: PadButton, now: Instant) -> Vec<TeleopOutput> {
         let mut out = Vec::new();
+        let channel = self.channel_of(id);
         let Some(pad) = self.pads.get_mut(&id) else {
             return out;
         };
-        let channel = id.channel();
         if b == self.config.estop_button {
             out.push(TeleopOutput {
                 channel,
@@ -277,7 +304,7 @@ impl Teleop {
         let zero = Mapped::zero(pad.mode);
         pad.last = Some(zero.clone());
         pad.last_sent = Some(now);
-        vec![publish(&id.channel(), zero)]
+        vec![publish(&pad.channel, zero)]
     }
 
     /// A stick or trigger moved: reshape, and publish if enabled and the
@@ -341,7 +368,7 @@ fn send_mapped(
     }
     pad.last = Some(m.clone());
     pad.last_sent = Some(now);
-    out.push(publish(&pad.id.channel(), m));
+    out.push(publish(&pad.channel, m));
 }
 
 #[cfg(test)]
@@ -529,6 +556,24 @@ mod tests {
         );
         assert_eq!(out[0].channel, "joy/1");
         assert_eq!(t.pads().count(), 2);
+    }
+
+    #[test]
+    fn an_attached_operators_pads_publish_under_their_prefix() {
+        let (mut t, now) = twist_pad();
+        t.set_channel_prefix("joy/ana");
+        t.handle(
+            &PadEvent::new(1, PadEventKind::Connected("other".into())),
+            now,
+        );
+        let out = t.handle(
+            &PadEvent::new(1, PadEventKind::ButtonPressed(PadButton::LeftBumper)),
+            now,
+        );
+        assert_eq!(out[0].channel, "joy/ana/1");
+        assert_eq!(t.pad(PadId(1)).unwrap().channel(), "joy/ana/1");
+        // A pad connected before keeps its channel until it reconnects.
+        assert_eq!(t.pad(PadId(0)).unwrap().channel(), "joy/0");
     }
 
     #[test]

@@ -29,8 +29,7 @@ pub use prompt::parse_waypoint;
 /// Channel the UI publishes waypoint missions on.
 pub const WAYPOINT_CHANNEL: &str = "wp/gcs";
 
-/// How long a robot's path stays on the map.
-pub const TRAIL_SECONDS: f64 = 10.0;
+pub use crate::view::TRAIL_SECONDS;
 const LOG_LINES: usize = 200;
 const HISTORY_LINES: usize = 100;
 
@@ -268,6 +267,10 @@ pub struct App {
     pub cards_scroll: usize,
     pub key_teleop_on: bool,
     pub key_teleop: KeyTeleop,
+    /// The channel keyboard teleop publishes on (the station names it).
+    pub key_channel: String,
+    /// Who the station logs this TUI's commands under.
+    pub operator: String,
     pub teleop: Teleop,
     /// Cluster a pad in cluster mode drives (the last one made or selected).
     pub active_cluster: Option<String>,
@@ -310,6 +313,8 @@ impl App {
             cards_scroll: 0,
             key_teleop_on: false,
             key_teleop: KeyTeleop::default(),
+            key_channel: KEY_CHANNEL.to_string(),
+            operator: String::new(),
             teleop: Teleop::new(TeleopConfig::default()),
             active_cluster: None,
             now,
@@ -346,7 +351,7 @@ impl App {
             }
         };
         push(WAYPOINT_CHANNEL);
-        push(KEY_CHANNEL);
+        push(&self.key_channel);
         for p in self.teleop.pads() {
             push(&p.channel());
         }

@@ -1,5 +1,6 @@
-//! Robot cards: one three-line card per robot with identity, pose, speed,
-//! heading, mode, route, computation, link, failsafe, battery and mission.
+//! Robot cards: one three-line card per robot with identity, pose, speed
+//! (measured or commanded), heading, mode, route, computation, link,
+//! failsafe and its fault text, battery and mission.
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -9,7 +10,9 @@ use ratatui::widgets::{Block, Paragraph, Widget};
 use super::app::{App, Focus};
 use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
-use super::view::{LinkState, RobotView, failsafe_str, health_str, link_label, mode_str};
+use super::view::{
+    LinkState, RobotView, failsafe_str, health_str, link_label, mode_str, velocity_source_str,
+};
 use mech_proto::{Computation, FailsafeState, Health};
 
 /// The cards panel.
@@ -57,6 +60,9 @@ impl Widget for CardsPanel<'_> {
     }
 }
 
+/// Height (m) from which a card shows a robot's `z`.
+const AIRBORNE: f64 = 0.05;
+
 fn link_style(l: LinkState, t: &Theme) -> ratatui::style::Style {
     match l {
         LinkState::Connected => t.ok(),
@@ -76,18 +82,28 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
     out.push(Line::from(vec![
         Span::styled(marker, colour),
         Span::styled(r.name.as_str(), name_style),
-        Span::raw(format!(" #{} ", r.id)),
+        // Another station's robot: its id is that station's router's.
+        match r.remote {
+            Some(_) => Span::styled(" remote ", t.dim()),
+            None => Span::raw(format!(" #{} ", r.id)),
+        },
         Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
-        Span::styled(if r.remote.is_some() { " remote" } else { "" }, t.dim()),
     ]));
+    // Height only when airborne, so a ground robot's line has room for
+    // whether its speed was measured.
+    let z = if r.pose.z.abs() >= AIRBORNE {
+        format!(" z{:5.2}", r.pose.z)
+    } else {
+        String::new()
+    };
     out.push(Line::raw(format!(
-        " x{:6.2} y{:6.2} z{:5.2} {:4.0}° {:.2}m/s",
+        " x{:6.2} y{:6.2}{z} {:4.0}° {:.2}m/s {}",
         r.pose.x,
         r.pose.y,
-        r.pose.z,
         r.heading_deg(),
-        r.speed()
+        r.speed(),
+        velocity_source_str(r.velocity_source),
     )));
     let route = if r.route.channel.is_empty() {
         "none".to_string()
@@ -109,7 +125,9 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
         Span::raw(format!(" {} {} ", mode_str(r.mode), route)),
         Span::styled(failsafe_str(r.failsafe), fs_style),
     ];
-    if r.health != Health::Ok {
+    if let Some(fault) = &r.fault {
+        spans.push(Span::styled(format!(" {fault}"), t.alarm()));
+    } else if r.health != Health::Ok {
         spans.push(Span::styled(format!(" {}", health_str(r.health)), t.warn()));
     }
     if let Some(m) = r.mission {
@@ -126,5 +144,69 @@ fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec
         spans.push(Span::raw(format!(" {:.0}%", b * 100.0)));
     }
     spans.push(Span::raw(format!(" {comp}board")));
+    spans.push(Span::raw(if r.links.is_empty() {
+        String::new()
+    } else {
+        format!(" {}", r.links)
+    }));
     out.push(Line::from(spans));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ui::Action;
+    use crate::ui::view::FleetSnapshot;
+    use mech_proto::{Velocity, VelocitySource};
+
+    /// The cards of `robots` on a 50-column panel, as text lines.
+    fn cards(robots: Vec<RobotView>) -> Vec<String> {
+        let mut app = App::new("127.0.0.1:7700", std::time::Instant::now());
+        app.update(Action::Fleet(FleetSnapshot {
+            robots,
+            ..FleetSnapshot::default()
+        }));
+        let area = Rect::new(0, 0, 50, 8);
+        let mut buf = Buffer::empty(area);
+        CardsPanel {
+            app: &app,
+            theme: Theme::new(true),
+        }
+        .render(area, &mut buf);
+        (0..area.height)
+            .map(|y| {
+                (0..area.width)
+                    .map(|x| buf[(x, y)].symbol())
+                    .collect::<String>()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn speed_says_measured_or_commanded_and_a_fault_its_text() {
+        let mut rover = RobotView::at("a_rover", 1, "diff-drive", 1.0, 2.0, 0.0);
+        rover.velocity = Velocity {
+            vx: 0.2,
+            ..Velocity::default()
+        };
+        rover.velocity_source = VelocitySource::Measured;
+        rover.failsafe = FailsafeState::Fault;
+        rover.health = Health::Fault;
+        rover.fault = Some("left wheel stalled: driven at 60% for 0.50 s".into());
+        let mut drone = RobotView::at("b_drone", 2, "quadcopter", 0.0, 0.0, 0.0);
+        drone.pose.z = 1.2;
+        let lines = cards(vec![rover, drone]);
+        assert!(lines[2].contains("0.20m/s meas"), "{lines:#?}");
+        assert!(
+            !lines[2].contains(" z"),
+            "a ground robot's height is left out"
+        );
+        assert!(lines[3].contains("fault left wheel stalled"), "{lines:#?}");
+        assert!(
+            !lines[3].contains("FAULT"),
+            "the text replaces the bare health"
+        );
+        assert!(lines[5].contains("z 1.20"), "{lines:#?}");
+        assert!(lines[5].contains("0.00m/s cmd"), "{lines:#?}");
+    }
 }

@@ -12,7 +12,6 @@ use super::app::{App, Focus};
 use super::layout::{ROUTE_COL_W, ROUTE_NAME_W, TableWindow};
 use super::theme::Theme;
 use super::view::{ClusterControlView, RouteView};
-use crate::gamepad::KEY_CHANNEL;
 
 /// The routing-table panel.
 #[derive(Debug)]
@@ -145,7 +144,7 @@ fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
     }
     if app.key_teleop_on {
         lines.push(Line::from(vec![
-            Span::raw(format!(" {:<6} {:<8} ", KEY_CHANNEL, "twist")),
+            Span::raw(format!(" {:<6} {:<8} ", app.key_channel, "twist")),
             Span::styled("keys", t.warn()),
         ]));
     }

@@ -42,9 +42,9 @@ impl Widget for StatusBar<'_> {
         };
         let pads = app.pads();
         let teleop = if app.key_teleop_on {
-            "key/0 ON"
+            format!("{} ON", app.key_channel)
         } else {
-            "key off"
+            "key off".to_string()
         };
         let line = if area.width >= 110 {
             Line::from(vec![

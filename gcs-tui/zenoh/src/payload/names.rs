@@ -80,6 +80,14 @@ names! {
 }
 
 names! {
+    /// Whether the velocity was measured or follows from the commands.
+    velocity_source: mech_proto::VelocitySource {
+        mech_proto::VelocitySource::Commanded => "commanded",
+        mech_proto::VelocitySource::Measured => "measured",
+    }
+}
+
+names! {
     /// How recently the station heard from the robot.
     link: mech_core::LinkState {
         mech_core::LinkState::Connected => "connected",
@@ -90,7 +98,7 @@ names! {
 
 #[cfg(test)]
 mod tests {
-    use mech_proto::{Computation, ControlMode, FailsafeState, Health};
+    use mech_proto::{Computation, ControlMode, FailsafeState, Health, VelocitySource};
 
     #[test]
     fn every_name_reads_back() {
@@ -122,6 +130,10 @@ mod tests {
         }
         for h in [Health::Ok, Health::Degraded, Health::Fault] {
             assert_eq!(super::health::parse(super::health::name(h)), Some(h));
+        }
+        for v in [VelocitySource::Commanded, VelocitySource::Measured] {
+            let name = super::velocity_source::name(v);
+            assert_eq!(super::velocity_source::parse(name), Some(v));
         }
         assert_eq!(super::link::parse("lost"), Some(mech_core::LinkState::Lost));
         assert_eq!(super::mode::parse("Twist"), None);

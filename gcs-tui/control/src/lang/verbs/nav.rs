@@ -1,4 +1,4 @@
-//! `nav ROBOT offboard|onboard`: moves a robot's waypoint navigation
+//! `nav ROBOT offboard|onboard|toggle`: moves a robot's waypoint navigation
 //! between the station's offboard loop and the robot, keeping the mission's
 //! progress; it routes the robot itself, since the switch must not lose a
 //! waypoint.
@@ -13,6 +13,8 @@ use crate::lang::{LangError, Outcome, Span};
 pub enum NavSide {
     Onboard,
     Offboard,
+    /// Whichever side it is not on now (the TUI's `o` key).
+    Toggle,
 }
 
 /// Run `robot`'s navigation on `side`.
@@ -25,14 +27,15 @@ pub struct Nav {
 impl Nav {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Nav, LangError> {
         let robot = a.target()?;
-        let w = a.next("offboard or onboard")?;
+        let w = a.next("offboard, onboard or toggle")?;
         let side = match w.text.as_str() {
             "offboard" => NavSide::Offboard,
             "onboard" => NavSide::Onboard,
+            "toggle" => NavSide::Toggle,
             other => {
                 return Err(LangError::new(
                     w.span,
-                    format!("expected offboard or onboard, found {other:?}"),
+                    format!("expected offboard, onboard or toggle, found {other:?}"),
                 ));
             }
         };
@@ -71,6 +74,12 @@ impl Nav {
                     robot.name, p.id, p.next, p.total
                 )))
             }
+            NavSide::Toggle => ctx
+                .control
+                .toggle_nav(&robot.name)
+                .await
+                .map(Outcome::new)
+                .map_err(|e| control_error(robot, e)),
         }
     }
 }

@@ -4,7 +4,6 @@
 
 use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
-use crate::lang::context::SENDER;
 use crate::lang::{LangError, Outcome, Span};
 
 /// Send the drafts of `target` on `channel` (default: the configured
@@ -53,7 +52,7 @@ impl SendWaypoints {
             };
             let id = ctx
                 .gcs
-                .send_waypoints(SENDER, r, &channel, waypoints, looped)
+                .send_waypoints(&ctx.sender, r, &channel, waypoints, looped)
                 .await
                 .map_err(|e| LangError::new(target.span, e.to_string()))?;
             ids.push(format!("{r}: mission {id}"));

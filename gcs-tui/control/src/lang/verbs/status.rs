@@ -2,7 +2,7 @@
 //! failsafe), for every robot when no target is given, after a summary that
 //! says whether the station authenticates and what it refused.
 
-use mech_core::fleet::{Fleet, Robot};
+use mech_core::fleet::{Fleet, MissionDelivery, Robot};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target, failsafe_name};
@@ -51,9 +51,24 @@ impl Status {
                 .collect();
             format!("; rejected {}", by.join(", "))
         };
+        let recording = ctx
+            .gcs
+            .recording()
+            .map(|r| format!("; {}", super::record::describe(&r)))
+            .unwrap_or_default();
+        let radios: String = router
+            .radios()
+            .iter()
+            .map(|r| {
+                format!(
+                    "; radio {} {} frames {} replaced {} waiting",
+                    r.port, r.frames, r.replaced, r.waiting
+                )
+            })
+            .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}{}",
+                "{} robots; station {}{refused}{}{radios}{recording}",
                 details.len(),
                 router.security().as_str(),
                 ctx.gcs.with_fleet(stations),
@@ -103,8 +118,34 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.stale)
     } else {
         String::new()
-    } + &match &r.remote {
+    } + &links(r)
+        + &lost_mission(r)
+        + &remote(r)
+}
+
+/// Another station's robot, shown here read-only.
+fn remote(r: &Robot) -> String {
+    match &r.remote {
         Some(station) => format!(" remote {station} (read-only)"),
+        None => String::new(),
+    }
+}
+
+/// A mission the robot lost (registered again without it: its agent
+/// restarted), so the operator knows it will not resume by itself.
+fn lost_mission(r: &Robot) -> String {
+    match &r.waypoints.sent {
+        Some(m) if m.delivery == MissionDelivery::Lost => {
+            format!(" mission {} lost (agent restarted; send it again)", m.id)
+        }
+        _ => String::new(),
+    }
+}
+
+/// The live links when the robot has a radio (`links wifi*+radio radio-budget 12 Hz`).
+fn links(r: &Robot) -> String {
+    match r.links.radio_budget_hz {
+        Some(hz) => format!(" links {} radio-budget {hz} Hz", r.links.label()),
         None => String::new(),
     }
 }

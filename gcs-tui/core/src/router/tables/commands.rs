@@ -4,8 +4,6 @@
 //! robot gets only its part; a cluster command goes to the controller that
 //! serves the channel. Every publisher is noted with its channel's rate.
 
-use std::net::SocketAddr;
-
 use mech_proto::{Body, ClusterCommand, Envelope, FleetCommand, Header};
 use tokio::time::Instant;
 use tracing::{info, warn};
@@ -32,9 +30,9 @@ impl Tables {
             return Delivery::Dropped(DropReason::NotRouted);
         }
         self.note_publisher(sender, channel, from, now, events);
-        match self.check_route(destination, channel) {
-            Ok(addr) => {
-                self.pass_on(bytes, Peer::Udp(addr), destination, out);
+        match self.check_route(destination, channel, now) {
+            Ok(to) => {
+                self.pass_on(bytes, to, destination, out);
                 Delivery::Forwarded(1)
             }
             Err(reason) => Delivery::Dropped(reason),
@@ -52,7 +50,7 @@ impl Tables {
         self.note_publisher(&h.sender, channel, m.from, m.now, events);
         let mut delivered = 0;
         for part in fc.parts {
-            let Ok(target) = self.check_route(&part.robot, channel) else {
+            let Ok(target) = self.check_route(&part.robot, channel, m.now) else {
                 continue;
             };
             let header = Header {
@@ -63,7 +61,7 @@ impl Tables {
                 Ok(mut b) => {
                     b.pop(); // the nil auth element: signed for the robot
                     if let Some(b) = self.seal(&b, &part.robot) {
-                        out.owned.push((Peer::Udp(target), b));
+                        out.owned.push((target, b));
                         delivered += 1;
                     }
                 }
@@ -144,18 +142,21 @@ impl Tables {
         }
     }
 
-    /// Whether `robot` obeys `channel` now; counts the outcome for the robot
-    /// and the channel (which [`Tables::note_publisher`] created).
+    /// Whether `robot` obeys `channel` now, and on which link to send to
+    /// it; counts the outcome for the robot and the channel (which
+    /// [`Tables::note_publisher`] created).
     pub(super) fn check_route(
         &mut self,
         robot: &str,
         channel: &str,
-    ) -> Result<SocketAddr, DropReason> {
+        now: Instant,
+    ) -> Result<Peer, DropReason> {
+        let timeout = self.config.link_timeout;
         let outcome = match self.robots.get_mut(robot) {
             None => Err(DropReason::UnknownRobot),
             Some(r) if r.route.as_deref() == Some(channel) => {
                 r.traffic.forwarded += 1;
-                Ok(r.addr)
+                r.links.target(now, timeout).ok_or(DropReason::UnknownRobot)
             }
             Some(r) => {
                 r.traffic.dropped.count(DropReason::NotRouted);

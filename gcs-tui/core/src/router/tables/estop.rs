@@ -3,7 +3,6 @@
 //! robot that registers later is stopped too.
 
 use std::collections::HashSet;
-use std::net::SocketAddr;
 
 use mech_proto::{Body, EStop, EStopAck};
 use tokio::time::Instant;
@@ -77,15 +76,9 @@ impl Tables {
             warn!(id, robots = pending.len(), "e-stop released");
         }
         events.push(Event::EStop { engage, id });
-        let targets: Vec<(String, SocketAddr)> = self
-            .robots
-            .iter()
-            .map(|(n, r)| (n.clone(), r.addr))
-            .collect();
-        for (name, addr) in targets {
-            if let Some(b) = self.make(&name, Body::EStop(EStop { engage, id })) {
-                out.owned.push((Peer::Udp(addr), b));
-            }
+        let names: Vec<String> = self.robots.keys().cloned().collect();
+        for name in names {
+            self.send_estop(&name, EStop { engage, id }, out);
         }
         if pending.is_empty() {
             events.push(Event::EStopComplete { engage, id });
@@ -101,14 +94,23 @@ impl Tables {
         id
     }
 
+    /// Sends an e-stop or release to `robot` on every link it has (each
+    /// copy signed afresh): whichever arrives first stops it, and the
+    /// robot obeys an id once.
+    fn send_estop(&mut self, robot: &str, e: EStop, out: &mut Outbox) {
+        let links: Vec<Peer> = match self.robots.get(robot) {
+            Some(r) => r.links.all().collect(),
+            None => return,
+        };
+        for peer in links {
+            if let Some(b) = self.make(robot, Body::EStop(e)) {
+                out.owned.push((peer, b));
+            }
+        }
+    }
+
     /// A robot registering while the e-stop is latched is stopped too.
-    pub(super) fn estop_newcomer(
-        &mut self,
-        robot: &str,
-        addr: SocketAddr,
-        now: Instant,
-        out: &mut Outbox,
-    ) {
+    pub(super) fn estop_newcomer(&mut self, robot: &str, now: Instant, out: &mut Outbox) {
         let Some(id) = self.estop_latched else {
             return;
         };
@@ -120,9 +122,7 @@ impl Tables {
         });
         if run.engage && run.id == id {
             run.pending.insert(robot.to_string());
-            if let Some(b) = self.make(robot, Body::EStop(EStop { engage: true, id })) {
-                out.owned.push((Peer::Udp(addr), b));
-            }
+            self.send_estop(robot, EStop { engage: true, id }, out);
         }
     }
 
@@ -141,15 +141,9 @@ impl Tables {
             engage: run.engage,
             id: run.id,
         };
-        let due: Vec<(String, SocketAddr)> = run
-            .pending
-            .iter()
-            .filter_map(|name| Some((name.clone(), self.robots.get(name)?.addr)))
-            .collect();
-        for (name, addr) in due {
-            if let Some(b) = self.make(&name, Body::EStop(e)) {
-                out.owned.push((Peer::Udp(addr), b));
-            }
+        let due: Vec<String> = run.pending.iter().cloned().collect();
+        for name in due {
+            self.send_estop(&name, e, out);
         }
     }
 }

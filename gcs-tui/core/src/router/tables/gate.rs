@@ -100,6 +100,7 @@ impl Tables {
     /// [`Tables::reject`] for a source named by text.
     fn reject_from(&mut self, source: String, r: Rejection, events: &mut Vec<Event>) {
         self.rejected.count(r.reason);
+        self.note_refusal(|| format!("{}: {}", r.reason.as_str(), r.detail));
         let now = Instant::now();
         let due = self
             .reject_logged

@@ -25,15 +25,15 @@ impl Tables {
             self.dropped.count(DropReason::UnknownRobot);
             return Delivery::Dropped(DropReason::UnknownRobot);
         };
-        let addr = entry.addr;
         entry.traffic.forwarded += 1;
+        let to = self.target(&robot, m.now);
         self.forwarded += 1;
         let region = match mech_proto::auth::split(m.bytes) {
             Ok((region, _)) => region.to_vec(),
             Err(e) => return self.bad(m.from, e.to_string(), events),
         };
-        if let Some(b) = self.seal(&region, &robot) {
-            out.owned.push((Peer::Udp(addr), b));
+        if let (Some(b), Some(to)) = (self.seal(&region, &robot), to) {
+            out.owned.push((to, b));
         }
         self.missions
             .retain(|p| !(p.robot == robot && p.id == mission.id));
@@ -106,6 +106,7 @@ impl Tables {
         events: &mut Vec<Event>,
     ) {
         let (retry, give_up) = (self.config.mission_retry, self.config.mission_give_up);
+        let timeout = self.config.link_timeout;
         let robots = &self.robots;
         let mut due = Vec::new();
         self.missions.retain_mut(|m| {
@@ -120,15 +121,18 @@ impl Tables {
             }
             if now.saturating_duration_since(m.last) >= retry {
                 m.last = now;
-                if let Some(r) = robots.get(&m.robot) {
-                    due.push((r.addr, m.robot.clone(), m.region.clone()));
+                if let Some(to) = robots
+                    .get(&m.robot)
+                    .and_then(|r| r.links.target(now, timeout))
+                {
+                    due.push((to, m.robot.clone(), m.region.clone()));
                 }
             }
             true
         });
-        for (addr, robot, region) in due {
+        for (to, robot, region) in due {
             if let Some(b) = self.seal(&region, &robot) {
-                out.owned.push((Peer::Udp(addr), b));
+                out.owned.push((to, b));
             }
         }
     }

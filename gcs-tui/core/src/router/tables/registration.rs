@@ -2,12 +2,11 @@
 //! restart or from a new address), `Bye`, link states from silence, and the
 //! router's heartbeats.
 
-use std::net::SocketAddr;
-
 use mech_proto::{Body, Bye, Heartbeat, Hello, Route, Welcome};
 use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
+use super::links::Links;
 use super::{Delivery, Incoming, Outbox, Peer, RobotEntry, Tables};
 use crate::counters::Traffic;
 use crate::event::{Event, LinkState};
@@ -20,34 +19,36 @@ impl Tables {
         out: &mut Outbox,
         events: &mut Vec<Event>,
     ) -> Delivery {
-        let Peer::Udp(addr) = m.from else {
-            return self.bad(m.from, "Hello must come over UDP".into(), events);
-        };
+        if !matches!(m.from, Peer::Udp(_) | Peer::Serial(_)) {
+            return self.bad(m.from, "Hello must come over UDP or a radio".into(), events);
+        }
         if hello.name != m.header.sender {
             let why = format!("Hello for {} sent by {}", hello.name, m.header.sender);
             return self.bad(m.from, why, events);
         }
-        self.register(hello, addr, m.now, out, events);
+        self.register(hello, m.from, m.now, out, events);
         Delivery::Consumed
     }
 
     /// Registers a robot (again, after a restart or from a new address: its
     /// id and route are kept, but it must confirm the route), welcomes it
-    /// with its id and route, and gives it a latched e-stop.
+    /// with its id and route on the link the Hello came on, and gives it a
+    /// latched e-stop.
     pub(super) fn register(
         &mut self,
         hello: Hello,
-        addr: SocketAddr,
+        from: Peer,
         now: Instant,
         out: &mut Outbox,
         events: &mut Vec<Event>,
     ) {
         let known = self.robots.contains_key(&hello.name);
         if known {
-            info!(robot = %hello.name, %addr, "robot registered again");
+            info!(robot = %hello.name, %from, "robot registered again");
         } else {
-            self.enrol(&hello, addr, now, events);
+            self.enrol(&hello, from, now, events);
         }
+        let addr = self.link_addr(from);
         let Some(entry) = self.robots.get_mut(&hello.name) else {
             return;
         };
@@ -75,14 +76,14 @@ impl Tables {
             router_version: env!("CARGO_PKG_VERSION").into(),
         });
         if let Some(b) = self.make(&name, welcome) {
-            out.owned.push((Peer::Udp(addr), b));
+            out.owned.push((from, b));
         }
-        self.estop_newcomer(&name, addr, now, out);
+        self.estop_newcomer(&name, now, out);
     }
 
     /// A robot's first registration: a new id, and the configured default
     /// route (none unless configured, so it holds still).
-    fn enrol(&mut self, hello: &Hello, addr: SocketAddr, now: Instant, events: &mut Vec<Event>) {
+    fn enrol(&mut self, hello: &Hello, from: Peer, now: Instant, events: &mut Vec<Event>) {
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1).max(1);
         let route = self.config.default_route.clone();
@@ -91,7 +92,7 @@ impl Tables {
             hello.name.clone(),
             RobotEntry {
                 id,
-                addr,
+                links: Links::new(from, now),
                 last_seen: now,
                 link: LinkState::Connected,
                 route: route.clone(),
@@ -105,7 +106,7 @@ impl Tables {
                 },
             },
         );
-        info!(robot = %hello.name, platform = %hello.platform, %addr, id, "robot registered");
+        info!(robot = %hello.name, platform = %hello.platform, %from, id, "robot registered");
         if route.is_some() {
             events.push(Event::RouteChanged {
                 robot: hello.name.clone(),
@@ -135,20 +136,20 @@ impl Tables {
         Delivery::Consumed
     }
 
-    /// Liveness: any message from a registered robot's name over UDP.
+    /// Liveness: any message from a registered robot's name over UDP or
+    /// a radio.
     pub(super) fn seen_robot(
         &mut self,
         sender: &str,
-        addr: SocketAddr,
+        from: Peer,
         now: Instant,
         events: &mut Vec<Event>,
     ) {
         if let Some(r) = self.robots.get_mut(sender) {
             r.last_seen = now;
             r.traffic.received += 1;
-            if r.addr != addr {
-                info!(robot = sender, old = %r.addr, new = %addr, "robot moved to a new address");
-                r.addr = addr;
+            if let Some(old) = r.links.heard(from, now) {
+                info!(robot = sender, %old, new = %from, "robot moved to a new address");
             }
             if r.link != LinkState::Connected {
                 r.link = LinkState::Connected;
@@ -190,20 +191,39 @@ impl Tables {
         }
     }
 
-    /// The router's heartbeat to every robot, every `heartbeat_period`.
+    /// The router's heartbeat to every robot, every `heartbeat_period`, on
+    /// each of its links: a robot with two links hears which are alive.
     pub(super) fn send_heartbeats(&mut self, now: Instant, out: &mut Outbox) {
         let period = self.config.heartbeat_period;
         let mut due = Vec::new();
         for (name, r) in self.robots.iter_mut() {
             if now.saturating_duration_since(r.heartbeat_sent) >= period {
                 r.heartbeat_sent = now;
-                due.push((name.clone(), r.addr));
+                due.extend(r.links.all().map(|peer| (name.clone(), peer)));
             }
         }
-        for (name, addr) in due {
+        for (name, peer) in due {
             let body = Body::Heartbeat(Heartbeat { uptime_ms: 0 });
             if let Some(b) = self.make(&name, body) {
-                out.owned.push((Peer::Udp(addr), b));
+                out.owned.push((peer, b));
+            }
+        }
+    }
+
+    /// `Bye` to every registered robot: the station is stopping, so each
+    /// knows now instead of after its router timeout.
+    pub(crate) fn farewell(&mut self, out: &mut Outbox) {
+        let links: Vec<_> = self
+            .robots
+            .iter()
+            .flat_map(|(n, r)| r.links.all().map(|peer| (n.clone(), peer)))
+            .collect();
+        for (name, peer) in links {
+            let body = Body::Bye(Bye {
+                reason: "station stopping".into(),
+            });
+            if let Some(b) = self.make(&name, body) {
+                out.owned.push((peer, b));
             }
         }
     }

@@ -5,7 +5,7 @@ use mech_proto::{Body, Route, RouteAck};
 use tokio::time::Instant;
 use tracing::info;
 
-use super::{Delivery, Incoming, Outbox, Peer, Tables};
+use super::{Delivery, Incoming, Outbox, Tables};
 use crate::event::Event;
 
 /// `None` for the wire's empty channel ("none").
@@ -29,7 +29,8 @@ impl Tables {
         entry.epoch = entry.epoch.wrapping_add(1);
         entry.acked = false;
         entry.route_sent = now;
-        let (addr, epoch) = (entry.addr, entry.epoch);
+        let epoch = entry.epoch;
+        let to = self.target(robot, now);
         let route = Route {
             robot: robot.to_string(),
             channel: channel.unwrap_or_default().to_string(),
@@ -46,8 +47,8 @@ impl Tables {
             channel: channel.map(str::to_string),
             epoch,
         });
-        if let Some(b) = self.make(robot, Body::Route(route)) {
-            out.owned.push((Peer::Udp(addr), b));
+        if let (Some(b), Some(to)) = (self.make(robot, Body::Route(route)), to) {
+            out.owned.push((to, b));
         }
         Some(epoch)
     }
@@ -82,7 +83,7 @@ impl Tables {
 
     /// Resends every unacknowledged route every `route_retry`.
     pub(super) fn retry_routes(&mut self, now: Instant, out: &mut Outbox) {
-        let retry = self.config.route_retry;
+        let (retry, timeout) = (self.config.route_retry, self.config.link_timeout);
         let mut due = Vec::new();
         for (name, r) in self.robots.iter_mut() {
             if !r.acked && now.saturating_duration_since(r.route_sent) >= retry {
@@ -92,13 +93,13 @@ impl Tables {
                     channel: r.route.clone().unwrap_or_default(),
                     epoch: r.epoch,
                 };
-                due.push((r.addr, route));
+                due.extend(r.links.target(now, timeout).map(|to| (to, route)));
             }
         }
-        for (addr, route) in due {
+        for (to, route) in due {
             let robot = route.robot.clone();
             if let Some(b) = self.make(&robot, Body::Route(route)) {
-                out.owned.push((Peer::Udp(addr), b));
+                out.owned.push((to, b));
             }
         }
     }

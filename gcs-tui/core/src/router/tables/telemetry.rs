@@ -19,9 +19,13 @@ impl Tables {
         events: &mut Vec<Event>,
     ) -> Delivery {
         let sender = m.header.sender.as_str();
-        if !self.robots.contains_key(sender) {
+        let Some(robot) = self.robots.get_mut(sender) else {
             self.dropped.count(DropReason::UnknownRobot);
+            self.unknown_robot(m, out);
             return Delivery::Dropped(DropReason::UnknownRobot);
+        };
+        if let Peer::Serial(_) = m.from {
+            robot.links.radio_telemetry(m.bytes.len());
         }
         let subscribers: Vec<(Peer, String)> = self
             .subscribers
@@ -55,9 +59,8 @@ impl Tables {
         fix: PositionFix,
         out: &mut Outbox,
     ) -> Delivery {
-        match self.robots.get(&fix.robot) {
-            Some(r) => {
-                let to = Peer::Udp(r.addr);
+        match self.target(&fix.robot, m.now) {
+            Some(to) => {
                 self.pass_on(m.bytes, to, &fix.robot, out);
                 Delivery::Consumed
             }

@@ -7,7 +7,7 @@ use std::time::Instant;
 use mech_proto::Command;
 
 use super::{App, LogLevel, Request};
-use crate::gamepad::{DriveKey, KEY_CHANNEL, Mapped, PadEvent, TeleopAction, TeleopOutput};
+use crate::gamepad::{DriveKey, Mapped, PadEvent, TeleopAction, TeleopOutput};
 
 impl App {
     /// Time moves on: held pads and keys republish at their rate, and a key
@@ -17,7 +17,8 @@ impl App {
         let out = self.teleop.tick(now);
         self.teleop_outputs(out);
         if let Some(c) = self.key_teleop.tick(now) {
-            self.publish(KEY_CHANNEL, c);
+            let channel = self.key_channel.clone();
+            self.publish(&channel, c);
         }
     }
 
@@ -31,21 +32,23 @@ impl App {
         let state = if self.key_teleop_on { "on" } else { "off" };
         self.log(
             LogLevel::Info,
-            format!("keyboard teleop {state} (channel {KEY_CHANNEL})"),
+            format!("keyboard teleop {state} (channel {})", self.key_channel),
         );
     }
 
     /// A drive key pressed (or repeated) in keyboard teleop.
     pub(super) fn drive(&mut self, key: DriveKey) {
         if let Some(c) = self.key_teleop.press(key, self.now) {
-            self.publish(KEY_CHANNEL, c);
+            let channel = self.key_channel.clone();
+            self.publish(&channel, c);
         }
     }
 
     /// Keyboard teleop's stop: publishes one zero command.
     pub(super) fn drive_stop(&mut self) {
         let c = self.key_teleop.stop(self.now);
-        self.publish(KEY_CHANNEL, c);
+        let channel = self.key_channel.clone();
+        self.publish(&channel, c);
     }
 
     /// One gamepad event through the pads' publish logic.

@@ -7,12 +7,17 @@
 
 use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+    VelocitySource,
 };
+use serde::{Deserialize, Serialize};
 
 /// Link to a robot as the router judges it from its timeouts (the core's
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
 pub use mech_core::auth::Security;
+
+/// How long a robot's path stays on the map.
+pub const TRAIL_SECONDS: f64 = 10.0;
 
 /// How a card spells a link state.
 pub fn link_label(link: LinkState) -> &'static str {
@@ -25,7 +30,7 @@ pub fn link_label(link: LinkState) -> &'static str {
 
 /// Route of a robot: the channel the router forwards, and whether the agent
 /// has acknowledged it yet.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct RouteView {
     /// Empty = routed to none.
     pub channel: String,
@@ -33,7 +38,7 @@ pub struct RouteView {
 }
 
 /// One robot, as the cards and the map show it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RobotView {
     pub name: String,
     /// Router-assigned id.
@@ -41,21 +46,30 @@ pub struct RobotView {
     pub platform: String,
     pub pose: Pose,
     pub velocity: Velocity,
+    /// Measured by wheel encoders, or following from the commands.
+    pub velocity_source: VelocitySource,
     pub mode: ControlMode,
     pub route: RouteView,
     pub computation: Computation,
     pub link: LinkState,
+    /// Live links and radio budget of a robot with a radio
+    /// (`wifi*+radio 14Hz`); empty for a robot on UDP alone.
+    pub links: String,
     pub failsafe: FailsafeState,
     pub health: Health,
+    /// The robot's driver fault text while it reports the fault.
+    pub fault: Option<String>,
     /// Fraction `[0, 1]`.
     pub battery: Option<f64>,
     pub mission: Option<MissionProgress>,
-    /// Where the robot went in the last [`super::app::TRAIL_SECONDS`],
+    /// Where the robot went in the last [`TRAIL_SECONDS`],
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
     pub trail: Vec<(f64, f64)>,
     /// The other station this robot belongs to (shown read-only, through
-    /// a bridge); `None` for this station's robots.
+    /// a bridge); `None` for this station's robots. Absent in the attach
+    /// protocol from a station that predates it.
+    #[serde(default)]
     pub remote: Option<String>,
 }
 
@@ -84,12 +98,15 @@ impl RobotView {
                 heading,
             },
             velocity: Velocity::default(),
+            velocity_source: VelocitySource::Commanded,
             mode: ControlMode::Idle,
             route: RouteView::default(),
             computation: Computation::Onboard,
             link: LinkState::Connected,
+            links: String::new(),
             failsafe: FailsafeState::Ok,
             health: Health::Ok,
+            fault: None,
             battery: None,
             mission: None,
             trail: Vec::new(),
@@ -99,7 +116,7 @@ impl RobotView {
 }
 
 /// A live controller channel seen by the router.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ChannelView {
     pub name: String,
     /// Last publisher's sender name.
@@ -111,7 +128,7 @@ pub struct ChannelView {
 /// panel show it: its members from the fleet model and, once a cluster
 /// controller runs it, what that controller reports (not to be confused
 /// with [`mech_control::ClusterView`], the controller's own account).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ClusterOnScreen {
     pub name: String,
     pub members: Vec<String>,
@@ -121,7 +138,7 @@ pub struct ClusterOnScreen {
 
 /// A cluster controller's last period, as the map and the routes panel
 /// show it (copied from [`mech_control::ControlHub::snapshot`]).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct ClusterControlView {
     /// Cluster pose being tracked (x, y, heading).
     pub desired: Option<(f64, f64, f64)>,
@@ -136,7 +153,7 @@ pub struct ClusterControlView {
 }
 
 /// One member's slot in the formation.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlotView {
     pub robot: String,
     /// Slot position, m.
@@ -170,7 +187,7 @@ impl ClusterControlView {
 }
 
 /// The arena rectangle from the config, metres.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ArenaBounds {
     pub min_x: f64,
     pub min_y: f64,
@@ -179,7 +196,7 @@ pub struct ArenaBounds {
 }
 
 /// Everything the core reports in one refresh.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct FleetSnapshot {
     pub robots: Vec<RobotView>,
     pub channels: Vec<ChannelView>,
@@ -213,6 +230,15 @@ pub fn failsafe_str(f: FailsafeState) -> &'static str {
         FailsafeState::RouterLost => "router-lost",
         FailsafeState::EStopped => "E-STOPPED",
         FailsafeState::Fault => "fault",
+    }
+}
+
+/// How a card tags a speed: measured by encoders or following from the
+/// commands (a stuck wheel shows as a commanded speed with no measured one).
+pub fn velocity_source_str(v: VelocitySource) -> &'static str {
+    match v {
+        VelocitySource::Measured => "meas",
+        VelocitySource::Commanded => "cmd",
     }
 }
 

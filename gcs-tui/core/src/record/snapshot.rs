@@ -1,0 +1,132 @@
+//! The fleet model as events: what a replay applies first so that a file
+//! begun mid-run (`record start`, or the next file of a rotation) shows the
+//! robots, routes, missions and e-stop as they stood. Applying them to an
+//! empty [`Fleet`] gives the same robots, routes, missions, e-stop and last
+//! telemetry (trails and log lines start afresh).
+
+use mech_proto::{Hello, Telemetry};
+
+use crate::event::{Event, LinkState};
+use crate::fleet::{Fleet, MissionDelivery, Robot};
+
+/// Events that rebuild `fleet`.
+pub(crate) fn events(fleet: &Fleet) -> Vec<Event> {
+    let mut out = Vec::new();
+    if let Some(udp) = fleet.udp {
+        out.push(Event::Listening {
+            udp,
+            tcp: fleet.tcp,
+        });
+    }
+    for r in fleet.robots.values() {
+        robot(r, &mut out);
+    }
+    if fleet.estop.id != 0 {
+        out.push(Event::EStop {
+            engage: fleet.estop.engaged,
+            id: fleet.estop.id,
+        });
+    }
+    out
+}
+
+fn robot(r: &Robot, out: &mut Vec<Event>) {
+    let name = r.name.clone();
+    out.push(Event::Registered {
+        hello: Hello {
+            name: name.clone(),
+            platform: r.platform.clone(),
+            capabilities: r.capabilities.clone(),
+            motors: r.motors,
+            max_speed: r.max_speed,
+            max_yaw_rate: r.max_yaw_rate,
+            agent_version: String::new(),
+        },
+        id: r.id,
+        addr: r.addr.clone(),
+        known: false,
+    });
+    if r.route.epoch != 0 {
+        out.push(Event::RouteChanged {
+            robot: name.clone(),
+            channel: r.route.requested.clone(),
+            epoch: r.route.epoch,
+        });
+    }
+    if r.route.acked_epoch != 0 {
+        out.push(Event::RouteAcked {
+            robot: name.clone(),
+            channel: r.route.acknowledged.clone(),
+            epoch: r.route.acked_epoch,
+        });
+    }
+    mission(r, out);
+    if r.last_telemetry.is_some() {
+        out.push(Event::Telemetry {
+            robot: name.clone(),
+            telemetry: telemetry(r),
+        });
+    }
+    if r.link != LinkState::Connected {
+        out.push(Event::Link {
+            robot: name,
+            state: r.link,
+        });
+    }
+}
+
+fn mission(r: &Robot, out: &mut Vec<Event>) {
+    let Some(sent) = &r.waypoints.sent else {
+        return;
+    };
+    let robot = r.name.clone();
+    out.push(Event::MissionSent {
+        robot: robot.clone(),
+        channel: sent.channel.clone(),
+        id: sent.id,
+        waypoints: sent.waypoints.clone(),
+        looped: sent.looped,
+    });
+    let id = sent.id;
+    match &sent.delivery {
+        MissionDelivery::Sending => {}
+        // A lost mission was acknowledged before its robot restarted; the
+        // snapshot replays the acknowledgement (the loss is not restated).
+        MissionDelivery::Acked | MissionDelivery::Lost => out.push(Event::MissionAcked {
+            robot,
+            id,
+            accepted: true,
+            reason: String::new(),
+        }),
+        MissionDelivery::Refused(reason) => out.push(Event::MissionAcked {
+            robot,
+            id,
+            accepted: false,
+            reason: reason.clone(),
+        }),
+        MissionDelivery::Failed(reason) => out.push(Event::MissionFailed {
+            robot,
+            id,
+            reason: reason.clone(),
+        }),
+    }
+}
+
+/// The robot's last telemetry, as the fleet model kept it.
+fn telemetry(r: &Robot) -> Telemetry {
+    Telemetry {
+        pose: r.pose,
+        velocity: r.velocity,
+        mode: r.mode,
+        channel: r.reported_channel.clone().unwrap_or_default(),
+        computation: r.computation,
+        failsafe: r.failsafe,
+        health: r.health,
+        battery: r.battery,
+        position_quality: r.position_quality,
+        actuators: r.actuators.clone(),
+        mission: r.mission,
+        stale: r.stale,
+        velocity_source: r.velocity_source,
+    }
+}

@@ -1,0 +1,381 @@
+//! Serial radios at the station. One radio carries many robots: it is a
+//! broadcast medium (every robot hears every frame; the destination picks
+//! the robot), framed with the protocol's COBS + CRC-32 serial framing.
+//!
+//! Each port has a reader thread, which splits the byte stream into
+//! messages and hands each to the tables exactly as a datagram
+//! ([`super::Shared::decide_frame`]), and a writer thread, which sends from
+//! a [`RadioQueue`]: e-stops first, then commands, routes, missions and the
+//! other control traffic, then heartbeats and the rest. A newer message for
+//! the same robot, kind and channel replaces one still waiting (newest
+//! wins), so a stale command never waits in the queue behind others. The
+//! writer paces itself at the radio's rate, so the queue forms here, where
+//! an e-stop can jump it, and not in the radio's own first-in-first-out
+//! buffer.
+
+use std::collections::{HashMap, VecDeque};
+use std::io::{Read, Write};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use mech_proto::framing::{SerialDecoder, write_serial_message};
+
+use super::Shared;
+use super::tables::Peer;
+use crate::sync::lock;
+
+/// Messages waiting for one radio, at most: beyond it the lowest class is
+/// dropped first (and counted).
+const QUEUE_LIMIT: usize = 1024;
+
+/// Bytes the writer may send ahead of the radio's rate (one frame or so):
+/// the radio's own buffer holds this much at most.
+const BURST_BYTES: f64 = 256.0;
+
+/// What goes first on a radio.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) enum Class {
+    /// E-stops and releases.
+    EStop = 0,
+    /// Commands, routes, missions, registration and time answers.
+    Control = 1,
+    /// Heartbeats, position fixes, notices and anything else.
+    Telemetry = 2,
+}
+
+impl Class {
+    /// The class of a message kind (see docs/protocol.md, *Bodies*).
+    pub(crate) fn of(kind: u8) -> Class {
+        match kind {
+            11 => Class::EStop,
+            // Welcome, Command, FleetCommand, Mission, Route, Time.
+            2 | 5 | 6 | 7 | 9 | 21 => Class::Control,
+            _ => Class::Telemetry,
+        }
+    }
+}
+
+/// Newest wins per destination, kind and channel.
+type Key = (String, u8, String);
+
+#[derive(Debug, Default)]
+struct Pending {
+    /// Per class, keys in the order they first queued.
+    order: [VecDeque<Key>; 3],
+    waiting: HashMap<Key, Vec<u8>>,
+    closed: bool,
+}
+
+/// Counters of one radio's sending side.
+#[derive(Debug, Default)]
+pub(crate) struct RadioCounters {
+    pub(crate) frames: AtomicU64,
+    pub(crate) bytes: AtomicU64,
+    /// Messages replaced in the queue by a newer one (newest wins).
+    pub(crate) replaced: AtomicU64,
+    /// Messages dropped because the queue was full.
+    pub(crate) dropped: AtomicU64,
+}
+
+/// The outgoing queue of one radio, shared by whoever decides (UDP
+/// workers, TCP peers, timers, readers) and the port's writer thread.
+#[derive(Debug, Default)]
+pub(crate) struct RadioQueue {
+    pending: Mutex<Pending>,
+    ready: Condvar,
+    pub(crate) counters: RadioCounters,
+}
+
+impl RadioQueue {
+    /// Queues one message (its encoded bytes) for the radio; never blocks.
+    pub(crate) fn push(&self, bytes: &[u8]) {
+        let Ok(head) = mech_proto::peek(bytes) else {
+            self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        };
+        let class = Class::of(head.kind);
+        let key = (
+            head.destination.to_string(),
+            head.kind,
+            head.channel.to_string(),
+        );
+        let mut p = lock(&self.pending);
+        if p.closed {
+            return;
+        }
+        if let Some(slot) = p.waiting.get_mut(&key) {
+            slot.clear();
+            slot.extend_from_slice(bytes);
+            self.counters.replaced.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        if p.waiting.len() >= QUEUE_LIMIT && !p.make_room(class) {
+            self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        p.order[class as usize].push_back(key.clone());
+        p.waiting.insert(key, bytes.to_vec());
+        drop(p);
+        self.ready.notify_one();
+    }
+
+    /// The next message to send, highest class first; waits for one.
+    /// `None` once closed.
+    fn pop(&self) -> Option<Vec<u8>> {
+        let mut p = lock(&self.pending);
+        loop {
+            if p.closed {
+                return None;
+            }
+            if let Some(bytes) = p.take() {
+                return Some(bytes);
+            }
+            p = self.ready.wait(p).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+
+    /// Messages waiting.
+    pub(crate) fn len(&self) -> usize {
+        lock(&self.pending).waiting.len()
+    }
+
+    /// Stops the writer (it returns from [`RadioQueue::pop`]).
+    pub(crate) fn close(&self) {
+        lock(&self.pending).closed = true;
+        self.ready.notify_all();
+    }
+}
+
+impl Pending {
+    fn take(&mut self) -> Option<Vec<u8>> {
+        for class in 0..self.order.len() {
+            while let Some(key) = self.order[class].pop_front() {
+                if let Some(bytes) = self.waiting.remove(&key) {
+                    return Some(bytes);
+                }
+            }
+        }
+        None
+    }
+
+    /// Drops the oldest message of a class below `class` to make room.
+    fn make_room(&mut self, class: Class) -> bool {
+        for lower in (class as usize + 1..self.order.len()).rev() {
+            if let Some(key) = self.order[lower].pop_front() {
+                self.waiting.remove(&key);
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// Paces writes at the radio's rate: a byte takes 10 bit times (start,
+/// eight data bits, stop).
+#[derive(Debug)]
+struct Pacer {
+    bytes_per_sec: f64,
+    /// Bytes written ahead of the radio's rate.
+    ahead: f64,
+    last: Instant,
+}
+
+impl Pacer {
+    fn new(baud: u32) -> Pacer {
+        Pacer {
+            bytes_per_sec: f64::from(baud) / 10.0,
+            ahead: 0.0,
+            last: Instant::now(),
+        }
+    }
+
+    /// Accounts for `n` bytes written; sleeps while too far ahead.
+    fn wrote(&mut self, n: usize) {
+        let now = Instant::now();
+        let drained = now.duration_since(self.last).as_secs_f64() * self.bytes_per_sec;
+        self.last = now;
+        self.ahead = (self.ahead - drained).max(0.0) + n as f64;
+        if self.ahead > BURST_BYTES {
+            let wait = (self.ahead - BURST_BYTES) / self.bytes_per_sec;
+            std::thread::sleep(Duration::from_secs_f64(wait));
+        }
+    }
+}
+
+/// Sends the queue's messages as serial frames until the queue closes or
+/// the port fails.
+pub(super) fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, name: String) {
+    let mut pacer = Pacer::new(baud);
+    let mut frame = Vec::with_capacity(512);
+    while let Some(bytes) = queue.pop() {
+        frame.clear();
+        write_serial_message(&bytes, &mut frame);
+        if let Err(e) = port.write_all(&frame).and_then(|()| port.flush()) {
+            tracing::warn!(port = %name, error = %e, "radio write failed");
+            if e.kind() != std::io::ErrorKind::TimedOut {
+                return;
+            }
+        }
+        queue.counters.frames.fetch_add(1, Ordering::Relaxed);
+        queue
+            .counters
+            .bytes
+            .fetch_add(frame.len() as u64, Ordering::Relaxed);
+        pacer.wrote(frame.len());
+    }
+}
+
+/// Reads frames from the radio until the router stops or the port fails;
+/// each good message is decided like a datagram, each bad frame counted.
+/// `port` must return from `read` periodically (a port timeout) so the
+/// thread sees the router stop.
+pub(super) fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
+    let mut decoder = SerialDecoder::new();
+    let mut buf = [0u8; 1024];
+    let from = Peer::Serial(index);
+    while !shared.stopped() {
+        let n = match port.read(&mut buf) {
+            Ok(0) => {
+                tracing::warn!(port = %name, "radio port closed");
+                return;
+            }
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                continue;
+            }
+            Err(e) => {
+                tracing::warn!(port = %name, error = %e, "radio read failed");
+                return;
+            }
+        };
+        decoder.push(&buf[..n]);
+        while let Some(frame) = decoder.next_bytes() {
+            match frame {
+                Ok(bytes) => shared.decide_frame(&bytes, from),
+                Err(e) => shared.count_bad_frame(from, e.to_string()),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_proto::{Body, Command, EStop, Envelope, Header, Heartbeat, Twist};
+
+    fn msg(dest: &str, channel: &str, body: Body) -> Vec<u8> {
+        let header = Header {
+            destination: dest.into(),
+            channel: channel.into(),
+            ..Header::default()
+        };
+        mech_proto::encode(&Envelope::new(header, body)).unwrap()
+    }
+
+    fn twist(vx: f64) -> Body {
+        Body::Command(Command::Twist(Twist {
+            vx,
+            ..Twist::default()
+        }))
+    }
+
+    fn next(q: &RadioQueue) -> Envelope {
+        mech_proto::decode(&lock(&q.pending).take().unwrap()).unwrap()
+    }
+
+    #[test]
+    fn estops_go_first_then_commands_then_heartbeats_and_the_newest_command_wins() {
+        let q = RadioQueue::default();
+        q.push(&msg("r1", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        q.push(&msg("r1", "joy/0", twist(0.1)));
+        q.push(&msg("r2", "joy/0", twist(0.2)));
+        q.push(&msg("r1", "joy/0", twist(0.3)));
+        q.push(&msg(
+            "r2",
+            "",
+            Body::EStop(EStop {
+                engage: true,
+                id: 4,
+            }),
+        ));
+        assert_eq!(q.len(), 4, "the newer r1 command replaced the older");
+        assert!(matches!(next(&q).body, Body::EStop(_)));
+        let first = next(&q);
+        assert_eq!(first.header.destination, "r1");
+        assert_eq!(first.body, twist(0.3), "in the older one's place");
+        assert_eq!(next(&q).body, twist(0.2));
+        assert!(matches!(next(&q).body, Body::Heartbeat(_)));
+        assert!(lock(&q.pending).take().is_none());
+        assert_eq!(q.counters.replaced.load(Ordering::Relaxed), 1);
+    }
+
+    #[test]
+    fn a_full_queue_drops_telemetry_before_control_and_never_grows() {
+        let q = RadioQueue::default();
+        for i in 0..QUEUE_LIMIT {
+            let dest = format!("r{i}");
+            q.push(&msg(&dest, "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        }
+        q.push(&msg("x", "joy/0", twist(0.1)));
+        assert_eq!(q.len(), QUEUE_LIMIT);
+        assert_eq!(next(&q).body, twist(0.1), "the command made room");
+        q.push(&msg("y", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        q.push(&msg("z", "", Body::Heartbeat(Heartbeat { uptime_ms: 1 })));
+        assert_eq!(q.len(), QUEUE_LIMIT);
+        assert_eq!(q.counters.dropped.load(Ordering::Relaxed), 1);
+        q.push(&[0x99]);
+        assert_eq!(q.counters.dropped.load(Ordering::Relaxed), 2, "garbage");
+    }
+
+    #[test]
+    fn the_writer_paces_at_the_radio_rate() {
+        // 9600 baud = 960 bytes/s: 20 frames of ~60 bytes take over a second
+        // beyond the burst allowance.
+        let q = Arc::new(RadioQueue::default());
+        for i in 0..20 {
+            q.push(&msg(&format!("r{i}"), "joy/0", twist(0.1)));
+        }
+        let out = Arc::new(Mutex::new(Vec::new()));
+        struct Sink(Arc<Mutex<Vec<u8>>>);
+        impl Write for Sink {
+            fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+                lock(&self.0).extend_from_slice(b);
+                Ok(b.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let started = Instant::now();
+        let (qw, sink) = (q.clone(), Sink(out.clone()));
+        let t = std::thread::spawn(move || writer(qw, sink, 9600, "test".into()));
+        while q.len() > 0 {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        q.close();
+        t.join().unwrap();
+        let sent = lock(&out).len();
+        let floor = (sent as f64 - BURST_BYTES - 100.0) / 960.0;
+        assert!(
+            started.elapsed().as_secs_f64() >= floor,
+            "{sent} bytes in {:?}",
+            started.elapsed()
+        );
+        let mut d = SerialDecoder::new();
+        d.push(&lock(&out));
+        let mut n = 0;
+        while let Some(m) = d.next_message() {
+            m.unwrap();
+            n += 1;
+        }
+        assert_eq!(n, 20);
+    }
+}

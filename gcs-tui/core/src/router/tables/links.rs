@@ -1,0 +1,253 @@
+//! A robot's links and failover: the UDP address and the radio the robot
+//! was last heard on, and when. Everything for a robot goes out on UDP
+//! while UDP is live (heard within `link_timeout`), else on its radio
+//! while that is live, else on whichever was heard last; heartbeats and
+//! e-stops go out on every link, so a robot hears the router on each and
+//! an e-stop takes whichever arrives first. The router tells the fleet
+//! model which links are live and each radio robot's telemetry budget.
+
+use std::net::SocketAddr;
+
+use mech_proto::{Body, Level, Notice, NoticeCode};
+use tokio::time::Instant;
+
+use super::{Incoming, Outbox, Peer, Tables};
+use crate::event::{Event, LinkAddr, RobotLinks};
+
+/// Share of a radio's bandwidth given to the robots' telemetry; the rest
+/// carries commands, acknowledgements, heartbeats and retries.
+const TELEMETRY_SHARE: f64 = 0.5;
+
+/// Bytes of a telemetry frame on the radio before one is measured
+/// (a signed telemetry message, its checksum and COBS framing).
+const DEFAULT_TELEMETRY_FRAME: f64 = 200.0;
+
+/// Most unknown senders remembered for rate-limiting the "register again"
+/// notice; beyond it the memory is cleared.
+const UNKNOWN_SENDERS: usize = 4096;
+
+/// Where one robot was heard, and when.
+#[derive(Debug, Clone)]
+pub(super) struct Links {
+    udp: Option<(SocketAddr, Instant)>,
+    radio: Option<(u16, Instant)>,
+    /// Mean size of the robot's telemetry frames on the radio, bytes.
+    radio_frame: f64,
+    /// What the last [`Event::Links`] said.
+    reported: RobotLinks,
+}
+
+impl Links {
+    pub(super) fn new(from: Peer, now: Instant) -> Links {
+        let mut links = Links {
+            udp: None,
+            radio: None,
+            radio_frame: DEFAULT_TELEMETRY_FRAME,
+            reported: RobotLinks::default(),
+        };
+        links.heard(from, now);
+        links
+    }
+
+    /// Notes a message from the robot on `from`; returns the address it
+    /// replaced when the robot moved (a restart, a new DHCP lease).
+    pub(super) fn heard(&mut self, from: Peer, now: Instant) -> Option<Peer> {
+        match from {
+            Peer::Udp(addr) => {
+                let old = self.udp.replace((addr, now)).map(|(a, _)| a);
+                old.filter(|a| *a != addr).map(Peer::Udp)
+            }
+            Peer::Serial(port) => {
+                let old = self.radio.replace((port, now)).map(|(p, _)| p);
+                old.filter(|p| *p != port).map(Peer::Serial)
+            }
+            Peer::Tcp(_) | Peer::Local => None,
+        }
+    }
+
+    /// The link to send on now: UDP while live, else the radio while live,
+    /// else the one heard last.
+    pub(super) fn target(&self, now: Instant, timeout: std::time::Duration) -> Option<Peer> {
+        let live = |at: Instant| now.saturating_duration_since(at) < timeout;
+        match (self.udp, self.radio) {
+            (Some((a, t)), _) if live(t) => Some(Peer::Udp(a)),
+            (_, Some((p, t))) if live(t) => Some(Peer::Serial(p)),
+            (Some((a, ta)), Some((p, tp))) => Some(if ta >= tp {
+                Peer::Udp(a)
+            } else {
+                Peer::Serial(p)
+            }),
+            (Some((a, _)), None) => Some(Peer::Udp(a)),
+            (None, Some((p, _))) => Some(Peer::Serial(p)),
+            (None, None) => None,
+        }
+    }
+
+    /// Every link of the robot.
+    pub(super) fn all(&self) -> impl Iterator<Item = Peer> + use<> {
+        let udp = self.udp.map(|(a, _)| Peer::Udp(a));
+        let radio = self.radio.map(|(p, _)| Peer::Serial(p));
+        udp.into_iter().chain(radio)
+    }
+
+    /// The radio port the robot was heard on, if any.
+    pub(super) fn radio(&self) -> Option<u16> {
+        self.radio.map(|(p, _)| p)
+    }
+
+    /// Notes the size of a telemetry frame heard on the radio.
+    pub(super) fn radio_telemetry(&mut self, message_len: usize) {
+        // The message, its CRC, COBS overhead and two delimiters.
+        let frame = (message_len + 4 + message_len / 254 + 3) as f64;
+        self.radio_frame += (frame - self.radio_frame) * 0.1;
+    }
+}
+
+impl Tables {
+    /// Where to send to `robot` now.
+    pub(super) fn target(&self, robot: &str, now: Instant) -> Option<Peer> {
+        let timeout = self.config.link_timeout;
+        self.robots.get(robot)?.links.target(now, timeout)
+    }
+
+    /// How a link is named in events and logs.
+    pub(super) fn link_addr(&self, peer: Peer) -> LinkAddr {
+        match peer {
+            Peer::Serial(i) => LinkAddr::Radio(self.radio_name(i)),
+            Peer::Udp(a) => LinkAddr::Udp(a),
+            Peer::Tcp(_) | Peer::Local => LinkAddr::Radio(peer.to_string()),
+        }
+    }
+
+    fn radio_name(&self, port: u16) -> String {
+        self.config
+            .serial
+            .get(usize::from(port))
+            .map_or_else(|| format!("#{port}"), |s| s.port.clone())
+    }
+
+    /// Telemetry messages per second each robot on radio `port` may send:
+    /// the radio's telemetry share split evenly among its robots.
+    fn radio_budget(&self, port: u16, frame: f64) -> Option<f64> {
+        let baud = self.config.serial.get(usize::from(port))?.baud;
+        let robots = self
+            .robots
+            .values()
+            .filter(|r| r.links.radio() == Some(port))
+            .count()
+            .max(1);
+        let hz = f64::from(baud) / 10.0 * TELEMETRY_SHARE / robots as f64 / frame;
+        // Whole messages per second once there are a few, so the budget
+        // does not flicker with the frame size.
+        Some(if hz >= 2.0 {
+            hz.floor()
+        } else {
+            (hz * 10.0).floor() / 10.0
+        })
+    }
+
+    /// Reports every robot with a radio whose live links (or radio budget)
+    /// changed. A robot on UDP alone has one link: its link state says it.
+    pub(super) fn report_links(&mut self, now: Instant, events: &mut Vec<Event>) {
+        let timeout = self.config.link_timeout;
+        let mut changed = Vec::new();
+        for (name, r) in &self.robots {
+            let live = |at: Instant| now.saturating_duration_since(at) < timeout;
+            let l = &r.links;
+            if l.radio.is_none() {
+                continue;
+            }
+            let report = RobotLinks {
+                udp: l.udp.is_some_and(|(_, t)| live(t)),
+                radio: l
+                    .radio
+                    .filter(|(_, t)| live(*t))
+                    .map(|(p, _)| self.radio_name(p)),
+                active: match l.target(now, timeout) {
+                    Some(Peer::Udp(_)) if l.udp.is_some_and(|(_, t)| live(t)) => "udp",
+                    Some(Peer::Serial(_)) if l.radio.is_some_and(|(_, t)| live(t)) => "radio",
+                    _ => "",
+                },
+                radio_budget_hz: l.radio().and_then(|p| self.radio_budget(p, l.radio_frame)),
+            };
+            if report != l.reported {
+                changed.push((name.clone(), report));
+            }
+        }
+        for (name, report) in changed {
+            if let Some(r) = self.robots.get_mut(&name) {
+                r.links.reported = report.clone();
+            }
+            events.push(Event::Links {
+                robot: name,
+                links: report,
+            });
+        }
+    }
+
+    /// A robot's message from a sender the router does not know (the
+    /// station restarted and forgot it): the robot is told to register
+    /// again at once, rather than after its router timeout. At most one
+    /// notice per sender every `heartbeat_period`.
+    pub(super) fn unknown_robot(&mut self, m: Incoming<'_>, out: &mut Outbox) {
+        if !matches!(m.from, Peer::Udp(_) | Peer::Serial(_)) {
+            return;
+        }
+        let sender = m.header.sender.as_str();
+        let gap = self.config.heartbeat_period;
+        let recent = self
+            .unknown_told
+            .get(sender)
+            .is_some_and(|t| m.now.saturating_duration_since(*t) < gap);
+        if recent {
+            return;
+        }
+        if self.unknown_told.len() >= UNKNOWN_SENDERS {
+            self.unknown_told.clear();
+        }
+        self.unknown_told.insert(sender.to_string(), m.now);
+        let notice = Body::Notice(Notice {
+            level: Level::Warn,
+            code: NoticeCode::UnknownRobot,
+            text: "not registered with this router: send Hello".into(),
+        });
+        if let Some(b) = self.make(sender, notice) {
+            out.owned.push((m.from, b));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn udp_while_live_then_the_radio_then_udp_again() {
+        let t0 = Instant::now();
+        let ms = |v| t0 + Duration::from_millis(v);
+        let timeout = Duration::from_millis(300);
+        let wifi = Peer::Udp("10.0.0.2:5000".parse().unwrap());
+        let mut l = Links::new(wifi, t0);
+        assert_eq!(l.target(ms(100), timeout), Some(wifi), "UDP only");
+        l.heard(Peer::Serial(0), ms(100));
+        l.heard(wifi, ms(200));
+        assert_eq!(l.target(ms(400), timeout), Some(wifi), "both live: UDP");
+        l.heard(Peer::Serial(0), ms(400));
+        assert_eq!(
+            l.target(ms(500), timeout),
+            Some(Peer::Serial(0)),
+            "UDP silent for 300 ms: the radio"
+        );
+        assert_eq!(
+            l.target(ms(5_000), timeout),
+            Some(Peer::Serial(0)),
+            "neither live: the one heard last"
+        );
+        l.heard(wifi, ms(5_000));
+        assert_eq!(l.target(ms(5_010), timeout), Some(wifi), "back on UDP");
+        assert_eq!(l.all().count(), 2);
+        let moved = l.heard(Peer::Udp("10.0.0.3:5000".parse().unwrap()), ms(5_020));
+        assert_eq!(moved, Some(wifi));
+    }
+}

@@ -1,0 +1,135 @@
+//! The recorder's tap on the router: every message the tables decide (its
+//! bytes as received, where it came from, what was done with it and why),
+//! every event they make and every operator command, in the order the
+//! tables saw them, offered to a bounded queue without ever waiting. A full
+//! queue drops the record and counts it: recording never slows routing.
+//!
+//! The tap only copies and queues; the writer (`crate::record`) encodes and
+//! writes on a thread of its own.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::time::Duration;
+
+use tokio::time::Instant;
+
+use super::{Delivery, Peer};
+use crate::event::Stamped;
+
+/// One message as the router decided it.
+#[derive(Debug, Clone)]
+pub(crate) struct TappedMessage {
+    /// Router time it was decided at.
+    pub at: Duration,
+    /// The router's count of received messages, this one included: the
+    /// recording's messages are numbered as the router counts them.
+    pub number: u64,
+    /// Where it came from (`udp:ADDR`, `tcp#N`, `gcs`).
+    pub from: Peer,
+    pub bytes: Vec<u8>,
+    pub delivery: Delivery,
+    /// Why it was refused or could not be read, when it was.
+    pub detail: Option<String>,
+}
+
+/// A command the operator gave (command line, script, key), and how it went.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OperatorRecord {
+    pub at: Duration,
+    /// Where it was given: `script`, `tui`, `serve`...
+    pub source: String,
+    /// Script line number, when it came from a script (0 otherwise).
+    pub line: usize,
+    pub text: String,
+    pub ok: bool,
+    /// The command's one-line outcome, or its error.
+    pub summary: String,
+}
+
+/// What the tap queues, in the order the router made it.
+#[derive(Debug)]
+pub(crate) enum Tapped {
+    Message(TappedMessage),
+    Event(Arc<Stamped>),
+    Operator(OperatorRecord),
+    /// Recording starts: the fleet model at that instant (taken under the
+    /// tables' lock, so no message or event falls between it and what
+    /// follows) and the router time.
+    Begin {
+        at: Duration,
+        fleet: Box<crate::fleet::Fleet>,
+        /// The router's count of received messages then.
+        received: u64,
+    },
+    /// Recording ends; the router's count of received messages then.
+    End {
+        received: u64,
+    },
+}
+
+/// The sending end, held by the router's tables while recording.
+#[derive(Debug, Clone)]
+pub(crate) struct Tap {
+    tx: SyncSender<Tapped>,
+    /// Router start, for message times.
+    start: Instant,
+    dropped: Arc<AtomicU64>,
+    queued: Arc<AtomicU64>,
+}
+
+impl Tap {
+    pub(crate) fn new(
+        tx: SyncSender<Tapped>,
+        start: Instant,
+        dropped: Arc<AtomicU64>,
+        queued: Arc<AtomicU64>,
+    ) -> Tap {
+        Tap {
+            tx,
+            start,
+            dropped,
+            queued,
+        }
+    }
+
+    /// Offers `t` to the queue; a full (or closed) queue drops and counts it.
+    pub(crate) fn offer(&self, t: Tapped) {
+        match self.tx.try_send(t) {
+            Ok(()) => {
+                self.queued.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Router time of `now`.
+    pub(crate) fn at(&self, now: Instant) -> Duration {
+        now.saturating_duration_since(self.start)
+    }
+
+    /// Queues a copy of a decided message.
+    pub(crate) fn message(&self, m: MessageTap<'_>) {
+        self.offer(Tapped::Message(TappedMessage {
+            at: self.at(m.now),
+            number: m.number,
+            from: m.from,
+            bytes: m.bytes.to_vec(),
+            delivery: m.delivery,
+            detail: m.detail,
+        }));
+    }
+}
+
+/// A decided message, as [`Tap::message`] takes it.
+#[derive(Debug)]
+pub(crate) struct MessageTap<'a> {
+    pub(crate) now: Instant,
+    pub(crate) number: u64,
+    pub(crate) from: Peer,
+    pub(crate) bytes: &'a [u8],
+    pub(crate) delivery: Delivery,
+    pub(crate) detail: Option<String>,
+}

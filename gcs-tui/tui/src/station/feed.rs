@@ -1,0 +1,297 @@
+//! What every attached TUI is sent: the fleet snapshot, made and
+//! serialized once for all of them at the snapshot rate and at once after
+//! any event other than telemetry (a route change reaches every screen
+//! without waiting for the next period), and the event log, which each
+//! session reads from the fleet model after its own cursor ([`LogCursor`])
+//! when the feed says it grew. A session forwards the newest snapshot
+//! only, so a slow client skips snapshots instead of queueing them.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use mech_control::ControlHub;
+use mech_core::ChannelStatus;
+use mech_core::Gcs;
+use mech_core::fleet::{Fleet, LogEntry, Robot, Severity};
+use tokio::sync::watch;
+
+use super::wire::{FromStation, LogLevel, to_line};
+use crate::view::{
+    ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView, RouteView,
+    Security, TRAIL_SECONDS,
+};
+
+/// Recent log lines a client gets when it attaches.
+pub(super) const LOG_HISTORY: usize = 50;
+
+/// Shortest time between two snapshots (an event storm is coalesced).
+const MIN_GAP: Duration = Duration::from_millis(3);
+
+/// The shared feed: subscribe to snapshots and log lines.
+#[derive(Debug)]
+pub(super) struct Feed {
+    snapshots: watch::Sender<Arc<str>>,
+    log_seq: watch::Sender<u64>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Feed {
+    /// Starts making snapshots `rate` times a second (while anyone
+    /// watches) and after every event.
+    pub fn start(gcs: Gcs, control: ControlHub, rate: f64) -> Feed {
+        let (snapshots, _) = watch::channel(Arc::<str>::from(""));
+        let (log_seq, _) = watch::channel(0);
+        let maker = Maker {
+            gcs,
+            control,
+            snapshots: snapshots.clone(),
+            log_seq: log_seq.clone(),
+            seq: 0,
+        };
+        let task = tokio::spawn(maker.run(Duration::from_secs_f64(1.0 / rate)));
+        Feed {
+            snapshots,
+            log_seq,
+            task,
+        }
+    }
+
+    /// The newest snapshot line, and every later one.
+    pub fn snapshots(&self) -> watch::Receiver<Arc<str>> {
+        self.snapshots.subscribe()
+    }
+
+    /// The newest event-log line's sequence number, changed when it grows.
+    pub fn log_seq(&self) -> watch::Receiver<u64> {
+        self.log_seq.subscribe()
+    }
+
+    pub fn stop(&self) {
+        self.task.abort();
+    }
+}
+
+/// The feed's task state.
+struct Maker {
+    gcs: Gcs,
+    control: ControlHub,
+    snapshots: watch::Sender<Arc<str>>,
+    log_seq: watch::Sender<u64>,
+    seq: u64,
+}
+
+impl Maker {
+    async fn run(mut self, period: Duration) {
+        let mut events = self.gcs.router().subscribe_default(false);
+        let mut tick = tokio::time::interval(period);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        loop {
+            tokio::select! {
+                _ = tick.tick() => {}
+                ev = events.recv() => {
+                    if ev.is_none() {
+                        // The router stopped.
+                        self.publish();
+                        return;
+                    }
+                    // Let the rest of a burst arrive, then show it all.
+                    tokio::time::sleep(MIN_GAP).await;
+                    while events.try_recv().is_some() {}
+                }
+            }
+            self.publish();
+        }
+    }
+
+    /// Says how far the log has grown, then makes a snapshot if anyone
+    /// is watching.
+    fn publish(&mut self) {
+        let wanted = self.snapshots.receiver_count() > 0;
+        // Channels and the controllers' reports lock the router's tables:
+        // read them before the fleet (the lock order).
+        let channels = wanted.then(|| self.gcs.router().channels());
+        let control = wanted.then(|| self.control.snapshot());
+        let (snap, newest) = self.gcs.with_fleet(|f| {
+            let newest = f.log.back().map_or(0, |e| e.seq);
+            (channels.map(|c| snapshot(f, c)), newest)
+        });
+        self.log_seq.send_if_modified(|seq| {
+            let grew = *seq != newest;
+            *seq = newest;
+            grew
+        });
+        let Some(mut fleet) = snap else {
+            return;
+        };
+        if let Some(c) = &control {
+            apply_control(&mut fleet, c);
+        }
+        let router = self.gcs.router();
+        fleet.security = router.security();
+        fleet.rejected = router.rejections().total();
+        self.seq += 1;
+        let line = to_line(&FromStation::Snapshot {
+            seq: self.seq,
+            fleet,
+        });
+        self.snapshots.send_replace(line.into());
+    }
+}
+
+/// Where a session is in the event log: it sends each line once, in
+/// order, and says so when lines it had not sent yet fell out of the log.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct LogCursor {
+    last: u64,
+}
+
+impl LogCursor {
+    /// Starting with the newest `n` lines (debug lines left out).
+    pub fn recent(f: &Fleet, n: usize) -> LogCursor {
+        let shown: Vec<u64> = f
+            .log
+            .iter()
+            .rev()
+            .filter(|e| e.severity != Severity::Debug)
+            .take(n)
+            .map(|e| e.seq)
+            .collect();
+        let last = shown
+            .last()
+            .map_or_else(|| f.log.back().map_or(0, |e| e.seq), |s| s - 1);
+        LogCursor { last }
+    }
+
+    /// The wire lines of the log after the cursor, moving it on.
+    pub fn take(&mut self, f: &Fleet) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(first) = f.log.front() {
+            if first.seq > self.last + 1 {
+                let n = first.seq - self.last - 1;
+                out.push(to_line(&FromStation::Refused {
+                    reason: format!("{n} event-log lines were missed: this client read too slowly"),
+                }));
+            }
+        }
+        for e in f.log_after(self.last) {
+            self.last = e.seq;
+            if let Some(line) = log_line(e) {
+                out.push(line);
+            }
+        }
+        out
+    }
+}
+
+fn log_line(e: &LogEntry) -> Option<String> {
+    let level = match e.severity {
+        Severity::Debug => return None,
+        Severity::Info => LogLevel::Info,
+        Severity::Warn => LogLevel::Warn,
+        Severity::Error => LogLevel::Error,
+    };
+    Some(to_line(&FromStation::Log {
+        seq: e.seq,
+        t: mech_control::script::secs(e.at),
+        level,
+        text: e.text.clone(),
+    }))
+}
+
+/// Converts the core's fleet model into what the screen shows. Read
+/// `channels` from the router *before* taking the fleet lock: the router
+/// holds its tables while it updates the fleet, so asking it for channels
+/// inside [`Gcs::with_fleet`] can deadlock.
+pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
+    let robots = fleet
+        .robots
+        .values()
+        .map(|r| RobotView {
+            name: r.name.clone(),
+            id: r.id,
+            platform: r.platform.clone(),
+            pose: r.pose,
+            velocity: r.velocity,
+            velocity_source: r.velocity_source,
+            mode: r.mode,
+            route: RouteView {
+                channel: r.route.requested.clone().unwrap_or_default(),
+                acknowledged: !r.route.is_pending(),
+            },
+            computation: r.computation,
+            link: r.link,
+            links: r
+                .links
+                .radio_budget_hz
+                .map(|hz| format!("{} {hz}Hz", r.links.label()))
+                .unwrap_or_default(),
+            failsafe: r.failsafe,
+            health: r.health,
+            fault: r.fault.clone(),
+            battery: r.battery,
+            mission: r.mission,
+            trail: recent_path(r),
+            remote: r.remote.clone(),
+        })
+        .collect();
+    FleetSnapshot {
+        robots,
+        channels: channel_views(channels),
+        estop: fleet.estop.engaged,
+        security: Security::default(),
+        rejected: 0,
+        clusters: Some(
+            fleet
+                .clusters
+                .values()
+                .map(|c| ClusterOnScreen {
+                    name: c.name.clone(),
+                    members: c.members.clone(),
+                    control: None,
+                })
+                .collect(),
+        ),
+    }
+}
+
+/// Copies what the cluster controllers report (desired and measured
+/// cluster pose, slot targets, tracking errors) into the snapshot's
+/// clusters, so the screen stays a function of the App's state. Call it
+/// outside [`Gcs::with_fleet`].
+pub fn apply_control(snap: &mut FleetSnapshot, control: &mech_control::ControlSnapshot) {
+    let Some(clusters) = snap.clusters.as_mut() else {
+        return;
+    };
+    for c in clusters {
+        c.control = control
+            .clusters
+            .iter()
+            .find(|v| v.status.cluster == c.name)
+            .map(|v| ClusterControlView::from_status(&v.status));
+    }
+}
+
+/// The part of the robot's recorded path from the last
+/// [`TRAIL_SECONDS`] before its newest telemetry.
+fn recent_path(r: &Robot) -> Vec<(f64, f64)> {
+    let Some(newest) = r.last_telemetry.or_else(|| r.path.back().map(|p| p.at)) else {
+        return Vec::new();
+    };
+    let from = newest.saturating_sub(Duration::from_secs_f64(TRAIL_SECONDS));
+    r.path
+        .iter()
+        .filter(|p| p.at >= from)
+        .map(|p| (p.x, p.y))
+        .collect()
+}
+
+fn channel_views(channels: Vec<ChannelStatus>) -> Vec<ChannelView> {
+    channels
+        .into_iter()
+        .map(|c| ChannelView {
+            name: c.name,
+            publisher: c.publisher,
+            rate_hz: c.rate_hz,
+        })
+        .collect()
+}

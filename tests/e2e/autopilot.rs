@@ -1,0 +1,280 @@
+//! The MAVLink platform end to end: a real `mech-agent` with an
+//! `[autopilot]` section flying a fake PX4 written with pymavlink
+//! (`fake_autopilot.py`), registered with a real `mech-gcs --script`.
+//! Checks the heartbeat exchange, that nothing is armed or switched
+//! before the operator's `autopilot` commands, the setpoints' frame, type
+//! mask and signs, the autopilot's position, heading, velocity and battery
+//! mapped back into MECH's frame, and the zero-velocity hold when the
+//! controller goes quiet and on e-stop.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde_json::Value;
+
+use crate::station::{Station, free_port, observe_telemetry, root};
+
+fn now() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64()
+}
+
+/// Drives `drone` forward at 0.5 m/s, climbing 0.1 m/s and turning left
+/// 0.2 rad/s, for 3 s (a command every 200 ms keeps its failsafe quiet).
+fn drive_for_three_seconds() -> String {
+    "drive drone 0.5 0 0.1 0.2\nsleep 200ms\n".repeat(15)
+}
+
+#[test]
+fn the_agent_flies_a_fake_px4_over_mavlink() {
+    let mavlink_port = free_port();
+    let script = format!(
+        "wait connected drone 20s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
+         autopilot drone arm\nautopilot drone offboard\nsleep 1s\n\
+         route drone cmd/gcs\nwait route drone cmd/gcs 5s\nmode drone twist\nlog driving\n\
+         {}log holding\nsleep 1500ms\nexpect failsafe drone channel-silent\nstatus drone\n\
+         estop\nwait estop 5s\nautopilot drone arm\nsleep 1s\nlog done\n",
+        drive_for_three_seconds()
+    );
+    let mut station = Station::start(&script, &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("drone.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "name = \"drone\"\ncontrol_rate_hz = 20.0\n\
+             [platform]\nkind = \"quadcopter\"\nmax_speed = 1.0\nmax_climb = 0.5\nmax_yaw_rate = 1.0\n\
+             [autopilot]\nlink = \"udpin:127.0.0.1:{mavlink_port}\"\n\
+             [link]\nkind = \"udp\"\nrouter = \"{}\"\n",
+            station.router()
+        ),
+    )
+    .unwrap();
+    let mut agent = Command::new(mech_e2e::binary("mech-agent"))
+        .arg("--config")
+        .arg(&config)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mech-agent starts");
+    let mut autopilot = Command::new("python3")
+        .arg(root().join("tests/e2e/fake_autopilot.py"))
+        .args([&mavlink_port.to_string(), "40"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 runs the fake autopilot (scripts/deps.sh installs pymavlink)");
+    let events = {
+        let out = autopilot.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            BufReader::new(out)
+                .lines()
+                .map_while(Result::ok)
+                .filter_map(|l| serde_json::from_str::<Value>(&l).ok())
+                .collect::<Vec<Value>>()
+        })
+    };
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let observer = {
+        let (router, stop) = (station.router(), stop.clone());
+        std::thread::spawn(move || observe_telemetry(router, stop))
+    };
+    station.until("\"summary\":\"before-arming\"");
+    let arm_window_ends = now() + 1.0;
+    station.until("\"summary\":\"driving\"");
+    let driving = now();
+    station.until("\"summary\":\"holding\"");
+    let holding = now();
+    let (lines, ok) = station.finish();
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    let telemetry = observer.join().unwrap();
+    let _ = autopilot.kill();
+    let _ = autopilot.wait();
+    let events = events.join().unwrap();
+    let _ = agent.kill();
+    let agent_log = agent
+        .wait_with_output()
+        .map(|o| String::from_utf8_lossy(&o.stderr).to_string())
+        .unwrap_or_default();
+    let context = format!("{lines:#?}\nagent: {agent_log}");
+    assert!(ok, "the script failed: {context}");
+    let of = |kind: &str| -> Vec<&Value> { events.iter().filter(|e| e["event"] == kind).collect() };
+    let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+
+    // Heartbeats both ways, MAVLink 2: the agent is an onboard controller
+    // (type 18, autopilot "invalid" 8), and it found the PX4.
+    let heartbeats = of("heartbeat");
+    assert!(
+        heartbeats.len() >= 5,
+        "{} heartbeats: {context}",
+        heartbeats.len()
+    );
+    assert!(heartbeats.iter().all(|h| h["type"] == 18
+        && h["autopilot"] == 8
+        && h["component"] == 191
+        && h["mavlink2"] == true));
+    assert!(
+        lines.iter().any(|l| l.contains("autopilot found: PX4")),
+        "{context}"
+    );
+
+    // Nothing armed or switched before the operator asked: setpoints were
+    // streaming (zero: the drone was routed to none) but no command came.
+    let commands = of("command");
+    let first_command = commands.first().map_or(f64::INFINITY, |c| num(c, "t"));
+    assert!(
+        first_command > arm_window_ends,
+        "a command came before the operator's: {commands:?}"
+    );
+    let setpoints = of("setpoint");
+    let early: Vec<&&Value> = setpoints
+        .iter()
+        .filter(|s| num(s, "t") < arm_window_ends)
+        .collect();
+    assert!(
+        early.len() > 20,
+        "setpoints stream before arming: {}",
+        early.len()
+    );
+    assert!(
+        early
+            .iter()
+            .all(|s| num(s, "vx") == 0.0 && num(s, "vy") == 0.0 && num(s, "yaw_rate") == 0.0)
+    );
+    // Then arm (400, param 1) and OFFBOARD (176, custom mode, main mode 6);
+    // after the e-stop the second arm was refused by the robot itself.
+    let sent: Vec<(i64, Vec<f64>)> = commands
+        .iter()
+        .map(|c| {
+            let p = c["params"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            (c["command"].as_i64().unwrap(), p)
+        })
+        .collect();
+    assert_eq!(sent.len(), 2, "{sent:?}");
+    assert_eq!((sent[0].0, sent[0].1[0]), (400, 1.0));
+    assert_eq!((sent[1].0, sent[1].1[0], sent[1].1[1]), (176, 1.0, 6.0));
+    for accepted in [
+        "autopilot accepted arm",
+        "autopilot armed",
+        "autopilot mode OFFBOARD",
+        "e-stopped: arm refused",
+    ] {
+        assert!(
+            lines.iter().any(|l| l.contains(accepted)),
+            "no {accepted:?}: {context}"
+        );
+    }
+
+    // While driving: LOCAL_NED (1), velocity + yaw rate only (0x05c7), to
+    // system 1 component 1. The drone starts facing east, so forward is
+    // +east (NED y) at first and swings north as it turns left; climbing is
+    // -z; a left turn is a negative NED yaw rate.
+    // (A command delayed past the failsafe timeout on a loaded machine
+    // would make a zero setpoint here: those are counted, not checked.)
+    let window: Vec<&Value> = of("setpoint")
+        .into_iter()
+        .filter(|s| (driving + 0.3..holding).contains(&num(s, "t")))
+        .collect();
+    let flying: Vec<&Value> = window
+        .iter()
+        .copied()
+        .filter(|s| num(s, "vx").hypot(num(s, "vy")) > 0.01)
+        .collect();
+    assert!(
+        flying.len() > 30 && flying.len() * 10 >= window.len() * 8,
+        "{} of {} setpoints while driving moved",
+        flying.len(),
+        window.len()
+    );
+    for s in &flying {
+        assert_eq!(
+            (s["frame"].as_i64(), s["type_mask"].as_i64()),
+            (Some(1), Some(0x05c7)),
+            "{s}"
+        );
+        assert_eq!(s["target"], serde_json::json!([1, 1]));
+        assert_eq!(s["mavlink2"], true);
+        let speed = num(s, "vx").hypot(num(s, "vy"));
+        assert!((speed - 0.5).abs() < 0.01, "{s}");
+        assert!(
+            (num(s, "vz") + 0.1).abs() < 0.01 && (num(s, "yaw_rate") + 0.2).abs() < 0.01,
+            "{s}"
+        );
+        assert!(num(s, "vy") > 0.2, "still mostly east: {s}");
+    }
+    let (first, last) = (flying[0], flying[flying.len() - 1]);
+    assert!(
+        num(first, "vx").abs() < 0.1,
+        "facing east at first: {first}"
+    );
+    assert!(
+        num(last, "vx") > num(first, "vx") + 0.1,
+        "turning left, towards north: {last}"
+    );
+
+    // The controller went quiet: zero-velocity hold, still streamed.
+    let held: Vec<&Value> = of("setpoint")
+        .into_iter()
+        .filter(|s| num(s, "t") > holding + 0.8)
+        .collect();
+    assert!(held.len() > 10, "the hold is streamed: {}", held.len());
+    assert!(held.iter().all(|s| num(s, "vx") == 0.0
+        && num(s, "vy") == 0.0
+        && num(s, "vz") == 0.0
+        && num(s, "yaw_rate") == 0.0));
+
+    // Telemetry back in MECH's frame: the fake's state at the end (NED)
+    // against the last telemetry (ENU), battery 87 %.
+    let drone = &telemetry["drone"];
+    let start = &drone[0];
+    assert!(
+        (start.pose.x - 2.0).abs() < 0.01 && (start.pose.y - 1.0).abs() < 0.01,
+        "1 m north, 2 m east is (2, 1): {:?}",
+        start.pose
+    );
+    assert!(
+        (start.pose.z - 3.0).abs() < 0.01 && start.pose.heading.abs() < 0.01,
+        "{:?}",
+        start.pose
+    );
+    assert_eq!(drone.last().unwrap().battery, Some(0.87));
+    let state = of("state");
+    let end = state.last().unwrap();
+    let t = drone.last().unwrap();
+    assert!(
+        (t.pose.x - num(end, "east")).abs() < 0.05 && (t.pose.y - num(end, "north")).abs() < 0.05,
+        "{:?} vs {end}",
+        t.pose
+    );
+    assert!(
+        (t.pose.z + num(end, "down")).abs() < 0.05,
+        "{:?} vs {end}",
+        t.pose
+    );
+    let heading = mech_proto::wrap_angle(std::f64::consts::FRAC_PI_2 - num(end, "yaw"));
+    assert!(mech_proto::wrap_angle(t.pose.heading - heading).abs() < 0.05);
+    assert!(
+        t.pose.x > 2.5 && t.pose.z > 3.1,
+        "it flew east and up: {:?}",
+        t.pose
+    );
+    // While driving, the velocity reported is the autopilot's (ENU), with
+    // a counter-clockwise yaw rate.
+    let moving = drone
+        .iter()
+        .find(|t| t.velocity.vx.hypot(t.velocity.vy) > 0.4)
+        .expect("moving telemetry");
+    assert!(
+        (moving.velocity.wz - 0.2).abs() < 0.01 && (moving.velocity.vz - 0.1).abs() < 0.01,
+        "{:?}",
+        moving.velocity
+    );
+}

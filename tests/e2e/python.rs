@@ -1,0 +1,368 @@
+//! The Python client package end to end: its own tests, its encoder and
+//! decoder against mech-proto byte for byte, and its two examples driving
+//! simulated robots through a real `mech-gcs --script`: go-to-goal against
+//! a station that requires keys (signing, station time, router-signed
+//! telemetry), leader-follower unsigned, as against `mech-gcs --demo`.
+
+use mech_proto::{
+    Actuators, Body, ChannelInfo as Channel, Channels, Command as Cmd, Computation, ControlMode,
+    Envelope, FailsafeState, FleetCommand, Health, Mission, MissionAck, MissionProgress, Notice,
+    NoticeCode, Pose, RobotCommand, Stop, Subscribe, Telemetry, Time, TimeRequest, Twist, Velocity,
+    VelocityHeading, VelocitySource, Waypoint,
+};
+
+use crate::station::{Station, header, observe, pose_in, python, root, run_ok};
+
+#[test]
+fn the_python_package_passes_its_own_tests() {
+    let mut c = python();
+    c.args(["-m", "unittest", "discover", "-s"])
+        .arg(root().join("clients/python/tests"));
+    run_ok(c, "python3 -m unittest");
+}
+
+/// Python builds these messages with `mech_client`; mech-proto builds the
+/// same envelopes here; the bytes must agree exactly.
+const PYTHON_ENCODES: &str = r#"
+from mech_client import protocol as p
+def env(kind, body, sender="py", destination="robot_1", channel="ext/python"):
+    return p.encode(p.envelope(kind, body, seq=9, stamp_us=1_700_000_000_000_000,
+                               sender=sender, destination=destination, channel=channel)).hex()
+print(env(p.Kind.COMMAND, p.command_body(p.twist(0.3, -0.1, 0.05, 1.25))))
+print(env(p.Kind.COMMAND, p.command_body(p.velocity_heading(-0.2, 3.0))))
+print(env(p.Kind.COMMAND, p.command_body(p.actuators([0.5, -1, 0]))))
+print(env(p.Kind.COMMAND, p.command_body(p.stop())))
+print(env(p.Kind.FLEET_COMMAND, [[["robot_1", p.command_body(p.twist(0.1))],
+                                  ["robot_2", p.command_body(p.stop())]]], destination="router"))
+print(env(p.Kind.MISSION, p.mission_body(4_000_000_000, [p.Waypoint(1.0, 2.0), p.Waypoint(0.5, -1.5, 0.25, 12.5)],
+                                         looped=True, arrival_radius=0.15, start_index=1), channel="wp/python"))
+print(env(p.Kind.SUBSCRIBE, [True], destination="router", channel=""))
+print(env(p.Kind.CHANNELS_REQUEST, [], destination="router", channel=""))
+print(env(p.Kind.TIME_REQUEST, [2**64 - 1], destination="router", channel=""))
+"#;
+
+#[test]
+fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
+    let twist = |vx| {
+        Cmd::Twist(Twist {
+            vx,
+            ..Twist::default()
+        })
+    };
+    let ext = |body| Envelope::new(header("py", "robot_1", "ext/python"), body);
+    let to_router = |channel: &str, body| Envelope::new(header("py", "router", channel), body);
+    let expected = [
+        ext(Body::Command(Cmd::Twist(Twist {
+            vx: 0.3,
+            vy: -0.1,
+            vz: 0.05,
+            wz: 1.25,
+        }))),
+        ext(Body::Command(Cmd::VelocityHeading(VelocityHeading {
+            speed: -0.2,
+            heading: 3.0,
+        }))),
+        ext(Body::Command(Cmd::Actuators(Actuators {
+            outputs: vec![0.5, -1.0, 0.0],
+        }))),
+        ext(Body::Command(Cmd::Stop(Stop {}))),
+        to_router(
+            "ext/python",
+            Body::FleetCommand(FleetCommand {
+                parts: vec![
+                    RobotCommand {
+                        robot: "robot_1".into(),
+                        command: twist(0.1),
+                    },
+                    RobotCommand {
+                        robot: "robot_2".into(),
+                        command: Cmd::Stop(Stop {}),
+                    },
+                ],
+            }),
+        ),
+        Envelope::new(
+            header("py", "robot_1", "wp/python"),
+            Body::Mission(Mission {
+                id: 4_000_000_000,
+                waypoints: vec![
+                    Waypoint {
+                        x: 1.0,
+                        y: 2.0,
+                        z: 0.0,
+                        time: None,
+                    },
+                    Waypoint {
+                        x: 0.5,
+                        y: -1.5,
+                        z: 0.25,
+                        time: Some(12.5),
+                    },
+                ],
+                looped: true,
+                arrival_radius: 0.15,
+                start_index: 1,
+            }),
+        ),
+        to_router("", Body::Subscribe(Subscribe { telemetry: true })),
+        to_router("", Body::ChannelsRequest(mech_proto::ChannelsRequest {})),
+        to_router("", Body::TimeRequest(TimeRequest { nonce: u64::MAX })),
+    ];
+    let mut c = python();
+    c.args(["-c", PYTHON_ENCODES]);
+    let out = run_ok(c, "python3 with mech_client");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let got: Vec<&str> = text.lines().collect();
+    assert_eq!(got.len(), expected.len(), "{text}");
+    for (i, (py, env)) in got.iter().zip(&expected).enumerate() {
+        let rust: String = mech_proto::encode(env)
+            .unwrap()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(*py, rust, "message {i}: {:?}", env.body);
+    }
+}
+
+#[test]
+fn the_python_decoder_reads_what_mech_proto_writes() {
+    let telemetry = Telemetry {
+        pose: Pose {
+            x: 1.5,
+            y: -0.25,
+            z: 2.0,
+            heading: 0.75,
+        },
+        velocity: Velocity {
+            vx: 0.1,
+            vy: 0.2,
+            vz: -0.3,
+            wz: 0.4,
+        },
+        mode: ControlMode::Waypoints,
+        channel: "wp/gcs".into(),
+        computation: Computation::Offboard,
+        failsafe: FailsafeState::ChannelSilent,
+        health: Health::Degraded,
+        battery: Some(0.5),
+        position_quality: 0.9,
+        actuators: vec![0.25, -0.5],
+        mission: Some(MissionProgress {
+            id: 7,
+            next: 2,
+            total: 3,
+        }),
+        stale: 4,
+        velocity_source: VelocitySource::Measured,
+    };
+    let messages = [
+        Body::Telemetry(telemetry),
+        Body::Channels(Channels {
+            channels: vec![Channel {
+                name: "ext/python".into(),
+                publisher: "py".into(),
+                rate_hz: 19.5,
+                robots: vec!["robot_1".into()],
+                idle_ms: 12,
+            }],
+        }),
+        Body::MissionAck(MissionAck {
+            id: 4_000_000_000,
+            accepted: false,
+            reason: "no position".into(),
+        }),
+        Body::Time(Time {
+            nonce: u64::MAX,
+            station_us: 1_700_000_000_000_001,
+        }),
+        Body::Notice(Notice {
+            level: mech_proto::Level::Warn,
+            code: NoticeCode::NotRouted,
+            text: "robot_1 obeys \"\"".into(),
+        }),
+    ];
+    let hex: Vec<String> = messages
+        .into_iter()
+        .map(|b| {
+            mech_proto::encode(&Envelope::new(header("robot_1", "py", ""), b))
+                .unwrap()
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect()
+        })
+        .collect();
+    let script = format!(
+        "import sys\nfrom mech_client import protocol as p\n\
+         for h in {hex:?}:\n    print(repr(p.decode(bytes.fromhex(h)).body))\n"
+    );
+    let mut c = python();
+    c.args(["-c", &script]);
+    let out = run_ok(c, "python3 with mech_client");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 5, "{text}");
+    for (line, wanted) in lines.iter().zip([
+        &[
+            "x=1.5, y=-0.25, z=2.0, heading=0.75",
+            "vx=0.1, vy=0.2, vz=-0.3, wz=0.4",
+            "mode=<ControlMode.WAYPOINTS: 5>",
+            "channel='wp/gcs', offboard=True",
+            "failsafe=<FailsafeState.CHANNEL_SILENT: 1>, health=<Health.DEGRADED: 1>",
+            "battery=0.5, position_quality=0.9, actuators=[0.25, -0.5]",
+            "mission=MissionProgress(id=7, next=2, total=3), stale=4, measured=True",
+        ][..],
+        &["name='ext/python', publisher='py', rate_hz=19.5, robots=['robot_1'], idle_ms=12"],
+        &["MissionAck(id=4000000000, accepted=False, reason='no position')"],
+        &["Time(nonce=18446744073709551615, station_us=1700000000000001)"],
+        &["level=<Level.WARN: 2>, code=3, text='robot_1 obeys \"\"'"],
+    ]) {
+        for w in wanted {
+            assert!(line.contains(w), "{line}\nlacks {w}");
+        }
+    }
+}
+
+#[test]
+fn go_to_goal_signs_and_drives_a_simulated_robot_to_its_goal() {
+    let goal = (1.0, 2.2);
+    let script = format!(
+        "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
+         wait route robot_1 ext/python 5s\nstatus robot_1\nlog go\n\
+         wait near robot_1 {},{} 0.15 60s\nsleep 500ms\nstatus robot_1\n",
+        goal.0, goal.1
+    );
+    let mut station = Station::start(
+        &script,
+        &[(
+            "python",
+            "role = \"controller\"\nchannels = [\"ext/python\"]",
+        )],
+    );
+    station.until("\"summary\":\"go\"");
+    let mut c = python();
+    c.arg(root().join("clients/python/examples/go_to_goal.py"))
+        .args(["robot_1", &goal.0.to_string(), &goal.1.to_string()])
+        .args(["--router", &station.router(), "--timeout", "45", "--key"])
+        .arg(station.key("python"));
+    let out = run_ok(c, "go_to_goal.py");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(report.contains("\"arrived\": true"), "{report}");
+    let (lines, ok) = station.finish();
+    assert!(ok, "the station's script failed: {lines:#?}");
+    let start = pose_in(&lines, "robot_1", 0);
+    let end = pose_in(&lines, "robot_1", 1);
+    let error = (end.0 - goal.0).hypot(end.1 - goal.1);
+    assert!(
+        (start.0 - goal.0).hypot(start.1 - goal.1) > 1.0,
+        "the robot started at the goal: {start:?}"
+    );
+    assert!(
+        error < 0.15,
+        "robot_1 ended {error:.2} m from the goal: {end:?}"
+    );
+    let summary = lines.last().unwrap();
+    assert!(summary.contains("\"authenticated\":true"), "{summary}");
+}
+
+#[test]
+fn leader_follower_keeps_the_follower_behind_the_leader() {
+    let offset = 0.6;
+    let script = "spawn 2\nwait connected robot_1 10s\nwait connected robot_2 10s\n\
+                  route robot_1 ext/python\nroute robot_2 ext/python\n\
+                  wait route robot_1 ext/python 5s\nwait route robot_2 ext/python 5s\n\
+                  log go\nsleep 120s\n";
+    let mut station = Station::start(script, &[]);
+    station.until("\"summary\":\"go\"");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let observer = {
+        let (router, stop) = (station.router(), stop.clone());
+        std::thread::spawn(move || observe(router, stop))
+    };
+    let mut c = python();
+    c.arg(root().join("clients/python/examples/leader_follower.py"))
+        .args(["robot_1", "robot_2", "--seconds", "25"])
+        .args([
+            "--offset",
+            &offset.to_string(),
+            "--router",
+            &station.router(),
+        ]);
+    let out = run_ok(c, "leader_follower.py");
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    let track = observer.join().unwrap();
+    station.child.kill().ok();
+    station.child.wait().ok();
+    let report = String::from_utf8_lossy(&out.stdout).to_string();
+    let (leader, follower) = (&track["robot_1"], &track["robot_2"]);
+    // The leader went round its circle: a path of metres, ending near where
+    // it started a lap earlier or later, and never far from its centre.
+    let path: f64 = leader
+        .windows(2)
+        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+        .sum();
+    assert!(path > 2.0, "the leader drove only {path:.2} m: {report}");
+    // Over the last 5 s (20 Hz telemetry) the follower kept its slot,
+    // `offset` behind the leader, by this observer's telemetry.
+    let n = leader.len().min(follower.len());
+    assert!(n > 200, "{n} telemetry samples");
+    let (lead, fol) = (
+        &leader[leader.len() - 100..],
+        &follower[follower.len() - 100..],
+    );
+    let errors: Vec<f64> = lead
+        .iter()
+        .zip(fol)
+        .map(|(l, f)| {
+            let slot = (l.0 - offset * l.2.cos(), l.1 - offset * l.2.sin());
+            (f.0 - slot.0).hypot(f.1 - slot.1)
+        })
+        .collect();
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    assert!(
+        mean < 0.3,
+        "the follower was {mean:.2} m from its slot on average: {report}"
+    );
+    let behind = lead
+        .iter()
+        .zip(fol)
+        .filter(|(l, f)| (f.0 - l.0) * l.2.cos() + (f.1 - l.1) * l.2.sin() < 0.0)
+        .count();
+    assert!(
+        behind > 90,
+        "the follower was behind the leader {behind} of 100 times"
+    );
+    assert!(report.contains("\"mean_error\""), "{report}");
+}
+
+/// A mission and channel discovery through the package's own calls.
+const MISSION_AND_CHANNELS: &str = r#"
+import json, sys
+from mech_client import Client, Waypoint
+with Client("py_planner", sys.argv[1]) as mech:
+    ack = mech.send_mission("robot_1", "wp/python", [Waypoint(2.6, 0.8), Waypoint(1.0, 2.0)],
+                            arrival_radius=0.1)
+    channels = {c.name: c.robots for c in mech.channels()}
+    t = mech.wait_telemetry("robot_1")
+    print(json.dumps({"accepted": ack.accepted, "channels": channels, "mode": t.mode.name}))
+"#;
+
+#[test]
+fn a_python_client_sends_a_mission_and_discovers_the_channel() {
+    let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 wp/python\n\
+                  wait route robot_1 wp/python 5s\nlog go\n\
+                  wait near robot_1 1.0,2.0 0.15 60s\nstatus robot_1\n";
+    let mut station = Station::start(script, &[]);
+    station.until("\"summary\":\"go\"");
+    let mut c = python();
+    c.args(["-c", MISSION_AND_CHANNELS, &station.router()]);
+    let out = run_ok(c, "python3 with mech_client");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(report.contains("\"accepted\": true"), "{report}");
+    assert!(
+        report.contains("\"wp/python\": [\"robot_1\"]"),
+        "the channel lists its robot: {report}"
+    );
+    assert!(report.contains("\"mode\": \"WAYPOINTS\""), "{report}");
+    let (lines, ok) = station.finish();
+    assert!(ok, "robot_1 did not reach the last waypoint: {lines:#?}");
+}

@@ -1,0 +1,148 @@
+//! A serial radio at the station, end to end: the real `mech-gcs` with a
+//! `[[router.serial]]` endpoint on a pseudo-terminal, two real agents on
+//! the same "radio" (a frame hub between pseudo-terminal pairs), one of
+//! them also on UDP (through a proxy that can cut it). When its UDP goes
+//! silent the station commands it over the radio, fast enough that its
+//! failsafe never trips, and back over UDP when UDP returns.
+
+use std::time::Duration;
+
+use mech_e2e::harness::agent::{self, Agent};
+use mech_e2e::harness::controller::Controller;
+use mech_e2e::harness::proxy::UdpProxy;
+use mech_e2e::harness::radio::{PtyPair, RadioHub};
+use mech_e2e::harness::station::{self, Line, Station};
+use mech_e2e::harness::unix_us;
+
+const FAILSAFE: &str = "channel_timeout = 0.5\nrouter_timeout = 2.0";
+
+/// The active link of `robot` in the last `links` event before `until_us`.
+fn active_at(lines: &[Line], robot: &str, until_us: u64) -> String {
+    lines
+        .iter()
+        .rfind(|l| l.is_event("links") && l.robot() == robot && l.at_us <= until_us)
+        .map(|l| l.json["active"].as_str().unwrap_or("").to_string())
+        .unwrap_or_default()
+}
+
+#[test]
+fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let (air, ra, rb) = (
+        PtyPair::new(dir.path(), "station"),
+        PtyPair::new(dir.path(), "ra"),
+        PtyPair::new(dir.path(), "rb"),
+    );
+    let _hub = RadioHub::start(&air.b, &[&ra.b, &rb.b], 0.0, 1);
+    let port = station::free_port();
+    let wifi = UdpProxy::start(
+        "127.0.0.1:0".parse().unwrap(),
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        2,
+    );
+    let radio = format!(
+        "[[router.serial]]\nport = \"{}\"\nbaud = 115200\n",
+        air.a.display()
+    );
+    let config = station::config(dir.path(), port, &radio);
+    let script = "wait connected ra 20s\nwait connected rb 20s\nroute all ext/t\n\
+                  wait route ra ext/t 5s\nwait route rb ext/t 5s\nlog routed\nsleep 60s\n";
+    let gcs = Station::start(&config, script, dir.path());
+    let serial = |p: &std::path::Path| {
+        format!(
+            "kind = \"serial\"\nport = \"{}\"\nbaud = 115200\ntelemetry_rate_hz = 10",
+            p.display()
+        )
+    };
+    let a_links = format!("[link]\n{}", serial(&ra.a));
+    let b_links = format!(
+        "[[links]]\nkind = \"udp\"\nrouter = \"{}\"\n[[links]]\n{}",
+        wifi.addr,
+        serial(&rb.a)
+    );
+    let mut a = Agent::start(
+        "ra",
+        &agent::config(dir.path(), "ra", 1.0, &a_links, FAILSAFE),
+        None,
+    );
+    let mut b = Agent::start(
+        "rb",
+        &agent::config(dir.path(), "rb", 2.0, &b_links, FAILSAFE),
+        None,
+    );
+    let ctl = Controller::start(
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        &["ra", "rb"],
+        "ext/t",
+        0.1,
+    );
+    ctl.publish(true);
+    gcs.wait_log("routed", Duration::from_secs(40));
+    std::thread::sleep(Duration::from_secs(2));
+
+    let cut = unix_us();
+    wifi.faults.block(true);
+    std::thread::sleep(Duration::from_secs(3));
+    let back = unix_us();
+    wifi.faults.block(false);
+    std::thread::sleep(Duration::from_secs(3));
+    let end = unix_us();
+    ctl.publish(false);
+    std::thread::sleep(Duration::from_secs(1));
+    let (ca, cb) = (a.stop(), b.stop());
+    let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
+    let lines = gcs.lines();
+
+    // The station saw rb on UDP, then on the radio only, then on UDP again.
+    assert_eq!(active_at(&lines, "rb", cut), "udp", "{:#?}", gcs.tail());
+    assert_eq!(active_at(&lines, "rb", back), "radio", "{:#?}", gcs.tail());
+    assert_eq!(active_at(&lines, "rb", end), "udp", "{:#?}", gcs.tail());
+    assert_eq!(
+        active_at(&lines, "ra", end),
+        "radio",
+        "ra has only the radio"
+    );
+    let budget = lines
+        .iter()
+        .filter(|l| l.is_event("links") && l.robot() == "ra")
+        .filter_map(|l| l.json["radio_budget_hz"].as_f64())
+        .next_back();
+    assert!(
+        budget.is_some_and(|hz| hz > 0.0),
+        "a radio budget: {budget:?}"
+    );
+    let switch = |after: u64, to: &str| {
+        lines
+            .iter()
+            .find(|l| {
+                l.is_event("links")
+                    && l.robot() == "rb"
+                    && l.at_us > after
+                    && l.json["active"] == to
+            })
+            .map(|l| (l.at_us - after) / 1000)
+    };
+    println!(
+        "rb: UDP cut -> radio active at the station after {:?} ms; UDP back -> UDP active after {:?} ms",
+        switch(cut, "radio"),
+        switch(back, "udp")
+    );
+    // rb kept driving while UDP was cut: its telemetry came over the radio.
+    let during = ctl
+        .samples()
+        .into_iter()
+        .filter(|s| s.robot == "rb" && s.stamp_us > cut + 1_000_000 && s.stamp_us < back)
+        .collect::<Vec<_>>();
+    assert!(
+        !during.is_empty() && during.iter().all(|s| s.moving),
+        "rb over the radio: {during:?}"
+    );
+    // Neither failsafe tripped before the controller stopped: the commands
+    // never paused for the channel timeout (0.5 s), not even while rb
+    // moved to the radio and back. The one trip each is the final silence.
+    for (name, c) in [("ra", ca), ("rb", cb)] {
+        let c = c.unwrap_or_else(|| panic!("{name} printed no counters"));
+        assert_eq!(c["failsafe_trips"], 1, "{name}: {c}\n{logs}");
+        assert!(c["commands"].as_u64().unwrap_or(0) > 100, "{name}: {c}");
+    }
+}

@@ -1,0 +1,304 @@
+//! Recording and replay end to end: `mech-gcs --script --record` with
+//! simulated agents, the file read by Python's `mcap` package (an
+//! independent reader), then `mech-gcs replay --script`, which must print
+//! what the run printed without sending anything anywhere.
+
+use std::io::Write;
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+use serde_json::Value;
+
+const RUN: &str = r#"
+spawn 2
+wait connected robot_1 5s
+wait connected robot_2 5s
+waypoint robot_1 0.8,0.6
+send robot_1
+route robot_1 wp/gcs
+wait arrived robot_1 30s
+route robot_2 cmd/gcs
+mode robot_2 twist
+drive robot_2 0.2 0 0
+mode robot_1 twist
+drive robot_1 0.2 0 0
+record
+estop
+wait estop 3s
+release
+wait estop 3s
+"#;
+
+fn mech_gcs(args: &[&str], stdin: &str, state: &Path) -> Output {
+    let mut child = Command::new(mech_e2e::binary("mech-gcs"))
+        .args(args)
+        .env("XDG_STATE_HOME", state)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mech-gcs starts");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(stdin.as_bytes())
+        .expect("script written");
+    child.wait_with_output().expect("mech-gcs finishes")
+}
+
+fn json_lines(out: &Output) -> Vec<Value> {
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect()
+}
+
+fn of_type<'a>(lines: &'a [Value], t: &str) -> Vec<&'a Value> {
+    lines.iter().filter(|l| l["type"] == t).collect()
+}
+
+/// A fresh directory for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mech-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// What Python's `mcap` package reads in `file`, or `None` if it is not
+/// installed (`scripts/deps.sh` installs it).
+fn python_reads(file: &Path) -> Option<Value> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_recording.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(file)
+        .output()
+        .ok()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if stderr.contains("No module named 'mcap'") {
+        return None;
+    }
+    assert!(out.status.success(), "python reader: {stderr}");
+    Some(serde_json::from_slice(&out.stdout).expect("one JSON object"))
+}
+
+#[test]
+fn a_recorded_script_reads_in_python_and_replays_as_it_ran() {
+    let dir = scratch("record");
+    let file = dir.join("run.mcap");
+    let args = [
+        "--script",
+        "-",
+        "--udp",
+        "127.0.0.1:0",
+        "--tcp",
+        "127.0.0.1:0",
+        "--record",
+        file.to_str().expect("utf-8 path"),
+    ];
+    let out = mech_gcs(&args, RUN, &dir);
+    let run = json_lines(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{run:#?}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = run.last().expect("a summary");
+    assert_eq!(summary["recording"]["dropped"], 0, "{summary}");
+    let record_result = of_type(&run, "result")
+        .into_iter()
+        .find(|r| r["command"] == "record")
+        .expect("the record verb ran");
+    assert!(
+        record_result["summary"]
+            .as_str()
+            .is_some_and(|s| s.starts_with("recording ")),
+        "{record_result}"
+    );
+    match python_reads(&file) {
+        Some(read) => check_python_view(&read),
+        None => println!("skipped the Python reader: python3 -m pip install mcap"),
+    }
+    replay_prints_the_run(&file, &run, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Schemas Foxglove and Lichtblick draw, JSON everywhere but the raw copy,
+/// and every message the router received recorded once.
+fn check_python_view(read: &Value) {
+    assert_eq!(read["profile"], "mech");
+    let topics = &read["topics"];
+    let schema = |t: &str| topics[t]["schema"].as_str().unwrap_or("").to_string();
+    assert_eq!(schema("/robots/robot_1/pose"), "foxglove.PoseInFrame");
+    assert_eq!(schema("/mech/scene"), "foxglove.SceneUpdate");
+    assert_eq!(schema("/mech/log"), "foxglove.Log");
+    assert_eq!(schema("/mech/events"), "mech.Event");
+    assert_eq!(schema("/robots/robot_2/telemetry"), "mech.Telemetry");
+    assert_eq!(schema("/mech/decisions"), "mech.Decision");
+    assert_eq!(schema("/mech/operator"), "mech.OperatorCommand");
+    let Value::Object(map) = topics else {
+        panic!("topics: {topics}")
+    };
+    for (topic, t) in map {
+        let expected = if topic == "/mech/raw" {
+            "x-mech-msgpack"
+        } else {
+            "json"
+        };
+        assert_eq!(t["encoding"], expected, "{topic}");
+        if expected == "json" {
+            assert_eq!(t["schema_encoding"], "jsonschema", "{topic}");
+        }
+    }
+    let end = &read["metadata"]["mech.end"];
+    let counted = topics["/mech/raw"]["count"].as_u64().expect("raw count");
+    assert_eq!(end["router_received"], counted.to_string(), "{end}");
+    assert_eq!(end["dropped"], "0");
+    let total: u64 = map.values().filter_map(|t| t["count"].as_u64()).sum();
+    assert_eq!(read["message_count"], total);
+    let pose = &topics["/robots/robot_1/pose"]["first"];
+    assert_eq!(pose["frame_id"], "world", "{pose}");
+    assert!(pose["pose"]["orientation"]["w"].is_number(), "{pose}");
+    assert!(pose["timestamp"]["sec"].as_u64().unwrap_or(0) > 1_600_000_000);
+    let scene = &topics["/mech/scene"]["first"];
+    assert!(scene["entities"].as_array().is_some(), "{scene}");
+    assert_eq!(topics["/mech/operator"]["count"], 17);
+}
+
+/// `replay --script` prints the run's events in the same order and the same
+/// commands with the same outcomes; no datagram reaches the robots' or the
+/// router's recorded addresses while it runs.
+fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
+    let listeners = recorded_addresses(run);
+    let file = file.to_str().expect("utf-8 path");
+    let out = mech_gcs(&["replay", file, "--script"], "", dir);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let replayed = json_lines(&out);
+    let events = |lines: &[Value]| -> Vec<Value> {
+        of_type(lines, "event")
+            .into_iter()
+            .filter(|e| e["event"] != "listening")
+            .cloned()
+            .collect()
+    };
+    let (ran, again) = (events(run), events(&replayed));
+    assert!(ran.len() > 10 && again.len() >= ran.len(), "{ran:#?}");
+    // The run printed until its summary; the recording goes on to the
+    // router's shutdown (the robots' goodbyes).
+    assert_eq!(again[..ran.len()], ran[..]);
+    let commands = |lines: &[Value]| -> Vec<(Value, Value, Value)> {
+        of_type(lines, "result")
+            .into_iter()
+            .map(|r| (r["line"].clone(), r["command"].clone(), r["ok"].clone()))
+            .collect()
+    };
+    assert_eq!(commands(&replayed), commands(run));
+    let summary = replayed.last().expect("a summary");
+    assert_eq!(summary["ok"], true, "{summary}");
+    for (what, sock) in &listeners {
+        let mut buf = [0u8; 2048];
+        assert!(
+            sock.recv_from(&mut buf).is_err(),
+            "the replay sent a datagram to the recorded {what}"
+        );
+    }
+    if let Some(calls) = network_calls_of_replay(file, dir) {
+        assert!(calls.is_empty(), "the replay touched the network: {calls}");
+    }
+}
+
+/// Sockets bound on the router's and robots' recorded UDP addresses (those
+/// still free), non-blocking.
+fn recorded_addresses(run: &[Value]) -> Vec<(String, UdpSocket)> {
+    let mut addrs = Vec::new();
+    for e in of_type(run, "event") {
+        let addr = match e["event"].as_str() {
+            Some("listening") => e["udp"].as_str(),
+            Some("registered") => e["addr"].as_str(),
+            _ => None,
+        };
+        if let Some(a) = addr {
+            addrs.push((e["event"].to_string(), a.to_string()));
+        }
+    }
+    assert!(addrs.len() >= 3, "router and two robots: {addrs:?}");
+    addrs
+        .into_iter()
+        .filter_map(|(what, a)| {
+            let s = UdpSocket::bind(&a).ok()?;
+            s.set_nonblocking(true).ok()?;
+            Some((format!("{what} address {a}"), s))
+        })
+        .collect()
+}
+
+/// The network system calls `mech-gcs replay --script` makes, traced with
+/// strace (`None` when strace is not installed).
+fn network_calls_of_replay(file: &str, dir: &Path) -> Option<String> {
+    let trace = dir.join("replay.strace");
+    let status = Command::new("strace")
+        .args(["-f", "-qq", "-e", "trace=%network", "-o"])
+        .arg(&trace)
+        .arg(mech_e2e::binary("mech-gcs"))
+        .args(["replay", file, "--script"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .ok()?;
+    if !status.success() {
+        println!("strace could not trace the replay here: skipped");
+        return None;
+    }
+    let calls = std::fs::read_to_string(trace).ok()?;
+    Some(calls.trim().to_string())
+}
+
+#[test]
+fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
+    let dir = scratch("record-damaged");
+    let file = dir.join("run.mcap");
+    let script = "spawn 1\nwait connected robot_1 5s\nsleep 2500ms\nlog done\n";
+    let args = [
+        "--script",
+        "-",
+        "--udp",
+        "127.0.0.1:0",
+        "--tcp",
+        "127.0.0.1:0",
+        "--record",
+        file.to_str().expect("utf-8 path"),
+    ];
+    let out = mech_gcs(&args, script, &dir);
+    assert_eq!(out.status.code(), Some(0));
+    let bytes = std::fs::read(&file).expect("the recording");
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("cut written");
+    let out = mech_gcs(
+        &["replay", cut.to_str().expect("utf-8"), "--script"],
+        "",
+        &dir,
+    );
+    assert_eq!(out.status.code(), Some(1), "damaged: exit code 1");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("truncated or corrupt"), "{stderr}");
+    let lines = json_lines(&out);
+    assert!(
+        lines.iter().any(|l| l["event"] == "registered"),
+        "{lines:#?}"
+    );
+    assert_eq!(lines.last().expect("summary")["ok"], false);
+    let junk = dir.join("junk.mcap");
+    std::fs::write(&junk, b"hello").expect("junk written");
+    let out = mech_gcs(&["replay", junk.to_str().expect("utf-8")], "", &dir);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not a MECH recording"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
