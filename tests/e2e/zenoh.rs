@@ -171,16 +171,112 @@ fn two_stations_share_their_fleets_and_a_python_program_reads_them() {
 #[test]
 fn the_zenoh_page_shows_the_tested_reader() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let page = std::fs::read_to_string(root.join("docs/zenoh.md")).unwrap();
     let file = std::fs::read_to_string(root.join("docs/examples/zenoh_telemetry.py")).unwrap();
-    let section = &page[page
-        .find("## Reading MECH from Python")
-        .expect("the section")..];
-    let start = section.find("```python\n").expect("a python block") + "```python\n".len();
-    let end = start + section[start..].find("```").expect("the block's end");
-    assert_eq!(
-        &section[start..end],
-        file,
-        "docs/zenoh.md and zenoh_telemetry.py differ"
+    let block = mech_e2e::doc_block("docs/zenoh.md", "## Reading MECH from Python", "python");
+    assert_eq!(block, file, "docs/zenoh.md and zenoh_telemetry.py differ");
+}
+
+#[test]
+fn a_station_name_that_is_not_a_key_chunk_is_refused_with_why() {
+    let out = Command::new(mech_e2e::binary("mech-zenoh"))
+        .args([
+            "--station",
+            "site*a",
+            "--script",
+            "-",
+            "--udp",
+            "127.0.0.1:0",
+        ])
+        .stdin(Stdio::null())
+        .output()
+        .expect("mech-zenoh runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("\"site*a\" cannot be a Zenoh key chunk: it contains '*'"),
+        "{err}"
     );
+}
+
+const SERVED_PEER: &str = "
+wait connected robot_1@site-s 30s
+route robot_1@site-s ext/t
+wait route robot_1@site-s ext/t 30s
+sleep 120s
+";
+
+const ATTACHED: &str = "
+wait route robot_1 ext/t 30s
+wait connected robot_2@site-t 30s
+status
+";
+
+/// Starts `mech-zenoh serve` and waits for its ready line.
+fn serve(dir: &Path, socket: &Path, endpoint: &str) -> Running {
+    let config = dir.join("site-s.toml");
+    std::fs::write(&config, "[zenoh]\nroute_requests = \"unsigned\"\n").unwrap();
+    let mut child = Command::new(mech_e2e::binary("mech-zenoh"))
+        .args(["serve", "--station", "site-s", "--demo", "1"])
+        .args(["--config", config.to_str().unwrap(), "--listen", endpoint])
+        .args(["--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
+        .arg("--socket")
+        .arg(socket)
+        .env("XDG_STATE_HOME", dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mech-zenoh serve starts");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let ready = lines.next().expect("a ready line").expect("utf-8");
+    assert!(ready.contains("mech-gcs serving"), "{ready}");
+    Running(child)
+}
+
+#[test]
+fn a_served_station_bridges_while_operators_attach() {
+    let dir = tempfile::tempdir().unwrap();
+    let socket = dir.path().join("gcs.sock");
+    let s_end = free_endpoint();
+    let mut served = serve(dir.path(), &socket, &s_end);
+    let t_args = ["--listen", &free_endpoint(), "--connect", &s_end];
+    let (_t, t_out) = start("site-t", &t_args, SERVED_PEER, dir.path());
+    let t_lines = read_until(&t_out, &["\"line\":4,", "\"ok\":true"], "site-t's route");
+    assert!(
+        t_lines
+            .iter()
+            .any(|l| l.contains("\"line\":3,") && l.contains("of station site-s routed to ext/t")),
+        "{t_lines:#?}"
+    );
+
+    let out = Command::new(mech_e2e::binary("mech-gcs"))
+        .arg("--attach")
+        .arg(&socket)
+        .args(["--script", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .and_then(|mut c| {
+            c.stdin.take().unwrap().write_all(ATTACHED.as_bytes())?;
+            c.wait_with_output()
+        })
+        .expect("mech-gcs attaches");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("robot_2@site-t") && text.contains("remote site-t (read-only)"),
+        "{text}"
+    );
+
+    let term = Command::new("kill")
+        .args(["-TERM", &served.0.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(term.success());
+    let status = served.0.wait().expect("serve exits");
+    assert!(status.success(), "{status:?}");
 }

@@ -5,7 +5,6 @@
 
 use mech_core::Gcs;
 use mech_core::fleet::Robot;
-use mech_proto::Telemetry;
 use tracing::debug;
 use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
@@ -76,26 +75,7 @@ fn state(station: &str, r: &Robot, topic: Topic, origin_us: u64) -> Option<Vec<u
         Topic::Telemetry => {
             let at = r.last_telemetry?;
             let stamp = origin_us + at.as_micros() as u64;
-            to_json(&TelemetryMsg::new(station, name, &last_telemetry(r), stamp))
+            to_json(&TelemetryMsg::new(station, name, &r.telemetry(), stamp))
         }
     })
-}
-
-/// The robot's last telemetry, as the fleet model keeps it.
-fn last_telemetry(r: &Robot) -> Telemetry {
-    Telemetry {
-        pose: r.pose,
-        velocity: r.velocity,
-        velocity_source: r.velocity_source,
-        mode: r.mode,
-        channel: r.reported_channel.clone().unwrap_or_default(),
-        computation: r.computation,
-        failsafe: r.failsafe,
-        health: r.health,
-        battery: r.battery,
-        position_quality: r.position_quality,
-        actuators: r.actuators.clone(),
-        mission: r.mission,
-        stale: r.stale,
-    }
 }

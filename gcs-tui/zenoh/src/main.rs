@@ -143,22 +143,12 @@ fn load(cli: &Cli) -> anyhow::Result<(GcsConfig, ZenohConfig)> {
         Some(path) => read(path)?,
         None => (GcsConfig::default(), ZenohConfig::default()),
     };
-    if cli.demo.is_some() && cli.config.is_none() {
-        // A demo fleet lives in this process: the router stays on loopback.
-        config
-            .router
-            .udp
-            .set_ip(std::net::Ipv4Addr::LOCALHOST.into());
-    }
-    if let Some(udp) = cli.udp {
-        config.router.udp = udp;
-    }
-    if let Some(tcp) = cli.tcp {
-        config.router.tcp = Some(tcp);
-    }
-    if let Some(socket) = &cli.socket {
-        config.station.socket = Some(socket.clone());
-    }
+    config.override_with(&mech_gcs::config::Overrides {
+        demo_without_file: cli.demo.is_some() && cli.config.is_none(),
+        udp: cli.udp,
+        tcp: cli.tcp,
+        socket: cli.socket.clone(),
+    });
     if let Some(s) = &cli.station {
         zenoh.station.clone_from(s);
     }

@@ -6,8 +6,8 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mech_proto::{
-    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    VelocitySource, Waypoint,
+    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
+    Velocity, VelocitySource, Waypoint,
 };
 
 use crate::counters::Traffic;
@@ -211,6 +211,25 @@ impl Robot {
     /// station's, shown read-only).
     pub fn is_local(&self) -> bool {
         self.remote.is_none()
+    }
+
+    /// The robot's last telemetry, as the fleet model keeps it.
+    pub fn telemetry(&self) -> Telemetry {
+        Telemetry {
+            pose: self.pose,
+            velocity: self.velocity,
+            mode: self.mode,
+            channel: self.reported_channel.clone().unwrap_or_default(),
+            computation: self.computation,
+            failsafe: self.failsafe,
+            health: self.health,
+            battery: self.battery,
+            position_quality: self.position_quality,
+            actuators: self.actuators.clone(),
+            mission: self.mission,
+            stale: self.stale,
+            velocity_source: self.velocity_source,
+        }
     }
 
     /// After a registration, the first telemetry tells whether the robot
