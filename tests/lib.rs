@@ -3,7 +3,10 @@
 
 pub mod harness;
 
-use std::path::PathBuf;
+use std::ffi::OsStr;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
 
 /// Path of a workspace binary (`mech-gcs`, `mech-agent`) next to the test
 /// executable's target directory. The test command builds the binaries first.
@@ -29,4 +32,31 @@ pub fn doc_block(page: &str, section: &str, lang: &str) -> String {
     let start = section.find(&fence).expect("a code block") + fence.len();
     let end = start + section[start..].find("```").expect("the block's end");
     section[start..end].to_string()
+}
+
+/// Starts `mech-gcs ARGS` logging into `state`, with `stdin` written to its
+/// standard input (then closed) and its output piped.
+pub fn spawn_mech_gcs<A: AsRef<OsStr>>(args: &[A], stdin: &str, state: &Path) -> Child {
+    let mut child = Command::new(binary("mech-gcs"))
+        .args(args)
+        .env("XDG_STATE_HOME", state)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mech-gcs starts (the test command builds it first)");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(stdin.as_bytes())
+        .expect("stdin written");
+    child
+}
+
+/// Runs `mech-gcs ARGS` as [`spawn_mech_gcs`] starts it, to the end.
+pub fn mech_gcs<A: AsRef<OsStr>>(args: &[A], stdin: &str, state: &Path) -> Output {
+    spawn_mech_gcs(args, stdin, state)
+        .wait_with_output()
+        .expect("mech-gcs finishes")
 }

@@ -387,11 +387,8 @@ impl Default for SimConfig {
 /// A config that could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error("{file}: cannot read: {source}")]
-    Read {
-        file: String,
-        source: std::io::Error,
-    },
+    #[error("{file}: cannot read: {error}")]
+    Read { file: String, error: std::io::Error },
     #[error("{file}:{line}:{column}: {message}")]
     Invalid {
         file: String,
@@ -405,9 +402,9 @@ impl RobotConfig {
     /// Reads and checks a config file.
     pub fn load(path: &Path) -> Result<RobotConfig, ConfigError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {
             file: file.clone(),
-            source,
+            error,
         })?;
         let mut config = RobotConfig::parse(&text, &file)?;
         if let Some(auth) = config.auth.as_mut().filter(|a| a.key.is_relative()) {
@@ -552,13 +549,12 @@ impl RobotConfig {
                 telemetry_rate_hz: Some(hz),
                 ..
             } = &link.get_ref().0
+                && !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0)
             {
-                if !(hz.is_finite() && *hz > 0.0 && *hz <= 1000.0) {
-                    return Err((
-                        at(link.span()),
-                        format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
-                    ));
-                }
+                return Err((
+                    at(link.span()),
+                    format!("telemetry_rate_hz = {hz}: expected a rate in (0, 1000] Hz"),
+                ));
             }
         }
         let f = self.failover;

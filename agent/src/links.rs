@@ -95,10 +95,8 @@ impl LinkChoice {
             (Some(gap), Some(last)) => now.saturating_sub(last) >= gap,
             _ => true,
         };
-        if allowed {
-            if let Some(l) = self.last_telemetry.get_mut(link) {
-                *l = Some(now);
-            }
+        if allowed && let Some(l) = self.last_telemetry.get_mut(link) {
+            *l = Some(now);
         }
         allowed
     }

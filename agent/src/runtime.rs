@@ -18,8 +18,17 @@ use crate::links::LinkChoice;
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
 pub trait Vehicle: Send {
+    /// The agent core.
+    fn agent(&self) -> &Agent;
+    fn agent_mut(&mut self) -> &mut Agent;
+    /// One control period; returns messages to send.
+    fn tick(&mut self, now: Duration) -> Vec<Envelope>;
+    /// Zeroes the actuators and returns the `Bye` to send.
+    fn stop(&mut self, now: Duration) -> Envelope;
     /// Handles one received datagram.
-    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope>;
+    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
+        self.agent_mut().handle_bytes(bytes, now)
+    }
     /// Encodes a message to send on the robot's link number `link`
     /// (signed, when the robot has a key).
     fn encode(
@@ -27,17 +36,21 @@ pub trait Vehicle: Send {
         env: &Envelope,
         link: u8,
         out: &mut Vec<u8>,
-    ) -> Result<(), mech_proto::Error>;
+    ) -> Result<(), mech_proto::Error> {
+        self.agent_mut().encode_on(env, link, out)
+    }
     /// Handles one received message.
-    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope>;
-    /// One control period; returns messages to send.
-    fn tick(&mut self, now: Duration) -> Vec<Envelope>;
-    /// Zeroes the actuators and returns the `Bye` to send.
-    fn stop(&mut self, now: Duration) -> Envelope;
+    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
+        self.agent_mut().handle(env, now)
+    }
     /// A heartbeat (a probe on a link not in use).
-    fn heartbeat(&mut self, now: Duration) -> Envelope;
+    fn heartbeat(&mut self, now: Duration) -> Envelope {
+        self.agent_mut().heartbeat(now)
+    }
     /// The agent's counters.
-    fn counters(&self) -> Counters;
+    fn counters(&self) -> Counters {
+        self.agent().counters()
+    }
 }
 
 /// A robot with real actuators, (optionally) a position source read by its
@@ -60,25 +73,11 @@ impl std::fmt::Debug for HardwareVehicle {
 }
 
 impl Vehicle for HardwareVehicle {
-    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
-        self.agent.handle_bytes(bytes, now)
+    fn agent(&self) -> &Agent {
+        &self.agent
     }
-    fn encode(
-        &mut self,
-        env: &Envelope,
-        link: u8,
-        out: &mut Vec<u8>,
-    ) -> Result<(), mech_proto::Error> {
-        self.agent.encode_on(env, link, out)
-    }
-    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
-        self.agent.handle(env, now)
-    }
-    fn heartbeat(&mut self, now: Duration) -> Envelope {
-        self.agent.heartbeat(now)
-    }
-    fn counters(&self) -> Counters {
-        self.agent.counters()
+    fn agent_mut(&mut self) -> &mut Agent {
+        &mut self.agent
     }
     fn tick(&mut self, now: Duration) -> Vec<Envelope> {
         let mut extra = Vec::new();
@@ -330,10 +329,10 @@ pub async fn drive<V: Vehicle>(
                 let now = origin.elapsed();
                 match incoming {
                     Incoming::Bytes(b, link) => {
-                        if let Io::Failover { choice, .. } = &mut io {
-                            if from_router(&b) {
-                                choice.heard(link, now);
-                            }
+                        if let Io::Failover { choice, .. } = &mut io
+                            && from_router(&b)
+                        {
+                            choice.heard(link, now);
                         }
                         vehicle.handle_bytes(&b, now)
                     }

@@ -82,7 +82,7 @@ fn drive(
     let mut seq = from.as_millis() as u32;
     while now < until {
         now += PERIOD;
-        if now.as_millis() % 100 == 0 {
+        if now.as_millis().is_multiple_of(100) {
             seq += 1;
             let twist = Body::Command(Command::Twist(Twist {
                 vx,

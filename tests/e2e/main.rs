@@ -7,6 +7,7 @@ mod octave;
 mod python;
 mod radio;
 mod record;
+mod replay_tui;
 mod script;
 mod serve;
 mod signed;

@@ -3,7 +3,6 @@
 //! independent reader), then `mech-gcs replay --script`, which must print
 //! what the run printed without sending anything anywhere.
 
-use std::io::Write;
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -31,21 +30,7 @@ wait estop 3s
 "#;
 
 fn mech_gcs(args: &[&str], stdin: &str, state: &Path) -> Output {
-    let mut child = Command::new(mech_e2e::binary("mech-gcs"))
-        .args(args)
-        .env("XDG_STATE_HOME", state)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mech-gcs starts");
-    child
-        .stdin
-        .take()
-        .expect("stdin")
-        .write_all(stdin.as_bytes())
-        .expect("script written");
-    child.wait_with_output().expect("mech-gcs finishes")
+    mech_e2e::mech_gcs(args, stdin, state)
 }
 
 fn json_lines(out: &Output) -> Vec<Value> {

@@ -13,29 +13,16 @@ fn run_script(script: &str, extra: &[&str]) -> (Output, std::path::PathBuf) {
         script.len()
     ));
     let _ = std::fs::remove_dir_all(&logs);
-    let mut child = Command::new(mech_e2e::binary("mech-gcs"))
-        .args([
-            "--script",
-            "-",
-            "--udp",
-            "127.0.0.1:0",
-            "--tcp",
-            "127.0.0.1:0",
-        ])
-        .args(extra)
-        .env("XDG_STATE_HOME", &logs)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mech-gcs starts");
-    child
-        .stdin
-        .take()
-        .expect("stdin")
-        .write_all(script.as_bytes())
-        .expect("script written");
-    (child.wait_with_output().expect("mech-gcs finishes"), logs)
+    let mut args = vec![
+        "--script",
+        "-",
+        "--udp",
+        "127.0.0.1:0",
+        "--tcp",
+        "127.0.0.1:0",
+    ];
+    args.extend_from_slice(extra);
+    (mech_e2e::mech_gcs(&args, script, &logs), logs)
 }
 
 fn lines(out: &Output) -> Vec<String> {

@@ -74,24 +74,16 @@ fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
         ),
     )
     .unwrap();
-    let mut gcs = Command::new(mech_e2e::binary("mech-gcs"))
-        .arg("--config")
-        .arg(&config)
-        .args(["--script", "-"])
-        .env("XDG_STATE_HOME", dir.path())
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mech-gcs starts");
     let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
                   wait route robot_1 ext/python 5s\nsleep 500ms\nstatus robot_1\nlog intruder\n\
                   sleep 2s\nstatus robot_1\nlog listed\nsleep 4s\nstatus robot_1\n";
-    gcs.stdin
-        .take()
-        .unwrap()
-        .write_all(script.as_bytes())
-        .unwrap();
+    let args: [&std::ffi::OsStr; 4] = [
+        "--config".as_ref(),
+        config.as_os_str(),
+        "--script".as_ref(),
+        "-".as_ref(),
+    ];
+    let mut gcs = mech_e2e::spawn_mech_gcs(&args, script, dir.path());
     let mut lines = BufReader::new(gcs.stdout.take().unwrap()).lines();
     let mut all = Vec::new();
     let mut next_until = |marker: &str, all: &mut Vec<String>| {

@@ -2,9 +2,9 @@
 //! loopback port, a plain telemetry subscriber, and running other
 //! languages' programs.
 
-use std::io::{BufRead, BufReader, Lines, Write};
+use std::io::{BufRead, BufReader, Lines};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdout, Command, Output, Stdio};
+use std::process::{Child, ChildStdout, Command, Output};
 use std::time::{Duration, Instant};
 
 use mech_proto::{Body, Envelope, Header, Subscribe};
@@ -71,22 +71,13 @@ impl Station {
         }
         let config_path = dir.path().join("gcs.toml");
         std::fs::write(&config_path, config).unwrap();
-        let mut child = Command::new(mech_e2e::binary("mech-gcs"))
-            .arg("--config")
-            .arg(&config_path)
-            .args(["--script", "-"])
-            .env("XDG_STATE_HOME", dir.path())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("mech-gcs starts");
-        child
-            .stdin
-            .take()
-            .unwrap()
-            .write_all(script.as_bytes())
-            .unwrap();
+        let args: [&std::ffi::OsStr; 4] = [
+            "--config".as_ref(),
+            config_path.as_os_str(),
+            "--script".as_ref(),
+            "-".as_ref(),
+        ];
+        let mut child = mech_e2e::spawn_mech_gcs(&args, script, dir.path());
         let lines = BufReader::new(child.stdout.take().unwrap()).lines();
         Station {
             child,

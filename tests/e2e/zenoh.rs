@@ -248,19 +248,13 @@ fn a_served_station_bridges_while_operators_attach() {
         "{t_lines:#?}"
     );
 
-    let out = Command::new(mech_e2e::binary("mech-gcs"))
-        .arg("--attach")
-        .arg(&socket)
-        .args(["--script", "-"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .and_then(|mut c| {
-            c.stdin.take().unwrap().write_all(ATTACHED.as_bytes())?;
-            c.wait_with_output()
-        })
-        .expect("mech-gcs attaches");
+    let attach = [
+        "--attach".as_ref(),
+        socket.as_os_str(),
+        "--script".as_ref(),
+        "-".as_ref(),
+    ];
+    let out = mech_e2e::mech_gcs(&attach, ATTACHED, dir.path());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),

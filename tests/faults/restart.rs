@@ -97,8 +97,11 @@ pub fn agent(failures: &mut Vec<String>) -> Figures {
         s.moving && s.mission.is_some()
     });
     rig.agents[0].kill();
+    // Restart once the script has seen the robot lost (not only the event:
+    // on a loaded machine the script could otherwise miss a lost state
+    // that lasts a few milliseconds).
     let lost = rig.station.wait(Duration::from_secs(15), |l| {
-        l.is_event("link") && l.robot() == "r1" && l.json["state"] == "lost"
+        l.json["type"] == "result" && l.json["command"] == "wait lost r1 30s"
     });
     let restarted = unix_us();
     rig.agents[0].restart(None);

@@ -36,6 +36,9 @@ impl Line {
     }
 }
 
+/// The station's standard error, in its log directory.
+const STDERR: &str = "station.stderr";
+
 /// A running station; killed (SIGKILL) when dropped.
 #[derive(Debug)]
 pub struct Station {
@@ -43,6 +46,8 @@ pub struct Station {
     lines: Arc<Mutex<Vec<Line>>>,
     /// When it was started, µs since the Unix epoch.
     pub started_us: u64,
+    /// Where its standard error goes.
+    stderr: std::path::PathBuf,
 }
 
 impl Station {
@@ -56,7 +61,10 @@ impl Station {
             .env("XDG_STATE_HOME", logs)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            .stderr(
+                std::fs::File::create(logs.join(STDERR))
+                    .map_or_else(|_| Stdio::null(), Stdio::from),
+            )
             .spawn()
             .expect("mech-gcs starts (the test command builds it first)");
         let mut stdin = child.stdin.take().expect("stdin");
@@ -81,6 +89,7 @@ impl Station {
             process: Mutex::new(Killed(Some(child))),
             lines,
             started_us,
+            stderr: logs.join(STDERR),
         }
     }
 
@@ -102,15 +111,23 @@ impl Station {
         })
         .unwrap_or_else(|| {
             panic!(
-                "no `log {text}` within {timeout:?} ({} lines, station {}): {:#?}",
+                "no `log {text}` within {timeout:?} ({} lines, station {}): {:#?}\nits stderr ends:\n{}",
                 self.lines().len(),
                 self.process
                     .lock()
                     .unwrap_or_else(|e| e.into_inner())
                     .state(),
-                self.tail()
+                self.tail(),
+                self.stderr_tail()
             )
         })
+    }
+
+    /// The end of the station's standard error, for failure messages.
+    pub fn stderr_tail(&self) -> String {
+        let text = std::fs::read_to_string(&self.stderr).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(20)..].join("\n")
     }
 
     /// The last lines, for failure messages.

@@ -143,29 +143,12 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
 }
 
 impl<L: MavlinkPort> Vehicle for AutopilotVehicle<L> {
-    fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
-        self.agent.handle_bytes(bytes, now)
+    fn agent(&self) -> &crate::agent::Agent {
+        &self.agent
     }
 
-    fn encode(
-        &mut self,
-        env: &Envelope,
-        link: u8,
-        out: &mut Vec<u8>,
-    ) -> Result<(), mech_proto::Error> {
-        self.agent.encode_on(env, link, out)
-    }
-
-    fn heartbeat(&mut self, now: Duration) -> Envelope {
-        self.agent.heartbeat(now)
-    }
-
-    fn counters(&self) -> crate::agent::Counters {
-        self.agent.counters()
-    }
-
-    fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
-        self.agent.handle(env, now)
+    fn agent_mut(&mut self) -> &mut crate::agent::Agent {
+        &mut self.agent
     }
 
     fn tick(&mut self, now: Duration) -> Vec<Envelope> {

@@ -123,22 +123,14 @@ impl SimAgent {
 /// The simulator runs in the same loop as a robot: a simulated agent is a
 /// [`Vehicle`] whose actuators move its simulated body.
 impl Vehicle for SimAgent {
+    fn agent(&self) -> &crate::agent::Agent {
+        &self.agent
+    }
+    fn agent_mut(&mut self) -> &mut crate::agent::Agent {
+        &mut self.agent
+    }
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         SimAgent::handle_bytes(self, bytes, now)
-    }
-    fn encode(
-        &mut self,
-        env: &Envelope,
-        link: u8,
-        out: &mut Vec<u8>,
-    ) -> Result<(), mech_proto::Error> {
-        self.agent.encode_on(env, link, out)
-    }
-    fn heartbeat(&mut self, now: Duration) -> Envelope {
-        self.agent.heartbeat(now)
-    }
-    fn counters(&self) -> crate::agent::Counters {
-        self.agent.counters()
     }
     fn handle(&mut self, env: Envelope, now: Duration) -> Vec<Envelope> {
         SimAgent::handle(self, env, now)

@@ -238,7 +238,10 @@ async fn record_starts_reports_and_stops_a_recording_with_the_commands_in_it() {
     let err = exec.execute_line("record start").await.unwrap_err();
     assert!(err.message.contains("record start FILE"), "{err}");
     let err = exec.execute_line("record pause").await.unwrap_err();
-    assert!(err.message.contains("start, stop or nothing"), "{err}");
+    assert!(
+        err.message.contains("start, stop, toggle or nothing"),
+        "{err}"
+    );
     let file = dir.path().join("a.mcap");
     let started = exec
         .execute_line(&format!("record start {}", file.display()))
@@ -288,4 +291,22 @@ async fn record_start_without_a_file_uses_the_recording_directory() {
     gcs.shutdown().await;
     let files: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert_eq!(files.len(), 1);
+}
+
+/// `record toggle` (the TUI's record key) starts when not recording and
+/// stops when recording.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn record_toggle_starts_then_stops() {
+    let (gcs, exec, _robot) = setup().await;
+    let dir = tempfile::tempdir().unwrap();
+    let mut exec = exec.with_record_dir(dir.path().to_owned());
+    let started = exec.execute_line("record toggle").await.unwrap();
+    assert!(started.summary.starts_with("recording to "), "{started:?}");
+    assert!(gcs.recording().is_some_and(|s| s.active));
+    let stopped = exec.execute_line("record toggle").await.unwrap();
+    assert!(stopped.summary.starts_with("stopped: "), "{stopped:?}");
+    assert!(!gcs.recording().is_some_and(|s| s.active));
+    let err = exec.execute_line("record pause").await.unwrap_err();
+    assert!(err.message.contains("start, stop, toggle"), "{err}");
+    gcs.shutdown().await;
 }

@@ -71,10 +71,10 @@ impl Entry {
 /// Why a recording cannot be replayed at all.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path} is not a MECH recording: {why}")]
     NotARecording { path: PathBuf, why: String },
@@ -118,9 +118,9 @@ impl Replay {
     /// Opens and checks a recording; its fleet models use `config` (trail
     /// length, event log size).
     pub fn open_with(path: &Path, config: FleetConfig) -> Result<Replay, ReplayError> {
-        let bytes = std::fs::read(path).map_err(|source| ReplayError::Read {
+        let bytes = std::fs::read(path).map_err(|error| ReplayError::Read {
             path: path.to_owned(),
-            source,
+            error,
         })?;
         let scanned = read::scan(&bytes).map_err(|why| ReplayError::NotARecording {
             path: path.to_owned(),

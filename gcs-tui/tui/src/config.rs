@@ -19,15 +19,17 @@ use crate::station::StationConfig;
 /// Why a configuration could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error("cannot read {path}: {source}")]
+    // The causes are printed in the message, not chained as sources, so a
+    // report that prints the chain does not say them twice.
+    #[error("cannot read {path}: {error}")]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Parse {
         path: PathBuf,
-        source: Box<toml::de::Error>,
+        error: Box<toml::de::Error>,
     },
     #[error(transparent)]
     Invalid(#[from] mech_core::ConfigError),
@@ -85,9 +87,9 @@ impl GcsConfig {
 
     /// Reads and checks a TOML file.
     pub fn load(path: &Path) -> Result<GcsConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {
             path: path.to_owned(),
-            source,
+            error,
         })?;
         let mut cfg = GcsConfig::parse_at(&text, path)?;
         // Key files are found next to the configuration that names them.
@@ -108,7 +110,7 @@ impl GcsConfig {
     fn parse_at(text: &str, path: &Path) -> Result<GcsConfig, ConfigError> {
         let cfg: GcsConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: path.to_owned(),
-            source: Box::new(e),
+            error: Box::new(e),
         })?;
         cfg.validate()?;
         Ok(cfg)

@@ -77,15 +77,19 @@ enum Command {
     /// client and robot; ready and watchdog notifications for systemd.
     Serve,
     /// Replay a recording without a router: nothing is sent to any robot.
-    /// Prints what it holds; with --script, prints it as the JSON lines of
-    /// `--script` (exit code 1 if the file is damaged: what could be read
-    /// is printed first).
+    /// Shows it in the TUI (`:pause`, `:play`, `:speed X`, `:seek T`); with
+    /// --script, prints it as the JSON lines of `--script`; with --info,
+    /// what it holds (exit code 1 if the file is damaged: what could be
+    /// read is printed or shown first).
     Replay {
         /// The recording (`--record`, `record start`, or `serve`'s).
         file: PathBuf,
         /// Print the recording as `--script` JSON lines.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "info")]
         script: bool,
+        /// Print what the recording holds: span, robots, topics.
+        #[arg(long)]
+        info: bool,
     },
     /// Make a new key for a robot, controller, operator or e-stop device,
     /// in a file only its owner can read. List it in the station's
@@ -117,8 +121,22 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     if let Some(Command::Keygen { name, out }) = &cli.command {
         return keygen(name, out.clone());
     }
-    if let Some(Command::Replay { file, script }) = &cli.command {
-        return replay::run(file, *script, cli.config.as_deref());
+    if let Some(Command::Replay { file, script, info }) = &cli.command {
+        let show = if *script {
+            replay::Show::Script
+        } else if *info {
+            replay::Show::Info
+        } else {
+            let _log =
+                logging::init(&load_config(&cli)?.log, None).context("cannot start logging")?;
+            let options = mech_gcs::ui::RunOptions {
+                mouse: !cli.no_mouse,
+                gamepads: false,
+                ..mech_gcs::ui::RunOptions::default()
+            };
+            return runtime()?.block_on(replay::run_tui(file, cli.config.as_deref(), options));
+        };
+        return replay::run(file, show, cli.config.as_deref());
     }
     let config = load_config(&cli)?;
     if matches!(cli.command, Some(Command::Serve)) {

@@ -1,6 +1,9 @@
 //! `mech-gcs replay FILE`: a recording read back, with no router and no
-//! socket (nothing can reach a robot). `--script` prints it as the JSON
-//! lines of `--script`; without it, what the recording holds.
+//! socket (nothing can reach a robot): in the TUI ([`player`]: pause,
+//! play, speed, seek), as the JSON lines of `--script` (`--script`), or as
+//! a summary of what the recording holds (`--info`).
+
+pub mod player;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -14,10 +17,17 @@ use mech_core::replay::Replay;
 
 use crate::GcsConfig;
 
-/// Opens `file` and prints it; exit code 0 for a whole file, 1 for a
-/// damaged one (what could be read is printed), an error if it is not a
-/// recording.
-pub fn run(file: &Path, script: bool, config: Option<&Path>) -> anyhow::Result<ExitCode> {
+/// How `replay` prints a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Show {
+    /// The JSON lines of `--script`.
+    Script,
+    /// What it holds.
+    Info,
+}
+
+/// Opens `file`, saying on stderr what is damaged in it.
+fn open(file: &Path, config: Option<&Path>) -> anyhow::Result<Replay> {
     let fleet = match config {
         Some(path) => GcsConfig::load(path)?.fleet,
         None => FleetConfig::default(),
@@ -26,7 +36,34 @@ pub fn run(file: &Path, script: bool, config: Option<&Path>) -> anyhow::Result<E
     if let Some(damage) = replay.damage() {
         eprintln!("mech-gcs: {}: {damage}", file.display());
     }
-    if script {
+    Ok(replay)
+}
+
+/// Shows `file` in the TUI until the operator quits; exit code 1 for a
+/// damaged file (what could be read is shown).
+pub async fn run_tui(
+    file: &Path,
+    config: Option<&Path>,
+    options: crate::ui::RunOptions,
+) -> anyhow::Result<ExitCode> {
+    let replay = open(file, config)?;
+    let whole = replay.damage().is_none();
+    crate::ui::run(player::attach(replay), options)
+        .await
+        .context("terminal error")?;
+    Ok(if whole {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// Opens `file` and prints it; exit code 0 for a whole file, 1 for a
+/// damaged one (what could be read is printed), an error if it is not a
+/// recording.
+pub fn run(file: &Path, show: Show, config: Option<&Path>) -> anyhow::Result<ExitCode> {
+    let replay = open(file, config)?;
+    if show == Show::Script {
         let sink: Sink = Arc::new(Mutex::new(Box::new(std::io::stdout())));
         let whole = playback::print(&replay, &sink);
         return Ok(if whole {

@@ -26,6 +26,7 @@ mod server;
 mod session;
 pub mod wire;
 
+pub(crate) use feed::LogCursor;
 pub use feed::snapshot;
 pub use listen::{ListenError, bind_tcp, bind_unix};
 pub use server::{Station, Via};

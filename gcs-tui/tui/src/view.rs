@@ -208,6 +208,33 @@ pub struct FleetSnapshot {
     pub security: Security,
     /// Messages the station refused (bad tag, replay, not permitted...).
     pub rejected: u64,
+    /// Where a replayed recording is (`None` for a live station).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replay: Option<ReplayClock>,
+}
+
+/// A replay's position, pace and span, in seconds of router time.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct ReplayClock {
+    pub at: f64,
+    pub start: f64,
+    pub end: f64,
+    /// Recording seconds per wall-clock second.
+    pub speed: f64,
+    pub paused: bool,
+}
+
+impl ReplayClock {
+    /// As the status bar shows it: `replay 12.3/60.0 s x2 paused`.
+    pub fn label(&self) -> String {
+        format!(
+            "replay {:.1}/{:.1} s x{} {}",
+            self.at,
+            self.end,
+            self.speed,
+            if self.paused { "paused" } else { "playing" }
+        )
+    }
 }
 
 /// Human-readable names for protocol enums.

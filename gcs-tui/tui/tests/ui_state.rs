@@ -467,3 +467,16 @@ fn nav_toggle_asks_for_the_selected_robots_only() {
         }]
     );
 }
+
+/// `R` asks the station to toggle recording.
+#[test]
+fn the_record_key_toggles_recording_at_the_station() {
+    let mut app = fixture::app(2, 80, 24);
+    for a in on_key(&app, &key(KeyCode::Char('R'))) {
+        app.update(a);
+    }
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Exec("record toggle".into())]
+    );
+}

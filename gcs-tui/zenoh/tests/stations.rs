@@ -35,7 +35,12 @@ fn publish_twists(session: zenoh::Session, key: String) -> tokio::task::JoinHand
 
 async fn two_stations(robots: usize) -> (Station, Station) {
     let a = station(core(), zenoh("site-a", &[]), robots).await;
-    let b = station(core(), zenoh("site-b", &[a.endpoint.clone()]), robots).await;
+    let b = station(
+        core(),
+        zenoh("site-b", std::slice::from_ref(&a.endpoint)),
+        robots,
+    )
+    .await;
     for (st, other) in [(&a, "site-b"), (&b, "site-a")] {
         for i in 1..=robots {
             let name = format!("robot_{i}@{other}");
@@ -142,15 +147,20 @@ async fn authenticated_station(dir: &std::path::Path) -> Station {
 async fn a_remote_robot_is_routed_only_with_an_operator_key_its_station_lists() {
     let dir = tempfile::tempdir().unwrap();
     let a = authenticated_station(dir.path()).await;
-    let mut with_key = zenoh("site-b", &[a.endpoint.clone()]);
+    let mut with_key = zenoh("site-b", std::slice::from_ref(&a.endpoint));
     with_key.operator_key = Some(dir.path().join("op-b.key"));
     let mut b = station(core(), with_key, 0).await;
     let c_key = dir.path().join("op-c.key");
     KeyFile::generate("op-c", &c_key).unwrap();
-    let mut unlisted = zenoh("site-c", &[a.endpoint.clone()]);
+    let mut unlisted = zenoh("site-c", std::slice::from_ref(&a.endpoint));
     unlisted.operator_key = Some(c_key);
     let mut c = station(core(), unlisted, 0).await;
-    let mut unsigned = station(core(), zenoh("site-d", &[a.endpoint.clone()]), 0).await;
+    let mut unsigned = station(
+        core(),
+        zenoh("site-d", std::slice::from_ref(&a.endpoint)),
+        0,
+    )
+    .await;
     for s in [&b, &c, &unsigned] {
         s.until("robots of site-a", WAIT, |f| {
             shown(f, "robot_2@site-a", LinkState::Connected)

@@ -225,7 +225,7 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "record",
-        usage: "record start [FILE] | record stop | record",
+        usage: "record start [FILE] | record stop | record toggle | record",
         help: "record everything the router sees to MCAP (no FILE: rotating files in the recording directory); `record` says how it goes",
         parse: |a| record::Record::parse(a).map(Command::Record),
     },

@@ -141,7 +141,7 @@ impl Maker {
 /// Where a session is in the event log: it sends each line once, in
 /// order, and says so when lines it had not sent yet fell out of the log.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct LogCursor {
+pub(crate) struct LogCursor {
     last: u64,
 }
 
@@ -164,38 +164,41 @@ impl LogCursor {
 
     /// The wire lines of the log after the cursor, moving it on.
     pub fn take(&mut self, f: &Fleet) -> Vec<String> {
+        self.messages(f).iter().map(to_line).collect()
+    }
+
+    /// The log's messages after the cursor, moving it on.
+    pub fn messages(&mut self, f: &Fleet) -> Vec<FromStation> {
         let mut out = Vec::new();
         if let Some(first) = f.log.front() {
             if first.seq > self.last + 1 {
                 let n = first.seq - self.last - 1;
-                out.push(to_line(&FromStation::Refused {
+                out.push(FromStation::Refused {
                     reason: format!("{n} event-log lines were missed: this client read too slowly"),
-                }));
+                });
             }
         }
         for e in f.log_after(self.last) {
             self.last = e.seq;
-            if let Some(line) = log_line(e) {
-                out.push(line);
-            }
+            out.extend(log_message(e));
         }
         out
     }
 }
 
-fn log_line(e: &LogEntry) -> Option<String> {
+fn log_message(e: &LogEntry) -> Option<FromStation> {
     let level = match e.severity {
         Severity::Debug => return None,
         Severity::Info => LogLevel::Info,
         Severity::Warn => LogLevel::Warn,
         Severity::Error => LogLevel::Error,
     };
-    Some(to_line(&FromStation::Log {
+    Some(FromStation::Log {
         seq: e.seq,
         t: mech_control::script::secs(e.at),
         level,
         text: e.text.clone(),
-    }))
+    })
 }
 
 /// Converts the core's fleet model into what the screen shows. Read
@@ -240,6 +243,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
         estop: fleet.estop.engaged,
         security: Security::default(),
         rejected: 0,
+        replay: None,
         clusters: Some(
             fleet
                 .clusters

@@ -16,7 +16,9 @@ use mech_proto::{ClusterVelocity, Command, Waypoint};
 use ratatui::layout::Rect;
 
 use super::layout::{Areas, CARD_HEIGHT, SidePanel};
-use super::view::{ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, RobotView, Security};
+use super::view::{
+    ArenaBounds, ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView, Security,
+};
 use super::viewport::Viewport;
 use crate::gamepad::{DriveKey, KEY_CHANNEL, KeyTeleop, PadEvent, PadState, Teleop, TeleopConfig};
 
@@ -183,6 +185,8 @@ pub enum Action {
     /// Move the selected robots' waypoint navigation to the other side
     /// (onboard <-> offboard).
     ToggleNav,
+    /// Start recording into the recording directory, or stop.
+    ToggleRecording,
     Drive(DriveKey),
     DriveStop,
     Pad(PadEvent),
@@ -261,6 +265,8 @@ pub struct App {
     pub security: Security,
     /// Messages the station refused, as last reported.
     pub rejected: u64,
+    /// A replay's clock, when the TUI shows a recording.
+    pub replay: Option<ReplayClock>,
     pub log: VecDeque<LogLine>,
     /// Routing-table cursor: robot row, channel column.
     pub route_cursor: (usize, usize),
@@ -308,6 +314,7 @@ impl App {
             estop: false,
             security: Security::default(),
             rejected: 0,
+            replay: None,
             log: VecDeque::new(),
             route_cursor: (0, 0),
             cards_scroll: 0,
@@ -390,6 +397,7 @@ impl App {
             Action::ToggleHelp => self.toggle_help(),
             Action::HelpScroll(d) => self.scroll_help(d),
             Action::Fleet(snapshot) => self.apply_snapshot(snapshot),
+            Action::ToggleRecording => self.outbox.push(Request::Exec("record toggle".into())),
             Action::Select(s) => self.select(s),
             Action::Click { col, row, add } => self.click(col, row, add),
             Action::Drag { col, row } => self.drag(col, row),
@@ -469,6 +477,7 @@ impl App {
         self.estop = s.estop;
         self.security = s.security;
         self.rejected = s.rejected;
+        self.replay = s.replay;
         let first = self.robots.is_empty() && !s.robots.is_empty();
         self.robots = s.robots;
         self.channels = s.channels;

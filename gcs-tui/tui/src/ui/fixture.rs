@@ -74,6 +74,7 @@ pub fn fleet(n: usize) -> FleetSnapshot {
         robots,
         security: Security::Authenticated,
         rejected: 0,
+        replay: None,
         channels: vec![
             ChannelView {
                 name: "joy/0".into(),

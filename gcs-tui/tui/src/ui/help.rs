@@ -56,6 +56,7 @@ pub const KEYS: &[(&str, &str)] = &[
         "selected robots: waypoint navigation onboard <-> offboard",
     ),
     ("t", "keyboard teleop on key/0 on/off"),
+    ("R", "record to the recording directory on/off"),
     (
         "teleop: arrows WASD",
         "drive / turn; Q E strafe; Space stop",

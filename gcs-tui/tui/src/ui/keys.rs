@@ -145,6 +145,7 @@ fn global_key(app: &App, code: KeyCode) -> Option<Action> {
         KeyCode::Char('0') | KeyCode::Char('z') => Action::FitFleet,
         KeyCode::Char('t') => Action::ToggleKeyTeleop,
         KeyCode::Char('o') => Action::ToggleNav,
+        KeyCode::Char('R') => Action::ToggleRecording,
         KeyCode::Left => Action::Pan(-4.0, 0.0),
         KeyCode::Right => Action::Pan(4.0, 0.0),
         KeyCode::Up => Action::Pan(0.0, 2.0),

@@ -46,12 +46,16 @@ impl Widget for StatusBar<'_> {
         } else {
             "key off".to_string()
         };
+        // A replay shows where it is instead of a router.
+        let source = app
+            .replay
+            .map_or_else(|| app.router_addr.clone(), |c| c.label());
         let line = if area.width >= 110 {
             Line::from(vec![
                 Span::styled(" MECH ", t.title()),
                 Span::raw(format!(
                     "│ {} │ robots {} ({} ok {} stale {} lost) │ sel {} │ pads {} │ {} │",
-                    app.router_addr,
+                    source,
                     app.robots.len(),
                     count(LinkState::Connected),
                     count(LinkState::Stale),
@@ -72,7 +76,7 @@ impl Widget for StatusBar<'_> {
                 rejected,
                 Span::raw(format!(
                     "│ {} │ {}/{} ok │ sel {} │ pads {} │ {} │ ? help",
-                    app.router_addr,
+                    source,
                     count(LinkState::Connected),
                     app.robots.len(),
                     app.selection.len(),

@@ -1,5 +1,5 @@
-//! `record start [FILE]`, `record stop`, `record`: recording everything the
-//! router sees to MCAP (`docs/recording.md`). Without a file, `record
+//! `record start [FILE]`, `record stop`, `record toggle`, `record`:
+//! recording everything the router sees to MCAP (`docs/recording.md`). Without a file, `record
 //! start` writes rotating files into the recording directory (`[record]
 //! dir`, or the log directory).
 
@@ -17,6 +17,9 @@ pub enum Record {
     /// Start recording, to this file or (`None`) to rotating files.
     Start(Option<PathBuf>),
     Stop,
+    /// Stop if recording, else start into the recording directory (the
+    /// TUI's record key).
+    Toggle,
     /// Say how the recording is going.
     Status,
 }
@@ -32,11 +35,13 @@ impl Record {
             }
         } else if a.keyword("stop") {
             Record::Stop
+        } else if a.keyword("toggle") {
+            Record::Toggle
         } else {
-            let w = a.next("start, stop or nothing")?;
+            let w = a.next("start, stop, toggle or nothing")?;
             return Err(LangError::new(
                 w.span,
-                format!("expected start, stop or nothing, got {:?}", w.text),
+                format!("expected start, stop, toggle or nothing, got {:?}", w.text),
             ));
         };
         a.finish()?;
@@ -45,6 +50,15 @@ impl Record {
 
     pub(super) async fn apply(&self, ctx: &mut Context, at: Span) -> Result<Outcome, LangError> {
         match self {
+            Record::Toggle => {
+                let recording = ctx.gcs.recording().is_some_and(|s| s.active);
+                let then = if recording {
+                    Record::Stop
+                } else {
+                    Record::Start(None)
+                };
+                Box::pin(then.apply(ctx, at)).await
+            }
             Record::Start(file) => {
                 let target = match (file, &ctx.record_dir) {
                     (Some(f), _) => RecordTarget::File(f.clone()),
