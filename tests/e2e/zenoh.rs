@@ -4,7 +4,9 @@
 //! Python reader (`docs/examples/zenoh_telemetry.py`, no MECH code) reads
 //! site-a's robots off the network; site-b freezes (SIGSTOP: no goodbye,
 //! its connection stays open but silent), and site-a shows its robots lost
-//! when the Zenoh lease runs out.
+//! when the Zenoh lease runs out. Also: `mech-zenoh serve` bridges while an
+//! operator attaches with `mech-gcs --attach`, and a station name that
+//! cannot be a key chunk is refused with the reason.
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
