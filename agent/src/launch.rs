@@ -5,11 +5,12 @@
 use std::net::SocketAddr;
 
 use mech_proto::Pose;
+use mech_proto::auth::Key;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use crate::agent::{Agent, Counters};
+use crate::agent::{Agent, AgentSettings, Counters};
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource, WheelEncoders};
 use crate::links::LinkChoice;
@@ -68,68 +69,87 @@ pub async fn run(
         simulated,
         "agent starting"
     );
+    // The agent's own key, and the router's name it checks signatures for.
+    let signing = key.map(|k| (k, router_name));
     let counters = if simulated {
-        let s = config.sim;
-        let noise = s
-            .noise
-            .then(|| UwbNoise::new(UwbNoiseModel::default(), s.seed));
-        let pose = Pose {
-            x: s.x,
-            y: s.y,
-            z: s.z,
-            heading: s.heading,
-        };
-        let mut sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
-        if let Some(e) = config.encoders() {
-            // The configured encoders' resolution and kind, on simulated
-            // wheels with the simulator's slip and noise.
-            let model = SimEncoderModel {
-                counting: e.kind,
-                counts_per_revolution: e.counts_per_revolution,
-                wheel_radius: e.wheel_radius,
-                ..SimEncoderModel::default()
-            };
-            sim = sim.with_encoders(model, s.seed);
-        }
-        if let Some(key) = key {
-            sim.agent = sim.agent.with_key(key, &router_name);
-        }
+        let sim = simulated_vehicle(&config, settings, stamp_origin, signing);
         runtime::drive(sim, io, ticker, origin, shutdown).await
     } else {
-        let mut settings = settings;
-        if config.autopilot().is_some() {
-            // The autopilot's estimate is already filtered.
-            settings.autopilot = true;
-            settings.has_position = true;
-            settings.filter_window = 1;
+        let agent = hardware_agent(&config, settings, stamp_origin, signing);
+        match config.autopilot() {
+            Some(autopilot) => {
+                let vehicle = open_autopilot(autopilot, agent)?;
+                runtime::drive(vehicle, io, ticker, origin, shutdown).await
+            }
+            None => {
+                let vehicle = HardwareVehicle {
+                    agent,
+                    actuators: open_actuators(&config)?,
+                    positions: open_position(&config, origin)?,
+                    encoders: open_encoders(&config, origin)?,
+                };
+                runtime::drive(vehicle, io, ticker, origin, shutdown).await
+            }
         }
-        let mut agent = Agent::new(settings, config.platform().build(), stamp_origin);
-        if let Some(key) = key {
-            agent = agent.with_key(key, &router_name);
-        }
-        if let Some(autopilot) = config.autopilot() {
-            let vehicle = open_autopilot(autopilot, agent)?;
-            return Ok(runtime::drive(vehicle, io, ticker, origin, shutdown).await);
-        }
-        let actuators = open_actuators(&config)?;
-        let positions = open_position(&config, origin)?;
-        let encoders = open_encoders(&config, origin)?;
-        runtime::drive(
-            HardwareVehicle {
-                agent,
-                actuators,
-                positions,
-                encoders,
-            },
-            io,
-            ticker,
-            origin,
-            shutdown,
-        )
-        .await
     };
     tracing::info!("agent stopped");
     Ok(counters)
+}
+
+/// A simulated robot at the configured start pose, with simulated
+/// encoders if the config has encoders.
+fn simulated_vehicle(
+    config: &RobotConfig,
+    settings: AgentSettings,
+    stamp_origin: u64,
+    signing: Option<(Key, String)>,
+) -> SimAgent {
+    let s = config.sim;
+    let noise = s
+        .noise
+        .then(|| UwbNoise::new(UwbNoiseModel::default(), s.seed));
+    let pose = Pose {
+        x: s.x,
+        y: s.y,
+        z: s.z,
+        heading: s.heading,
+    };
+    let mut sim = SimAgent::new(settings, config.platform(), pose, noise, stamp_origin);
+    if let Some(e) = config.encoders() {
+        // The configured encoders' resolution and kind, on simulated
+        // wheels with the simulator's slip and noise.
+        let model = SimEncoderModel {
+            counting: e.kind,
+            counts_per_revolution: e.counts_per_revolution,
+            wheel_radius: e.wheel_radius,
+            ..SimEncoderModel::default()
+        };
+        sim = sim.with_encoders(model, s.seed);
+    }
+    if let Some((key, router)) = signing {
+        sim.agent = sim.agent.with_key(key, &router);
+    }
+    sim
+}
+
+/// The agent core of a real robot (an autopilot's estimate is already
+/// filtered, so it is taken as it comes).
+fn hardware_agent(
+    config: &RobotConfig,
+    mut settings: AgentSettings,
+    stamp_origin: u64,
+    signing: Option<(Key, String)>,
+) -> Agent {
+    if config.autopilot().is_some() {
+        settings.autopilot = true;
+        settings.has_position = true;
+        settings.filter_window = 1;
+    }
+    let agent = Agent::new(settings, config.platform().build(), stamp_origin);
+    match signing {
+        Some((key, router)) => agent.with_key(key, &router),
+        None => agent,
+    }
 }
 
 async fn open_link(config: &RobotConfig, overrides: &Overrides) -> Result<Io, LaunchError> {

@@ -480,3 +480,29 @@ fn the_record_key_toggles_recording_at_the_station() {
         vec![Request::Exec("record toggle".into())]
     );
 }
+
+/// A waypoint past a mission's limit is not added, and the operator is told.
+#[test]
+fn a_waypoint_past_the_limit_is_refused_with_a_message() {
+    let mut app = fixture::app(2, 80, 24);
+    let w = |x: f64| mech_proto::Waypoint {
+        x,
+        y: 0.0,
+        z: 0.0,
+        time: None,
+    };
+    for i in 0..mech_proto::MAX_WAYPOINTS {
+        app.update(Action::AddWaypoint(w(i as f64)));
+    }
+    let before = app.log.len();
+    app.update(Action::AddWaypoint(w(-1.0)));
+    assert_eq!(app.waypoints.len(), mech_proto::MAX_WAYPOINTS);
+    assert_eq!(app.log.len(), before + 1);
+    assert!(
+        app.log
+            .back()
+            .is_some_and(|l| l.text.contains("at most 1024 waypoints")),
+        "{:?}",
+        app.log.back()
+    );
+}

@@ -647,6 +647,16 @@ impl App {
     fn add_waypoint(&mut self, w: Waypoint) {
         if self.waypoints.len() < mech_proto::MAX_WAYPOINTS {
             self.waypoints.push(w);
+        } else {
+            self.log(
+                LogLevel::Warn,
+                format!(
+                    "a mission holds at most {} waypoints: ({:.2}, {:.2}) not added",
+                    mech_proto::MAX_WAYPOINTS,
+                    w.x,
+                    w.y
+                ),
+            );
         }
     }
 
