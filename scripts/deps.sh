@@ -7,8 +7,9 @@
 # instrument-control package (the tests run the Octave example; about a
 # minute to install once, without recommended packages), Python's msgpack
 # (the Python client and the documented controller), pymavlink (the fake
-# autopilot the MAVLink tests fly against) and Python's mcap (the recording
-# test reads recordings with it). Does nothing when they are already there.
+# autopilot the MAVLink tests fly against), Python's mcap (the recording
+# test reads recordings with it) and eclipse-zenoh (the documented reader of
+# MECH's robots on Zenoh). Does nothing when they are already there.
 set -euo pipefail
 need=()
 for pkg in libudev-dev pkg-config socat nftables iproute2 tmux strace octave octave-instrument-control; do
@@ -39,5 +40,11 @@ if command -v python3 >/dev/null; then
     if ! python3 -c 'import mcap' 2>/dev/null; then
         echo "installing: python mcap"
         pip_install mcap
+    fi
+    # Python's Zenoh, the version of the Rust crate: the documented reader
+    # of MECH's robots on Zenoh runs in the tests.
+    if ! python3 -c 'import zenoh' 2>/dev/null; then
+        echo "installing: python eclipse-zenoh"
+        pip_install eclipse-zenoh==1.10.2
     fi
 fi

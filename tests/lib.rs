@@ -20,6 +20,20 @@ pub fn binary(name: &str) -> PathBuf {
     profile_dir.join(name)
 }
 
+/// The first ```LANG block after the heading `section` of the page at
+/// `page` (relative to the repository): the documented example the tests
+/// compare with the file they run.
+pub fn doc_block(page: &str, section: &str, lang: &str) -> String {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join(page)).expect("the page");
+    let at = text.find(section).expect("the section");
+    let section = &text[at..];
+    let fence = format!("```{lang}\n");
+    let start = section.find(&fence).expect("a code block") + fence.len();
+    let end = start + section[start..].find("```").expect("the block's end");
+    section[start..end].to_string()
+}
+
 /// Starts `mech-gcs ARGS` logging into `state`, with `stdin` written to its
 /// standard input (then closed) and its output piped.
 pub fn spawn_mech_gcs<A: AsRef<OsStr>>(args: &[A], stdin: &str, state: &Path) -> Child {

@@ -15,3 +15,4 @@ mod signed;
 mod station;
 mod tmux;
 mod tui;
+mod zenoh;

@@ -139,18 +139,13 @@ fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
 #[test]
 fn the_protocol_page_shows_the_tested_controller() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let page = std::fs::read_to_string(root.join("docs/protocol.md")).unwrap();
     let file = std::fs::read_to_string(root.join("docs/examples/controller.py")).unwrap();
-    let section = &page[page
-        .find("## Example: a controller in Python")
-        .expect("the section")..];
-    let start = section.find("```python\n").expect("a python block") + "```python\n".len();
-    let end = start + section[start..].find("```").expect("the block's end");
-    assert_eq!(
-        &section[start..end],
-        file,
-        "docs/protocol.md and controller.py differ"
+    let block = mech_e2e::doc_block(
+        "docs/protocol.md",
+        "## Example: a controller in Python",
+        "python",
     );
+    assert_eq!(block, file, "docs/protocol.md and controller.py differ");
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! The workspace's shape, checked: no import cycles between the modules of
-//! any crate, and a station core that needs no terminal, gamepad or
-//! simulator.
+//! any crate, a station core that needs no terminal, gamepad or simulator,
+//! and a default build without Zenoh.
 //!
 //! Modules may depend on their parent and their children freely (a parent
 //! re-exports its children, a child uses its parent's shared types); what
@@ -21,6 +21,7 @@ const CRATES: &[&str] = &[
     "gcs-tui/core/src",
     "gcs-tui/control/src",
     "gcs-tui/tui/src",
+    "gcs-tui/zenoh/src",
 ];
 
 fn workspace() -> PathBuf {
@@ -368,6 +369,50 @@ fn the_station_core_needs_no_terminal_gamepad_or_simulator() {
         assert!(
             !tree.lines().any(|l| l.starts_with(banned)),
             "mech-core (with dev-dependencies) depends on {banned}"
+        );
+    }
+}
+
+#[test]
+fn the_default_build_leaves_zenoh_out() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let manifest = std::fs::read_to_string(workspace().join("Cargo.toml")).unwrap();
+    let defaults = &manifest[manifest
+        .find("default-members")
+        .expect("the workspace lists its default members")..];
+    let defaults = &defaults[..defaults.find(']').unwrap()];
+    assert!(!defaults.contains("zenoh"), "{defaults}");
+    for krate in [
+        "mech-gcs",
+        "mech-agent",
+        "mech-control",
+        "mech-core",
+        "mech-e2e",
+    ] {
+        let out = Command::new(&cargo)
+            .current_dir(workspace())
+            .args([
+                "tree",
+                "-p",
+                krate,
+                "-e",
+                "normal,build,dev",
+                "--prefix",
+                "none",
+            ])
+            .output()
+            .expect("cargo tree runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let tree = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            !tree
+                .lines()
+                .any(|l| l.starts_with("zenoh ") || l.starts_with("mech-zenoh ")),
+            "{krate} depends on zenoh"
         );
     }
 }

@@ -1,5 +1,5 @@
-//! NMEA 0183 GPS receiver on a serial line, parsed with the `nmea` crate
-//! and converted to a local metric frame (ENU: x east, y north, z up) around
+//! NMEA 0183 GPS receiver on a serial line, parsed here ([`sentence`]: the
+//! two sentences it needs, checksum first) and converted to a local metric frame (ENU: x east, y north, z up) around
 //! a configured origin with the equirectangular approximation, which is
 //! accurate to millimetres over a few kilometres.
 //!
@@ -13,6 +13,9 @@ use mech_proto::Pose;
 
 use crate::hal::{self, ErrorKind, ErrorType, PositionSample, PositionSource};
 use mech_proto::wrap_angle;
+use sentence::Sentence;
+
+mod sentence;
 
 /// Mean Earth radius (IUGG), m.
 const EARTH_RADIUS: f64 = 6_371_008.8;
@@ -80,19 +83,15 @@ impl<R: BufRead> NmeaGps<R> {
 
     /// Handles one sentence; returns a sample for a valid `GGA` fix.
     pub fn parse_line(&mut self, line: &str, now: Duration) -> Option<PositionSample> {
-        match nmea::parse_str(line.trim()) {
-            Ok(nmea::ParseResult::GGA(gga)) => {
-                let valid = gga.fix_type.is_some_and(|f| f.is_valid());
-                let (lat, lon) = (gga.latitude?, gga.longitude?);
-                if !valid {
-                    return None;
-                }
+        match sentence::parse(line.trim()) {
+            Ok(Sentence::Gga(gga)) => {
+                let fix = gga.fix?;
                 let (x, y, z) = self.origin.to_local(
-                    lat,
-                    lon,
-                    gga.altitude.map_or(self.origin.altitude, f64::from),
+                    fix.latitude,
+                    fix.longitude,
+                    gga.altitude.unwrap_or(self.origin.altitude),
                 );
-                let hdop = gga.hdop.map_or(5.0, f64::from);
+                let hdop = gga.hdop.unwrap_or(5.0);
                 Some(PositionSample {
                     pose: Pose {
                         x,
@@ -105,14 +104,13 @@ impl<R: BufRead> NmeaGps<R> {
                     has_heading: self.heading.is_some(),
                 })
             }
-            Ok(nmea::ParseResult::HDT(hdt)) => {
+            Ok(Sentence::Hdt(heading)) => {
                 // True heading is clockwise from north; ENU is CCW from east.
-                self.heading = hdt
-                    .heading
-                    .map(|h| wrap_angle(std::f64::consts::FRAC_PI_2 - f64::from(h).to_radians()));
+                self.heading =
+                    heading.map(|h| wrap_angle(std::f64::consts::FRAC_PI_2 - h.to_radians()));
                 None
             }
-            Ok(_) => None,
+            Ok(Sentence::Other) => None,
             Err(_) => {
                 self.skipped += 1;
                 None

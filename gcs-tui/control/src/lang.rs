@@ -47,7 +47,7 @@ pub mod verbs;
 use std::fmt;
 
 pub use args::Target;
-pub use exec::{Executor, SharedSpawner, SimSpawner};
+pub use exec::{Executor, RemoteRoutes, SharedSpawner, SimSpawner};
 pub use lexer::quote;
 pub use parse::{Statement, parse_line, parse_script};
 pub use verbs::Command;

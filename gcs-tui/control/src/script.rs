@@ -272,16 +272,19 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         ScriptOutcome::Failed { error, commands } => (false, *commands, Some(error.to_string())),
         ScriptOutcome::Invalid(e) => (false, 0, Some(e.to_string())),
     };
-    let robots = gcs.with_fleet(|f| {
-        f.robots
+    let (robots, remote) = gcs.with_fleet(|f| {
+        let connected = |r: &&mech_core::fleet::Robot| r.link == LinkState::Connected;
+        let remote = f
+            .robots
             .values()
-            .filter(|r| r.link == LinkState::Connected)
-            .count()
+            .filter(|r| !r.is_local())
+            .filter(connected);
+        (f.local_robots().filter(connected).count(), remote.count())
     });
     let counters = gcs.router().counters();
     let mut summary = json!({
         "type": "summary", "ok": ok, "commands": ran, "error": error,
-        "connected_robots": robots,
+        "connected_robots": robots, "connected_remote_robots": remote,
         "received": counters.received, "forwarded": counters.forwarded,
         "bad_packets": counters.dropped.bad_packet,
         "authenticated": gcs.router().authenticated(),

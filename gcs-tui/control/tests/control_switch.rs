@@ -153,8 +153,20 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     exec.execute_line("wait route robot_1 wp/gcs 5s")
         .await
         .unwrap();
-    // Let the progress (next = 2) reach the fleet model.
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    // Wait until the progress (next = 2) has reached the fleet model.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while gcs
+        .snapshot()
+        .robot("robot_1")
+        .and_then(|r| r.mission)
+        .is_none_or(|m| m.next != 2)
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the agent's progress never arrived"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
     while rx.try_recv().is_ok() {}
 
     let mut latencies = Vec::new();

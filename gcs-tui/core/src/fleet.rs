@@ -9,6 +9,7 @@
 //! [`crate::Gcs::with_fleet`]; it holds no sockets and no UI types.
 
 mod config;
+mod remote;
 mod robot;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -18,6 +19,7 @@ use std::time::Duration;
 use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
+pub use remote::{RemoteInfo, remote_name};
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
 
 use crate::counters::{ChannelStatus, Counters};
@@ -85,6 +87,9 @@ pub struct Fleet {
     pub estop: EStopState,
     /// Most recent last.
     pub log: VecDeque<LogEntry>,
+    /// Other stations seen through a bridge, and whether they are alive
+    /// (their robots are in `robots`, marked [`Robot::remote`]).
+    pub stations: BTreeMap<String, LinkState>,
     /// Router endpoints once bound.
     pub udp: Option<SocketAddr>,
     pub tcp: Option<SocketAddr>,
@@ -104,6 +109,7 @@ impl Fleet {
             counters: Counters::default(),
             estop: EStopState::default(),
             log: VecDeque::new(),
+            stations: BTreeMap::new(),
             udp: None,
             tcp: None,
             now: Duration::ZERO,
@@ -120,10 +126,11 @@ impl Fleet {
         self.robots.get_mut(name)
     }
 
-    /// Robots named by `target`: `all`, a cluster name, or a robot name.
+    /// Robots named by `target`: `all` (this station's own robots), a
+    /// cluster name, or a robot name (another station's too).
     pub fn resolve(&self, target: &str) -> Option<Vec<String>> {
         if target == "all" {
-            return Some(self.robots.keys().cloned().collect());
+            return Some(self.local_robots().map(|r| r.name.clone()).collect());
         }
         if let Some(c) = self.clusters.get(target) {
             return Some(c.members.clone());
@@ -131,6 +138,11 @@ impl Fleet {
         self.robots
             .contains_key(target)
             .then(|| vec![target.to_string()])
+    }
+
+    /// This station's own robots (not other stations' shown read-only).
+    pub fn local_robots(&self) -> impl Iterator<Item = &Robot> {
+        self.robots.values().filter(|r| r.is_local())
     }
 
     /// Defines (or redefines) a cluster.
@@ -261,6 +273,7 @@ impl Fleet {
         r.max_speed = hello.max_speed;
         r.max_yaw_rate = hello.max_yaw_rate;
         r.link = LinkState::Connected;
+        r.remote = None;
         let text = match (known, moved) {
             (false, _) => format!("{robot} ({}) connected from {addr}", hello.platform),
             (true, true) => format!("{robot} re-registered from new address {addr}"),
@@ -426,7 +439,7 @@ impl Fleet {
     fn estop(&mut self, engage: bool, id: u32) {
         self.estop.engaged = engage;
         self.estop.id = id;
-        self.estop.pending = self.robots.keys().cloned().collect();
+        self.estop.pending = self.local_robots().map(|r| r.name.clone()).collect();
         if engage {
             self.log(Severity::Error, format!("E-STOP engaged (id {id})"));
         } else {

@@ -39,12 +39,13 @@ pub(crate) use tables::Peer;
 pub use tables::tap::OperatorRecord;
 pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
 
-use crate::auth::{Identity, Keyring, Security};
+use crate::auth::{Identity, Keyring, Rejection, Role, Security};
 use crate::counters::{ChannelStatus, Counters, DropReason, Rejections};
 use crate::event::{Event, EventSink};
 use crate::sync::lock;
 use batch::{RecvBatch, SendBatch};
 use bus::EventBus;
+use mech_proto::auth::Tag;
 use radio::RadioQueue;
 use tables::{Outbox, Tables};
 
@@ -805,6 +806,43 @@ impl RouterHandle {
     /// nothing when the router runs unauthenticated.
     pub fn add_key(&self, identity: Identity) {
         lock(&self.shared.tables).add_key(identity);
+    }
+
+    /// Checks that `sender`, a name with a key in `[auth]`, may send `body`
+    /// on `channel`: the gate for an in-process publisher that carries
+    /// messages from beyond the station under its own name (a bridge to
+    /// other stations), whose messages the router would otherwise take as
+    /// the station operator's. Always `Ok` when the station runs
+    /// unauthenticated. A refusal is counted and reported, as the gate's.
+    pub fn permit_as(&self, sender: &str, body: &Body, channel: &str) -> Result<(), Rejection> {
+        self.decide_now(|t, events| t.permit_named(sender, body, channel, events))
+    }
+
+    /// Checks a request signed with a listed key outside the message
+    /// protocol (a route request from another station, received from
+    /// `source`): `tag` must be a fresh tag over `region` by the key of
+    /// `sender`, a key with `role`. Refused when the station runs
+    /// unauthenticated. A refusal is counted and reported, as the gate's.
+    pub fn verify_signed(
+        &self,
+        source: &str,
+        sender: &str,
+        region: &[u8],
+        tag: Tag,
+        role: Role,
+    ) -> Result<(), Rejection> {
+        self.decide_now(|t, events| t.verify_signed(source, sender, (region, tag), role, events))
+    }
+
+    /// Runs a table decision that sends nothing, emitting its events.
+    fn decide_now<R>(&self, f: impl FnOnce(&mut Tables, &mut Vec<Event>) -> R) -> R {
+        let mut events = Vec::new();
+        let mut tables = lock(&self.shared.tables);
+        let r = f(&mut tables, &mut events);
+        for e in events {
+            self.shared.bus.emit(e);
+        }
+        r
     }
 
     /// The identity a key id belongs to (`None` when unknown or when the

@@ -55,7 +55,36 @@ pub struct GcsConfig {
     pub station: StationConfig,
 }
 
+/// The command line's settings that override the configuration file's.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// `--demo` without `--config`: the simulated fleet lives in this
+    /// process, so the router is not exposed beyond this machine.
+    pub demo_without_file: bool,
+    /// `--udp`, `--tcp`: the router's endpoints.
+    pub udp: Option<std::net::SocketAddr>,
+    pub tcp: Option<std::net::SocketAddr>,
+    /// `--socket`: the station's control socket.
+    pub socket: Option<PathBuf>,
+}
+
 impl GcsConfig {
+    /// Applies the command line's settings over the file's.
+    pub fn override_with(&mut self, o: &Overrides) {
+        if o.demo_without_file {
+            self.router.udp.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+        }
+        if let Some(udp) = o.udp {
+            self.router.udp = udp;
+        }
+        if let Some(tcp) = o.tcp {
+            self.router.tcp = Some(tcp);
+        }
+        if let Some(socket) = &o.socket {
+            self.station.socket = Some(socket.clone());
+        }
+    }
+
     /// Reads and checks a TOML file.
     pub fn load(path: &Path) -> Result<GcsConfig, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {

@@ -175,23 +175,12 @@ fn load_config(cli: &Cli) -> anyhow::Result<GcsConfig> {
         Some(path) => GcsConfig::load(path)?,
         None => GcsConfig::default(),
     };
-    if cli.demo.is_some() && cli.config.is_none() {
-        // A demo fleet lives in this process: nothing on the network needs
-        // to reach the router, so it is not exposed beyond this machine.
-        config
-            .router
-            .udp
-            .set_ip(std::net::Ipv4Addr::LOCALHOST.into());
-    }
-    if let Some(udp) = cli.udp {
-        config.router.udp = udp;
-    }
-    if let Some(tcp) = cli.tcp {
-        config.router.tcp = Some(tcp);
-    }
-    if let Some(socket) = &cli.socket {
-        config.station.socket = Some(socket.clone());
-    }
+    config.override_with(&mech_gcs::config::Overrides {
+        demo_without_file: cli.demo.is_some() && cli.config.is_none(),
+        udp: cli.udp,
+        tcp: cli.tcp,
+        socket: cli.socket.clone(),
+    });
     config.validate()?;
     Ok(config)
 }

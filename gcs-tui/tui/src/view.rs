@@ -73,6 +73,11 @@ pub struct RobotView {
     /// station's snapshot: not measured).
     #[serde(default)]
     pub quality: LinkQuality,
+    /// The other station this robot belongs to (shown read-only, through
+    /// a bridge); `None` for this station's robots. Absent in the attach
+    /// protocol from a station that predates it.
+    #[serde(default)]
+    pub remote: Option<String>,
 }
 
 impl RobotView {
@@ -113,6 +118,7 @@ impl RobotView {
             mission: None,
             trail: Vec::new(),
             quality: LinkQuality::default(),
+            remote: None,
         }
     }
 }

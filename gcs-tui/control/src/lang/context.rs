@@ -32,6 +32,21 @@ pub trait SimSpawner: Send + std::fmt::Debug {
     fn shutdown(&mut self) -> BoxFuture<'_, ()>;
 }
 
+/// Asks another station to route one of its robots. A bridge between
+/// stations plugs one in; without it, other stations' robots are shown but
+/// cannot be routed from here.
+pub trait RemoteRoutes: Send + Sync + std::fmt::Debug {
+    /// Asks `station` to route its `robot` to `channel` (`None`: to none).
+    /// That station decides (whether this station's operator may); the
+    /// answer says what it did, or why not.
+    fn request_route(
+        &self,
+        station: &str,
+        robot: &str,
+        channel: Option<&str>,
+    ) -> BoxFuture<'_, Result<String, String>>;
+}
+
 /// One simulator shared by every executor of a station: `spawn` from any
 /// operator's session starts agents in it, and only the station stops them
 /// ([`SharedSpawner::shutdown_all`]); an executor's own shutdown (an
@@ -80,6 +95,8 @@ pub(super) struct Context {
     pub(super) publishers: Publishers,
     /// Fleet and offboard controllers started by this executor's commands.
     pub(super) control: ControlHub,
+    /// Route requests to other stations, when a bridge is plugged in.
+    pub(super) remote_routes: Option<Arc<dyn RemoteRoutes>>,
     /// Where `record start` without a file records (rotating files).
     pub(super) record_dir: Option<std::path::PathBuf>,
 }
@@ -92,12 +109,36 @@ impl Context {
             sender: SENDER.to_string(),
             gcs,
             spawner: None,
+            remote_routes: None,
             record_dir: None,
         }
     }
 
-    /// Robots named by `target`; an error at the target if it names nothing.
+    /// Robots named by `target` that this station drives; an error at the
+    /// target if it names nothing, or names another station's robot (shown
+    /// here read-only).
     pub(super) fn resolve(&self, target: &Target) -> Result<Vec<String>, LangError> {
+        let robots = self.resolve_shown(target)?;
+        let remote = self.gcs.with_fleet(|f| {
+            robots
+                .iter()
+                .find_map(|r| Some((r.clone(), f.robot(r)?.remote.clone()?)))
+        });
+        match remote {
+            None => Ok(robots),
+            Some((robot, station)) => Err(LangError::new(
+                target.span,
+                format!(
+                    "{robot} is a robot of station {station}, shown here read-only \
+                     (only `route` reaches it, as a request to {station})"
+                ),
+            )),
+        }
+    }
+
+    /// Every robot named by `target`, other stations' included; an error at
+    /// the target if it names nothing.
+    pub(super) fn resolve_shown(&self, target: &Target) -> Result<Vec<String>, LangError> {
         self.gcs
             .with_fleet(|f| f.resolve(&target.name))
             .ok_or_else(|| {

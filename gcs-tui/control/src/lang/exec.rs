@@ -2,6 +2,8 @@
 //! the TUI command line and `--script`. Each verb's work is in its own file
 //! under [`verbs`](super::verbs); this is the front door.
 
+use std::sync::Arc;
+
 use super::context::Context;
 use super::parse::{Statement, parse_line};
 use super::{LangError, Outcome};
@@ -11,7 +13,7 @@ use mech_core::Gcs;
 use mech_core::fleet::Severity;
 use mech_core::record::OperatorRecord;
 
-pub use super::context::{SENDER, SharedSpawner, SimSpawner};
+pub use super::context::{RemoteRoutes, SENDER, SharedSpawner, SimSpawner};
 
 /// Executes command-language statements. Holds the publishers it created
 /// (one per channel, so sequence numbers continue), the controllers its
@@ -77,6 +79,12 @@ impl Executor {
     /// Enables `spawn` (and `--demo`).
     pub fn with_spawner(mut self, spawner: Box<dyn SimSpawner>) -> Executor {
         self.ctx.spawner = Some(spawner);
+        self
+    }
+
+    /// Lets `route` reach other stations' robots, as requests to them.
+    pub fn with_remote_routes(mut self, routes: Arc<dyn RemoteRoutes>) -> Executor {
+        self.ctx.remote_routes = Some(routes);
         self
     }
 

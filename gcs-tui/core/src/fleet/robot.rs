@@ -6,8 +6,8 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mech_proto::{
-    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    VelocitySource, Waypoint,
+    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
+    Velocity, VelocitySource, Waypoint,
 };
 
 use crate::counters::{LinkQuality, Traffic};
@@ -136,6 +136,10 @@ pub struct Robot {
     /// The robot's last driver fault notice ("left wheel stalled: ..."),
     /// kept while its telemetry reports the fault.
     pub fault: Option<String>,
+    /// The station this robot belongs to when it is another station's,
+    /// shown here read-only through a bridge (`mech-zenoh`); `None` for
+    /// this station's own robots. Only that station routes it.
+    pub remote: Option<String>,
 }
 
 impl Robot {
@@ -174,6 +178,7 @@ impl Robot {
             quality: LinkQuality::default(),
             velocity_source: VelocitySource::Commanded,
             fault: None,
+            remote: None,
         }
     }
 
@@ -203,6 +208,31 @@ impl Robot {
                     && p.next >= p.total
             }
             _ => false,
+        }
+    }
+
+    /// Whether this station's router drives the robot (not another
+    /// station's, shown read-only).
+    pub fn is_local(&self) -> bool {
+        self.remote.is_none()
+    }
+
+    /// The robot's last telemetry, as the fleet model keeps it.
+    pub fn telemetry(&self) -> Telemetry {
+        Telemetry {
+            pose: self.pose,
+            velocity: self.velocity,
+            mode: self.mode,
+            channel: self.reported_channel.clone().unwrap_or_default(),
+            computation: self.computation,
+            failsafe: self.failsafe,
+            health: self.health,
+            battery: self.battery,
+            position_quality: self.position_quality,
+            actuators: self.actuators.clone(),
+            mission: self.mission,
+            stale: self.stale,
+            velocity_source: self.velocity_source,
         }
     }
 

@@ -4,7 +4,7 @@
 //! empty [`Fleet`] gives the same robots, routes, missions, e-stop and last
 //! telemetry (trails and log lines start afresh).
 
-use mech_proto::{Hello, Telemetry};
+use mech_proto::Hello;
 
 use crate::event::{Event, LinkState};
 use crate::fleet::{Fleet, MissionDelivery, Robot};
@@ -64,7 +64,7 @@ fn robot(r: &Robot, out: &mut Vec<Event>) {
     if r.last_telemetry.is_some() {
         out.push(Event::Telemetry {
             robot: name.clone(),
-            telemetry: telemetry(r),
+            telemetry: r.telemetry(),
         });
     }
     if r.link != LinkState::Connected {
@@ -109,24 +109,5 @@ fn mission(r: &Robot, out: &mut Vec<Event>) {
             id,
             reason: reason.clone(),
         }),
-    }
-}
-
-/// The robot's last telemetry, as the fleet model kept it.
-fn telemetry(r: &Robot) -> Telemetry {
-    Telemetry {
-        pose: r.pose,
-        velocity: r.velocity,
-        mode: r.mode,
-        channel: r.reported_channel.clone().unwrap_or_default(),
-        computation: r.computation,
-        failsafe: r.failsafe,
-        health: r.health,
-        battery: r.battery,
-        position_quality: r.position_quality,
-        actuators: r.actuators.clone(),
-        mission: r.mission,
-        stale: r.stale,
-        velocity_source: r.velocity_source,
     }
 }

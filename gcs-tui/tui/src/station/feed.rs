@@ -235,6 +235,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             mission: r.mission,
             trail: recent_path(r),
             quality: r.quality,
+            remote: r.remote.clone(),
         })
         .collect();
     FleetSnapshot {

@@ -17,6 +17,9 @@ use super::listen::{bind_tcp, bind_unix};
 use super::server::Station;
 use crate::GcsConfig;
 
+/// Stops what [`serve_with`] started beside the station.
+pub type Stop = futures::future::BoxFuture<'static, ()>;
+
 /// Starts the station and serves until SIGTERM or SIGINT. `demo`: start
 /// that many simulated robots first.
 pub async fn serve(
@@ -24,6 +27,24 @@ pub async fn serve(
     demo: Option<usize>,
     record: Option<PathBuf>,
 ) -> anyhow::Result<()> {
+    let nothing = |_: Station| async { Ok(Box::pin(async {}) as Stop) };
+    serve_with(config, demo, record, nothing).await
+}
+
+/// [`serve`], with `beside` started once the station runs (before its
+/// sockets take clients and its demo robots start): something that extends
+/// the station, such as a bridge to other stations. What it returns is
+/// awaited, to stop it, before the station stops.
+pub async fn serve_with<F, Fut>(
+    config: GcsConfig,
+    demo: Option<usize>,
+    record: Option<PathBuf>,
+    beside: F,
+) -> anyhow::Result<()>
+where
+    F: FnOnce(Station) -> Fut,
+    Fut: std::future::Future<Output = anyhow::Result<Stop>>,
+{
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         "mech-gcs serve starting"
@@ -48,9 +69,16 @@ pub async fn serve(
         &config.station,
     );
     station.set_record_dir(config.record.dir.clone().or_else(|| config.log.dir.clone()));
-    station.listen_unix(listener);
-    let result = run(&station, &config, &socket, demo, &recording).await;
-    let _ = sd_notify::notify(&[NotifyState::Stopping]);
+    let result = match beside(station.clone()).await {
+        Ok(stop) => {
+            station.listen_unix(listener);
+            let result = run(&station, &config, &socket, demo, &recording).await;
+            let _ = sd_notify::notify(&[NotifyState::Stopping]);
+            stop.await;
+            result
+        }
+        Err(e) => Err(e),
+    };
     station.shutdown().await;
     let _ = std::fs::remove_file(&socket);
     tracing::info!("mech-gcs serve stopped");
@@ -120,7 +148,7 @@ fn ready_line(station: &Station, socket: &Path, config: &GcsConfig) -> String {
 }
 
 /// `serve --demo N`: N simulated robots, as `spawn N` would.
-async fn spawn_demo(station: &Station, n: usize) -> anyhow::Result<()> {
+pub async fn spawn_demo(station: &Station, n: usize) -> anyhow::Result<()> {
     let mut exec = mech_control::lang::Executor::new(station.gcs().clone())
         .with_control(station.control().clone());
     if let Some(s) = &station.inner.spawner {

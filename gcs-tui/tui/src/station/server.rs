@@ -7,7 +7,7 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use mech_control::lang::{SharedSpawner, SimSpawner};
+use mech_control::lang::{RemoteRoutes, SharedSpawner, SimSpawner};
 use mech_control::{ClusterSpec, ControlHub};
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
@@ -62,6 +62,8 @@ pub(super) struct Inner {
     pub arena: Mutex<Option<ArenaBounds>>,
     /// Where `record start` without a file records.
     pub record_dir: Mutex<Option<std::path::PathBuf>>,
+    /// Route requests to other stations, when a bridge runs beside.
+    pub remote_routes: Mutex<Option<Arc<dyn RemoteRoutes>>>,
     /// Set when the station stops: sessions say Bye and end.
     pub closing: watch::Sender<bool>,
     pub sessions: Mutex<JoinSet<()>>,
@@ -90,6 +92,7 @@ impl Station {
                 feed,
                 arena: Mutex::new(None),
                 record_dir: Mutex::new(None),
+                remote_routes: Mutex::new(None),
                 closing: watch::channel(false).0,
                 sessions: Mutex::new(JoinSet::new()),
                 listeners: Mutex::new(Vec::new()),
@@ -105,6 +108,12 @@ impl Station {
     /// Where `record start` without a file name records.
     pub fn set_record_dir(&self, dir: Option<std::path::PathBuf>) {
         *lock(&self.inner.record_dir) = dir;
+    }
+
+    /// Lets every session's `route robot@station` ask that station,
+    /// through a bridge to other stations (`mech-zenoh`).
+    pub fn set_remote_routes(&self, routes: Arc<dyn RemoteRoutes>) {
+        *lock(&self.inner.remote_routes) = Some(routes);
     }
 
     pub fn gcs(&self) -> &Gcs {

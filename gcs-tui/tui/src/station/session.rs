@@ -310,6 +310,9 @@ fn executor(station: &Station, operator: &str) -> Executor {
     if let Some(dir) = lock(&station.inner.record_dir).clone() {
         e = e.with_record_dir(dir);
     }
+    if let Some(routes) = lock(&station.inner.remote_routes).clone() {
+        e = e.with_remote_routes(routes);
+    }
     e
 }
 

@@ -109,7 +109,11 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
     out.push(Line::from(vec![
         Span::styled(marker, colour),
         Span::styled(r.name.as_str(), name_style),
-        Span::raw(format!(" #{} ", r.id)),
+        // Another station's robot: its id is that station's router's.
+        match r.remote {
+            Some(_) => Span::styled(" remote ", t.dim()),
+            None => Span::raw(format!(" #{} ", r.id)),
+        },
         Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
     ]));

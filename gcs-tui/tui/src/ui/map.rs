@@ -387,7 +387,12 @@ fn print_text(ctx: &mut Context, app: &App, proj: &Projection, text: &MapText, t
         if selected {
             style = style.patch(t.selected());
         }
-        let glyph = if selected { "◉" } else { "●" };
+        // Another station's robot (read-only) is a hollow mark.
+        let glyph = match (selected, app.robots[i].remote.is_some()) {
+            (true, _) => "◉",
+            (false, true) => "○",
+            (false, false) => "●",
+        };
         print_at(ctx, proj, col, row, TextLine::styled(glyph, style));
     }
 }

@@ -37,12 +37,23 @@ impl Cluster {
     pub(super) async fn apply(&self, ctx: &mut Context, _at: Span) -> Result<Outcome, LangError> {
         let mut names = Vec::new();
         for m in &self.members {
-            let known = ctx.gcs.with_fleet(|f| f.robot(&m.name).is_some());
-            if !known {
-                return Err(LangError::new(
-                    m.span,
-                    format!("no robot named {:?}", m.name),
-                ));
+            let known = ctx
+                .gcs
+                .with_fleet(|f| f.robot(&m.name).map(|r| r.is_local()));
+            match known {
+                None => {
+                    return Err(LangError::new(
+                        m.span,
+                        format!("no robot named {:?}", m.name),
+                    ));
+                }
+                Some(false) => {
+                    return Err(LangError::new(
+                        m.span,
+                        format!("{} is another station's robot, shown read-only", m.name),
+                    ));
+                }
+                Some(true) => {}
             }
             names.push(m.name.clone());
         }

@@ -4,7 +4,7 @@
 //! whether the station authenticates and what it refused.
 
 use mech_core::LinkQuality;
-use mech_core::fleet::{MissionDelivery, Robot};
+use mech_core::fleet::{Fleet, MissionDelivery, Robot};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target, failsafe_name};
@@ -30,7 +30,7 @@ impl Status {
 
     pub(super) async fn apply(&self, ctx: &mut Context, _at: Span) -> Result<Outcome, LangError> {
         let robots = match &self.target {
-            Some(t) => ctx.resolve(t)?,
+            Some(t) => ctx.resolve_shown(t)?,
             None => ctx.gcs.with_fleet(|f| {
                 let mut names: Vec<String> = f.robots.keys().cloned().collect();
                 names.sort_by(|a, b| mech_core::names::natural_cmp(a, b));
@@ -74,13 +74,31 @@ impl Status {
             .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}{radios}{recording}",
+                "{} robots; station {}{refused}{}{radios}{recording}",
                 details.len(),
-                router.security().as_str()
+                router.security().as_str(),
+                ctx.gcs.with_fleet(stations),
             ),
             details,
         })
     }
+}
+
+/// Other stations seen through a bridge, with their state and how many of
+/// their robots are shown: `; stations site-b connected (2 robots)`.
+fn stations(f: &Fleet) -> String {
+    if f.stations.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = f
+        .stations
+        .iter()
+        .map(|(name, link)| {
+            let n = f.robots_of(name).count();
+            format!("{name} {} ({n} robots)", link.as_str())
+        })
+        .collect();
+    format!("; stations {}", each.join(", "))
 }
 
 fn status_line(r: &Robot) -> String {
@@ -109,6 +127,15 @@ fn status_line(r: &Robot) -> String {
     } + &link_quality(&r.quality)
         + &links(r)
         + &lost_mission(r)
+        + &remote(r)
+}
+
+/// Another station's robot, shown here read-only.
+fn remote(r: &Robot) -> String {
+    match &r.remote {
+        Some(station) => format!(" remote {station} (read-only)"),
+        None => String::new(),
+    }
 }
 
 /// ` link rx 21.0/s tx 4.0/s loss 0.0% rtt 0.42ms`, once measured.

@@ -116,8 +116,7 @@ impl WaitFor {
             }),
             WaitFor::Robots(n) => {
                 let c = f
-                    .robots
-                    .values()
+                    .local_robots()
                     .filter(|r| r.link == LinkState::Connected)
                     .count();
                 (c < *n).then(|| format!("{c} of {n} robots connected"))

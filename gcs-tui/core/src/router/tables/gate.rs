@@ -12,7 +12,7 @@ use tokio::time::Instant;
 use tracing::warn;
 
 use super::{Delivery, Outbox, Peer, Tables};
-use crate::auth::Rejection;
+use crate::auth::{Rejection, Role};
 use crate::counters::{DropReason, RejectReason};
 use crate::event::Event;
 
@@ -93,10 +93,15 @@ impl Tables {
     /// Counts a rejection; logs it and reports it as an event at most once
     /// per source per second.
     fn reject(&mut self, from: Peer, r: Rejection, events: &mut Vec<Event>) -> Delivery {
+        self.reject_from(from.to_string(), r, events);
+        Delivery::Dropped(DropReason::Rejected)
+    }
+
+    /// [`Tables::reject`] for a source named by text.
+    fn reject_from(&mut self, source: String, r: Rejection, events: &mut Vec<Event>) {
         self.rejected.count(r.reason);
         self.note_refusal(|| format!("{}: {}", r.reason.as_str(), r.detail));
         let now = Instant::now();
-        let source = from.to_string();
         let due = self
             .reject_logged
             .get(&source)
@@ -113,7 +118,74 @@ impl Tables {
                 detail: r.detail,
             });
         }
-        Delivery::Dropped(DropReason::Rejected)
+    }
+
+    /// The gate for a publisher inside the station that carries messages
+    /// from beyond it under its own name (a bridge to other stations): the
+    /// key listed as `sender` must permit `body` on `channel`, as if
+    /// `sender` had signed it. Everything passes when the station runs
+    /// unauthenticated. A refusal is counted and reported.
+    pub(crate) fn permit_named(
+        &mut self,
+        sender: &str,
+        body: &Body,
+        channel: &str,
+        events: &mut Vec<Event>,
+    ) -> Result<(), Rejection> {
+        let Some(keys) = self.auth.as_ref() else {
+            return Ok(());
+        };
+        let identity = keys.key_for(sender).and_then(|k| keys.identity(k.id()));
+        let why = match identity {
+            Some(identity) => identity.permits(body, channel),
+            None => Some(format!("{sender:?} has no key in [auth]")),
+        };
+        let Some(detail) = why else {
+            return Ok(());
+        };
+        let r = Rejection {
+            reason: RejectReason::NotPermitted,
+            detail,
+        };
+        self.reject_from(sender.to_string(), r.clone(), events);
+        Err(r)
+    }
+
+    /// Checks a request signed outside the message protocol (a route
+    /// request from another station, received from `source`): `tag` must be
+    /// a fresh tag over `region` by the key listed as `sender`, a key with
+    /// `role`. A refusal is counted and reported.
+    pub(crate) fn verify_signed(
+        &mut self,
+        source: &str,
+        sender: &str,
+        signed: (&[u8], Tag),
+        role: Role,
+        events: &mut Vec<Event>,
+    ) -> Result<(), Rejection> {
+        let (region, tag) = signed;
+        let checked = match self.auth.as_mut() {
+            None => Err(Rejection {
+                reason: RejectReason::UnknownKey,
+                detail: "this station runs unauthenticated: it holds no key to check a \
+                         signature with"
+                    .into(),
+            }),
+            Some(keys) => keys
+                .verify(region, Some(tag), sender, mech_proto::unix_micros(), true)
+                .and_then(|v| match v.identity.role {
+                    r if r == role => Ok(()),
+                    other => Err(Rejection {
+                        reason: RejectReason::NotPermitted,
+                        detail: format!(
+                            "{sender:?} is a {}, not an {}",
+                            other.as_str(),
+                            role.as_str()
+                        ),
+                    }),
+                }),
+        };
+        checked.inspect_err(|r| self.reject_from(source.to_string(), r.clone(), events))
     }
 
     /// Answers a time request signed with a listed key (its stamp may be
