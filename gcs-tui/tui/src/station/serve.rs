@@ -40,7 +40,18 @@ pub async fn serve(
             return Err(e).context("cannot start the router");
         }
     };
-    let recording = start_recording(&gcs, &config, record);
+    let live = match crate::foxglove::Live::start(&gcs, &config.foxglove).await {
+        Ok(live) => live,
+        Err(e) => {
+            gcs.shutdown().await;
+            let _ = std::fs::remove_file(&socket);
+            return Err(e);
+        }
+    };
+    let mut recording = start_recording(&gcs, &config, record);
+    if let Some(view) = live.describe() {
+        recording = format!("{recording}; {view}");
+    }
     let station = Station::start(
         gcs,
         &config.cluster,
@@ -51,6 +62,7 @@ pub async fn serve(
     station.listen_unix(listener);
     let result = run(&station, &config, &socket, demo, &recording).await;
     let _ = sd_notify::notify(&[NotifyState::Stopping]);
+    live.stop();
     station.shutdown().await;
     let _ = std::fs::remove_file(&socket);
     tracing::info!("mech-gcs serve stopped");
