@@ -145,12 +145,10 @@ mod tests {
         let mut c = FoxgloveConfig::default();
         assert!(c.validate().is_ok());
         c.addr = Some(SocketAddr::from(([127, 0, 0, 1], 8765)));
-        match c.validate() {
-            Ok(()) => assert!(BUILT),
-            Err(e) => {
-                assert!(!BUILT);
-                assert!(e.to_string().contains("feature `foxglove`"), "{e}");
-            }
+        let checked = c.validate();
+        assert_eq!(checked.is_ok(), BUILT);
+        if let Err(e) = checked {
+            assert!(e.to_string().contains("feature `foxglove`"), "{e}");
         }
         c.client_queue = 1;
         assert!(c.validate().is_err());

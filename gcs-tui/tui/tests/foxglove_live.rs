@@ -285,7 +285,9 @@ mod live {
             !String::from_utf8_lossy(&reply).contains(" 101 "),
             "no upgrade"
         );
-        let err = handshake(addr, false).await.err().expect("refused");
+        let Err(err) = handshake(addr, false).await else {
+            panic!("a client without the subprotocol is refused")
+        };
         assert!(err.contains("400"), "{err}");
 
         let mut c = Client::connect(addr).await;

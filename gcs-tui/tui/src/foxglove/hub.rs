@@ -61,6 +61,12 @@ struct Inner {
     wanted: HashMap<u32, usize>,
 }
 
+impl Inner {
+    fn wants(&self, channel: u32) -> bool {
+        self.wanted.get(&channel).is_some_and(|&n| n > 0)
+    }
+}
+
 /// Channels and clients, shared by the source and the connections.
 #[derive(Debug)]
 pub(super) struct Hub {
@@ -226,7 +232,7 @@ impl Hub {
     /// encoding it (`payload`) only if there is one.
     pub(super) fn publish(&self, channel: u32, unix_ns: u64, payload: impl FnOnce() -> Vec<u8>) {
         let mut inner = lock(&self.inner);
-        if !inner.wanted.get(&channel).is_some_and(|&n| n > 0) {
+        if !inner.wants(channel) {
             return;
         }
         let payload = payload();

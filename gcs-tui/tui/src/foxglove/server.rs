@@ -126,7 +126,9 @@ async fn accept(listener: TcpListener, hub: Arc<Hub>) {
 }
 
 /// Accepts the handshake only for a client that offers the subprotocol,
-/// and names it in the response.
+/// and names it in the response. (The signature is tungstenite's for a
+/// handshake callback.)
+#[allow(clippy::result_large_err)]
 fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, ErrorResponse> {
     let offered = req
         .headers()
