@@ -40,7 +40,13 @@ async fn cpu_during<T>(pid: u32, wait: impl std::future::Future<Output = T>) -> 
 
 fn start(robots: usize, dir: &std::path::Path) -> (Child, SocketAddr) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
-        .args(["serve", "--demo", &robots.to_string(), "--udp", "127.0.0.1:0"])
+        .args([
+            "serve",
+            "--demo",
+            &robots.to_string(),
+            "--udp",
+            "127.0.0.1:0",
+        ])
         .args(["--foxglove", "127.0.0.1:0", "--socket"])
         .arg(dir.join("gcs.sock"))
         .env("XDG_STATE_HOME", dir)
@@ -77,7 +83,9 @@ async fn main() {
     let (idle, ()) = cpu_during(pid, tokio::time::sleep(window)).await;
 
     let tcp = tokio::net::TcpStream::connect(addr).await.expect("connect");
-    let mut req = format!("ws://{addr}/").into_client_request().expect("request");
+    let mut req = format!("ws://{addr}/")
+        .into_client_request()
+        .expect("request");
     req.headers_mut().insert(
         "Sec-WebSocket-Protocol",
         HeaderValue::from_static("foxglove.websocket.v1"),
@@ -104,11 +112,15 @@ async fn main() {
         .collect();
     let channels = subs.len();
     let subscribe = json!({"op": "subscribe", "subscriptions": subs}).to_string();
-    ws.send(Message::Text(subscribe.into())).await.expect("sent");
+    ws.send(Message::Text(subscribe.into()))
+        .await
+        .expect("sent");
     let count = async {
         let (mut msgs, mut bytes) = (0u64, 0u64);
         let end = Instant::now() + window;
-        while let Ok(Some(Ok(m))) = tokio::time::timeout_at(tokio::time::Instant::from_std(end), ws.next()).await {
+        while let Ok(Some(Ok(m))) =
+            tokio::time::timeout_at(tokio::time::Instant::from_std(end), ws.next()).await
+        {
             if let Message::Binary(b) = m {
                 msgs += 1;
                 bytes += b.len() as u64;

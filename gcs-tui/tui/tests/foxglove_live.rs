@@ -128,6 +128,25 @@ mod live {
             );
         }
 
+        /// The station's log files, waiting (up to 20 s) until `needle`
+        /// is in them.
+        fn log_with(&self, needle: &str) -> String {
+            let deadline = Instant::now() + Duration::from_secs(20);
+            loop {
+                let text: String = std::fs::read_dir(self.dir.0.join("mech"))
+                    .into_iter()
+                    .flatten()
+                    .flatten()
+                    .filter(|e| e.file_name().to_string_lossy().starts_with("mech-gcs.log"))
+                    .filter_map(|e| std::fs::read_to_string(e.path()).ok())
+                    .collect();
+                if text.contains(needle) || Instant::now() > deadline {
+                    return text;
+                }
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        }
+
         fn alive(&mut self) -> bool {
             matches!(self.child.try_wait(), Ok(None))
         }
@@ -400,5 +419,10 @@ mod live {
         assert!(station.alive(), "the station runs on");
         // The station still serves its operators.
         station.script("wait connected robot_2 20s\nstatus\n");
+        // The log says who was cut and why.
+        let log = station.log_with("too many bad requests");
+        assert!(log.contains("Foxglove live view listening"), "{log}");
+        assert!(log.contains("too many bad requests"), "{log}");
+        assert!(log.contains("Foxglove handshake refused"), "{log}");
     }
 }
