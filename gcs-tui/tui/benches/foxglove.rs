@@ -47,7 +47,13 @@ fn start(robots: usize, dir: &std::path::Path) -> (Child, SocketAddr) {
             "--udp",
             "127.0.0.1:0",
         ])
-        .args(["--foxglove", "127.0.0.1:0", "--socket"])
+        .args([
+            "--tcp",
+            "127.0.0.1:0",
+            "--foxglove",
+            "127.0.0.1:0",
+            "--socket",
+        ])
         .arg(dir.join("gcs.sock"))
         .env("XDG_STATE_HOME", dir)
         .stdin(Stdio::null())

@@ -33,7 +33,8 @@ fn without_the_feature_asking_for_the_live_view_is_an_error_naming_it() {
     use std::process::{Command, Stdio};
     let dir = Dir::new("off");
     let out = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
-        .args(["serve", "--udp", "127.0.0.1:0", "--foxglove", "127.0.0.1:0"])
+        .args(["serve", "--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
+        .args(["--foxglove", "127.0.0.1:0"])
         .arg("--socket")
         .arg(dir.0.join("gcs.sock"))
         .env("XDG_STATE_HOME", &dir.0)
@@ -77,7 +78,15 @@ mod live {
             let dir = Dir::new(tag);
             let stderr = std::fs::File::create(dir.0.join("stderr.log")).expect("log");
             let mut child = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
-                .args(["serve", "--demo", "2", "--udp", "127.0.0.1:0"])
+                .args([
+                    "serve",
+                    "--demo",
+                    "2",
+                    "--udp",
+                    "127.0.0.1:0",
+                    "--tcp",
+                    "127.0.0.1:0",
+                ])
                 .args(["--foxglove", "127.0.0.1:0", "--socket"])
                 .arg(dir.0.join("gcs.sock"))
                 .env("XDG_STATE_HOME", &dir.0)
@@ -424,5 +433,81 @@ mod live {
         assert!(log.contains("Foxglove live view listening"), "{log}");
         assert!(log.contains("too many bad requests"), "{log}");
         assert!(log.contains("Foxglove handshake refused"), "{log}");
+    }
+
+    /// A tmux server, killed on drop.
+    struct Tmux(String);
+
+    impl Drop for Tmux {
+        fn drop(&mut self) {
+            let _ = Command::new("tmux")
+                .args(["-L", &self.0, "kill-server"])
+                .output();
+        }
+    }
+
+    /// The TUI's own station (`mech-gcs --demo 2 --foxglove ADDR` in a
+    /// terminal) serves the live view too.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn the_tuis_own_station_serves_the_live_view() {
+        if Command::new("tmux").arg("-V").output().is_err() {
+            println!("skipped: tmux is not installed");
+            return;
+        }
+        let dir = Dir::new("tui");
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let cmd = format!(
+            "exec env XDG_STATE_HOME={} {} --demo 2 --no-mouse --udp 127.0.0.1:0 --tcp 127.0.0.1:0 \
+             --foxglove 127.0.0.1:{port} 2>{}/tui.err",
+            dir.0.display(),
+            env!("CARGO_BIN_EXE_mech-gcs"),
+            dir.0.display()
+        );
+        let tmux = Tmux(format!("mech-foxglove-tui-{}", std::process::id()));
+        let started = Command::new("tmux")
+            .args([
+                "-L",
+                &tmux.0,
+                "new-session",
+                "-d",
+                "-s",
+                "tui",
+                "-x",
+                "120",
+                "-y",
+                "40",
+                &cmd,
+            ])
+            .output()
+            .expect("tmux runs");
+        assert!(started.status.success(), "{started:?}");
+        let addr = SocketAddr::from(([127, 0, 0, 1], port));
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let mut viewer = loop {
+            if handshake(addr, true).await.is_ok() {
+                break Client::connect(addr).await;
+            }
+            if Instant::now() > deadline {
+                let screen = Command::new("tmux")
+                    .args(["-L", &tmux.0, "capture-pane", "-p", "-t", "tui"])
+                    .output()
+                    .map(|o| String::from_utf8_lossy(&o.stdout).into_owned());
+                let err = std::fs::read_to_string(dir.0.join("tui.err"));
+                panic!("the TUI's live view never listened: {screen:?} {err:?}");
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        };
+        viewer.subscribe(1, &schema::pose_topic("robot_2")).await;
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            assert!(Instant::now() < deadline, "no pose of robot_2");
+            if let Some(Got::Data { sub: 1, msg, .. }) = viewer.next(Duration::from_secs(5)).await {
+                assert_eq!(msg["frame_id"], "world");
+                break;
+            }
+        }
     }
 }
