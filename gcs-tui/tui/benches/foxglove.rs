@@ -2,7 +2,9 @@
 //! --foxglove 127.0.0.1:0` (N simulated robots in the station's process,
 //! 20 Hz telemetry each), its CPU over a window with no client, then with
 //! one client subscribed to every channel, and the messages and bytes a
-//! second that client got. Prints numbers; asserts nothing.
+//! second that client got, and the live view's totals as the station logs
+//! them when it stops (router events dropped, client messages dropped).
+//! Prints numbers; asserts nothing.
 //!
 //! `cargo bench -p mech-gcs --features foxglove --bench foxglove [-- ROBOTS SECONDS]`
 
@@ -143,7 +145,22 @@ async fn main() {
         msgs as f64 / secs,
         bytes as f64 / secs / 1000.0
     );
-    let _ = station.kill();
+    // SIGTERM: the station stops cleanly and logs the live view's totals
+    // (events taken, dropped, messages sent, dropped per client queue).
+    let _ = Command::new("kill")
+        .args(["-TERM", &pid.to_string()])
+        .status();
     let _ = station.wait();
+    let totals = std::fs::read_dir(dir.join("mech"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| std::fs::read_to_string(e.path()).ok())
+        .flat_map(|t| t.lines().map(str::to_owned).collect::<Vec<_>>())
+        .filter(|l| l.contains("Foxglove live view stopped"))
+        .collect::<Vec<_>>();
+    for line in totals {
+        println!("{line}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
