@@ -74,22 +74,11 @@ fn start(robots: usize, dir: &std::path::Path) -> (Child, SocketAddr) {
     (child, addr)
 }
 
-#[tokio::main(flavor = "current_thread")]
-async fn main() {
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
-    let robots = args.first().copied().unwrap_or(100);
-    let window = Duration::from_secs(args.get(1).copied().unwrap_or(10) as u64);
-    let dir = std::env::temp_dir().join(format!("mech-bench-foxglove-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let (mut station, addr) = start(robots, &dir);
-    let pid = station.id();
-    // Let every robot connect and settle.
-    tokio::time::sleep(Duration::from_secs(5)).await;
-    let (idle, ()) = cpu_during(pid, tokio::time::sleep(window)).await;
+type Ws = tokio_tungstenite::WebSocketStream<tokio::net::TcpStream>;
 
+/// A client subscribed to every channel advertised within 3 s; with the
+/// number of channels.
+async fn subscribe_all(addr: SocketAddr) -> (Ws, usize) {
     let tcp = tokio::net::TcpStream::connect(addr).await.expect("connect");
     let mut req = format!("ws://{addr}/")
         .into_client_request()
@@ -118,25 +107,65 @@ async fn main() {
         .enumerate()
         .map(|(i, id)| json!({"id": i, "channelId": id}))
         .collect();
-    let channels = subs.len();
     let subscribe = json!({"op": "subscribe", "subscriptions": subs}).to_string();
     ws.send(Message::Text(subscribe.into()))
         .await
         .expect("sent");
-    let count = async {
-        let (mut msgs, mut bytes) = (0u64, 0u64);
-        let end = Instant::now() + window;
-        while let Ok(Some(Ok(m))) =
-            tokio::time::timeout_at(tokio::time::Instant::from_std(end), ws.next()).await
-        {
-            if let Message::Binary(b) = m {
-                msgs += 1;
-                bytes += b.len() as u64;
+    (ws, ids.len())
+}
+
+/// Message-data frames and their bytes received during `window`.
+async fn count(ws: &mut Ws, window: Duration) -> (u64, u64) {
+    let (mut msgs, mut bytes) = (0u64, 0u64);
+    let end = tokio::time::Instant::now() + window;
+    while let Ok(Some(Ok(m))) = tokio::time::timeout_at(end, ws.next()).await {
+        if let Message::Binary(b) = m {
+            msgs += 1;
+            bytes += b.len() as u64;
+        }
+    }
+    (msgs, bytes)
+}
+
+/// Stops the station with SIGTERM, so it logs the live view's totals
+/// (events taken and dropped, messages sent and dropped per client
+/// queue), and prints them.
+fn stop_and_print_totals(mut station: Child, dir: &std::path::Path) {
+    let _ = Command::new("kill")
+        .args(["-TERM", &station.id().to_string()])
+        .status();
+    let _ = station.wait();
+    let logs = std::fs::read_dir(dir.join("mech"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| std::fs::read_to_string(e.path()).ok());
+    for text in logs {
+        for line in text.lines() {
+            if line.contains("Foxglove live view stopped") {
+                println!("{line}");
             }
         }
-        (msgs, bytes)
-    };
-    let (busy, (msgs, bytes)) = cpu_during(pid, count).await;
+    }
+}
+
+#[tokio::main(flavor = "current_thread")]
+async fn main() {
+    let args: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let robots = args.first().copied().unwrap_or(100);
+    let window = Duration::from_secs(args.get(1).copied().unwrap_or(10) as u64);
+    let dir = std::env::temp_dir().join(format!("mech-bench-foxglove-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let (station, addr) = start(robots, &dir);
+    let pid = station.id();
+    // Let every robot connect and settle.
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    let (idle, ()) = cpu_during(pid, tokio::time::sleep(window)).await;
+    let (mut ws, channels) = subscribe_all(addr).await;
+    let (busy, (msgs, bytes)) = cpu_during(pid, count(&mut ws, window)).await;
     let secs = window.as_secs_f64();
     println!(
         "foxglove live view, {robots} robots x 20 Hz, {channels} channels subscribed: \
@@ -145,22 +174,6 @@ async fn main() {
         msgs as f64 / secs,
         bytes as f64 / secs / 1000.0
     );
-    // SIGTERM: the station stops cleanly and logs the live view's totals
-    // (events taken, dropped, messages sent, dropped per client queue).
-    let _ = Command::new("kill")
-        .args(["-TERM", &pid.to_string()])
-        .status();
-    let _ = station.wait();
-    let totals = std::fs::read_dir(dir.join("mech"))
-        .into_iter()
-        .flatten()
-        .flatten()
-        .filter_map(|e| std::fs::read_to_string(e.path()).ok())
-        .flat_map(|t| t.lines().map(str::to_owned).collect::<Vec<_>>())
-        .filter(|l| l.contains("Foxglove live view stopped"))
-        .collect::<Vec<_>>();
-    for line in totals {
-        println!("{line}");
-    }
+    stop_and_print_totals(station, &dir);
     let _ = std::fs::remove_dir_all(&dir);
 }
