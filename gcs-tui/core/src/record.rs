@@ -10,15 +10,17 @@
 //! recording never slows routing: a full queue drops records and counts
 //! them ([`RecordingStatus::dropped`]).
 //!
-//! Modules: [`schema`] (topics and JSON Schemas), `encode` (message JSON),
-//! `scene` (the fleet as a scene), `snapshot` (the fleet model as events, at
-//! the start of each file), `rotate` (file names and pruning), `file` (one
-//! MCAP file), `writer` (the thread).
+//! Modules: [`schema`] (topics and JSON Schemas), [`encode`] (message
+//! JSON), [`scene`] (the fleet as a scene), `snapshot` (the fleet model as
+//! events, at the start of each file), `rotate` (file names and pruning),
+//! `file` (one MCAP file), `writer` (the thread). `schema`, `encode` and
+//! `scene` are public so a live view (`mech-gcs --foxglove`) sends the same
+//! messages as recordings hold.
 
-mod encode;
+pub mod encode;
 mod file;
 mod rotate;
-mod scene;
+pub mod scene;
 pub mod schema;
 mod snapshot;
 mod writer;
@@ -27,6 +29,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, sync_channel};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use serde::Deserialize;
 
@@ -161,6 +164,19 @@ pub enum RecordError {
     Config(#[from] ConfigError),
 }
 
+/// When `router` started, in nanoseconds since the Unix epoch: a message's
+/// time is this plus its router time ([`unix_ns`]).
+pub fn router_start_unix_ns(router: &RouterHandle) -> u64 {
+    let elapsed = u64::try_from(router.elapsed().as_nanos()).unwrap_or(0);
+    (mech_proto::unix_micros() * 1000).saturating_sub(elapsed)
+}
+
+/// Router time `at` in nanoseconds since the Unix epoch, given when the
+/// router started ([`router_start_unix_ns`]).
+pub fn unix_ns(router_start_ns: u64, at: Duration) -> u64 {
+    router_start_ns.saturating_add(u64::try_from(at.as_nanos()).unwrap_or(u64::MAX))
+}
+
 /// A recording in progress: the writer thread and what the tap needs.
 /// Made by [`crate::Gcs::start_recording`].
 #[derive(Debug)]
@@ -191,8 +207,7 @@ impl Recorder {
             events: AtomicU64::new(0),
             written: AtomicU64::new(0),
         });
-        let elapsed = u64::try_from(router.elapsed().as_nanos()).unwrap_or(0);
-        let router_start_ns = (mech_proto::unix_micros() * 1000).saturating_sub(elapsed);
+        let router_start_ns = router_start_unix_ns(router);
         let writer = writer::Writer::new(writer::WriterSetup {
             target,
             compress: config.compress,

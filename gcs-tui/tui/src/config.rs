@@ -1,7 +1,7 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
 //! sections each layer owns: `[router]`, `[fleet]`, `[auth]` and `[record]`
-//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[gamepad]` and
-//! `[station]` (this binary).
+//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[gamepad]`,
+//! `[station]` and `[foxglove]` (this binary).
 //! Every field has a default, so an empty file (or none) gives a working
 //! ground station on port 7400.
 
@@ -12,6 +12,7 @@ use mech_core::auth::AuthConfig;
 use mech_core::{CoreConfig, FleetConfig, RecordConfig, RouterConfig};
 use serde::Deserialize;
 
+use crate::foxglove::FoxgloveConfig;
 use crate::gamepad::GamepadConfig;
 use crate::logging::LogConfig;
 use crate::station::StationConfig;
@@ -53,6 +54,8 @@ pub struct GcsConfig {
     pub record: RecordConfig,
     /// Where a served station listens for TUIs and scripts.
     pub station: StationConfig,
+    /// The Foxglove live view (`--foxglove`).
+    pub foxglove: FoxgloveConfig,
 }
 
 /// The command line's settings that override the configuration file's.
@@ -135,6 +138,7 @@ impl GcsConfig {
         }
         self.gamepad.teleop()?;
         self.station.validate()?;
+        self.foxglove.validate()?;
         Ok(())
     }
 }

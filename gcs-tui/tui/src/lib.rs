@@ -7,6 +7,8 @@
 //! - [`view`]: the fleet as the screen shows it (what a station sends);
 //! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
 //! - [`config`]: `gcs.toml`, assembled from each layer's section;
+//! - [`foxglove`]: the Foxglove live view (`--foxglove`, cargo feature
+//!   `foxglove`);
 //! - [`logging`]: rolling log files;
 //! - [`replay`]: `mech-gcs replay`, a recording read back;
 //! - [`sim`]: simulated agents for `spawn` and `--demo`;
@@ -15,6 +17,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
 pub mod config;
+pub mod foxglove;
 pub mod gamepad;
 pub mod logging;
 pub mod replay;

@@ -65,6 +65,11 @@ struct Cli {
     /// into its log directory by default, in rotating files.
     #[arg(long, value_name = "FILE.mcap", global = true)]
     record: Option<PathBuf>,
+    /// Serve the Foxglove live view here (e.g. 127.0.0.1:8765): Foxglove
+    /// or Lichtblick connect to ws://ADDR and show the fleet live, on the
+    /// topics of a recording. Needs a build with the `foxglove` feature.
+    #[arg(long, value_name = "ADDR", global = true)]
+    foxglove: Option<SocketAddr>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -181,6 +186,9 @@ fn load_config(cli: &Cli) -> anyhow::Result<GcsConfig> {
         tcp: cli.tcp,
         socket: cli.socket.clone(),
     });
+    if let Some(addr) = cli.foxglove {
+        config.foxglove.addr = Some(addr);
+    }
     config.validate()?;
     Ok(config)
 }
@@ -289,6 +297,7 @@ async fn run_tui(config: GcsConfig, cli: &Cli) -> anyhow::Result<()> {
         options.arena = Some(mech_gcs::sim::demo_arena());
     }
     let gcs = start(&config, cli.record.clone()).await?;
+    let live = mech_gcs::foxglove::Live::start(&gcs, &config.foxglove).await?;
     let station = Station::start(
         gcs,
         &config.cluster,
@@ -298,6 +307,7 @@ async fn run_tui(config: GcsConfig, cli: &Cli) -> anyhow::Result<()> {
     station.set_record_dir(record_dir(&config));
     let attached = attach_stream(station.attach_local(), opts).await?;
     let result = mech_gcs::ui::run(attached, options).await;
+    live.stop();
     station.shutdown().await;
     tracing::info!("mech-gcs stopped");
     result.context("terminal error")

@@ -41,7 +41,7 @@ fn bytes(v: &Value) -> Vec<u8> {
 }
 
 /// A station event: `{"t": .., "event": "name", ..its fields}`.
-pub(super) fn event(s: &Stamped) -> Vec<u8> {
+pub fn event(s: &Stamped) -> Vec<u8> {
     let mut v = serde_json::to_value(&s.event).unwrap_or(Value::Null);
     if let Value::Object(m) = &mut v {
         m.insert("t".into(), json!(secs(s.at)));
@@ -50,7 +50,7 @@ pub(super) fn event(s: &Stamped) -> Vec<u8> {
 }
 
 /// A robot's telemetry, field for field.
-pub(super) fn telemetry(t: &Telemetry) -> Vec<u8> {
+pub fn telemetry(t: &Telemetry) -> Vec<u8> {
     serde_json::to_vec(t).unwrap_or_default()
 }
 
@@ -101,7 +101,7 @@ struct PoseInFrame<'a> {
 pub(super) const WORLD: &str = "world";
 
 /// A robot's pose as `foxglove.PoseInFrame`.
-pub(super) fn pose(unix_ns: u64, p: &Pose) -> Vec<u8> {
+pub fn pose(unix_ns: u64, p: &Pose) -> Vec<u8> {
     let msg = PoseInFrame {
         timestamp: Time::from_unix_ns(unix_ns),
         frame_id: WORLD,
@@ -173,7 +173,7 @@ pub(super) fn operator(o: &OperatorRecord) -> Vec<u8> {
 }
 
 /// A line of the event log as `foxglove.Log`.
-pub(super) fn log_line(unix_ns: u64, severity: Severity, text: &str, name: &str) -> Vec<u8> {
+pub fn log_line(unix_ns: u64, severity: Severity, text: &str, name: &str) -> Vec<u8> {
     let level = match severity {
         Severity::Debug => 1,
         Severity::Info => 2,
@@ -187,7 +187,7 @@ pub(super) fn log_line(unix_ns: u64, severity: Severity, text: &str, name: &str)
 }
 
 /// Every cluster, by name, with its members.
-pub(super) fn clusters(at: Duration, clusters: &BTreeMap<String, Cluster>) -> Vec<u8> {
+pub fn clusters(at: Duration, clusters: &BTreeMap<String, Cluster>) -> Vec<u8> {
     let by_name: BTreeMap<&str, &[String]> = clusters
         .iter()
         .map(|(n, c)| (n.as_str(), c.members.as_slice()))

@@ -4,14 +4,23 @@
 //! the whole scene (a delete-all first), so robots and clusters that went
 //! away disappear.
 
+use std::time::Duration;
+
 use serde_json::{Value, json};
 
 use super::encode::{Time, WORLD, foxglove_pose};
 use crate::event::LinkState;
 use crate::fleet::{Cluster, Fleet, Robot};
 
-/// The scene of `fleet` at `unix_ns`.
-pub(super) fn scene(unix_ns: u64, fleet: &Fleet) -> Vec<u8> {
+/// Shortest time between two scenes of `robots` robots at most `scene_hz`
+/// a second: longer for a big fleet (half a millisecond per robot), whose
+/// scene takes longer to make and to draw.
+pub fn period(scene_hz: f64, robots: usize) -> Duration {
+    Duration::from_secs_f64((1.0 / scene_hz).max(robots as f64 * 0.0005))
+}
+
+/// The scene of `fleet` at `unix_ns` (JSON).
+pub fn scene(unix_ns: u64, fleet: &Fleet) -> Vec<u8> {
     let t = Time::from_unix_ns(unix_ns);
     let mut entities = Vec::with_capacity(fleet.robots.len() * 2 + fleet.clusters.len());
     for r in fleet.robots.values() {

@@ -137,8 +137,7 @@ impl Writer {
     }
 
     fn ns(&self, at: Duration) -> u64 {
-        self.router_start_ns
-            .saturating_add(u64::try_from(at.as_nanos()).unwrap_or(u64::MAX))
+        super::unix_ns(self.router_start_ns, at)
     }
 
     fn put(
@@ -283,8 +282,7 @@ impl Writer {
     /// The scene, at most every scene period of router time (longer for a
     /// big fleet: half a millisecond per robot), with cluster changes.
     fn maybe_scene(&mut self, at: Duration) -> Result<(), RecordError> {
-        let robots = self.replica.robots.len() as f64;
-        let period = Duration::from_secs_f64((1.0 / self.scene_hz).max(robots * 0.0005));
+        let period = scene::period(self.scene_hz, self.replica.robots.len());
         if self.last_scene.is_some_and(|last| at < last + period) {
             return Ok(());
         }

@@ -61,7 +61,18 @@ where
             return Err(e).context("cannot start the router");
         }
     };
-    let recording = start_recording(&gcs, &config, record);
+    let live = match crate::foxglove::Live::start(&gcs, &config.foxglove).await {
+        Ok(live) => live,
+        Err(e) => {
+            gcs.shutdown().await;
+            let _ = std::fs::remove_file(&socket);
+            return Err(e);
+        }
+    };
+    let mut recording = start_recording(&gcs, &config, record);
+    if let Some(view) = live.describe() {
+        recording = format!("{recording}; {view}");
+    }
     let station = Station::start(
         gcs,
         &config.cluster,
@@ -79,6 +90,7 @@ where
         }
         Err(e) => Err(e),
     };
+    live.stop();
     station.shutdown().await;
     let _ = std::fs::remove_file(&socket);
     tracing::info!("mech-gcs serve stopped");

@@ -1,0 +1,267 @@
+//! The live view's WebSocket server: accepts connections, completes the
+//! handshake (which must ask for `foxglove.websocket.v1`, within a few
+//! seconds), then runs each connection: frames from its queue out, in
+//! batches; subscribe and unsubscribe in; anything else refused with a
+//! status message, and a client that keeps at it, or sends frames larger
+//! than a request can be, is cut.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use anyhow::Context;
+use futures::{SinkExt, StreamExt};
+use mech_core::Gcs;
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio_tungstenite::WebSocketStream;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
+use tokio_tungstenite::tungstenite::http::{HeaderValue, StatusCode};
+use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
+
+use super::FoxgloveConfig;
+use super::hub::{Hub, Out};
+use super::protocol::{self, Request as ClientRequest, SUBPROTOCOL};
+use super::source::{Counts, Source};
+
+/// Time a connection has to complete the WebSocket handshake.
+const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Largest message a client may send (requests are small).
+const MAX_REQUEST: usize = 64 << 10;
+
+/// Time a client has to take a batch of frames; one that does not read
+/// for this long is cut (it would hold a place among the clients).
+const SEND_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Frames sent before one flush.
+const SEND_BATCH: usize = 64;
+
+/// A running live view.
+#[derive(Debug)]
+pub struct LiveView {
+    addr: SocketAddr,
+    hub: Arc<Hub>,
+    counts: Arc<Counts>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl LiveView {
+    /// Listens on `config.addr` and starts showing `gcs`'s fleet.
+    pub async fn start(gcs: &Gcs, config: &FoxgloveConfig) -> anyhow::Result<LiveView> {
+        let want = config.addr.context("no [foxglove] addr")?;
+        let listener = TcpListener::bind(want)
+            .await
+            .with_context(|| format!("cannot listen for Foxglove on {want}"))?;
+        let addr = listener.local_addr()?;
+        if !addr.ip().is_loopback() {
+            tracing::warn!(%addr, "the Foxglove live view has no authentication: anyone who reaches {addr} sees the fleet");
+        }
+        let hub = Arc::new(Hub::new(config.client_queue, config.max_clients));
+        let (source, sub) = Source::new(gcs, hub.clone(), config.queue, config.scene_hz);
+        let counts = source.counts.clone();
+        let tasks = vec![
+            tokio::spawn(source.run(sub)),
+            tokio::spawn(accept(listener, hub.clone())),
+        ];
+        tracing::info!(%addr, "Foxglove live view listening (ws://{addr})");
+        Ok(LiveView {
+            addr,
+            hub,
+            counts,
+            tasks,
+        })
+    }
+
+    /// The address it listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Stops listening, closes every connection, and logs the totals.
+    pub fn stop(self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        self.hub.close_all("the station is stopping");
+        let n = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
+        let s = &self.hub.stats;
+        tracing::info!(
+            events = n(&self.counts.events),
+            router_events_dropped = n(&self.counts.dropped),
+            sent = n(&s.sent),
+            client_messages_dropped = n(&s.dropped),
+            clients = n(&s.clients),
+            refused = n(&s.refused),
+            bad_requests = n(&s.bad_requests),
+            "Foxglove live view stopped"
+        );
+    }
+}
+
+impl Drop for LiveView {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+async fn accept(listener: TcpListener, hub: Arc<Hub>) {
+    loop {
+        match listener.accept().await {
+            Ok((stream, peer)) => {
+                tokio::spawn(connection(stream, peer, hub.clone()));
+            }
+            Err(e) => {
+                // Out of descriptors, say: wait rather than spin.
+                tracing::warn!(error = %e, "Foxglove live view cannot accept");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    }
+}
+
+/// Accepts the handshake only for a client that offers the subprotocol,
+/// and names it in the response. (The signature is tungstenite's for a
+/// handshake callback.)
+#[allow(clippy::result_large_err)]
+fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, ErrorResponse> {
+    let offered = req
+        .headers()
+        .get_all("Sec-WebSocket-Protocol")
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|p| p.trim() == SUBPROTOCOL);
+    if !offered {
+        let mut refusal = ErrorResponse::new(Some(format!(
+            "this is a Foxglove live view: connect with the {SUBPROTOCOL} subprotocol\n"
+        )));
+        *refusal.status_mut() = StatusCode::BAD_REQUEST;
+        return Err(refusal);
+    }
+    resp.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        HeaderValue::from_static(SUBPROTOCOL),
+    );
+    Ok(resp)
+}
+
+async fn connection(stream: TcpStream, peer: SocketAddr, hub: Arc<Hub>) {
+    let _ = stream.set_nodelay(true);
+    let config = WebSocketConfig::default()
+        .max_message_size(Some(MAX_REQUEST))
+        .max_frame_size(Some(MAX_REQUEST));
+    let handshake =
+        tokio_tungstenite::accept_hdr_async_with_config(stream, choose_subprotocol, Some(config));
+    let mut ws = match tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await {
+        Ok(Ok(ws)) => ws,
+        Ok(Err(e)) => {
+            tracing::info!(%peer, error = %e, "Foxglove handshake refused");
+            return;
+        }
+        Err(_) => {
+            tracing::info!(%peer, "Foxglove handshake timed out");
+            return;
+        }
+    };
+    let Some((id, rx)) = hub.connect() else {
+        tracing::warn!(%peer, "Foxglove client refused: too many clients ([foxglove] max_clients)");
+        let _ = ws
+            .send(Message::Text(
+                protocol::status(protocol::Level::Error, "too many clients").into(),
+            ))
+            .await;
+        let _ = ws.close(None).await;
+        return;
+    };
+    tracing::info!(%peer, client = id, "Foxglove client connected");
+    let why = serve(&mut ws, rx, &hub, id).await;
+    let dropped = hub.disconnect(id);
+    let _ = ws.close(None).await;
+    tracing::info!(%peer, client = id, dropped, "Foxglove client left: {why}");
+}
+
+/// Runs a connection until it ends; says why.
+async fn serve(
+    ws: &mut WebSocketStream<TcpStream>,
+    mut rx: mpsc::Receiver<Out>,
+    hub: &Hub,
+    id: u64,
+) -> String {
+    loop {
+        tokio::select! {
+            out = rx.recv() => {
+                let Some(out) = out else { return "cut by the station".into() };
+                match tokio::time::timeout(SEND_TIMEOUT, send_batch(ws, out, &mut rx)).await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => return format!("send failed: {e}"),
+                    Err(_) => return "too slow: it did not read for 10 s".into(),
+                }
+            }
+            msg = ws.next() => match msg {
+                None => return "closed".into(),
+                Some(Err(e)) => return format!("error: {e}"),
+                Some(Ok(m)) => {
+                    if let Some(why) = request(m, hub, id) {
+                        return why;
+                    }
+                }
+            },
+        }
+    }
+}
+
+/// Sends `first` and what else is queued (up to a batch), then flushes.
+async fn send_batch(
+    ws: &mut WebSocketStream<TcpStream>,
+    first: Out,
+    rx: &mut mpsc::Receiver<Out>,
+) -> Result<(), tokio_tungstenite::tungstenite::Error> {
+    ws.feed(message(first)).await?;
+    for _ in 0..SEND_BATCH {
+        match rx.try_recv() {
+            Ok(out) => ws.feed(message(out)).await?,
+            Err(_) => break,
+        }
+    }
+    ws.flush().await
+}
+
+fn message(out: Out) -> Message {
+    match out {
+        Out::Text(t) => Message::Text(t.into()),
+        Out::Binary(b) => Message::Binary(b.into()),
+    }
+}
+
+/// Handles one message from the client; `Some(why)` ends the connection.
+fn request(m: Message, hub: &Hub, id: u64) -> Option<String> {
+    let refused = match m {
+        Message::Text(t) => match protocol::request(t.as_str()) {
+            Ok(ClientRequest::Subscribe { subscriptions }) => {
+                hub.subscribe(id, &subscriptions).err()
+            }
+            Ok(ClientRequest::Unsubscribe { subscription_ids }) => {
+                hub.unsubscribe(id, &subscription_ids);
+                None
+            }
+            Err(why) => Some(why),
+        },
+        Message::Binary(_) => {
+            Some("binary messages are not served: the live view only shows the fleet".into())
+        }
+        Message::Close(_) => return Some("closed".into()),
+        Message::Ping(_) | Message::Pong(_) | Message::Frame(_) => None,
+    };
+    let why = refused?;
+    if hub.refuse(id, &why) {
+        None
+    } else {
+        Some(format!("too many bad requests (last: {why})"))
+    }
+}
