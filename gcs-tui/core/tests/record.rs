@@ -303,6 +303,47 @@ async fn a_damaged_file_replays_up_to_the_damage_and_says_so() {
     let events: Vec<Stamped> = replay.events().collect();
     assert_eq!(events[..], all[..events.len()]);
 
+    // A chunk header damaged to claim an absurd size is damage, not an
+    // attempt to allocate it.
+    let mut huge = bytes.clone();
+    let first = mcap::read::LinearReader::new(&bytes)
+        .unwrap()
+        .find_map(|r| match r {
+            Ok(mcap::records::Record::Chunk { header, .. }) => Some(header),
+            _ => None,
+        })
+        .expect("a chunk");
+    let mut pattern = first.message_start_time.to_le_bytes().to_vec();
+    pattern.extend(first.message_end_time.to_le_bytes());
+    pattern.extend(first.uncompressed_size.to_le_bytes());
+    let at = huge
+        .windows(pattern.len())
+        .position(|w| w == pattern)
+        .expect("the chunk header's bytes")
+        + 16;
+    huge[at..at + 8].copy_from_slice(&0x3a3a_3a3a_3a3a_3a3a_u64.to_le_bytes());
+    let bad = dir.path().join("huge.mcap");
+    std::fs::write(&bad, &huge).unwrap();
+    let replay = Replay::open(&bad).unwrap();
+    let damage = replay.damage().unwrap();
+    assert!(damage.contains("claims"), "{damage}");
+
+    // Damage anywhere: a replay says so or reads past it, never crashes.
+    for step in 0..48 {
+        let mut damaged = bytes.clone();
+        let from = damaged.len() * step / 48;
+        let to = (from + 64).min(damaged.len());
+        for b in &mut damaged[from..to] {
+            *b ^= 0xa5;
+        }
+        let path = dir.path().join("damaged.mcap");
+        std::fs::write(&path, &damaged).unwrap();
+        if let Ok(replay) = Replay::open(&path) {
+            let _ = replay.events().count();
+            let _ = replay.fleet_at(replay.end());
+        }
+    }
+
     let other = dir.path().join("notes.mcap");
     std::fs::write(&other, b"not a recording at all").unwrap();
     let e = Replay::open(&other).unwrap_err().to_string();

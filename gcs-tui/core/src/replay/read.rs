@@ -49,6 +49,11 @@ impl Kind {
     }
 }
 
+/// The largest chunk a replay decompresses, bytes. The recorder closes its
+/// chunks at the MCAP writer's default size (768 KiB) or every second; a
+/// damaged header could otherwise ask for any amount of memory.
+const MAX_CHUNK: u64 = 64 << 20;
+
 /// Channel id -> topic and what it carries.
 pub(super) type Channels = HashMap<u16, (String, Kind)>;
 
@@ -88,6 +93,14 @@ pub(super) fn scan(bytes: &[u8]) -> Result<Scanned, String> {
                 metadata = true;
             }
             Ok(Record::Metadata(m)) if m.name == METADATA_END => out.end = Some(m.metadata),
+            Ok(Record::Chunk { header, .. }) if header.uncompressed_size > MAX_CHUNK => {
+                let what = format!(
+                    "a chunk that claims {} bytes uncompressed (a recording's are under {MAX_CHUNK})",
+                    header.uncompressed_size
+                );
+                out.damage = Some(damage(&what, out.chunks.len()));
+                break;
+            }
             Ok(Record::Chunk { header, data }) => out.chunks.push(Chunk {
                 header,
                 data: data.into_owned(),
@@ -144,9 +157,8 @@ pub(super) fn chunk(
     counts: &mut BTreeMap<String, u64>,
 ) -> Result<Vec<Entry>, String> {
     let mut out = Vec::new();
-    let reader =
-        mcap::read::ChunkReader::new(c.header.clone(), &c.data).map_err(|e| e.to_string())?;
-    for record in reader {
+    let bytes = uncompressed(c)?;
+    for record in LinearReader::sans_magic(&bytes) {
         match record.map_err(|e| e.to_string())? {
             Record::Channel(ch) => {
                 let kind = Kind::of(&ch.topic);
@@ -171,12 +183,40 @@ pub(super) fn chunk(
     Ok(out)
 }
 
+/// A chunk's records, decompressed into no more than the size its header
+/// states (at most [`MAX_CHUNK`]) and checked against its CRC; the MCAP
+/// crate's chunk reader trusts the lengths inside the data, so a damaged
+/// chunk could make it ask for any amount of memory.
+fn uncompressed(c: &Chunk) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+    let size = usize::try_from(c.header.uncompressed_size.min(MAX_CHUNK)).unwrap_or(0);
+    let bytes = match c.header.compression.as_str() {
+        "" => std::borrow::Cow::Borrowed(&c.data[..]),
+        "zstd" => std::borrow::Cow::Owned(
+            zstd::bulk::decompress(&c.data, size)
+                .map_err(|e| format!("a chunk does not decompress: {e}"))?,
+        ),
+        other => {
+            return Err(format!(
+                "a chunk compressed with {other:?}, which MECH never writes"
+            ));
+        }
+    };
+    if bytes.len() as u64 != c.header.uncompressed_size {
+        return Err("a chunk's size is not what its header says".into());
+    }
+    let crc = c.header.uncompressed_crc;
+    if crc != 0 && crc32fast::hash(&bytes) != crc {
+        return Err("a chunk fails its CRC".into());
+    }
+    Ok(bytes)
+}
+
 /// Decodes a chunk already checked by [`chunk`].
 pub(super) fn entries(c: &Chunk, channels: &Channels, start_ns: u64) -> Vec<Entry> {
-    let Ok(reader) = mcap::read::ChunkReader::new(c.header.clone(), &c.data) else {
+    let Ok(bytes) = uncompressed(c) else {
         return Vec::new();
     };
-    reader
+    LinearReader::sans_magic(&bytes)
         .filter_map(|r| match r.ok()? {
             Record::Message { header, data } => {
                 let (_, kind) = channels.get(&header.channel_id)?;
