@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use crate::tmux::{Tmux, card_position};
 
-const RUN: &str = "spawn 1\nwait connected robot_1 5s\nwaypoint robot_1 2.4,1.4\nsend robot_1\n\
+const RUN: &str = "spawn 1\nwait connected robot_1 5s\nwaypoint robot_1 0.7,1.4\nsend robot_1\n\
                    route robot_1 wp/gcs\nwait arrived robot_1 30s\nsleep 1s\n";
 
 /// Records RUN into `file`.
@@ -120,9 +120,18 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
     let wait = Duration::from_secs(30);
     tmux.wait_for("the replay", wait, |s| s.contains("replay "));
     let x0 = registered_at(&tmux);
+    // The map fitted the robot where it first reported: zoom out so its
+    // whole run stays in view.
+    tmux.keys(&["Escape"]);
+    for _ in 0..4 {
+        tmux.keys(&["-"]);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let start = tmux.screen();
+    let on_map_at_start = map_label(&start).expect("robot_1 labelled on the map");
     assert!(
-        end_x - x0 > 0.5,
-        "the run moved robot_1 from {x0} to {end_x}"
+        x0 - end_x > 0.5,
+        "the run drove robot_1 in -x, from {x0} to {end_x}"
     );
 
     // Refused: a command for a robot.
@@ -135,13 +144,19 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
     prompt(&tmux, "speed 4");
     prompt(&tmux, "play");
     tmux.wait_for("robot_1 moving", wait, |s| {
-        card_position(s, "robot_1").is_some_and(|(x, _)| x > x0 + 0.1)
+        card_position(s, "robot_1").is_some_and(|(x, _)| x < x0 - 0.1)
     });
     let end = tmux.wait_for("the end of the recording", Duration::from_secs(60), |s| {
         s.contains("paused")
             && card_position(s, "robot_1").is_some_and(|(x, _)| (x - end_x).abs() < 0.02)
     });
     assert!(end.contains("x4"), "{end}");
+    // On the map too: the run drove robot_1 in -x, so its label moved left.
+    let on_map_at_end = map_label(&end).expect("robot_1 labelled on the map");
+    assert!(
+        on_map_at_end.1 + 2 < on_map_at_start.1,
+        "robot_1's map label from {on_map_at_start:?} to {on_map_at_end:?}\n{start}\n{end}"
+    );
 
     // Seeking back shows the start again.
     let again = registered_at(&tmux);
@@ -156,7 +171,8 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
 }
 
 /// Plays from the start (the recording began before the robot registered)
-/// at 0.1x until robot_1's card appears, pauses, and reads its x.
+/// at 0.1x until robot_1's card shows its first position, pauses, and
+/// reads its x.
 fn registered_at(tmux: &Tmux) -> f64 {
     prompt(tmux, "pause");
     prompt(tmux, "seek 0");
@@ -165,16 +181,38 @@ fn registered_at(tmux: &Tmux) -> f64 {
     });
     prompt(tmux, "speed 0.1");
     prompt(tmux, "play");
-    tmux.wait_for("robot_1 registered", Duration::from_secs(30), |s| {
-        card_position(s, "robot_1").is_some()
-    });
+    // Its first telemetry (before it, the card's pose is 0, 0).
+    let reported =
+        |s: &str| card_position(s, "robot_1").is_some_and(|(x, y)| x.abs() + y.abs() > 0.01);
+    tmux.wait_for("robot_1 reporting", Duration::from_secs(30), reported);
     prompt(tmux, "pause");
     let screen = tmux.wait_for("paused", Duration::from_secs(30), |s| {
-        s.contains("paused") && card_position(s, "robot_1").is_some()
+        s.contains("paused") && reported(s)
     });
     card_position(&screen, "robot_1")
         .expect("robot_1 on its card")
         .0
+}
+
+/// Row and column (in characters) of robot_1's label on the map: the
+/// middle panel at 160 columns (the cards take the first 40, the waypoints
+/// and routes the last 40).
+fn map_label(screen: &str) -> Option<(usize, usize)> {
+    let map_rows = screen
+        .lines()
+        .take_while(|l| !l.contains("┌ Events"))
+        .count();
+    screen
+        .lines()
+        .take(map_rows)
+        .enumerate()
+        .find_map(|(row, line)| {
+            let chars: Vec<char> = line.chars().collect();
+            let text: String = chars.iter().skip(40).take(80).collect();
+            text.find("robot_1")
+                .filter(|&i| !text[i + 7..].starts_with(|c: char| c.is_ascii_digit()))
+                .map(|i| (row, 40 + text[..i].chars().count()))
+        })
 }
 
 /// The trace, once strace has finished writing it.

@@ -599,3 +599,23 @@ fn a_crowded_map_counts_its_hidden_labels_and_labels_the_hovered_robot() {
         assert_eq!(drawn, p.text, "{p:?} drawn where placed");
     }
 }
+
+/// The map fits the fleet once robots say where they are: a robot that has
+/// only registered reads as the origin and is not fitted to.
+#[test]
+fn the_map_fits_the_first_robots_that_reported_a_position() {
+    let mut app = App::new("127.0.0.1:7400", std::time::Instant::now());
+    app.update(Action::Resize(160, 48));
+    let at = |x: f64, y: f64| mech_gcs::ui::FleetSnapshot {
+        robots: vec![mech_gcs::ui::RobotView::at("robot_1", 1, "kiwi", x, y, 0.0)],
+        ..Default::default()
+    };
+    app.update(Action::Fleet(at(0.0, 0.0)));
+    assert_eq!((app.viewport.centre_x, app.viewport.centre_y), (0.0, 0.0));
+    app.update(Action::Fleet(at(6.0, 4.0)));
+    let (x, y) = (app.viewport.centre_x, app.viewport.centre_y);
+    assert!((x - 6.0).abs() < 0.5 && (y - 4.0).abs() < 0.5, "{x} {y}");
+    // Once: after that the operator's view is left alone.
+    app.update(Action::Fleet(at(9.0, 9.0)));
+    assert_eq!((app.viewport.centre_x, app.viewport.centre_y), (x, y));
+}

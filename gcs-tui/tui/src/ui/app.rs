@@ -559,7 +559,10 @@ impl App {
         self.security = s.security;
         self.rejected = s.rejected;
         self.replay = s.replay;
-        let first = self.robots.is_empty() && !s.robots.is_empty();
+        // Fit the map once, to the first robots that reported where they
+        // are (a robot that registered has no position until its first
+        // telemetry, and reads as the origin).
+        let first = s.robots.iter().any(|r| r.pose.x != 0.0 || r.pose.y != 0.0);
         self.robots = s.robots;
         // Already in order from the station: a stable sort then costs one
         // comparison per robot.
