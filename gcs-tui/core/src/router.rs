@@ -590,18 +590,19 @@ async fn bind(
         addr,
         source,
     };
-    if config.udp.port() != 0 {
-        // The group's sockets share their port with any socket that asks
-        // (`SO_REUSEPORT`), a second station's included, which would then
-        // receive part of this one's traffic. A plain socket binds only a
-        // free port: if it cannot, another program (or station) has it.
-        drop(std::net::UdpSocket::bind(config.udp).map_err(|e| bind_err(config.udp, e))?);
-    }
-    let first = bind_udp(config.udp, config.socket_buffer).map_err(|e| bind_err(config.udp, e))?;
-    // Port 0 picks a port once; the rest of the group joins that one.
-    let addr = first.local_addr().map_err(|e| bind_err(config.udp, e))?;
-    let mut udp = vec![Arc::new(first)];
-    for _ in 1..config.udp_workers.max(1) {
+    // The group's sockets share their port with any socket that asks
+    // (`SO_REUSEPORT`), a second station's included, which would then
+    // receive part of this one's traffic. A plain socket binds only a free
+    // port: if it cannot, another program (or station) has it. Asked for
+    // port 0, the kernel would hand a socket of a new group a port an
+    // existing group of the same user holds (such ports count as free to
+    // share), so the port is picked by a plain socket too.
+    let addr = {
+        let probe = std::net::UdpSocket::bind(config.udp).map_err(|e| bind_err(config.udp, e))?;
+        probe.local_addr().map_err(|e| bind_err(config.udp, e))?
+    };
+    let mut udp = Vec::with_capacity(config.udp_workers.max(1));
+    for _ in 0..config.udp_workers.max(1) {
         let s = bind_udp(addr, config.socket_buffer).map_err(|e| bind_err(addr, e))?;
         udp.push(Arc::new(s));
     }
@@ -991,5 +992,34 @@ impl Publishers {
         self.by_channel
             .entry(channel.to_string())
             .or_insert_with(|| router.publisher(sender, channel))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stations asking for any port get one each: a second station never
+    /// joins the first one's `SO_REUSEPORT` group (it would receive part of
+    /// the first one's traffic). Bound with `SO_REUSEPORT` from the start,
+    /// 600 groups on one host share a port (about 6 pairs, by the birthday
+    /// bound over the ephemeral range) far more often than not.
+    #[tokio::test]
+    async fn stations_on_port_0_never_share_a_port() {
+        let config = RouterConfig {
+            udp: "127.0.0.1:0".parse().unwrap(),
+            tcp: None,
+            udp_workers: 1,
+            socket_buffer: 4096,
+            ..RouterConfig::default()
+        };
+        let mut held = Vec::new();
+        let mut ports = std::collections::HashSet::new();
+        for _ in 0..600 {
+            let (udp, _) = bind(&config).await.unwrap();
+            let port = udp[0].local_addr().unwrap().port();
+            assert!(ports.insert(port), "port {port} given to two stations");
+            held.push(udp);
+        }
     }
 }
