@@ -403,6 +403,7 @@ impl Router {
             _ => None,
         };
         let workers = config.udp_workers;
+        let poll = config.udp_poll;
         let tick = config.tick;
         let name = config.name.clone();
         let serial = config.serial.clone();
@@ -432,7 +433,7 @@ impl Router {
             let (s, sock) = (shared.clone(), socket.clone());
             let thread = std::thread::Builder::new()
                 .name(format!("mech-udp-{i}"))
-                .spawn(move || net::udp_worker(s, sock))
+                .spawn(move || net::udp_worker(s, sock, poll))
                 .map_err(|source| RouterError::Bind {
                     what: "UDP worker",
                     addr: udp_addr,

@@ -172,6 +172,22 @@ mod tests {
         assert!(GcsConfig::parse("[router]\nstale_after = 3\n").is_err());
         assert!(GcsConfig::parse("[router]\nbogus = 1\n").is_err());
         assert!(GcsConfig::parse("[router]\ntick = -1\n").is_err());
+        let e = GcsConfig::parse("[router]\nudp_poll = 0.01\n").unwrap_err();
+        assert!(e.to_string().contains("router.udp_poll"), "{e}");
+    }
+
+    #[test]
+    fn udp_polling_is_read_and_can_be_turned_off() {
+        let cfg = GcsConfig::parse("[router]\nudp_poll = 0.00005\n").unwrap();
+        assert_eq!(cfg.router.udp_poll, Duration::from_micros(50));
+        let off = GcsConfig::parse("[router]\nudp_poll = 0\n").unwrap();
+        assert!(off.router.udp_poll.is_zero());
+        // The shipped file says what the default is.
+        let shipped = GcsConfig::parse(include_str!("../../../config/gcs.toml")).unwrap();
+        assert_eq!(
+            shipped.router.udp_poll,
+            GcsConfig::parse("").unwrap().router.udp_poll
+        );
     }
 
     #[test]
