@@ -928,7 +928,7 @@ fn recording_cost(rt: &tokio::runtime::Runtime) {
         let size = std::fs::metadata(&file).map_or(0, |m| m.len());
         let per_msg = |r: &LoadRun| r.router_cpu / r.received.max(1) as f64 * 1e6;
         println!(
-            "  {robots} robots at {hz} Hz: router CPU {:.2} us/msg ({:.0}% of a core) without, {:.2} us/msg ({:.0}%) recording: +{:.1}%",
+            "  {robots} robots at {hz} Hz: router CPU {:.2} us/msg ({:.0}% of a core) without, {:.2} us/msg ({:.0}%) recording: {:+.1}%",
             per_msg(&plain),
             plain.router_cpu / plain.secs * 100.0,
             per_msg(&rec),
