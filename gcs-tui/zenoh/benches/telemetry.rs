@@ -223,6 +223,7 @@ fn main() {
     });
     bb.clear_ages();
     let heard_before = bb.stats().remote_telemetry;
+    let out_before = ba.stats();
     let (bridge_cpu, station_cpu) = (cpu(bridge_thread), cpu(station_thread));
     let sent = robots(a.router().udp_addr(), RUN).join().unwrap();
     std::thread::sleep(Duration::from_millis(300));
@@ -235,6 +236,18 @@ fn main() {
         "{ROBOTS} robots x {RATE_HZ} Hz for {secs:.0} s ({shown} shown at B before the run): \
          sent {sent}, B received {heard} ({:.2} % lost)",
         100.0 * (sent.saturating_sub(heard)) as f64 / sent as f64
+    );
+    // Where samples went missing: A's bridge missing router events, A's
+    // bridge not publishing, or Zenoh dropping them between the bridges
+    // (telemetry is published with congestion control Drop: newest wins).
+    let out = ba.stats();
+    println!(
+        "  A's bridge: published {} (telemetry and state), publish failed {}, router events missed {}; \
+         B's bridge: bad input {}",
+        out.published - out_before.published,
+        out.publish_failed - out_before.publish_failed,
+        out.events_missed - out_before.events_missed,
+        s.bad_input
     );
     if let Some([p50, p95, p99, max]) = s.remote_age_us {
         println!(
