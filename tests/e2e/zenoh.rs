@@ -217,8 +217,11 @@ status
 fn serve(dir: &Path, socket: &Path, endpoint: &str) -> Running {
     let config = dir.join("site-s.toml");
     std::fs::write(&config, "[zenoh]\nroute_requests = \"unsigned\"\n").unwrap();
+    let record = dir.join("site-s.mcap");
     let mut child = Command::new(mech_e2e::binary("mech-zenoh"))
         .args(["serve", "--station", "site-s", "--demo", "1"])
+        .arg("--record")
+        .arg(&record)
         .args(["--config", config.to_str().unwrap(), "--listen", endpoint])
         .args(["--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
         .arg("--socket")
@@ -230,7 +233,11 @@ fn serve(dir: &Path, socket: &Path, endpoint: &str) -> Running {
         .expect("mech-zenoh serve starts");
     let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
     let ready = lines.next().expect("a ready line").expect("utf-8");
-    assert!(ready.contains("mech-gcs serving"), "{ready}");
+    assert!(ready.contains("mech-zenoh serving"), "{ready}");
+    assert!(
+        ready.contains(&format!("recording to {}", record.display())),
+        "{ready}"
+    );
     Running(child)
 }
 

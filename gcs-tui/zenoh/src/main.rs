@@ -68,7 +68,12 @@ struct Cli {
 enum Command {
     /// Run the station with its bridge as a service, as `mech-gcs serve`
     /// does (`mech-gcs --attach` attaches to it); stops on SIGTERM.
-    Serve,
+    Serve {
+        /// Record to this MCAP file (default: rotating files in the
+        /// [record] or [log] directory, as `mech-gcs serve` does).
+        #[arg(long, value_name = "FILE")]
+        record: Option<PathBuf>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -83,10 +88,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let (config, zenoh) = load(&cli)?;
-    if matches!(cli.command, Some(Command::Serve)) {
+    if let Some(Command::Serve { record }) = cli.command {
         let _log = logging::init(&config.log, Some("info")).context("cannot start logging")?;
         let beside = |station: Station| start_bridge(station, zenoh);
-        runtime()?.block_on(serve::serve_with(config, cli.demo, None, beside))?;
+        runtime()?.block_on(serve::serve_with(config, cli.demo, record, beside))?;
         return Ok(ExitCode::SUCCESS);
     }
     let source = cli.script.as_deref().map(read_script).transpose()?;

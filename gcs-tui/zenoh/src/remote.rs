@@ -7,8 +7,9 @@
 //! appears, its latest state is asked for, so a station that joins late
 //! shows it whole without waiting for its next change.
 
-use std::sync::Arc;
-use std::time::Duration;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use mech_core::{Gcs, LinkState};
 use tokio::runtime::Handle;
@@ -40,6 +41,34 @@ struct Hearing {
     stats: Arc<Stats>,
     session: Session,
     runtime: Handle,
+    freshness: Freshness,
+}
+
+/// When each robot's topics were last heard live, so that the answer to a
+/// state query, which may arrive after later live samples (a route that
+/// changed while the query was on its way), never overwrites them with
+/// older state.
+#[derive(Debug, Default)]
+struct Freshness {
+    live: Mutex<HashMap<(String, String, Topic), Instant>>,
+}
+
+impl Freshness {
+    /// A live sample of `topic` for `robot` of `station` arrived now.
+    fn heard_live(&self, station: &str, robot: &str, topic: Topic) {
+        mech_core::sync::lock(&self.live).insert(
+            (station.to_string(), robot.to_string(), topic),
+            Instant::now(),
+        );
+    }
+
+    /// Whether the answer to a query sent at `asked` is still the latest
+    /// of `topic`: no live sample of it came since.
+    fn answer_is_latest(&self, station: &str, robot: &str, topic: Topic, asked: Instant) -> bool {
+        mech_core::sync::lock(&self.live)
+            .get(&(station.to_string(), robot.to_string(), topic))
+            .is_none_or(|heard| *heard < asked)
+    }
 }
 
 /// Subscribes to every station's robots' state and liveliness.
@@ -55,12 +84,13 @@ pub(crate) async fn declare(
         stats,
         session: session.clone(),
         runtime: Handle::current(),
+        freshness: Freshness::default(),
     });
     let h = hearing.clone();
     let state = session
         .declare_subscriber(format!("{}/*/*/*", keys::ROOT))
         .allowed_origin(Locality::Remote)
-        .callback(move |sample| h.state(&sample, true))
+        .callback(move |sample| h.state(&sample, None))
         .await?;
     let liveliness = session
         .liveliness()
@@ -73,8 +103,10 @@ pub(crate) async fn declare(
 
 impl Hearing {
     /// A state sample of another station's robot: `live` as published, or
-    /// not (the latest, answered to a query: its age says nothing).
-    fn state(&self, sample: &Sample, live: bool) {
+    /// answered to a query sent at `asked` (the latest then: its age says
+    /// nothing, and a live sample heard since is newer).
+    fn state(&self, sample: &Sample, asked: Option<Instant>) {
+        let live = asked.is_none();
         let key = sample.key_expr().as_str();
         let (station, robot, topic) = match keys::parse(key) {
             Ok(Key::State {
@@ -87,6 +119,17 @@ impl Hearing {
         };
         if station == self.station {
             return;
+        }
+        match asked {
+            None => self.freshness.heard_live(station, robot, topic),
+            Some(asked)
+                if !self
+                    .freshness
+                    .answer_is_latest(station, robot, topic, asked) =>
+            {
+                return debug!(%key, "answer older than a live sample: not applied");
+            }
+            Some(_) => {}
         }
         let bytes = sample.payload().to_bytes();
         let applied = match topic {
@@ -181,14 +224,39 @@ impl Hearing {
     /// Asks `station` for its robot's latest state.
     async fn fetch(self: Arc<Self>, station: String, robot: String) {
         let key = format!("{}/{station}/{robot}/*", keys::ROOT);
+        let asked = Instant::now();
         let replies = match self.session.get(&key).timeout(FETCH_TIMEOUT).await {
             Ok(r) => r,
             Err(e) => return debug!(%key, error = %e, "cannot ask for a robot's state"),
         };
         while let Ok(reply) = replies.recv_async().await {
             if let Ok(sample) = reply.result() {
-                self.state(sample, false);
+                self.state(sample, Some(asked));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_query_answer_never_overwrites_a_later_live_sample() {
+        let f = Freshness::default();
+        let asked = Instant::now();
+        // Nothing heard live: the answer is the latest there is.
+        assert!(f.answer_is_latest("site-s", "robot_1", Topic::Route, asked));
+        // The route changes (live) while the query is on its way: the
+        // answer, older, must not overwrite it.
+        f.heard_live("site-s", "robot_1", Topic::Route);
+        assert!(!f.answer_is_latest("site-s", "robot_1", Topic::Route, asked));
+        // Other topics, robots and stations are apart.
+        assert!(f.answer_is_latest("site-s", "robot_1", Topic::Link, asked));
+        assert!(f.answer_is_latest("site-s", "robot_2", Topic::Route, asked));
+        assert!(f.answer_is_latest("site-u", "robot_1", Topic::Route, asked));
+        // A query sent after the live sample: its answer is newer.
+        std::thread::sleep(Duration::from_millis(1));
+        assert!(f.answer_is_latest("site-s", "robot_1", Topic::Route, Instant::now()));
     }
 }

@@ -152,11 +152,21 @@ fn ready_line(station: &Station, socket: &Path, config: &GcsConfig) -> String {
         .map(|a| format!(", operators over TCP on {a}"))
         .unwrap_or_default();
     format!(
-        "mech-gcs serving: router on {} ({}), control socket {}{tcp}",
+        "{} serving: router on {} ({}), control socket {}{tcp}",
+        program(),
         router.udp_addr(),
         router.security().as_str(),
         socket.display()
     )
+}
+
+/// The running program's name (`mech-gcs`, or `mech-zenoh` serving the
+/// same station with its bridge), for the ready line and systemd's status.
+fn program() -> String {
+    std::env::current_exe()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "mech-gcs".into())
 }
 
 /// `serve --demo N`: N simulated robots, as `spawn N` would.
