@@ -91,11 +91,21 @@ fn mission_script() -> String {
 /// and the station reports the mission lost.
 pub fn agent(failures: &mut Vec<String>) -> Figures {
     let mut rig = Rig::udp(2, false, crate::rig::FAILSAFE, Some(&mission_script()));
-    rig.station.wait_log("mission", Duration::from_secs(60));
-    std::thread::sleep(Duration::from_secs(2));
-    let ran = rig.ctl.first("r1", unix_us() - 1_000_000, |s| {
-        s.moving && s.mission.is_some()
-    });
+    let mission = rig.station.wait_log("mission", Duration::from_secs(60));
+    // Killed only once seen running its mission (on a loaded machine that
+    // can take a while after the route is acknowledged), and a moment
+    // into it.
+    let deadline = std::time::Instant::now() + Duration::from_secs(15);
+    let ran = loop {
+        let ran = rig
+            .ctl
+            .first("r1", mission.at_us, |s| s.moving && s.mission.is_some());
+        if ran.is_some() || std::time::Instant::now() > deadline {
+            break ran;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    std::thread::sleep(Duration::from_millis(500));
     rig.agents[0].kill();
     // Restart once the script has seen the robot lost (not only the event:
     // on a loaded machine the script could otherwise miss a lost state
