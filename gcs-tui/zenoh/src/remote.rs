@@ -44,10 +44,12 @@ struct Hearing {
     freshness: Freshness,
 }
 
-/// When each robot's topics were last heard live, so that the answer to a
-/// state query, which may arrive after later live samples (a route that
-/// changed while the query was on its way), never overwrites them with
-/// older state.
+/// When each robot's state topics were last heard live, so that the answer
+/// to a state query, which may arrive after later live samples (a route
+/// that changed while the query was on its way), never overwrites them
+/// with older state. Telemetry is not tracked: the next live sample, a
+/// period later, replaces an older answer anyway, and tracking it would
+/// cost a map update per sample.
 #[derive(Debug, Default)]
 struct Freshness {
     live: Mutex<HashMap<(String, String, Topic), Instant>>,
@@ -121,7 +123,9 @@ impl Hearing {
             return;
         }
         match asked {
+            None if topic == Topic::Telemetry => {}
             None => self.freshness.heard_live(station, robot, topic),
+            Some(_) if topic == Topic::Telemetry => {}
             Some(asked)
                 if !self
                     .freshness

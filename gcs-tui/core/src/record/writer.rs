@@ -411,34 +411,36 @@ pub(super) fn run(mut w: Writer, rx: Receiver<Tapped>) {
             *failed = Some(fail(w, e));
         }
     };
+    // Whether the last look at the queue found it empty: then the thread
+    // waits on it, else it sleeps and takes the next batch.
+    let mut idle = true;
     'run: loop {
-        match rx.recv_timeout(FLUSH_EVERY) {
-            Ok(t) => take(&mut w, t, &mut failed),
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => break,
-        }
-        loop {
-            let mut got = 0usize;
-            loop {
-                match rx.try_recv() {
-                    Ok(t) => {
-                        take(&mut w, t, &mut failed);
-                        got += 1;
-                    }
-                    Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => break 'run,
-                }
+        if idle {
+            match rx.recv_timeout(FLUSH_EVERY) {
+                Ok(t) => take(&mut w, t, &mut failed),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
             }
-            if failed.is_none() && last_flush.elapsed() >= FLUSH_EVERY {
-                last_flush = std::time::Instant::now();
-                if let Err(e) = w.flush() {
-                    failed = Some(fail(&w, e));
-                }
-            }
-            if got == 0 {
-                break; // the records stopped: wait on the queue again
-            }
+        } else {
             std::thread::sleep(BATCH_EVERY);
+        }
+        let mut got = 0usize;
+        loop {
+            match rx.try_recv() {
+                Ok(t) => {
+                    take(&mut w, t, &mut failed);
+                    got += 1;
+                }
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => break 'run,
+            }
+        }
+        idle = got == 0;
+        if failed.is_none() && last_flush.elapsed() >= FLUSH_EVERY {
+            last_flush = std::time::Instant::now();
+            if let Err(e) = w.flush() {
+                failed = Some(fail(&w, e));
+            }
         }
     }
     w.finish(failed);

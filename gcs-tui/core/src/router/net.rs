@@ -44,39 +44,36 @@ pub(super) fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, 
     let mut decided = Decided::default();
     let mut poll = Poll::new(poll);
     let fd = socket.as_raw_fd();
+    // Set while traffic is dense: until then, take what comes next
+    // without going to sleep.
+    let mut polling_until = None;
     while !shared.stopped() {
-        let n = match received.recv(fd, MsgFlags::MSG_WAITFORONE) {
-            Ok(n) => n,
+        let polling = polling_until.is_some_and(|t| std::time::Instant::now() < t);
+        let flags = if polling {
+            MsgFlags::MSG_DONTWAIT
+        } else {
+            MsgFlags::MSG_WAITFORONE
+        };
+        let n = match received.recv(fd, flags) {
+            Ok(n) if n > 0 => n,
+            // 0: shut down for reading (the stop signal is set).
+            Ok(_) => continue,
             Err(e) => {
                 receive_error(&e);
+                if polling {
+                    // Nothing yet: let a thread that has work (the sender,
+                    // perhaps) have this core meanwhile.
+                    std::thread::yield_now();
+                }
                 continue;
             }
         };
-        if n == 0 {
-            continue; // shut down for reading: the stop signal is set
+        if !polling {
+            poll.woke_with(n);
         }
-        poll.woke_with(n);
         shared.decide_batch(&received, n, &mut decided);
         shared.send_decided(fd, &mut sender, &received, &mut decided);
-        // Dense traffic: take what comes next without going to sleep, for
-        // as long as it keeps coming within the polling time.
-        let mut until = poll.until();
-        while until.is_some_and(|t| std::time::Instant::now() < t) && !shared.stopped() {
-            match received.recv(fd, MsgFlags::MSG_DONTWAIT) {
-                Ok(n) if n > 0 => {
-                    shared.decide_batch(&received, n, &mut decided);
-                    shared.send_decided(fd, &mut sender, &received, &mut decided);
-                    until = poll.until();
-                }
-                // Nothing yet: let a thread that has work (the sender,
-                // perhaps) have this core meanwhile.
-                Ok(_) => std::thread::yield_now(),
-                Err(e) => {
-                    receive_error(&e);
-                    std::thread::yield_now();
-                }
-            }
-        }
+        polling_until = poll.until();
     }
 }
 
