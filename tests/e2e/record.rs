@@ -4,7 +4,7 @@
 //! what the run printed without sending anything anywhere.
 
 use std::net::UdpSocket;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 use serde_json::Value;
@@ -44,12 +44,13 @@ fn of_type<'a>(lines: &'a [Value], t: &str) -> Vec<&'a Value> {
     lines.iter().filter(|l| l["type"] == t).collect()
 }
 
-/// A fresh directory for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mech-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir
+/// A fresh directory for one test's files, removed when the handle drops
+/// (a failed test's included).
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("mech-e2e-{name}-"))
+        .tempdir()
+        .expect("scratch dir")
 }
 
 /// What Python's `mcap` package reads in `file`, or `None` if it is not
@@ -71,7 +72,8 @@ fn python_reads(file: &Path) -> Option<Value> {
 
 #[test]
 fn a_recorded_script_reads_in_python_and_replays_as_it_ran() {
-    let dir = scratch("record");
+    let scratch = scratch("record");
+    let dir = scratch.path().to_path_buf();
     let file = dir.join("run.mcap");
     let args = [
         "--script",
@@ -108,7 +110,6 @@ fn a_recorded_script_reads_in_python_and_replays_as_it_ran() {
         None => println!("skipped the Python reader: python3 -m pip install mcap"),
     }
     replay_prints_the_run(&file, &run, &dir);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Schemas Foxglove and Lichtblick draw, JSON everywhere but the raw copy,
@@ -247,7 +248,8 @@ fn network_calls_of_replay(file: &str, dir: &Path) -> Option<String> {
 
 #[test]
 fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
-    let dir = scratch("record-damaged");
+    let scratch = scratch("record-damaged");
+    let dir = scratch.path().to_path_buf();
     let file = dir.join("run.mcap");
     let script = "spawn 1\nwait connected robot_1 5s\nsleep 2500ms\nlog done\n";
     let args = [
@@ -285,5 +287,4 @@ fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("not a MECH recording"), "{stderr}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

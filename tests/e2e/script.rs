@@ -5,14 +5,13 @@ use std::io::Write;
 use std::process::{Command, Output, Stdio};
 
 /// Runs `mech-gcs --script -` with `script` on stdin, on ephemeral ports,
-/// logging into a fresh directory. Returns the output and the log directory.
-fn run_script(script: &str, extra: &[&str]) -> (Output, std::path::PathBuf) {
-    let logs = std::env::temp_dir().join(format!(
-        "mech-e2e-script-{}-{}",
-        std::process::id(),
-        script.len()
-    ));
-    let _ = std::fs::remove_dir_all(&logs);
+/// logging into a fresh directory (removed when the returned handle drops,
+/// a failed test's included). Returns the output and the log directory.
+fn run_script(script: &str, extra: &[&str]) -> (Output, tempfile::TempDir) {
+    let logs = tempfile::Builder::new()
+        .prefix("mech-e2e-script-")
+        .tempdir()
+        .expect("a log directory");
     let mut args = vec![
         "--script",
         "-",
@@ -22,7 +21,7 @@ fn run_script(script: &str, extra: &[&str]) -> (Output, std::path::PathBuf) {
         "127.0.0.1:0",
     ];
     args.extend_from_slice(extra);
-    (mech_e2e::mech_gcs(&args, script, &logs), logs)
+    (mech_e2e::mech_gcs(&args, script, logs.path()), logs)
 }
 
 fn lines(out: &Output) -> Vec<String> {
@@ -119,7 +118,7 @@ fn a_mission_script_runs_headless_against_simulated_agents() {
     // Every line is one JSON object.
     assert!(lines.iter().all(|l| l.starts_with('{') && l.ends_with('}')));
     // The rolling log file records registrations and route changes.
-    let dir = logs.join("mech");
+    let dir = logs.path().join("mech");
     let log: String = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("log dir {}: {e}", dir.display()))
         .filter_map(|e| std::fs::read_to_string(e.ok()?.path()).ok())
@@ -129,7 +128,6 @@ fn a_mission_script_runs_headless_against_simulated_agents() {
         "{log}"
     );
     assert!(!log.contains('\u{1b}'), "no colour codes in log files");
-    let _ = std::fs::remove_dir_all(&logs);
 }
 
 #[test]
@@ -173,12 +171,10 @@ fn a_bad_script_is_rejected_before_anything_runs() {
 
 #[test]
 fn a_demo_router_listens_on_loopback_only() {
+    let state = tempfile::tempdir().expect("a state directory");
     let mut child = Command::new(mech_e2e::binary("mech-gcs"))
         .args(["--demo", "1", "--script", "-", "--tcp", "127.0.0.1:0"])
-        .env(
-            "XDG_STATE_HOME",
-            std::env::temp_dir().join("mech-e2e-demo-bind"),
-        )
+        .env("XDG_STATE_HOME", state.path())
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
