@@ -287,6 +287,45 @@ mod tests {
     use crate::platform::PlatformSpec;
     use mech_proto::{Actuators, Stop};
 
+    #[test]
+    fn each_mode_demands_at_its_own_level_and_outputs_are_clamped() {
+        let mut c = dd();
+        let p = Pose::default();
+        assert_eq!(c.demand(&p, Duration::ZERO, None), Demand::Zero);
+        c.command(&Command::Actuators(Actuators {
+            outputs: vec![2.0, -0.5],
+        }))
+        .unwrap();
+        let d = c.demand(&p, Duration::ZERO, None);
+        assert_eq!(d, Demand::Actuators(vec![2.0, -0.5]));
+        assert_eq!(d.outputs(c.platform()), [1.0, -0.5]);
+        let st = SteeringThrottle {
+            steering: 0.5,
+            throttle: 1.0,
+        };
+        c.command(&Command::SteeringThrottle(st)).unwrap();
+        let d = c.demand(&p, Duration::ZERO, None);
+        assert_eq!(d, Demand::SteeringThrottle(st));
+        assert_eq!(d.outputs(c.platform()), c.platform().steering_throttle(&st));
+        assert!(!c.needs_position());
+        c.command(&Command::VelocityHeading(VelocityHeading {
+            speed: 0.3,
+            heading: 0.0,
+        }))
+        .unwrap();
+        assert!(c.needs_position());
+        assert!(
+            matches!(c.demand(&p, Duration::ZERO, None), Demand::Twist(t) if (t.vx - 0.3).abs() < 1e-9)
+        );
+        c.follow_mission().unwrap();
+        assert!(c.needs_position());
+        assert_eq!(
+            c.demand(&p, Duration::ZERO, None),
+            Demand::Zero,
+            "no mission"
+        );
+    }
+
     fn dd() -> Controller {
         Controller::new(PlatformSpec::diff_drive().build(), Gains::default(), true)
     }

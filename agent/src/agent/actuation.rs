@@ -132,6 +132,54 @@ mod tests {
     use super::super::testing::*;
 
     #[test]
+    fn a_mode_that_steers_by_position_holds_still_without_an_estimate() {
+        let mut a = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: "joy/0".into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        a.handle(msg("", w), ms(0));
+        // One controller, numbering its commands.
+        let command = |seq: u32, body: Body| {
+            let mut m = msg("joy/0", body);
+            m.header.seq = seq;
+            m
+        };
+        a.handle(command(1, heading(0.2)), ms(10));
+        assert!(!moving(&a.tick(ms(20)).outputs), "no position yet");
+        assert_eq!(a.failsafe_state(ms(20)), FailsafeState::Ok);
+        a.handle(command(2, twist(0.2)), ms(30));
+        assert!(moving(&a.tick(ms(40)).outputs), "a twist needs none");
+        a.observe_position(PositionSample {
+            pose: Pose::default(),
+            stamp: ms(40),
+            quality: 1.0,
+            has_heading: true,
+        });
+        a.handle(command(3, heading(0.2)), ms(50));
+        assert!(
+            moving(&a.tick(ms(60)).outputs),
+            "with an estimate it steers"
+        );
+    }
+
+    fn heading(speed: f64) -> Body {
+        Body::Command(Command::VelocityHeading(mech_proto::VelocityHeading {
+            speed,
+            heading: 0.0,
+        }))
+    }
+
+    #[test]
     fn channel_silence_stops_within_timeout_plus_one_period() {
         let mut a = routed("joy/0");
         let last_command = ms(100);

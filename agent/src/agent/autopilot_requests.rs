@@ -64,3 +64,67 @@ impl AutopilotRequests {
         std::mem::take(&mut self.queue)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::*;
+    use super::*;
+    use mech_proto::AutopilotAction;
+
+    fn request(robot: &str, action: AutopilotAction) -> AutopilotRequest {
+        AutopilotRequest {
+            robot: robot.into(),
+            action,
+            altitude: 1.0,
+        }
+    }
+
+    #[test]
+    fn requests_are_queued_in_order_and_taken_once() {
+        let mut bench = Bench::new();
+        let mut q = AutopilotRequests::new(true);
+        q.receive(
+            request("r1", AutopilotAction::Arm),
+            false,
+            &mut bench.step(ms(0)),
+        );
+        q.receive(
+            request("r1", AutopilotAction::Takeoff),
+            false,
+            &mut bench.step(ms(1)),
+        );
+        q.receive(
+            request("r2", AutopilotAction::Land),
+            false,
+            &mut bench.step(ms(2)),
+        );
+        assert_eq!(bench.counters.not_for_me, 1);
+        let actions: Vec<_> = q.take().into_iter().map(|r| r.action).collect();
+        assert_eq!(actions, [AutopilotAction::Arm, AutopilotAction::Takeoff]);
+        assert!(q.take().is_empty());
+        assert!(bench.out.is_empty());
+    }
+
+    #[test]
+    fn while_estopped_only_what_cannot_start_motion_is_queued() {
+        let mut bench = Bench::new();
+        let mut q = AutopilotRequests::new(true);
+        q.receive(
+            request("r1", AutopilotAction::Arm),
+            true,
+            &mut bench.step(ms(0)),
+        );
+        q.receive(
+            request("r1", AutopilotAction::Land),
+            true,
+            &mut bench.step(ms(1)),
+        );
+        let actions: Vec<_> = q.take().into_iter().map(|r| r.action).collect();
+        assert_eq!(actions, [AutopilotAction::Land]);
+        assert_eq!(bench.counters.refused, 1);
+        assert!(
+            matches!(&bench.out[..], [e] if matches!(&e.body, Body::Notice(n)
+                if n.code == NoticeCode::Unsupported && n.text.contains("e-stopped")))
+        );
+    }
+}

@@ -154,3 +154,124 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod latch_tests {
+    use super::super::testing::*;
+    use super::*;
+    use crate::control::{Controller, Gains};
+
+    fn controller() -> Controller {
+        Controller::new(PlatformSpec::diff_drive().build(), Gains::default(), true)
+    }
+
+    fn one_mission(missions: &mut Missions, bench: &mut Bench) {
+        let mission = mission_to(1, 2.0);
+        assert!(missions.receive("wp/gcs", mission, None, false, &mut bench.step(ms(0))));
+    }
+
+    #[test]
+    fn an_estop_idles_the_controller_and_pauses_missions_and_a_release_lifts_only_the_latch() {
+        let (mut bench, mut latch, mut c, mut missions) = (
+            Bench::new(),
+            EStopLatch::default(),
+            controller(),
+            Missions::default(),
+        );
+        one_mission(&mut missions, &mut bench);
+        c.command(&Command::Twist(Twist::default())).unwrap();
+        latch.receive(
+            EStop {
+                engage: true,
+                id: 4,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(10)),
+        );
+        assert!(latch.engaged());
+        assert_eq!(*c.mode(), Mode::Idle);
+        assert!(!missions.runnable("wp/gcs"), "paused");
+        assert_eq!(bench.counters.estopped_at_us, 10_000);
+        latch.receive(
+            EStop {
+                engage: false,
+                id: 5,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(20)),
+        );
+        assert!(!latch.engaged());
+        assert!(
+            !missions.runnable("wp/gcs"),
+            "still paused after the release"
+        );
+        let acks: Vec<_> = bench
+            .out
+            .iter()
+            .filter_map(|e| match &e.body {
+                Body::EStopAck(a) => Some((a.engage, a.id)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(acks, [(true, 4), (false, 5)]);
+    }
+
+    #[test]
+    fn a_repeated_estop_keeps_its_first_time_and_a_restarted_routers_numbering_is_obeyed() {
+        let (mut bench, mut latch, mut c, mut missions) = (
+            Bench::new(),
+            EStopLatch::default(),
+            controller(),
+            Missions::default(),
+        );
+        latch.receive(
+            EStop {
+                engage: true,
+                id: 50,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(10)),
+        );
+        latch.receive(
+            EStop {
+                engage: true,
+                id: 51,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(20)),
+        );
+        assert_eq!(
+            bench.counters.estopped_at_us, 10_000,
+            "when it first stopped"
+        );
+        latch.receive(
+            EStop {
+                engage: false,
+                id: 1,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(30)),
+        );
+        assert!(latch.engaged(), "older than 51: stale");
+        assert_eq!(bench.counters.stale_estops, 1);
+        // A restarted router numbers afresh; the robot forgets the order
+        // when it registers with it, and the latch holds until released.
+        latch.forget_ids();
+        assert!(latch.engaged());
+        latch.receive(
+            EStop {
+                engage: false,
+                id: 1,
+            },
+            &mut c,
+            &mut missions,
+            &mut bench.step(ms(40)),
+        );
+        assert!(!latch.engaged());
+    }
+}

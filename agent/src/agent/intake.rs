@@ -256,3 +256,37 @@ mod tests {
         assert_eq!(a.telemetry(ms(110)).computation, Computation::Offboard);
     }
 }
+
+#[cfg(test)]
+mod route_tests {
+    use super::super::testing::*;
+    use super::*;
+
+    fn route_to(robot: &str, channel: &str, epoch: u32) -> Route {
+        Route {
+            robot: robot.into(),
+            channel: channel.into(),
+            epoch,
+        }
+    }
+
+    #[test]
+    fn the_first_route_is_taken_whatever_its_epoch_and_then_none_older() {
+        let mut bench = Bench::new();
+        let mut intake = Intake::new(&AgentSettings::new("r1"));
+        let first = route_to("r1", "joy/0", u32::MAX);
+        assert!(intake.fresh_route(&first, &mut bench.step(ms(0))));
+        assert!(intake.apply(first.clone(), ms(0)), "a first route changes");
+        assert!(!intake.apply(first, ms(5)), "a resend changes nothing");
+        let older = route_to("r1", "wp/gcs", u32::MAX - 1);
+        assert!(!intake.fresh_route(&older, &mut bench.step(ms(10))));
+        assert_eq!(bench.counters.stale_routes, 1);
+        let past_the_wrap = route_to("r1", "wp/gcs", 0);
+        assert!(intake.fresh_route(&past_the_wrap, &mut bench.step(ms(20))));
+        assert!(!intake.fresh_route(&route_to("r2", "wp/gcs", 1), &mut bench.step(ms(30))));
+        assert_eq!(bench.counters.not_for_me, 1);
+        assert!(
+            matches!(intake.ack(), Body::RouteAck(a) if a.channel == "joy/0" && a.epoch == u32::MAX)
+        );
+    }
+}

@@ -105,3 +105,21 @@ mod tests {
         assert!(v.vy > 0.1, "vy {}", v.vy);
     }
 }
+
+#[cfg(test)]
+mod schedule_tests {
+    use super::*;
+
+    #[test]
+    fn telemetry_stays_on_its_grid_through_jitter() {
+        let ms = Duration::from_millis;
+        let mut s = TelemetrySchedule::new(ms(50));
+        let due: Vec<u64> = [0, 30, 53, 99, 101, 149, 150, 170, 199, 201]
+            .into_iter()
+            .filter(|&t| s.due(ms(t)))
+            .collect();
+        // 53 and 101 are late, yet the next are due at 100 and 150 (no
+        // drift), and never two in one period.
+        assert_eq!(due, [0, 53, 101, 150, 201]);
+    }
+}

@@ -96,3 +96,27 @@ pub(super) fn mission_to(id: u32, x: f64) -> Mission {
 pub(super) fn one_waypoint(id: u32) -> Body {
     Body::Mission(mission_to(id, 2.0))
 }
+
+/// What a part is handed, for testing it on its own: robot `r1`'s wire,
+/// counters and replies.
+#[derive(Debug)]
+pub(super) struct Bench {
+    pub(super) wire: super::wire::Wire,
+    pub(super) counters: super::counters::Counters,
+    pub(super) out: Vec<Envelope>,
+}
+
+impl Bench {
+    pub(super) fn new() -> Bench {
+        Bench {
+            wire: super::wire::Wire::new("r1", 0),
+            counters: super::counters::Counters::default(),
+            out: Vec::new(),
+        }
+    }
+
+    /// A step at `now`, its replies collected in `out`.
+    pub(super) fn step(&mut self, now: Duration) -> super::step::Step<'_> {
+        super::step::Step::new(now, &mut self.wire, &mut self.counters, &mut self.out)
+    }
+}
