@@ -6,7 +6,8 @@
 //! mission starts or resumes ([`super::missions`]), no autopilot request
 //! that could start motion is queued, and the failsafe holds the outputs
 //! at zero ([`crate::failsafe`]). A release lifts the latch only: the
-//! controller stays idle and missions stay paused until commanded again.
+//! controller stays idle until the next command, and missions stay paused
+//! until re-sent or re-routed.
 //! The router numbers e-stops and releases in order, so an older one (a
 //! delayed resend of a release, overtaken by a new e-stop) never undoes a
 //! newer one.
