@@ -11,7 +11,9 @@ pub mod mission;
 
 use std::time::Duration;
 
-use mech_proto::{Command, CommandKind, ControlMode, Pose, Twist, VelocityHeading};
+use mech_proto::{
+    Command, CommandKind, ControlMode, Pose, SteeringThrottle, Twist, VelocityHeading,
+};
 use serde::Deserialize;
 
 use crate::platform::Platform;
@@ -51,7 +53,7 @@ pub enum Mode {
     /// Nothing commanded yet (or after a route change): outputs zero.
     Idle,
     Actuators(Vec<f64>),
-    SteeringThrottle(mech_proto::SteeringThrottle),
+    SteeringThrottle(SteeringThrottle),
     VelocityHeading(VelocityHeading),
     Twist(Twist),
     /// Following the mission passed to [`Controller::update`].
@@ -81,6 +83,36 @@ pub enum Refused {
     Unsupported(CommandKind),
     #[error("{given} actuator outputs for a robot with {motors} motors")]
     MotorCount { given: usize, motors: usize },
+}
+
+/// What the controller asks of the vehicle for one period, at the level its
+/// mode works at, before the platform turns it into actuator outputs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Demand {
+    /// Every output zero (idle, stopped, or waypoints without a mission);
+    /// wheel speed loops hold the wheels at rest.
+    Zero,
+    /// Per-motor outputs, as commanded (actuator level).
+    Actuators(Vec<f64>),
+    /// Car-style input, mixed by the platform's own rule.
+    SteeringThrottle(SteeringThrottle),
+    /// A body-frame twist: twist commands, and what the velocity-heading and
+    /// waypoint controllers compute.
+    Twist(Twist),
+}
+
+impl Demand {
+    /// The platform's actuator outputs for this demand, one per motor, each
+    /// in `[-1, 1]`.
+    pub fn outputs(&self, platform: &dyn Platform) -> Vec<f64> {
+        let outputs = match self {
+            Demand::Zero => vec![0.0; platform.motors()],
+            Demand::Actuators(a) => a.clone(),
+            Demand::SteeringThrottle(s) => platform.steering_throttle(s),
+            Demand::Twist(t) => platform.mix(t),
+        };
+        outputs.into_iter().map(crate::hal::clamp_output).collect()
+    }
 }
 
 /// The onboard controller of one robot.
@@ -172,35 +204,43 @@ impl Controller {
         self.outputs.iter_mut().for_each(|u| *u = 0.0);
     }
 
-    /// One control period: computes the outputs for the current mode from
+    /// Whether the current mode steers by the position estimate
+    /// (velocity-heading, waypoints): without an estimate it cannot run.
+    pub fn needs_position(&self) -> bool {
+        matches!(self.mode, Mode::VelocityHeading(_) | Mode::Waypoints)
+    }
+
+    /// One control period: what the current mode asks of the vehicle, from
     /// the pose estimate. `mission` is the run followed in
-    /// [`Mode::Waypoints`] (none = hold still).
+    /// [`Mode::Waypoints`] (none = hold still); following it advances it.
+    pub fn demand(&self, pose: &Pose, now: Duration, mission: Option<&mut MissionRun>) -> Demand {
+        match &self.mode {
+            Mode::Idle | Mode::Stopped => Demand::Zero,
+            Mode::Actuators(a) => Demand::Actuators(a.clone()),
+            Mode::SteeringThrottle(s) => Demand::SteeringThrottle(*s),
+            Mode::VelocityHeading(v) => Demand::Twist(self.velocity_heading(pose, v)),
+            Mode::Twist(t) => Demand::Twist(*t),
+            Mode::Waypoints => match mission {
+                Some(run) => {
+                    Demand::Twist(run.step(pose, now, self.platform.as_ref(), &self.gains))
+                }
+                None => Demand::Zero,
+            },
+        }
+    }
+
+    /// One control period: computes the outputs for the current mode from
+    /// the pose estimate ([`Controller::demand`] through the platform).
+    /// `mission` is the run followed in [`Mode::Waypoints`] (none = hold
+    /// still).
     pub fn update(
         &mut self,
         pose: &Pose,
         now: Duration,
         mission: Option<&mut MissionRun>,
     ) -> &[f64] {
-        let outputs = match &self.mode {
-            Mode::Idle | Mode::Stopped => vec![0.0; self.platform.motors()],
-            Mode::Actuators(a) => a.clone(),
-            Mode::SteeringThrottle(s) => self.platform.steering_throttle(s),
-            Mode::VelocityHeading(v) => {
-                let twist = self.velocity_heading(pose, v);
-                self.platform.mix(&twist)
-            }
-            Mode::Twist(t) => self.platform.mix(t),
-            Mode::Waypoints => match mission {
-                Some(run) => {
-                    let twist = run.step(pose, now, self.platform.as_ref(), &self.gains);
-                    self.platform.mix(&twist)
-                }
-                None => vec![0.0; self.platform.motors()],
-            },
-        };
-        self.outputs.clear();
-        self.outputs
-            .extend(outputs.into_iter().map(crate::hal::clamp_output));
+        let outputs = self.demand(pose, now, mission).outputs(self.platform());
+        self.outputs = outputs;
         &self.outputs
     }
 
@@ -246,6 +286,45 @@ mod tests {
     use super::*;
     use crate::platform::PlatformSpec;
     use mech_proto::{Actuators, Stop};
+
+    #[test]
+    fn each_mode_demands_at_its_own_level_and_outputs_are_clamped() {
+        let mut c = dd();
+        let p = Pose::default();
+        assert_eq!(c.demand(&p, Duration::ZERO, None), Demand::Zero);
+        c.command(&Command::Actuators(Actuators {
+            outputs: vec![2.0, -0.5],
+        }))
+        .unwrap();
+        let d = c.demand(&p, Duration::ZERO, None);
+        assert_eq!(d, Demand::Actuators(vec![2.0, -0.5]));
+        assert_eq!(d.outputs(c.platform()), [1.0, -0.5]);
+        let st = SteeringThrottle {
+            steering: 0.5,
+            throttle: 1.0,
+        };
+        c.command(&Command::SteeringThrottle(st)).unwrap();
+        let d = c.demand(&p, Duration::ZERO, None);
+        assert_eq!(d, Demand::SteeringThrottle(st));
+        assert_eq!(d.outputs(c.platform()), c.platform().steering_throttle(&st));
+        assert!(!c.needs_position());
+        c.command(&Command::VelocityHeading(VelocityHeading {
+            speed: 0.3,
+            heading: 0.0,
+        }))
+        .unwrap();
+        assert!(c.needs_position());
+        assert!(
+            matches!(c.demand(&p, Duration::ZERO, None), Demand::Twist(t) if (t.vx - 0.3).abs() < 1e-9)
+        );
+        c.follow_mission().unwrap();
+        assert!(c.needs_position());
+        assert_eq!(
+            c.demand(&p, Duration::ZERO, None),
+            Demand::Zero,
+            "no mission"
+        );
+    }
 
     fn dd() -> Controller {
         Controller::new(PlatformSpec::diff_drive().build(), Gains::default(), true)

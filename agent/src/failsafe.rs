@@ -3,8 +3,15 @@
 //! Actuators are zeroed when the routed channel has been silent for
 //! `channel_timeout` (a running onboard mission is exempt: the mission is the
 //! controller), when nothing has been heard from the router for
-//! `router_timeout` (a mission continues only if configured to), and while an
-//! e-stop is latched. Time is passed in, never read.
+//! `router_timeout` (a mission continues only if configured to), while an
+//! e-stop is latched, and while an actuator fault holds them.
+//!
+//! Each fact is owned by the part of the agent core that learns it (router
+//! liveness by registration, channel silence by command intake, each a
+//! [`Watchdog`]; the latch by the e-stop; the fault hold by the sensors);
+//! this module turns them, gathered as [`Conditions`], into a
+//! [`FailsafeState`] and each period's [`Verdict`]. Time is passed in, never
+//! read.
 
 use std::time::Duration;
 
@@ -55,78 +62,118 @@ impl Default for FailsafeToml {
     }
 }
 
-/// Liveness timers and the e-stop latch.
+/// How long since something was last heard, against a timeout: the
+/// router's liveness (kept by registration) and the routed channel's silence
+/// (kept by command intake) are each one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Watchdog {
+    timeout: Duration,
+    last: Option<Duration>,
+}
+
+impl Watchdog {
+    pub fn new(timeout: Duration) -> Watchdog {
+        Watchdog {
+            timeout,
+            last: None,
+        }
+    }
+
+    pub fn timeout(&self) -> Duration {
+        self.timeout
+    }
+
+    /// Something was heard at `now`.
+    pub fn heard(&mut self, now: Duration) {
+        self.last = Some(now);
+    }
+
+    /// Silent from now on, as if never heard (the router said goodbye).
+    pub fn forget(&mut self) {
+        self.last = None;
+    }
+
+    /// Nothing heard yet, or nothing for longer than the timeout.
+    pub fn silent(&self, now: Duration) -> bool {
+        self.last
+            .is_none_or(|t| now.saturating_sub(t) > self.timeout)
+    }
+}
+
+/// What the failsafe judges, as the parts of the agent that own each fact
+/// know it now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Conditions {
+    /// An e-stop is latched.
+    pub estopped: bool,
+    /// Actuators are held at zero after a driver error.
+    pub actuator_fault: bool,
+    /// Nothing heard from the router for `router_timeout`, or it said Bye.
+    pub router_lost: bool,
+    /// The robot has a route (its channel is not empty).
+    pub routed: bool,
+    /// Nothing accepted on the routed channel for `channel_timeout`.
+    pub channel_silent: bool,
+    /// A mission on the routed channel is the robot's controller, running or
+    /// done: silence on that channel is not a fault.
+    pub mission_controls: bool,
+}
+
+impl Conditions {
+    /// The failsafe state: an e-stop first, then an actuator fault, then
+    /// router loss, then channel silence.
+    pub fn state(&self) -> FailsafeState {
+        if self.estopped {
+            FailsafeState::EStopped
+        } else if self.actuator_fault {
+            FailsafeState::Fault
+        } else if self.router_lost {
+            FailsafeState::RouterLost
+        } else if self.routed && !self.mission_controls && self.channel_silent {
+            FailsafeState::ChannelSilent
+        } else {
+            FailsafeState::Ok
+        }
+    }
+}
+
+/// One control period's verdict.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Verdict {
+    pub state: FailsafeState,
+    /// Whether actuators may be driven.
+    pub drive: bool,
+    /// The state of the period before.
+    pub previous: FailsafeState,
+}
+
+impl Verdict {
+    /// The robot left `Ok` this period: a failsafe trip.
+    pub fn tripped(&self) -> bool {
+        self.state != FailsafeState::Ok && self.previous == FailsafeState::Ok
+    }
+}
+
+/// The verdict of each control period, and the state of the last one (so a
+/// trip is seen once, when the robot leaves `Ok`).
 #[derive(Debug, Clone)]
 pub struct Failsafe {
     pub config: FailsafeConfig,
-    last_router: Option<Duration>,
-    last_command: Option<Duration>,
-    estop: Option<u32>,
+    last: FailsafeState,
 }
 
 impl Failsafe {
     pub fn new(config: FailsafeConfig) -> Failsafe {
         Failsafe {
             config,
-            last_router: None,
-            last_command: None,
-            estop: None,
+            // Nothing heard from a router yet: not a trip when the first
+            // period finds the router lost.
+            last: FailsafeState::RouterLost,
         }
     }
 
-    /// Anything arrived from the router.
-    pub fn router_heard(&mut self, now: Duration) {
-        self.last_router = Some(now);
-    }
-
-    /// The router said goodbye: it counts as lost from now on.
-    pub fn router_gone(&mut self) {
-        self.last_router = None;
-    }
-
-    /// A command on the routed channel was accepted, or the route changed
-    /// (which restarts the channel-silence timer).
-    pub fn channel_heard(&mut self, now: Duration) {
-        self.last_command = Some(now);
-    }
-
-    pub fn engage_estop(&mut self, id: u32) {
-        self.estop = Some(id);
-    }
-
-    pub fn release_estop(&mut self) {
-        self.estop = None;
-    }
-
-    pub fn estopped(&self) -> bool {
-        self.estop.is_some()
-    }
-
-    pub fn router_lost(&self, now: Duration) -> bool {
-        self.last_router
-            .is_none_or(|t| now.saturating_sub(t) > self.config.router_timeout)
-    }
-
-    pub fn channel_silent(&self, now: Duration) -> bool {
-        self.last_command
-            .is_none_or(|t| now.saturating_sub(t) > self.config.channel_timeout)
-    }
-
-    /// The failsafe state now. `routed`: the robot has a route (channel not
-    /// empty); `mission_running`: an onboard mission is being followed.
-    pub fn state(&self, now: Duration, routed: bool, mission_running: bool) -> FailsafeState {
-        if self.estopped() {
-            FailsafeState::EStopped
-        } else if self.router_lost(now) {
-            FailsafeState::RouterLost
-        } else if routed && !mission_running && self.channel_silent(now) {
-            FailsafeState::ChannelSilent
-        } else {
-            FailsafeState::Ok
-        }
-    }
-
-    /// Whether actuators may be driven in `state`.
+    /// Whether actuators may be driven in `state`; `mission_running`: an
+    /// onboard mission is being followed.
     pub fn may_drive(&self, state: FailsafeState, mission_running: bool) -> bool {
         match state {
             FailsafeState::Ok => true,
@@ -136,6 +183,17 @@ impl Failsafe {
             _ => false,
         }
     }
+
+    /// This period's verdict in `state`, remembered for the next one.
+    pub fn judge(&mut self, state: FailsafeState, mission_running: bool) -> Verdict {
+        let verdict = Verdict {
+            state,
+            drive: self.may_drive(state, mission_running),
+            previous: self.last,
+        };
+        self.last = state;
+        verdict
+    }
 }
 
 #[cfg(test)]
@@ -144,11 +202,42 @@ mod tests {
 
     const MS: fn(u64) -> Duration = Duration::from_millis;
 
+    /// The facts as the agent's parts keep them: the router's and the
+    /// channel's watchdogs and the e-stop latch.
+    struct Watch {
+        router: Watchdog,
+        channel: Watchdog,
+        estopped: bool,
+    }
+
+    impl Watch {
+        fn new() -> Watch {
+            let c = FailsafeConfig::default();
+            Watch {
+                router: Watchdog::new(c.router_timeout),
+                channel: Watchdog::new(c.channel_timeout),
+                estopped: false,
+            }
+        }
+
+        fn state(&self, now: Duration, routed: bool, mission_running: bool) -> FailsafeState {
+            Conditions {
+                estopped: self.estopped,
+                actuator_fault: false,
+                router_lost: self.router.silent(now),
+                routed,
+                channel_silent: self.channel.silent(now),
+                mission_controls: mission_running,
+            }
+            .state()
+        }
+    }
+
     #[test]
     fn channel_silence_trips_after_the_timeout_only() {
-        let mut f = Failsafe::new(FailsafeConfig::default());
-        f.router_heard(MS(0));
-        f.channel_heard(MS(0));
+        let mut f = Watch::new();
+        f.router.heard(MS(0));
+        f.channel.heard(MS(0));
         assert_eq!(f.state(MS(500), true, false), FailsafeState::Ok);
         assert_eq!(f.state(MS(501), true, false), FailsafeState::ChannelSilent);
         assert_eq!(
@@ -161,29 +250,66 @@ mod tests {
             FailsafeState::Ok,
             "a mission is not subject to silence"
         );
-        f.channel_heard(MS(501));
+        f.channel.heard(MS(501));
         assert_eq!(f.state(MS(600), true, false), FailsafeState::Ok);
     }
 
     #[test]
     fn router_loss_and_estop() {
-        let mut f = Failsafe::new(FailsafeConfig::default());
+        let mut f = Watch::new();
+        let mut failsafe = Failsafe::new(FailsafeConfig::default());
         assert_eq!(
             f.state(MS(0), false, false),
             FailsafeState::RouterLost,
             "never heard"
         );
-        f.router_heard(MS(100));
-        f.channel_heard(MS(100));
+        f.router.heard(MS(100));
+        f.channel.heard(MS(100));
         assert_eq!(f.state(MS(1101), true, true), FailsafeState::RouterLost);
-        assert!(!f.may_drive(FailsafeState::RouterLost, true));
-        f.config.mission_continues_on_link_loss = true;
-        assert!(f.may_drive(FailsafeState::RouterLost, true));
-        assert!(!f.may_drive(FailsafeState::RouterLost, false));
-        f.engage_estop(3);
-        f.router_heard(MS(1200));
+        assert!(!failsafe.may_drive(FailsafeState::RouterLost, true));
+        failsafe.config.mission_continues_on_link_loss = true;
+        assert!(failsafe.may_drive(FailsafeState::RouterLost, true));
+        assert!(!failsafe.may_drive(FailsafeState::RouterLost, false));
+        f.estopped = true;
+        f.router.heard(MS(1200));
         assert_eq!(f.state(MS(1200), true, false), FailsafeState::EStopped);
-        f.release_estop();
+        f.estopped = false;
         assert_eq!(f.state(MS(1200), true, false), FailsafeState::ChannelSilent);
+    }
+
+    #[test]
+    fn a_router_bye_makes_it_lost_at_once() {
+        let mut router = Watchdog::new(FailsafeConfig::default().router_timeout);
+        router.heard(MS(100));
+        assert!(!router.silent(MS(100)));
+        router.forget();
+        assert!(router.silent(MS(100)));
+    }
+
+    #[test]
+    fn an_actuator_fault_outranks_everything_but_an_estop() {
+        let mut c = Conditions {
+            actuator_fault: true,
+            router_lost: true,
+            routed: true,
+            channel_silent: true,
+            ..Conditions::default()
+        };
+        assert_eq!(c.state(), FailsafeState::Fault);
+        c.estopped = true;
+        assert_eq!(c.state(), FailsafeState::EStopped);
+    }
+
+    #[test]
+    fn a_trip_is_seen_once_when_the_robot_leaves_ok() {
+        let mut f = Failsafe::new(FailsafeConfig::default());
+        let lost = f.judge(FailsafeState::RouterLost, false);
+        assert!(!lost.tripped() && !lost.drive, "never heard is not a trip");
+        let ok = f.judge(FailsafeState::Ok, false);
+        assert!(!ok.tripped() && ok.drive);
+        let silent = f.judge(FailsafeState::ChannelSilent, false);
+        assert!(silent.tripped() && !silent.drive);
+        assert_eq!(silent.previous, FailsafeState::Ok);
+        assert!(!f.judge(FailsafeState::RouterLost, false).tripped());
     }
 }

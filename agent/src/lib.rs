@@ -13,7 +13,10 @@
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
 //! - [`wheels`], [`fusion`]: wheel encoders (measured speed, closed-loop
 //!   wheel speed, stall detection) and odometry fused with position fixes.
-//! - [`agent`]: the socket-free core; [`runtime`]: the tokio loop around it.
+//! - [`agent`]: the socket-free core, one state machine per concern
+//!   (registration, command intake, the e-stop, missions, sensors and
+//!   faults, the autopilot queue, actuation, telemetry); [`runtime`]: the
+//!   tokio loop around it.
 //! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
 //!   [`launch`]: bringing a robot up from its config.
 

@@ -441,6 +441,21 @@ mod tests {
         )
     }
 
+    /// The router's Welcome, routing `r1` to `channel`.
+    fn welcome(channel: &str) -> Envelope {
+        let route = Route {
+            robot: "r1".into(),
+            channel: channel.into(),
+            epoch: 1,
+        };
+        let welcome = Welcome {
+            robot_id: 1,
+            route,
+            router_version: "t".into(),
+        };
+        msg("", Body::Welcome(welcome))
+    }
+
     /// Encoders that count `per_read` edges on each wheel per reading, or
     /// fail while `broken`.
     #[derive(Debug, Default)]
@@ -518,22 +533,7 @@ mod tests {
             encoders: None,
         };
         let ms = Duration::from_millis;
-        let route = Route {
-            robot: "r1".into(),
-            channel: "joy/0".into(),
-            epoch: 1,
-        };
-        v.handle(
-            msg(
-                "",
-                Body::Welcome(Welcome {
-                    robot_id: 1,
-                    route,
-                    router_version: "t".into(),
-                }),
-            ),
-            ms(0),
-        );
+        v.handle(welcome("joy/0"), ms(0));
         tx.send(Ok(PositionSample {
             pose: Pose {
                 x: 1.0,
@@ -544,16 +544,11 @@ mod tests {
             has_heading: true,
         }))
         .unwrap();
-        v.handle(
-            msg(
-                "joy/0",
-                Body::Command(Command::Twist(Twist {
-                    vx: 0.2,
-                    ..Twist::default()
-                })),
-            ),
-            ms(10),
-        );
+        let forward = Body::Command(Command::Twist(Twist {
+            vx: 0.2,
+            ..Twist::default()
+        }));
+        v.handle(msg("joy/0", forward), ms(10));
         v.tick(ms(20));
         assert_eq!(v.agent.estimate().map(|e| e.pose.x), Some(1.0));
         assert!(

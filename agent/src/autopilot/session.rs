@@ -66,6 +66,20 @@ impl Report {
     }
 }
 
+/// The newest of what the autopilot reports of the vehicle.
+#[derive(Debug, Clone, Default)]
+struct Reported {
+    position: Option<Ned>,
+    /// A LOCAL_POSITION_NED arrived since [`Session::take_pose`].
+    fresh_position: bool,
+    velocity: Option<Ned>,
+    /// Yaw and yaw rate, rad and rad/s.
+    yaw: Option<(f64, f64)>,
+    battery: Option<f64>,
+    /// AMSL altitude of home, m (GLOBAL_POSITION_INT alt - relative_alt).
+    home_amsl: Option<f64>,
+}
+
 /// The state of the conversation; see the module docs.
 #[derive(Debug, Clone)]
 pub struct Session {
@@ -80,14 +94,8 @@ pub struct Session {
     lost: bool,
     armed: Option<bool>,
     mode: Option<String>,
-    position: Option<Ned>,
-    /// A LOCAL_POSITION_NED arrived since [`Session::take_pose`].
-    fresh_position: bool,
-    velocity: Option<Ned>,
-    yaw: Option<(f64, f64)>,
-    battery: Option<f64>,
-    /// AMSL altitude of home, m (GLOBAL_POSITION_INT alt - relative_alt).
-    home_amsl: Option<f64>,
+    /// What the autopilot says of the vehicle's motion and battery.
+    vehicle: Reported,
     /// Commands sent and not yet acknowledged, oldest first, so each
     /// COMMAND_ACK can name its action (at most [`PENDING`]).
     pending: Vec<(MavCmd, AutopilotAction)>,
@@ -106,12 +114,7 @@ impl Session {
             lost: false,
             armed: None,
             mode: None,
-            position: None,
-            fresh_position: false,
-            velocity: None,
-            yaw: None,
-            battery: None,
-            home_amsl: None,
+            vehicle: Reported::default(),
             pending: Vec::new(),
         }
     }
@@ -162,30 +165,30 @@ impl Session {
                     .iter()
                     .all(|v| v.is_finite())
                 {
-                    self.position = Some(Ned {
+                    self.vehicle.position = Some(Ned {
                         north: f(p.x),
                         east: f(p.y),
                         down: f(p.z),
                     });
-                    self.velocity = Some(Ned {
+                    self.vehicle.velocity = Some(Ned {
                         north: f(p.vx),
                         east: f(p.vy),
                         down: f(p.vz),
                     });
-                    self.fresh_position = true;
+                    self.vehicle.fresh_position = true;
                 }
             }
             MavMessage::ATTITUDE(a) if a.yaw.is_finite() && a.yawspeed.is_finite() => {
-                self.yaw = Some((f64::from(a.yaw), f64::from(a.yawspeed)));
+                self.vehicle.yaw = Some((f64::from(a.yaw), f64::from(a.yawspeed)));
             }
             MavMessage::SYS_STATUS(s) => {
                 // -1: the autopilot does not know.
-                self.battery = (0..=100)
+                self.vehicle.battery = (0..=100)
                     .contains(&s.battery_remaining)
                     .then(|| f64::from(s.battery_remaining) / 100.0);
             }
             MavMessage::GLOBAL_POSITION_INT(g) => {
-                self.home_amsl = Some(f64::from(g.alt - g.relative_alt) / 1000.0);
+                self.vehicle.home_amsl = Some(f64::from(g.alt - g.relative_alt) / 1000.0);
             }
             MavMessage::COMMAND_ACK(ack) => return self.command_ack(ack.command, ack.result),
             MavMessage::STATUSTEXT(t)
@@ -304,23 +307,23 @@ impl Session {
     /// The pose, when a LOCAL_POSITION_NED arrived since the last call and
     /// the yaw is known.
     pub fn take_pose(&mut self) -> Option<Pose> {
-        if !self.fresh_position {
+        if !self.vehicle.fresh_position {
             return None;
         }
-        let (position, (yaw, _)) = (self.position?, self.yaw?);
-        self.fresh_position = false;
+        let (position, (yaw, _)) = (self.vehicle.position?, self.vehicle.yaw?);
+        self.vehicle.fresh_position = false;
         Some(pose_from_ned(position, yaw))
     }
 
     /// World-frame velocity (ENU) as the autopilot measures it.
     pub fn velocity(&self) -> Option<Velocity> {
-        let (v, (_, rate)) = (self.velocity?, self.yaw?);
+        let (v, (_, rate)) = (self.vehicle.velocity?, self.vehicle.yaw?);
         Some(velocity_from_ned(v, rate))
     }
 
     /// Battery charge, a fraction.
     pub fn battery(&self) -> Option<f64> {
-        self.battery
+        self.vehicle.battery
     }
 
     /// Puts what the autopilot measures into the agent's telemetry: its
@@ -330,8 +333,8 @@ impl Session {
             t.velocity = v;
             t.velocity_source = mech_proto::VelocitySource::Measured;
         }
-        if self.battery.is_some() {
-            t.battery = self.battery;
+        if self.vehicle.battery.is_some() {
+            t.battery = self.vehicle.battery;
         }
     }
 
@@ -352,7 +355,7 @@ impl Session {
     pub fn setpoint(&self, twist: &Twist, now: Duration) -> Option<MavMessage> {
         let target = self.target?;
         let still = Twist::default();
-        let (twist, heading) = match self.yaw {
+        let (twist, heading) = match self.vehicle.yaw {
             Some((yaw, _)) => (twist, super::frames::yaw_to_heading(yaw)),
             None => (&still, 0.0),
         };
@@ -416,7 +419,10 @@ impl Session {
                 // ArduPilot: metres above home; PX4: AMSL (NaN: its default
                 // takeoff altitude, MIS_TAKEOFF_ALT).
                 let alt = match target.flavour {
-                    Flavour::Px4 => self.home_amsl.map_or(nan, |h| (h + altitude) as f32),
+                    Flavour::Px4 => self
+                        .vehicle
+                        .home_amsl
+                        .map_or(nan, |h| (h + altitude) as f32),
                     _ => altitude as f32,
                 };
                 let (lat, lon) = match target.flavour {

@@ -109,57 +109,16 @@ impl Trial {
 
     /// Runs the trial.
     pub fn run(&self) -> TrialResult {
-        let noise = self.noise.map(|m| UwbNoise::new(m, self.seed));
-        let mut sim = SimAgent::new(self.settings(), &self.platform, self.start, noise, 0)
-            .with_fix_period(self.fix_period);
-        if let Some(model) = self.encoders {
-            sim = sim.with_encoders(model, self.seed.wrapping_mul(31));
-        }
-        sim.robot.set_battery(self.battery);
-        let msg = |channel: &str, body: Body| {
-            Envelope::new(
-                Header {
-                    sender: "router".into(),
-                    destination: "trial".into(),
-                    channel: channel.into(),
-                    ..Header::default()
-                },
-                body,
-            )
-        };
+        let mut sim = self.robot();
         let mut now = Duration::ZERO;
-        sim.tick(now);
-        let route = Route {
-            robot: "trial".into(),
-            channel: "wp/gcs".into(),
-            epoch: 1,
-        };
-        sim.handle(
-            msg(
-                "",
-                Body::Welcome(Welcome {
-                    robot_id: 1,
-                    route,
-                    router_version: "trial".into(),
-                }),
-            ),
-            now,
-        );
-        let mission = Mission {
-            id: 1,
-            waypoints: self.waypoints.clone(),
-            looped: false,
-            arrival_radius: self.arrival_radius,
-            start_index: 0,
-        };
-        sim.handle(msg("wp/gcs", Body::Mission(mission)), now);
+        self.start(&mut sim, now);
         let mut next_heartbeat = Duration::ZERO;
         let mut finished_at = None;
         let mut pose_errors = Vec::new();
         while now < self.timeout {
             now += self.control_period;
             if now >= next_heartbeat {
-                sim.handle(msg("", Body::Heartbeat(Heartbeat::new(0))), now);
+                sim.handle(from_router("", Body::Heartbeat(Heartbeat::new(0))), now);
                 next_heartbeat = now + Duration::from_millis(250);
             }
             sim.tick(now);
@@ -175,6 +134,54 @@ impl Trial {
                 _ => {}
             }
         }
+        self.outcome(&sim, finished_at, now, &pose_errors)
+    }
+
+    /// The simulated robot: noise, encoders and battery as the trial says.
+    fn robot(&self) -> SimAgent {
+        let noise = self.noise.map(|m| UwbNoise::new(m, self.seed));
+        let mut sim = SimAgent::new(self.settings(), &self.platform, self.start, noise, 0)
+            .with_fix_period(self.fix_period);
+        if let Some(model) = self.encoders {
+            sim = sim.with_encoders(model, self.seed.wrapping_mul(31));
+        }
+        sim.robot.set_battery(self.battery);
+        sim
+    }
+
+    /// Registers the robot routed to `wp/gcs` and sends it the mission, as
+    /// the router would.
+    fn start(&self, sim: &mut SimAgent, now: Duration) {
+        sim.tick(now);
+        let route = Route {
+            robot: "trial".into(),
+            channel: "wp/gcs".into(),
+            epoch: 1,
+        };
+        let welcome = Body::Welcome(Welcome {
+            robot_id: 1,
+            route,
+            router_version: "trial".into(),
+        });
+        sim.handle(from_router("", welcome), now);
+        let mission = Mission {
+            id: 1,
+            waypoints: self.waypoints.clone(),
+            looped: false,
+            arrival_radius: self.arrival_radius,
+            start_index: 0,
+        };
+        sim.handle(from_router("wp/gcs", Body::Mission(mission)), now);
+    }
+
+    /// The result of a run that ended at `now`.
+    fn outcome(
+        &self,
+        sim: &SimAgent,
+        finished_at: Option<Duration>,
+        now: Duration,
+        pose_errors: &[f64],
+    ) -> TrialResult {
         let target = self.waypoints.last().copied().unwrap_or(Waypoint {
             x: 0.0,
             y: 0.0,
@@ -197,9 +204,22 @@ impl Trial {
             finished: finished_at.is_some(),
             seconds: finished_at.unwrap_or(now).as_secs_f64(),
             pose_rms,
-            pose_p95: median_p95(&pose_errors).1,
+            pose_p95: median_p95(pose_errors).1,
         }
     }
+}
+
+/// A message from the router to the trial's robot on `channel`.
+fn from_router(channel: &str, body: Body) -> Envelope {
+    Envelope::new(
+        Header {
+            sender: "router".into(),
+            destination: "trial".into(),
+            channel: channel.into(),
+            ..Header::default()
+        },
+        body,
+    )
 }
 
 /// A standard trial `i`: a three-waypoint course across a 3.9 m x 2.8 m

@@ -1,0 +1,277 @@
+//! Missions stored at the robot, one per channel that sent one: upload and
+//! acknowledgement (a retry of an upload already held keeps its progress),
+//! delayed copies of replaced missions ignored, pause and resume. A
+//! mission runs only while its channel is the routed one; a stop or an
+//! e-stop pauses it until it is re-sent or re-routed.
+
+use std::collections::HashMap;
+
+use mech_proto::{Body, CommandKind, Mission, MissionAck};
+
+use super::step::Step;
+use crate::control::{Controller, MissionRun};
+use crate::order::is_older;
+
+/// The stored missions, by the channel that sent them.
+#[derive(Debug, Default)]
+pub(crate) struct Missions {
+    runs: HashMap<String, MissionRun>,
+}
+
+impl Missions {
+    /// The stored mission for `channel`, if any.
+    pub(crate) fn get(&self, channel: &str) -> Option<&MissionRun> {
+        self.runs.get(channel)
+    }
+
+    /// Whether `channel`'s mission can be followed: stored, not paused,
+    /// not finished.
+    pub(crate) fn runnable(&self, channel: &str) -> bool {
+        self.runs
+            .get(channel)
+            .is_some_and(|m| !m.paused && !m.finished())
+    }
+
+    /// Whether `channel`'s mission is finished (and not paused): the robot
+    /// holds at its last waypoint, as told.
+    pub(crate) fn done(&self, channel: &str) -> bool {
+        self.runs
+            .get(channel)
+            .is_some_and(|m| !m.paused && m.finished())
+    }
+
+    /// The mission the controller follows on `channel`, unless paused.
+    pub(crate) fn following(&mut self, channel: &str) -> Option<&mut MissionRun> {
+        self.runs.get_mut(channel).filter(|m| !m.paused)
+    }
+
+    /// A stop on `channel` holds: its mission must not resume by itself (on
+    /// a re-registration or a mission resend) until re-sent or re-routed.
+    pub(crate) fn pause(&mut self, channel: &str) {
+        if let Some(m) = self.runs.get_mut(channel) {
+            m.paused = true;
+        }
+    }
+
+    /// An e-stop pauses every mission.
+    pub(crate) fn pause_all(&mut self) {
+        self.runs.values_mut().for_each(|m| m.paused = true);
+    }
+
+    /// Re-routing to `channel` resumes its paused mission.
+    pub(crate) fn unpause(&mut self, channel: &str) {
+        if let Some(m) = self.runs.get_mut(channel) {
+            m.paused = false;
+        }
+    }
+
+    /// A mission upload on `channel`: refused with the reason
+    /// `cannot_follow` gives when the robot cannot follow waypoints, stored
+    /// (paused while `estopped`) and acknowledged otherwise. Returns whether
+    /// the stored mission may start now (it is not paused).
+    pub(crate) fn receive(
+        &mut self,
+        channel: &str,
+        mission: Mission,
+        cannot_follow: Option<&str>,
+        estopped: bool,
+        step: &mut Step,
+    ) -> bool {
+        let id = mission.id;
+        if channel.is_empty() {
+            // A robot routed to none has the empty channel: a mission on it
+            // would run without anyone having routed the robot.
+            step.counters.refused += 1;
+            step.send(
+                mech_proto::ROUTER,
+                nack(id, "a mission must be sent on a channel"),
+            );
+            return false;
+        }
+        if let Some(reason) = cannot_follow {
+            step.send(mech_proto::ROUTER, nack(id, reason));
+            return false;
+        }
+        if self
+            .runs
+            .get(channel)
+            .is_some_and(|run| is_older(id, run.mission.id))
+        {
+            // A delayed copy of a mission already replaced on this channel:
+            // not acknowledged (the router stopped retrying it long ago).
+            step.counters.stale_missions += 1;
+            return false;
+        }
+        let paused = match self.runs.get_mut(channel) {
+            // A repeated id is a retry of an upload already held (its ack was
+            // lost): progress and pause are kept, so a retry never restarts a
+            // stopped or e-stopped mission. A re-send uses a new id.
+            Some(run) if run.mission.id == id => {
+                run.paused |= estopped;
+                run.paused
+            }
+            _ => {
+                let mut run = MissionRun::new(mission);
+                run.paused = estopped;
+                self.runs.insert(channel.to_string(), run);
+                estopped
+            }
+        };
+        let ack = Body::MissionAck(MissionAck {
+            id,
+            accepted: true,
+            reason: String::new(),
+        });
+        step.send(mech_proto::ROUTER, ack);
+        !paused
+    }
+}
+
+/// Why a robot with this controller cannot follow a mission, if it cannot.
+/// `has_position`: the robot has a position source.
+pub(crate) fn cannot_follow(controller: &Controller, has_position: bool) -> Option<&'static str> {
+    if controller.capabilities().contains(&CommandKind::Waypoints) {
+        None
+    } else if has_position {
+        Some("this platform does not follow waypoints")
+    } else {
+        Some("this robot has no position source")
+    }
+}
+
+/// A refused upload's acknowledgement.
+fn nack(id: u32, reason: &str) -> Body {
+    Body::MissionAck(MissionAck {
+        id,
+        accepted: false,
+        reason: reason.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::*;
+
+    #[test]
+    fn mission_runs_only_while_routed_and_ignores_channel_silence() {
+        let mut a = routed("joy/0");
+        let mission = mission_to(1, 5.0);
+        let out = a.handle(msg("wp/gcs", Body::Mission(mission)), ms(10));
+        assert!(
+            matches!(&out[0].body, Body::MissionAck(m) if m.accepted),
+            "stored and acked while not routed"
+        );
+        a.tick(ms(20));
+        assert_ne!(*a.mode(), Mode::Waypoints);
+        a.handle(msg("", route("wp/gcs", 2)), ms(30));
+        assert_eq!(*a.mode(), Mode::Waypoints);
+        let mut now = ms(30);
+        while now < ms(3000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(
+                moving(&a.tick(now).outputs),
+                "mission is its own controller"
+            );
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(
+            tel.mission.map(|m| (m.id, m.next, m.total)),
+            Some((1, 0, 1))
+        );
+        assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    #[test]
+    fn a_finished_mission_holds_without_reading_as_channel_silence() {
+        let mut a = routed("wp/gcs");
+        // The robot is at the origin: a waypoint there is reached at once.
+        a.handle(msg("wp/gcs", Body::Mission(mission_to(1, 0.0))), ms(10));
+        let mut now = ms(10);
+        while now < ms(2000) {
+            now += PERIOD;
+            router_heartbeat(&mut a, now);
+            assert!(!moving(&a.tick(now).outputs), "holds at the waypoint");
+        }
+        let tel = a.telemetry(now);
+        assert_eq!(tel.mission.map(|m| (m.next, m.total)), Some((1, 1)));
+        assert_eq!(tel.failsafe, FailsafeState::Ok, "done, not silent");
+        // A controller that goes quiet on a channel without a mission still
+        // reads as silent.
+        let mut b = routed("joy/0");
+        router_heartbeat(&mut b, ms(2000));
+        assert_eq!(b.failsafe_state(ms(2000)), FailsafeState::ChannelSilent);
+    }
+
+    #[test]
+    fn mission_on_router_loss_follows_config() {
+        for continues in [false, true] {
+            let mut settings = AgentSettings::new("r1");
+            settings.failsafe.mission_continues_on_link_loss = continues;
+            let mut a = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+            a.observe_position(PositionSample {
+                pose: Pose::default(),
+                stamp: ms(0),
+                quality: 1.0,
+                has_heading: true,
+            });
+            a.handle(
+                msg(
+                    "",
+                    Body::Welcome(Welcome {
+                        robot_id: 1,
+                        route: Route {
+                            robot: "r1".into(),
+                            channel: "wp/gcs".into(),
+                            epoch: 1,
+                        },
+                        router_version: "t".into(),
+                    }),
+                ),
+                ms(0),
+            );
+            let mission = mission_to(1, 5.0);
+            a.handle(msg("wp/gcs", Body::Mission(mission)), ms(0));
+            let t = a.tick(ms(2000));
+            assert_eq!(a.failsafe_state(ms(2000)), FailsafeState::RouterLost);
+            assert_eq!(moving(&t.outputs), continues, "continues = {continues}");
+        }
+    }
+
+    #[test]
+    fn a_mission_without_a_channel_is_refused_by_an_unrouted_robot() {
+        let mut a = routed("");
+        let out = a.handle(msg("", one_waypoint(3)), ms(0));
+        assert!(matches!(&out[0].body, Body::MissionAck(m) if m.id == 3 && !m.accepted));
+        assert!(
+            !moving(&a.tick(ms(20)).outputs),
+            "routed to none, it holds still"
+        );
+    }
+
+    #[test]
+    fn a_stop_holds_the_mission_through_a_re_registration() {
+        let mut a = routed("wp/gcs");
+        a.handle(msg("wp/gcs", one_waypoint(5)), ms(0));
+        assert!(moving(&a.tick(ms(20)).outputs));
+        a.handle(
+            msg("wp/gcs", Body::Command(Command::Stop(mech_proto::Stop {}))),
+            ms(30),
+        );
+        assert!(!moving(&a.tick(ms(40)).outputs));
+        // The router repeats the mission (its ack was lost), then the robot
+        // re-registers after a link drop: neither restarts the mission.
+        a.handle(msg("wp/gcs", one_waypoint(5)), ms(50));
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: "wp/gcs".into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        a.handle(msg("", w), ms(2000));
+        assert!(!moving(&a.tick(ms(2020)).outputs), "the stop holds");
+    }
+}
