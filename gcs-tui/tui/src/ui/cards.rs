@@ -28,18 +28,19 @@ impl Widget for CardsPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
         let t = self.theme;
-        let border = if app.focus == Focus::Cards {
+        let border = if app.screen.focus == Focus::Cards {
             t.focused_border()
         } else {
             ratatui::style::Style::new()
         };
         let title = format!(
             " Robots {}/{} ",
-            app.robots
+            app.fleet
+                .robots
                 .iter()
                 .filter(|r| r.link == LinkState::Connected)
                 .count(),
-            app.robots.len()
+            app.fleet.robots.len()
         );
         let block = Block::bordered().title(title).border_style(border);
         let inner = block.inner(area);
@@ -47,15 +48,16 @@ impl Widget for CardsPanel<'_> {
         let visible = usize::from(inner.height) / CARD_HEIGHT;
         let mut lines: Vec<Line> = Vec::with_capacity(visible * CARD_HEIGHT);
         for (i, r) in app
+            .fleet
             .robots
             .iter()
             .enumerate()
-            .skip(app.cards_scroll)
+            .skip(app.cards.scroll)
             .take(visible)
         {
-            card(r, i, app.selection.contains(&r.name), &t, &mut lines);
+            card(r, i, app.cards.selection.contains(&r.name), &t, &mut lines);
         }
-        if app.robots.is_empty() {
+        if app.fleet.robots.is_empty() {
             lines.push(Line::styled("no robots yet", t.dim()));
         }
         Paragraph::new(lines).render(inner, buf);

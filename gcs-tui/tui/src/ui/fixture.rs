@@ -107,7 +107,7 @@ pub fn fleet(n: usize) -> FleetSnapshot {
 pub fn app(n: usize, w: u16, h: u16) -> App {
     let now = Instant::now();
     let mut app = App::new("127.0.0.1:7700", now);
-    app.arena = Some(ArenaBounds {
+    app.map.arena = Some(ArenaBounds {
         min_x: -3.0,
         min_y: -3.0,
         max_x: 3.0,
