@@ -30,17 +30,20 @@
 //! slot speeds are limited to a margin of the slowest member's top speed,
 //! leaving the rest for feedback.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeSet;
 
-use mech_proto::{
-    ClusterPose, ClusterVelocity, FleetCommand, Formation, FormationKind, Offset, RobotCommand,
-};
+use mech_proto::{ClusterPose, ClusterVelocity, FleetCommand, Formation, RobotCommand};
 
-use super::assignment::assign_slots;
 use super::formation::{FormationError, slot_offsets};
 use super::geometry::{norm, rotate, wrap_angle};
-use super::tracking::{Reference, TrackingGains, track};
+use super::tracking::{TrackingGains, track};
 use super::{ControlEvent, Kinematics, MemberState, StepClock, note_staleness};
+
+mod desired;
+mod slots;
+
+use desired::DesiredPose;
+use slots::{SlotAssignment, slot_reference};
 
 /// One cluster waypoint: centroid position (m) and, optionally, the cluster
 /// heading to reach there (rad); without one the heading is kept.
@@ -176,31 +179,20 @@ impl ClusterOutput {
     }
 }
 
-/// A cluster-space controller for one cluster; see the module docs.
+/// A cluster-space controller for one cluster; see the module docs. Beside
+/// its definition it keeps the desired cluster pose and its motion
+/// (`desired`), which member holds which slot (`slots`), and which members
+/// are lost.
 #[derive(Debug, Clone)]
 pub struct ClusterController {
     name: String,
     members: Vec<String>,
     formation: Formation,
     config: ClusterConfig,
-    motion: ClusterMotion,
-    desired: Option<ClusterPose>,
-    /// Current centroid speed along a waypoint leg (for the acceleration ramp).
-    path_speed: f64,
-    /// Current heading rate toward a waypoint heading.
-    turn_rate: f64,
-    /// Desired velocity applied in the last step (cluster frame).
-    velocity: ClusterVelocity,
-    /// Members commanded in the last step, sorted.
-    active: Vec<String>,
-    slots: Vec<Offset>,
-    assignment: BTreeMap<String, usize>,
-    reassign: bool,
+    desired: DesiredPose,
+    slots: SlotAssignment,
     lost: BTreeSet<String>,
     clock: StepClock,
-    /// The desired pose has been set or moved by the operator; from then on
-    /// membership changes no longer re-centre it.
-    anchored: bool,
 }
 
 /// The members of one step, as its input has them.
@@ -212,13 +204,6 @@ struct Roster<'a> {
     /// Members not in the input, in member order.
     absent: Vec<String>,
 }
-
-const ZERO_VELOCITY: ClusterVelocity = ClusterVelocity {
-    vx: 0.0,
-    vy: 0.0,
-    wz: 0.0,
-    scale_rate: 0.0,
-};
 
 impl ClusterController {
     /// A cluster holding still until given a velocity or waypoints. Its pose
@@ -235,18 +220,10 @@ impl ClusterController {
             members,
             formation,
             config,
-            motion: ClusterMotion::Hold,
-            desired: None,
-            path_speed: 0.0,
-            turn_rate: 0.0,
-            velocity: ZERO_VELOCITY,
-            active: Vec::new(),
-            slots: Vec::new(),
-            assignment: BTreeMap::new(),
-            reassign: true,
+            desired: DesiredPose::new(),
+            slots: SlotAssignment::new(),
             lost: BTreeSet::new(),
             clock: StepClock::default(),
-            anchored: false,
         })
     }
 
@@ -263,7 +240,7 @@ impl ClusterController {
     }
 
     pub fn motion(&self) -> &ClusterMotion {
-        &self.motion
+        self.desired.motion()
     }
 
     pub fn config(&self) -> &ClusterConfig {
@@ -275,7 +252,7 @@ impl ClusterController {
     pub fn set_formation(&mut self, formation: Formation) -> Result<(), FormationError> {
         slot_offsets(&formation, self.members.len())?;
         self.formation = formation;
-        self.reassign = true;
+        self.slots.invalidate();
         Ok(())
     }
 
@@ -285,7 +262,7 @@ impl ClusterController {
         slot_offsets(&self.formation, members.len())?;
         self.lost.retain(|r| members.contains(r));
         self.members = members;
-        self.reassign = true;
+        self.slots.invalidate();
         Ok(())
     }
 
@@ -293,32 +270,22 @@ impl ClusterController {
     pub fn remove_member(&mut self, robot: &str) {
         self.members.retain(|m| m != robot);
         self.lost.remove(robot);
-        self.reassign = true;
+        self.slots.invalidate();
     }
 
     /// Drive the cluster at a cluster-frame velocity (gamepad, command line).
     pub fn set_velocity(&mut self, velocity: ClusterVelocity) {
-        self.motion = ClusterMotion::Velocity(velocity);
-        self.anchored = true;
+        self.desired.set_velocity(velocity);
     }
 
     /// Visit `list` in order, starting with the first.
     pub fn set_waypoints(&mut self, list: Vec<ClusterWaypoint>, looped: bool) {
-        self.motion = ClusterMotion::Waypoints {
-            list,
-            next: 0,
-            looped,
-        };
-        self.anchored = true;
-        self.path_speed = 0.0;
-        self.turn_rate = 0.0;
+        self.desired.set_waypoints(list, looped);
     }
 
     /// Stop the cluster where its desired pose is now.
     pub fn hold(&mut self) {
-        self.motion = ClusterMotion::Hold;
-        self.path_speed = 0.0;
-        self.turn_rate = 0.0;
+        self.desired.hold();
     }
 
     /// One control step at time `now` (s) on the members' latest states.
@@ -328,13 +295,18 @@ impl ClusterController {
         let dt = self.clock.interval(now);
         let mut events = Vec::new();
         let roster = self.classify(now, states, &mut events);
-        self.watch_membership(&roster.present);
-        self.place_until_anchored(&roster.fresh);
+        self.slots.watch(&roster.present);
+        self.desired
+            .place_until_anchored(self.slots.is_stale(), &roster.fresh);
         let (commands, slots, measured) = match self.update_reference(dt, &roster) {
             Some(desired) => {
                 let (commands, slots) = self.slot_commands(&desired, &roster.fresh);
                 let measured = self.measure(&desired, &roster.fresh);
-                self.check_arrival(measured.as_ref(), &mut events);
+                self.desired.check_arrival(
+                    measured.as_ref(),
+                    self.config.arrival_radius,
+                    &mut events,
+                );
                 (commands, slots, measured)
             }
             None => (Vec::new(), Vec::new(), None),
@@ -378,41 +350,18 @@ impl ClusterController {
         roster
     }
 
-    /// Asks for a new slot assignment when the set of present members changed.
-    fn watch_membership(&mut self, present: &[&MemberState]) {
-        let active: Vec<String> = present.iter().map(|s| s.robot.clone()).collect();
-        if active != self.active {
-            self.active = active;
-            self.reassign = true;
-        }
-    }
-
-    /// Until the cluster is first told to move (or placed), its pose is
-    /// wherever its members are: members joining one by one (routed in turn)
-    /// re-centre it instead of gathering round the first to report.
-    fn place_until_anchored(&mut self, fresh: &[&MemberState]) {
-        if (self.desired.is_none() || (!self.anchored && self.reassign)) && !fresh.is_empty() {
-            self.desired = Some(initial_pose(fresh));
-        }
-    }
-
     /// Moves the desired cluster pose on by `dt`, re-assigning slots first if
     /// the members or the formation changed; `None` while the pose is not
     /// known yet (no member has reported).
     fn update_reference(&mut self, dt: f64, roster: &Roster) -> Option<ClusterPose> {
-        let mut desired = self.desired?;
-        if self.reassign && !roster.present.is_empty() {
-            self.assign(&desired, &roster.present);
+        let desired = self.desired.pose()?;
+        if self.slots.is_stale() && !roster.present.is_empty() {
+            self.slots
+                .assign(&self.formation, &desired, &roster.present);
         }
-        let max_offset = self
-            .slots
-            .iter()
-            .map(|o| norm(o.x, o.y))
-            .fold(0.0, f64::max);
         let speed_limit = self.slot_speed_limit(&desired, &roster.fresh);
-        self.velocity = self.advance(&mut desired, dt, max_offset, speed_limit);
-        self.desired = Some(desired);
-        Some(desired)
+        self.desired
+            .advance(dt, self.slots.max_offset(), speed_limit, &self.config)
     }
 
     /// How fast slots may move by feed-forward: a margin of the slowest fresh
@@ -429,7 +378,7 @@ impl ClusterController {
         } else {
             self.config.cruise_speed
         };
-        let lag = self.worst_lag(desired, fresh);
+        let lag = self.slots.worst_lag(desired, fresh);
         let span = (self.config.lag_stop - self.config.lag_free).max(1e-6);
         let throttle = ((self.config.lag_stop - lag) / span).clamp(0.0, 1.0);
         speed_limit * throttle
@@ -444,11 +393,12 @@ impl ClusterController {
     ) -> (Vec<RobotCommand>, Vec<SlotTarget>) {
         let mut commands = Vec::new();
         let mut slots = Vec::new();
+        let velocity = self.desired.velocity();
         for s in fresh {
-            let Some((slot, o)) = self.assigned_slot(&s.robot) else {
+            let Some((slot, o)) = self.slots.slot_of(&s.robot) else {
                 continue;
             };
-            let reference = slot_reference(desired, &self.velocity, o);
+            let reference = slot_reference(desired, &velocity, o);
             commands.push(RobotCommand {
                 robot: s.robot.clone(),
                 command: track(s, &reference, &self.config.gains),
@@ -474,220 +424,16 @@ impl ClusterController {
         slots: Vec<SlotTarget>,
         absent: Vec<String>,
     ) -> ClusterStatus {
-        let waypoint = match &self.motion {
-            ClusterMotion::Waypoints { list, next, .. } => Some((*next, list.len())),
-            _ => None,
-        };
         ClusterStatus {
             cluster: self.name.clone(),
             formation: self.formation.clone(),
-            desired: self.desired,
+            desired: self.desired.pose(),
             measured,
-            velocity: self.velocity,
+            velocity: self.desired.velocity(),
             slots,
             lost: self.lost.iter().cloned().collect(),
             absent,
-            waypoint,
-        }
-    }
-
-    /// The slot assigned to `robot`: its index and offset.
-    fn assigned_slot(&self, robot: &str) -> Option<(usize, &Offset)> {
-        let &slot = self.assignment.get(robot)?;
-        Some((slot, self.slots.get(slot)?))
-    }
-
-    /// Lays out slots for the commanded members and gives each the slot that
-    /// minimises the total distance.
-    fn assign(&mut self, desired: &ClusterPose, fresh: &[&MemberState]) {
-        let offsets = match slot_offsets(&self.formation, fresh.len()) {
-            Ok(o) => o,
-            // Only a custom formation with too few offsets can fail here, and
-            // set_formation/set_members refuse that; fall back to a circle.
-            Err(_) => match slot_offsets(
-                &Formation {
-                    kind: FormationKind::Circle,
-                    spacing: 1.0,
-                    offsets: vec![],
-                },
-                fresh.len(),
-            ) {
-                Ok(o) => o,
-                Err(_) => return,
-            },
-        };
-        let world: Vec<(f64, f64)> = offsets.iter().map(|o| slot_position(desired, o)).collect();
-        let positions: Vec<(f64, f64)> = fresh.iter().map(|s| (s.pose.x, s.pose.y)).collect();
-        let assignment = assign_slots(&positions, &world);
-        self.assignment = fresh
-            .iter()
-            .map(|s| s.robot.clone())
-            .zip(assignment)
-            .collect();
-        self.slots = offsets;
-        self.reassign = false;
-    }
-
-    /// Integrates the desired cluster pose over `dt` and returns the velocity
-    /// used (cluster frame), limited so no slot's feed-forward speed exceeds
-    /// `speed_limit`.
-    fn advance(
-        &mut self,
-        desired: &mut ClusterPose,
-        dt: f64,
-        max_offset: f64,
-        speed_limit: f64,
-    ) -> ClusterVelocity {
-        let v = self.motion_velocity(desired, dt);
-        let v = self.limit_slot_speed(v, desired.scale, max_offset, speed_limit);
-        let v = integrate(desired, v, dt, &self.config);
-        self.snap_to_waypoint(desired);
-        v
-    }
-
-    /// The cluster-frame velocity the current motion asks for, before any
-    /// speed limit.
-    fn motion_velocity(&mut self, desired: &ClusterPose, dt: f64) -> ClusterVelocity {
-        let w = match &mut self.motion {
-            ClusterMotion::Hold => return ZERO_VELOCITY,
-            ClusterMotion::Velocity(v) => return *v,
-            ClusterMotion::Waypoints { list, next, looped } => {
-                if *next >= list.len() && *looped && !list.is_empty() {
-                    *next = 0;
-                }
-                match list.get(*next) {
-                    Some(w) => *w,
-                    None => return ZERO_VELOCITY,
-                }
-            }
-        };
-        self.velocity_toward(&w, desired, dt)
-    }
-
-    /// Velocity along the leg to `w`: the centroid and the heading each on a
-    /// trapezoidal profile that arrives without overshoot.
-    fn velocity_toward(
-        &mut self,
-        w: &ClusterWaypoint,
-        desired: &ClusterPose,
-        dt: f64,
-    ) -> ClusterVelocity {
-        let cfg = &self.config;
-        let (dx, dy) = (w.x - desired.x, w.y - desired.y);
-        let dist = norm(dx, dy);
-        let speed = ramp(
-            &mut self.path_speed,
-            cfg.max_accel,
-            cfg.cruise_speed,
-            dist,
-            dt,
-        );
-        let (wx, wy) = if dist > 1e-12 {
-            (speed * dx / dist, speed * dy / dist)
-        } else {
-            (0.0, 0.0)
-        };
-        let turn = w.heading.map_or(0.0, |h| wrap_angle(h - desired.heading));
-        let rate = ramp(
-            &mut self.turn_rate,
-            cfg.max_yaw_accel,
-            cfg.max_yaw_rate,
-            turn.abs(),
-            dt,
-        );
-        let (cx, cy) = rotate(wx, wy, -desired.heading);
-        ClusterVelocity {
-            vx: cx,
-            vy: cy,
-            wz: rate * turn.signum(),
-            scale_rate: 0.0,
-        }
-    }
-
-    /// Scales `v` down so the fastest slot (`max_offset` from the centroid at
-    /// `scale`) moves no faster than `speed_limit`; the leg profiles slow
-    /// down with it, so they resume from the speed really used.
-    fn limit_slot_speed(
-        &mut self,
-        v: ClusterVelocity,
-        scale: f64,
-        max_offset: f64,
-        speed_limit: f64,
-    ) -> ClusterVelocity {
-        let slot_speed = norm(v.vx, v.vy) + (v.wz.abs() * scale + v.scale_rate.abs()) * max_offset;
-        if slot_speed > speed_limit && slot_speed > 0.0 {
-            let k = (speed_limit / slot_speed).max(0.0);
-            self.path_speed *= k;
-            self.turn_rate *= k;
-            return ClusterVelocity {
-                vx: v.vx * k,
-                vy: v.vy * k,
-                wz: v.wz * k,
-                scale_rate: v.scale_rate * k,
-            };
-        }
-        v
-    }
-
-    /// Puts the desired pose exactly on the waypoint once it is there to
-    /// rounding, so arrival can be checked with equality.
-    fn snap_to_waypoint(&self, desired: &mut ClusterPose) {
-        let ClusterMotion::Waypoints { list, next, .. } = &self.motion else {
-            return;
-        };
-        let Some(w) = list.get(*next) else { return };
-        let at_position = norm(w.x - desired.x, w.y - desired.y) < 1e-9;
-        let at_heading = w
-            .heading
-            .is_none_or(|h| wrap_angle(h - desired.heading).abs() < 1e-6);
-        if at_position && at_heading {
-            desired.x = w.x;
-            desired.y = w.y;
-            if let Some(h) = w.heading {
-                desired.heading = wrap_angle(h);
-            }
-        }
-    }
-
-    /// Largest distance between a commanded member and its slot at the
-    /// current desired pose, m.
-    fn worst_lag(&self, desired: &ClusterPose, fresh: &[&MemberState]) -> f64 {
-        fresh
-            .iter()
-            .filter_map(|s| {
-                let (_, o) = self.assigned_slot(&s.robot)?;
-                let (x, y) = slot_position(desired, o);
-                Some(norm(x - s.pose.x, y - s.pose.y))
-            })
-            .fold(0.0, f64::max)
-    }
-
-    /// Moves to the next waypoint once the desired pose sits on the current
-    /// one and the measured centroid is within the arrival radius.
-    fn check_arrival(&mut self, measured: Option<&ClusterPose>, events: &mut Vec<ControlEvent>) {
-        let (Some(desired), Some(measured)) = (self.desired, measured) else {
-            return;
-        };
-        let ClusterMotion::Waypoints { list, next, looped } = &mut self.motion else {
-            return;
-        };
-        let Some(w) = list.get(*next) else { return };
-        let settled = desired.x == w.x
-            && desired.y == w.y
-            && w.heading
-                .is_none_or(|h| (wrap_angle(h) - desired.heading).abs() < 1e-9);
-        if settled && norm(measured.x - w.x, measured.y - w.y) <= self.config.arrival_radius {
-            events.push(ControlEvent::WaypointReached { index: *next });
-            *next += 1;
-            self.path_speed = 0.0;
-            self.turn_rate = 0.0;
-            if *next >= list.len() {
-                if *looped {
-                    *next = 0;
-                } else {
-                    events.push(ControlEvent::Finished);
-                }
-            }
+            waypoint: self.desired.waypoint(),
         }
     }
 
@@ -704,7 +450,7 @@ impl ClusterController {
         let pairs: Vec<((f64, f64), (f64, f64))> = fresh
             .iter()
             .filter_map(|s| {
-                let (_, o) = self.assigned_slot(&s.robot)?;
+                let (_, o) = self.slots.slot_of(&s.robot)?;
                 Some((rotate(o.x, o.y, desired.heading), (s.pose.x, s.pose.y)))
             })
             .collect();
@@ -737,78 +483,5 @@ impl ClusterController {
             heading: wrap_angle(desired.heading + turn),
             scale,
         })
-    }
-}
-
-/// Where the slot with offset `o` is in the world at the desired pose.
-fn slot_position(desired: &ClusterPose, o: &Offset) -> (f64, f64) {
-    let (x, y) = rotate(o.x, o.y, desired.heading);
-    (desired.x + desired.scale * x, desired.y + desired.scale * y)
-}
-
-/// The slot with offset `o` as a tracking reference: its position, and its
-/// velocity from the inverse cluster kinematics,
-/// `v_slot = v_c + wz x r + scale_rate R o` with `r = scale R(heading) o`.
-fn slot_reference(desired: &ClusterPose, v: &ClusterVelocity, o: &Offset) -> Reference {
-    let (vwx, vwy) = rotate(v.vx, v.vy, desired.heading);
-    let (ox, oy) = rotate(o.x, o.y, desired.heading);
-    let (rx, ry) = (desired.scale * ox, desired.scale * oy);
-    Reference {
-        x: desired.x + rx,
-        y: desired.y + ry,
-        heading: desired.heading,
-        vx: vwx - v.wz * ry + v.scale_rate * ox,
-        vy: vwy + v.wz * rx + v.scale_rate * oy,
-        wz: v.wz,
-    }
-}
-
-/// One step of a trapezoidal profile toward a point `remaining` away:
-/// `speed` (kept between steps) grows by `accel` up to `top`, but no faster
-/// than still stops at the point, and the step never passes the point.
-fn ramp(speed: &mut f64, accel: f64, top: f64, remaining: f64, dt: f64) -> f64 {
-    let reachable = (2.0 * accel * remaining).sqrt();
-    *speed = (*speed + accel * dt).min(top).min(reachable);
-    if dt > 0.0 {
-        speed.min(remaining / dt)
-    } else {
-        0.0
-    }
-}
-
-/// Moves `desired` on by `v` (cluster frame) for `dt`, keeping the scale
-/// within its bounds; a scale rate that hits a bound is not applied and comes
-/// back as zero.
-fn integrate(
-    desired: &mut ClusterPose,
-    mut v: ClusterVelocity,
-    dt: f64,
-    cfg: &ClusterConfig,
-) -> ClusterVelocity {
-    let (wx, wy) = rotate(v.vx, v.vy, desired.heading);
-    desired.x += wx * dt;
-    desired.y += wy * dt;
-    desired.heading = wrap_angle(desired.heading + v.wz * dt);
-    let scale = (desired.scale + v.scale_rate * dt).clamp(cfg.min_scale, cfg.max_scale);
-    if scale != desired.scale + v.scale_rate * dt {
-        v.scale_rate = 0.0;
-    }
-    desired.scale = scale;
-    v
-}
-
-/// Starting cluster pose: centroid and circular-mean heading of the members.
-fn initial_pose(fresh: &[&MemberState]) -> ClusterPose {
-    let n = fresh.len() as f64;
-    let x = fresh.iter().map(|s| s.pose.x).sum::<f64>() / n;
-    let y = fresh.iter().map(|s| s.pose.y).sum::<f64>() / n;
-    let s: f64 = fresh.iter().map(|m| m.pose.heading.sin()).sum();
-    let c: f64 = fresh.iter().map(|m| m.pose.heading.cos()).sum();
-    let heading = if norm(s, c) > 1e-9 { s.atan2(c) } else { 0.0 };
-    ClusterPose {
-        x,
-        y,
-        heading,
-        scale: 1.0,
     }
 }

@@ -49,7 +49,7 @@ fn thread_cpu() -> Duration {
 /// Renders `app` 500 times and prints the frame time's percentiles, wall
 /// clock and CPU.
 fn percentiles(what: &str, app: &mech_gcs::ui::App) {
-    let (w, h) = app.size;
+    let (w, h) = app.screen.size;
     let area = Rect::new(0, 0, w, h);
     let mut buf = Buffer::empty(area);
     let (mut wall, mut cpu) = (Vec::with_capacity(500), Vec::with_capacity(500));

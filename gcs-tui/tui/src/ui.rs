@@ -5,17 +5,18 @@
 //! rendering (`impl Widget for &App`) is a pure function of that state, with
 //! each panel a small widget of its own.
 //!
-//! - state: [`app`] (App, actions, requests), [`view`] (what the station
-//!   reports, as the screen shows it; shared with the station, which sends
-//!   it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
+//! - state: [`app`] (App, actions, requests, and one state per panel),
+//!   [`view`] (what the station reports, as the screen shows it; shared
+//!   with the station, which sends it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
 //!   [`labels`] (where the map's text goes so nothing overlaps),
 //!   [`columns`] (the fleet table's columns, sorting and filter);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
 //!   [`status`], [`cards`], [`table`] (the fleet table), [`detail`] (one
 //!   robot), [`map`], [`waypoints`], [`routes`], [`events`] and [`help`],
 //!   styled by [`theme`];
-//! - input and I/O: [`keys`] (terminal events into actions) and [`station`]
-//!   (the event loop, and requests carried to the station);
+//! - input and I/O: [`keys`] (terminal events into actions), [`terminal`]
+//!   (the terminal and its event loop) and [`link`] (requests carried to
+//!   the station, what it sends into the App);
 //! - [`fixture`]: fixed fleets for snapshots, benchmarks and tests.
 
 pub mod app;
@@ -28,22 +29,26 @@ pub mod help;
 pub mod keys;
 pub mod labels;
 pub mod layout;
+pub mod link;
 pub mod map;
 pub mod render;
 pub mod routes;
-pub mod station;
 pub mod status;
 pub mod table;
+pub mod terminal;
 pub mod theme;
 pub mod viewport;
 pub mod waypoints;
 
 pub use crate::view;
 pub use app::{
-    Action, App, Focus, LogLevel, Prompt, PromptError, Request, RobotsView, Select, TableState,
+    Action, App, CardsState, EventLog, FleetState, Focus, Help, LogLevel, LogLine, ManualControl,
+    MapState, Prompt, PromptError, PromptLine, Request, RobotsView, RoutesState, Screen, Select,
+    Session, TableState, WaypointsState,
 };
 pub use columns::Column;
-pub use station::{RunOptions, StationLink, run};
+pub use link::StationLink;
+pub use terminal::{RunOptions, run};
 pub use view::{
     ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
     LinkState, RobotView, RouteView, SlotView,

@@ -52,7 +52,7 @@ fn pad_drives_only_robots_routed_to_its_channel() {
         channel: "wp/gcs".into(),
     });
     app.take_requests();
-    let t = app.now + Duration::from_millis(100);
+    let t = app.manual.now + Duration::from_millis(100);
     app.update(Action::Tick(t));
     let p = publishes(&app.take_requests());
     assert!(!p.is_empty(), "steady rate continues while enabled");
@@ -71,7 +71,7 @@ fn deadman_release_and_unplug_zero_the_channel() {
     feed(&mut app, &mut src);
     let p = publishes(&app.take_requests());
     assert_eq!(p.last().map(|x| &x.2), Some(&Command::Stop(Stop {})));
-    app.update(Action::Tick(app.now + Duration::from_secs(1)));
+    app.update(Action::Tick(app.manual.now + Duration::from_secs(1)));
     assert!(
         publishes(&app.take_requests()).is_empty(),
         "silent when released"
@@ -86,7 +86,7 @@ fn deadman_release_and_unplug_zero_the_channel() {
     let p = publishes(&app.take_requests());
     assert_eq!(p.last().map(|x| &x.2), Some(&Command::Stop(Stop {})));
     assert!(app.pads().is_empty());
-    assert!(app.log.iter().any(|l| l.text.contains("unplugged")));
+    assert!(app.events.iter().any(|l| l.text.contains("unplugged")));
 }
 
 #[test]
@@ -114,7 +114,12 @@ fn pad_estop_and_cluster_mode() {
     });
     let (name, v) = cluster.expect("cluster velocity published");
     assert_eq!(name, "c1");
-    let c1 = app.clusters.iter().find(|c| c.name == "c1").expect("c1");
+    let c1 = app
+        .fleet
+        .clusters
+        .iter()
+        .find(|c| c.name == "c1")
+        .expect("c1");
     assert_eq!(c1.members, ["robot_1", "robot_3"], "the cluster driven");
     assert!(v.wz > 0.0, "stick left rotates counter-clockwise");
 
@@ -123,7 +128,7 @@ fn pad_estop_and_cluster_mode() {
         PadEventKind::ButtonPressed(PadButton::Start),
     ));
     feed(&mut app, &mut src);
-    assert!(app.estop);
+    assert!(app.fleet.estop);
     assert!(
         app.take_requests()
             .contains(&Request::EStop { engage: true })
@@ -154,7 +159,7 @@ fn keyboard_teleop_publishes_on_key0_and_stops() {
     assert_eq!(p[0].0, "key/0");
     assert_eq!(p[0].1, ["robot_4"]);
     assert!(matches!(p[0].2, Command::Twist(t) if t.vx > 0.0));
-    app.update(Action::Tick(app.now + Duration::from_secs(2)));
+    app.update(Action::Tick(app.manual.now + Duration::from_secs(2)));
     let p = publishes(&app.take_requests());
     assert_eq!(p.last().map(|x| &x.2), Some(&Command::Stop(Stop {})));
 }

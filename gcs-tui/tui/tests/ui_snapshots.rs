@@ -83,7 +83,7 @@ fn help_lists_every_key_across_its_pages() {
 fn monochrome_screen_keeps_the_text() {
     let mut app = populated(80, 24);
     let colour = screen(&app, 80, 24);
-    app.monochrome = true;
+    app.session.monochrome = true;
     assert_eq!(colour, screen(&app, 80, 24), "same glyphs without colour");
 }
 

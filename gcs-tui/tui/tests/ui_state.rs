@@ -9,7 +9,8 @@ use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 
 fn render(app: &App) -> ratatui::buffer::Buffer {
-    let mut term = Terminal::new(TestBackend::new(app.size.0, app.size.1)).expect("test terminal");
+    let mut term = Terminal::new(TestBackend::new(app.screen.size.0, app.screen.size.1))
+        .expect("test terminal");
     term.draw(|f| f.render_widget(app, f.area()))
         .expect("draws");
     term.backend().buffer().clone()
@@ -48,7 +49,7 @@ fn clicking_a_robot_selects_it_and_shift_click_adds() {
         row: r,
         add: false,
     });
-    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+    assert_eq!(app.cards.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
     let (c, r) = drawn_robot_cell(&app, "robot_5");
     app.update(Action::Click {
         col: c,
@@ -56,7 +57,7 @@ fn clicking_a_robot_selects_it_and_shift_click_adds() {
         add: true,
     });
     assert_eq!(
-        app.selection.iter().collect::<Vec<_>>(),
+        app.cards.selection.iter().collect::<Vec<_>>(),
         ["robot_3", "robot_5"]
     );
 }
@@ -71,7 +72,7 @@ fn clicking_a_card_selects_its_robot() {
         row: cards.y + 1 + 2 * mech_gcs::ui::layout::CARD_HEIGHT as u16,
         add: false,
     });
-    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+    assert_eq!(app.cards.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
 }
 
 #[test]
@@ -80,18 +81,18 @@ fn keys_cycle_select_all_and_clear() {
     for a in on_key(&app, &key(KeyCode::Char('n'))) {
         app.update(a);
     }
-    assert!(app.selection.contains("robot_1"));
+    assert!(app.cards.selection.contains("robot_1"));
     app.update(Action::Select(Select::Next));
     app.update(Action::Select(Select::Next));
-    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
+    assert_eq!(app.cards.selection.iter().collect::<Vec<_>>(), ["robot_3"]);
     app.update(Action::Select(Select::Prev));
-    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_2"]);
+    assert_eq!(app.cards.selection.iter().collect::<Vec<_>>(), ["robot_2"]);
     app.update(Action::Select(Select::AddNext));
-    assert_eq!(app.selection.len(), 2);
+    assert_eq!(app.cards.selection.len(), 2);
     app.update(Action::Select(Select::All));
-    assert_eq!(app.selection.len(), 4);
+    assert_eq!(app.cards.selection.len(), 4);
     app.update(Action::Select(Select::Clear));
-    assert!(app.selection.is_empty());
+    assert!(app.cards.selection.is_empty());
 }
 
 #[test]
@@ -99,13 +100,13 @@ fn cluster_from_selection_is_listed_and_requested() {
     let mut app = fixture::app(4, 80, 24);
     app.update(Action::Select(Select::Only("robot_2".into())));
     app.update(Action::MakeCluster);
-    assert!(app.clusters.is_empty(), "one robot is not a cluster");
+    assert!(app.fleet.clusters.is_empty(), "one robot is not a cluster");
     app.update(Action::Select(Select::Toggle("robot_4".into())));
     app.take_requests();
     app.update(Action::MakeCluster);
-    assert_eq!(app.clusters.len(), 1);
-    assert_eq!(app.clusters[0].name, "c1");
-    assert_eq!(app.clusters[0].members, ["robot_2", "robot_4"]);
+    assert_eq!(app.fleet.clusters.len(), 1);
+    assert_eq!(app.fleet.clusters[0].name, "c1");
+    assert_eq!(app.fleet.clusters[0].members, ["robot_2", "robot_4"]);
     assert_eq!(
         app.take_requests(),
         vec![Request::DefineCluster {
@@ -117,7 +118,7 @@ fn cluster_from_selection_is_listed_and_requested() {
     for a in on_key(&app, &key(KeyCode::Char('1'))) {
         app.update(a);
     }
-    assert_eq!(app.selection.len(), 2, "1 selects cluster c1");
+    assert_eq!(app.cards.selection.len(), 2, "1 selects cluster c1");
 }
 
 #[test]
@@ -129,7 +130,7 @@ fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
 
     // 1. Exact arithmetic: the click maps to the centre of the clicked cell.
     let inner = app.areas().map_inner();
-    let v = app.viewport;
+    let v = app.map.viewport;
     let (col, row) = (inner.x + 7, inner.y + 5);
     app.update(Action::Click {
         col,
@@ -139,7 +140,7 @@ fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
     let m = v.metres_per_dot;
     let want_x = v.centre_x - f64::from(inner.width) * m + (2.0 * 7.0 + 1.0) * m;
     let want_y = v.centre_y + f64::from(inner.height) * 2.0 * m - (4.0 * 5.0 + 2.0) * m;
-    let w = app.waypoints[0];
+    let w = app.waypoints.list[0];
     assert!(
         (w.x - want_x).abs() < 1e-9 && (w.y - want_y).abs() < 1e-9,
         "{w:?}"
@@ -153,7 +154,7 @@ fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
         row: r,
         add: false,
     });
-    let w = app.waypoints[1];
+    let w = app.waypoints.list[1];
     let pose = app.robot("robot_2").expect("robot_2").pose;
     assert!((w.x - pose.x).abs() <= m + 1e-9, "x {} vs {}", w.x, pose.x);
     assert!(
@@ -163,7 +164,7 @@ fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
         pose.y
     );
     assert!(
-        app.selection.is_empty(),
+        app.cards.selection.is_empty(),
         "waypoint mode clicks do not select"
     );
 }
@@ -185,10 +186,10 @@ fn typed_waypoints_edit_and_send_to_the_selection() {
         app.update(Action::PromptChar(ch));
     }
     app.update(Action::PromptSubmit);
-    let err = app.prompt_error.clone().expect("bad waypoint reported");
+    let err = app.prompt.error.clone().expect("bad waypoint reported");
     assert_eq!(err.column, Some(2), "points at the bad field");
     assert!(
-        matches!(app.prompt, Some(Prompt::Waypoint(_))),
+        matches!(app.prompt.open, Some(Prompt::Waypoint(_))),
         "stays open"
     );
     app.update(Action::PromptCancel);
@@ -207,7 +208,7 @@ fn typed_waypoints_edit_and_send_to_the_selection() {
     for a in on_key(&app, &key(KeyCode::Backspace)) {
         app.update(a);
     }
-    assert_eq!(app.waypoints.len(), 2);
+    assert_eq!(app.waypoints.list.len(), 2);
     app.take_requests();
     for a in on_key(&app, &key(KeyCode::Enter)) {
         app.update(a);
@@ -235,9 +236,9 @@ fn typed_waypoints_edit_and_send_to_the_selection() {
     for a in on_key(&app, &key(KeyCode::Esc)) {
         app.update(a);
     }
-    assert!(!app.waypoint_mode);
+    assert!(!app.waypoints.placing);
     app.update(Action::ClearWaypoints);
-    assert!(app.waypoints.is_empty());
+    assert!(app.waypoints.list.is_empty());
 }
 
 #[test]
@@ -310,7 +311,7 @@ fn estop_key_works_in_every_mode_and_shows_a_banner() {
 
     app.take_requests();
     app.update(Action::EStop);
-    assert!(app.estop);
+    assert!(app.fleet.estop);
     assert_eq!(app.take_requests(), vec![Request::EStop { engage: true }]);
     let screen = format!("{:?}", render(&app));
     assert!(screen.contains("E-STOP ENGAGED"));
@@ -340,17 +341,17 @@ fn command_line_runs_through_the_core_with_history() {
     app.update(Action::HistoryPrev);
     app.update(Action::HistoryPrev);
     assert_eq!(
-        app.prompt,
+        app.prompt.open,
         Some(Prompt::Command("route robot_1 joy/0".into()))
     );
     app.update(Action::HistoryNext);
-    assert_eq!(app.prompt, Some(Prompt::Command("estop".into())));
+    assert_eq!(app.prompt.open, Some(Prompt::Command("estop".into())));
     app.update(Action::PromptCancel);
     app.update(Action::CommandResult(Ok(
         "2 channels\n joy/0 gcs\n wp/gcs gcs".into(),
     )));
     let tail: Vec<&str> = app
-        .log
+        .events
         .iter()
         .rev()
         .take(3)
@@ -373,11 +374,11 @@ fn command_line_runs_through_the_core_with_history() {
 #[test]
 fn zoom_keys_and_wheel_change_scale_fit_restores() {
     let mut app = fixture::app(4, 80, 24);
-    let fitted = app.viewport;
+    let fitted = app.map.viewport;
     for a in on_key(&app, &key(KeyCode::Char('+'))) {
         app.update(a);
     }
-    assert!(app.viewport.metres_per_dot < fitted.metres_per_dot);
+    assert!(app.map.viewport.metres_per_dot < fitted.metres_per_dot);
     let inner = app.areas().map_inner();
     let (c, r) = (inner.x + 4, inner.y + 3);
     let before = app.map_point(c, r).expect("on map");
@@ -389,7 +390,7 @@ fn zoom_keys_and_wheel_change_scale_fit_restores() {
     let after = app.map_point(c, r).expect("on map");
     assert!((before.0 - after.0).abs() < 1e-9 && (before.1 - after.1).abs() < 1e-9);
     app.update(Action::FitFleet);
-    assert_eq!(app.viewport, fitted);
+    assert_eq!(app.map.viewport, fitted);
 }
 
 #[test]
@@ -411,7 +412,7 @@ fn clicking_a_routes_cell_picks_it_and_a_second_click_routes() {
         row,
         add: false,
     });
-    assert_eq!(app.route_cursor, (3, wp));
+    assert_eq!(app.routes.cursor, (3, wp));
     assert!(app.take_requests().is_empty(), "first click only picks");
     app.update(Action::Click {
         col,
@@ -447,7 +448,7 @@ fn dragging_the_map_pans_it_with_the_pointer() {
     app.update(Action::MouseUp);
     let under = app.map_point(c + 5, r + 3).expect("on map");
     assert!((under.0 - grabbed.0).abs() < 1e-9 && (under.1 - grabbed.1).abs() < 1e-9);
-    assert!(app.selection.is_empty());
+    assert!(app.cards.selection.is_empty());
 }
 
 #[test]
@@ -455,7 +456,7 @@ fn nav_toggle_asks_for_the_selected_robots_only() {
     let mut app = fixture::app(4, 80, 24);
     app.update(Action::ToggleNav);
     assert!(app.take_requests().is_empty(), "nothing selected");
-    assert!(app.log.iter().any(|l| l.text.contains("select a robot")));
+    assert!(app.events.iter().any(|l| l.text.contains("select a robot")));
 
     app.update(Action::Select(Select::Only("robot_3".into())));
     app.update(Action::Select(Select::Toggle("robot_1".into())));
@@ -494,16 +495,16 @@ fn a_waypoint_past_the_limit_is_refused_with_a_message() {
     for i in 0..mech_proto::MAX_WAYPOINTS {
         app.update(Action::AddWaypoint(w(i as f64)));
     }
-    let before = app.log.len();
+    let before = app.events.len();
     app.update(Action::AddWaypoint(w(-1.0)));
-    assert_eq!(app.waypoints.len(), mech_proto::MAX_WAYPOINTS);
-    assert_eq!(app.log.len(), before + 1);
+    assert_eq!(app.waypoints.list.len(), mech_proto::MAX_WAYPOINTS);
+    assert_eq!(app.events.len(), before + 1);
     assert!(
-        app.log
-            .back()
+        app.events
+            .last()
             .is_some_and(|l| l.text.contains("at most 1024 waypoints")),
         "{:?}",
-        app.log.back()
+        app.events.last()
     );
 }
 /// The core lists robots as text (robot_1, robot_10, robot_2); the screen
@@ -515,12 +516,12 @@ fn robots_are_listed_in_natural_name_order() {
     assert_eq!(snap.robots[2].name, "robot_11", "text order");
     let mut app = fixture::app(0, 160, 48);
     app.update(Action::Fleet(snap));
-    let names: Vec<&str> = app.robots.iter().map(|r| r.name.as_str()).collect();
+    let names: Vec<&str> = app.fleet.robots.iter().map(|r| r.name.as_str()).collect();
     assert_eq!(names[..3], ["robot_1", "robot_2", "robot_3"]);
     assert_eq!(names[11], "robot_12");
     app.update(Action::Select(Select::Only("robot_9".into())));
     app.update(Action::Select(Select::Next));
-    assert_eq!(app.selection.iter().collect::<Vec<_>>(), ["robot_10"]);
+    assert_eq!(app.cards.selection.iter().collect::<Vec<_>>(), ["robot_10"]);
 }
 
 /// A card's last line is the link as the router measures it.
@@ -551,13 +552,13 @@ fn hovering_a_robot_on_the_map_marks_it() {
     let mut app = fixture::app(6, 160, 48);
     let (c, r) = drawn_robot_cell(&app, "robot_4");
     app.update(Action::Hover { col: c, row: r });
-    assert_eq!(app.hover.as_deref(), Some("robot_4"));
+    assert_eq!(app.map.hover.as_deref(), Some("robot_4"));
     let inner = app.areas().map_inner();
     app.update(Action::Hover {
         col: inner.x,
         row: inner.y,
     });
-    assert_eq!(app.hover, None);
+    assert_eq!(app.map.hover, None);
 }
 
 /// A crowded map: its title counts the labels left out, every label the
@@ -575,7 +576,7 @@ fn a_crowded_map_counts_its_hidden_labels_and_labels_the_hovered_robot() {
     let unlabelled = (0..100)
         .find(|&i| !labelled(&before, i))
         .expect("100 robots at 120x36 leave some unlabelled");
-    app.hover = Some(app.robots[unlabelled].name.clone());
+    app.map.hover = Some(app.fleet.robots[unlabelled].name.clone());
     let text = on_map(&app);
     assert!(labelled(&text, unlabelled), "the hovered robot is labelled");
     assert!(text.hidden > 0);
@@ -611,11 +612,17 @@ fn the_map_fits_the_first_robots_that_reported_a_position() {
         ..Default::default()
     };
     app.update(Action::Fleet(at(0.0, 0.0)));
-    assert_eq!((app.viewport.centre_x, app.viewport.centre_y), (0.0, 0.0));
+    assert_eq!(
+        (app.map.viewport.centre_x, app.map.viewport.centre_y),
+        (0.0, 0.0)
+    );
     app.update(Action::Fleet(at(6.0, 4.0)));
-    let (x, y) = (app.viewport.centre_x, app.viewport.centre_y);
+    let (x, y) = (app.map.viewport.centre_x, app.map.viewport.centre_y);
     assert!((x - 6.0).abs() < 0.5 && (y - 4.0).abs() < 0.5, "{x} {y}");
     // Once: after that the operator's view is left alone.
     app.update(Action::Fleet(at(9.0, 9.0)));
-    assert_eq!((app.viewport.centre_x, app.viewport.centre_y), (x, y));
+    assert_eq!(
+        (app.map.viewport.centre_x, app.map.viewport.centre_y),
+        (x, y)
+    );
 }

@@ -55,8 +55,9 @@ impl Rig {
         };
         rig.link.exec(format!("spawn {n}"));
         rig.wait_for("connected robots", Duration::from_secs(10), |a| {
-            a.robots.len() == n
-                && a.robots
+            a.fleet.robots.len() == n
+                && a.fleet
+                    .robots
                     .iter()
                     .all(|r| r.link == LinkState::Connected && r.pose.x != 0.0)
         })
@@ -102,7 +103,7 @@ impl Rig {
 async fn app_requests_reach_simulated_robots() {
     let mut rig = Rig::start(2).await;
     assert!(
-        rig.app.robots.iter().any(|r| r.platform == "kiwi"),
+        rig.app.fleet.robots.iter().any(|r| r.platform == "kiwi"),
         "mixed platforms"
     );
 
@@ -152,32 +153,33 @@ async fn app_requests_reach_simulated_robots() {
     // Every command is in the event log under the operator who sent it.
     assert!(
         rig.app
-            .log
+            .events
             .iter()
             .any(|l| l.text.ends_with("> route robot_1 wp/gcs")),
         "{:?}",
-        rig.app.log
+        rig.app.events
     );
 
     // A typed command's result comes after what it logged.
     rig.link.exec("route robot_2 joy/7".into());
     rig.wait_for("robot_2's route result", Duration::from_secs(5), |a| {
-        a.log.iter().any(|l| l.text == "robot_2 routed to joy/7")
+        a.events.iter().any(|l| l.text == "robot_2 routed to joy/7")
     })
     .await;
-    let at = |text: &str| rig.app.log.iter().position(|l| l.text == text);
+    let at = |text: &str| rig.app.events.iter().position(|l| l.text == text);
     let (logged, result) = (
         at("robot_2 routed to joy/7 (pending)"),
         at("robot_2 routed to joy/7"),
     );
-    assert!(logged.is_some() && logged < result, "{:?}", rig.app.log);
+    assert!(logged.is_some() && logged < result, "{:?}", rig.app.events);
 
     // E-stop from the App latches every robot.
     rig.app.update(Action::EStop);
     rig.carry_all();
     rig.wait_for("every robot e-stopped", Duration::from_secs(10), |a| {
-        a.estop
-            && a.robots
+        a.fleet.estop
+            && a.fleet
+                .robots
                 .iter()
                 .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
     })
@@ -289,7 +291,7 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
         assert!(
             t0.elapsed() < Duration::from_secs(15),
             "members move under the pad: {:?}",
-            rig.app.robots
+            rig.app.fleet.robots
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
@@ -302,7 +304,7 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     // The station copies the controller's report into its snapshots, for
     // the map and routes panel.
     rig.wait_for("c1's controller status", Duration::from_secs(5), |a| {
-        a.clusters.iter().any(|c| {
+        a.fleet.clusters.iter().any(|c| {
             c.name == "c1"
                 && c.control.as_ref().is_some_and(|ctl| {
                     ctl.slots.len() == 2 && ctl.desired.is_some() && ctl.measured.is_some()
@@ -443,11 +445,13 @@ async fn a_typed_estop_acts_at_once_whatever_the_command_queue_is_doing() {
     rig.app.update(Action::OpenCommandLine);
     rig.link.exec("wait lost robot_1 60s".into());
     rig.link.exec("estop".into());
-    rig.wait_for("the typed estop", Duration::from_secs(5), |a| a.estop)
+    rig.wait_for("the typed estop", Duration::from_secs(5), |a| a.fleet.estop)
         .await;
     rig.link.exec("release".into());
-    rig.wait_for("the typed release", Duration::from_secs(5), |a| !a.estop)
-        .await;
+    rig.wait_for("the typed release", Duration::from_secs(5), |a| {
+        !a.fleet.estop
+    })
+    .await;
     let gcs = rig.station.gcs().clone();
     assert!(!gcs.with_fleet(|f| f.estop.engaged));
     rig.stop().await;

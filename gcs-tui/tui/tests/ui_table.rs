@@ -10,7 +10,8 @@ use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 
 fn screen(app: &App) -> String {
-    let mut term = Terminal::new(TestBackend::new(app.size.0, app.size.1)).expect("test terminal");
+    let mut term = Terminal::new(TestBackend::new(app.screen.size.0, app.screen.size.1))
+        .expect("test terminal");
     term.draw(|f| f.render_widget(app, f.area()))
         .expect("draws");
     term.backend().to_string()
@@ -37,12 +38,12 @@ fn rows(app: &App) -> Vec<String> {
     app.table
         .rows
         .iter()
-        .map(|&i| app.robots[i].name.clone())
+        .map(|&i| app.fleet.robots[i].name.clone())
         .collect()
 }
 
 fn selected(app: &App) -> Vec<&str> {
-    app.selection.iter().map(String::as_str).collect()
+    app.cards.selection.iter().map(String::as_str).collect()
 }
 
 /// `fixture::app` with the table shown.
@@ -55,15 +56,19 @@ fn table(n: usize, w: u16, h: u16) -> App {
 #[test]
 fn v_shows_the_table_in_place_of_cards_and_map_and_back() {
     let mut app = table(12, 200, 50);
-    assert_eq!(app.robots_view, RobotsView::Table);
-    assert_eq!(app.focus, Focus::Cards, "the table takes the robot keys");
+    assert_eq!(app.screen.robots_view, RobotsView::Table);
+    assert_eq!(
+        app.screen.focus,
+        Focus::Cards,
+        "the table takes the robot keys"
+    );
     let areas = app.areas();
     assert!(areas.table.is_some() && areas.cards.is_none() && areas.map.is_empty());
     let text = screen(&app);
     assert!(text.contains("Fleet 12/12"), "{text}");
     assert!(text.contains("robot_12"), "every row fits: {text}");
     press(&mut app, KeyCode::Char('v'));
-    assert_eq!(app.robots_view, RobotsView::Cards);
+    assert_eq!(app.screen.robots_view, RobotsView::Cards);
     assert!(app.areas().cards.is_some());
 }
 
@@ -92,7 +97,11 @@ fn names_sort_naturally_and_any_column_sorts_either_way() {
 fn slash_filters_as_it_is_typed_and_esc_clears() {
     let mut app = fixture::app(100, 200, 50);
     press(&mut app, KeyCode::Char('/'));
-    assert_eq!(app.robots_view, RobotsView::Table, "/ opens the table");
+    assert_eq!(
+        app.screen.robots_view,
+        RobotsView::Table,
+        "/ opens the table"
+    );
     typed(&mut app, "robot_9");
     let want: Vec<String> = std::iter::once(9)
         .chain(90..=99)
@@ -100,7 +109,7 @@ fn slash_filters_as_it_is_typed_and_esc_clears() {
         .collect();
     assert_eq!(rows(&app), want);
     press(&mut app, KeyCode::Enter);
-    assert!(app.prompt.is_none(), "Enter keeps the filter");
+    assert!(app.prompt.open.is_none(), "Enter keeps the filter");
     let text = screen(&app);
     assert!(text.contains("Fleet 11/100"), "{text}");
     press(&mut app, KeyCode::Esc);
@@ -110,7 +119,7 @@ fn slash_filters_as_it_is_typed_and_esc_clears() {
     typed(&mut app, "LOST");
     assert_eq!(rows(&app).len(), 25);
     press(&mut app, KeyCode::Esc);
-    assert!(app.table.filter.is_empty() && app.prompt.is_none());
+    assert!(app.table.filter.is_empty() && app.prompt.open.is_none());
 }
 
 #[test]
@@ -161,7 +170,7 @@ fn a_cluster_is_made_from_rows_and_routing_works_beside_the_table() {
     assert_eq!(selected(&app), ["robot_12"]);
     press(&mut app, KeyCode::Tab);
     press(&mut app, KeyCode::Tab);
-    assert_eq!(app.focus, Focus::Routes);
+    assert_eq!(app.screen.focus, Focus::Routes);
     press(&mut app, KeyCode::Right);
     press(&mut app, KeyCode::Enter);
     assert_eq!(
@@ -173,7 +182,7 @@ fn a_cluster_is_made_from_rows_and_routing_works_beside_the_table() {
     );
     press(&mut app, KeyCode::Tab);
     assert_eq!(
-        app.focus,
+        app.screen.focus,
         Focus::Cards,
         "past the hidden map, back to the table"
     );

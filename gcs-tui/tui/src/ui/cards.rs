@@ -28,18 +28,19 @@ impl Widget for CardsPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
         let t = self.theme;
-        let border = if app.focus == Focus::Cards {
+        let border = if app.screen.focus == Focus::Cards {
             t.focused_border()
         } else {
             ratatui::style::Style::new()
         };
         let title = format!(
             " Robots {}/{} ",
-            app.robots
+            app.fleet
+                .robots
                 .iter()
                 .filter(|r| r.link == LinkState::Connected)
                 .count(),
-            app.robots.len()
+            app.fleet.robots.len()
         );
         let block = Block::bordered().title(title).border_style(border);
         let inner = block.inner(area);
@@ -47,15 +48,16 @@ impl Widget for CardsPanel<'_> {
         let visible = usize::from(inner.height) / CARD_HEIGHT;
         let mut lines: Vec<Line> = Vec::with_capacity(visible * CARD_HEIGHT);
         for (i, r) in app
+            .fleet
             .robots
             .iter()
             .enumerate()
-            .skip(app.cards_scroll)
+            .skip(app.cards.scroll)
             .take(visible)
         {
-            card(r, i, app.selection.contains(&r.name), &t, &mut lines);
+            card(r, i, app.cards.selection.contains(&r.name), &t, &mut lines);
         }
-        if app.robots.is_empty() {
+        if app.fleet.robots.is_empty() {
             lines.push(Line::styled("no robots yet", t.dim()));
         }
         Paragraph::new(lines).render(inner, buf);
@@ -99,6 +101,14 @@ fn quality_line<'a>(q: &LinkQuality, t: &Theme) -> Line<'a> {
 /// One robot's card, [`CARD_HEIGHT`] lines; `i` is its place in the fleet
 /// (its colour).
 pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec<Line<'a>>) {
+    out.push(identity_line(r, i, selected, t));
+    out.push(pose_line(r));
+    out.push(state_line(r, t));
+    out.push(quality_line(&r.quality, t));
+}
+
+/// The card's first line: `●robot_1 #1 ok diff-drive` (`▶` selected).
+fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> Line<'a> {
     let colour = ratatui::style::Style::new().fg(t.robot(i));
     let name_style = if selected {
         colour.patch(t.selected())
@@ -106,7 +116,7 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
         colour.patch(t.title())
     };
     let marker = if selected { "▶" } else { "●" };
-    out.push(Line::from(vec![
+    Line::from(vec![
         Span::styled(marker, colour),
         Span::styled(r.name.as_str(), name_style),
         // Another station's robot: its id is that station's router's.
@@ -116,7 +126,11 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
         },
         Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
-    ]));
+    ])
+}
+
+/// The card's second line: ` x  1.00 y  2.00   90° 0.20m/s meas`.
+fn pose_line<'a>(r: &RobotView) -> Line<'a> {
     // Height only when airborne, so a ground robot's line has room for
     // whether its speed was measured.
     let z = if r.pose.z.abs() >= AIRBORNE {
@@ -124,24 +138,26 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
     } else {
         String::new()
     };
-    out.push(Line::raw(format!(
+    Line::raw(format!(
         " x{:6.2} y{:6.2}{z} {:4.0}° {:.2}m/s {}",
         r.pose.x,
         r.pose.y,
         r.heading_deg(),
         r.speed(),
         velocity_source_str(r.velocity_source),
-    )));
+    ))
+}
+
+/// The card's third line: mode, route (✓ acknowledged, … pending),
+/// failsafe, a fault or the health, mission, battery, where the loop runs
+/// and the links.
+fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
     let route = if r.route.channel.is_empty() {
         "none".to_string()
     } else if r.route.acknowledged {
         format!("{}✓", r.route.channel)
     } else {
         format!("{}…", r.route.channel)
-    };
-    let comp = match r.computation {
-        Computation::Onboard => "on",
-        Computation::Offboard => "off",
     };
     let fs_style = match r.failsafe {
         FailsafeState::Ok => t.ok(),
@@ -170,14 +186,17 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
     if let Some(b) = r.battery {
         spans.push(Span::raw(format!(" {:.0}%", b * 100.0)));
     }
+    let comp = match r.computation {
+        Computation::Onboard => "on",
+        Computation::Offboard => "off",
+    };
     spans.push(Span::raw(format!(" {comp}board")));
     spans.push(Span::raw(if r.links.is_empty() {
         String::new()
     } else {
         format!(" {}", r.links)
     }));
-    out.push(Line::from(spans));
-    out.push(quality_line(&r.quality, t));
+    Line::from(spans)
 }
 
 #[cfg(test)]

@@ -47,12 +47,13 @@ impl Widget for DetailPanel<'_> {
         let inner = block.inner(area);
         block.render(area, buf);
         let i = app
+            .fleet
             .robots
             .iter()
             .position(|x| x.name == r.name)
             .unwrap_or(0);
         let mut lines = Vec::new();
-        card(r, i, app.selection.contains(&r.name), &t, &mut lines);
+        card(r, i, app.cards.selection.contains(&r.name), &t, &mut lines);
         lines.push(Line::raw(""));
         let q = &r.quality;
         lines.push(Line::styled("link, as the router measures it", t.title()));
@@ -78,7 +79,11 @@ impl Widget for DetailPanel<'_> {
         lines.push(Line::raw(""));
         lines.push(Line::styled("recent events", t.title()));
         let room = usize::from(inner.height).saturating_sub(lines.len());
-        let events: Vec<_> = app.log.iter().filter(|l| names(&l.text, &r.name)).collect();
+        let events: Vec<_> = app
+            .events
+            .iter()
+            .filter(|l| names(&l.text, &r.name))
+            .collect();
         if events.is_empty() {
             lines.push(Line::styled(" none kept", t.dim()));
         }

@@ -28,10 +28,10 @@ impl Widget for EventsPanel<'_> {
             area
         };
         let n = usize::from(inner.height);
-        let skip = self.app.log.len().saturating_sub(n);
+        let skip = self.app.events.len().saturating_sub(n);
         let lines: Vec<Line> = self
             .app
-            .log
+            .events
             .iter()
             .skip(skip)
             .map(|l| {

@@ -14,74 +14,8 @@ const PLATFORMS: [&str; 3] = ["diff-drive", "kiwi", "quadcopter"];
 
 /// `n` robots on a ring, with a mix of platforms, routes, links and states.
 pub fn fleet(n: usize) -> FleetSnapshot {
-    let mut robots = Vec::with_capacity(n);
-    for i in 0..n {
-        let a = i as f64 * std::f64::consts::TAU / n.max(1) as f64;
-        let radius = 1.5 + (i % 3) as f64 * 0.5;
-        let mut r = RobotView::at(
-            &format!("robot_{}", i + 1),
-            (i + 1) as u16,
-            PLATFORMS[i % PLATFORMS.len()],
-            radius * a.cos(),
-            radius * a.sin(),
-            a + std::f64::consts::FRAC_PI_2,
-        );
-        r.battery = Some(1.0 - (i % 10) as f64 * 0.07);
-        r.velocity = Velocity {
-            vx: 0.1 * (i % 4) as f64,
-            vy: 0.0,
-            vz: 0.0,
-            wz: 0.0,
-        };
-        r.quality = LinkQuality {
-            rx_hz: 21.0 - (i % 5) as f64,
-            tx_hz: 4.0 + (i % 3) as f64 * 10.0,
-            loss: Some((i % 5) as f64 * 0.06),
-            rtt: Some(Duration::from_micros(300 + 700 * (i % 7) as u64)),
-            window: Duration::from_secs(5),
-            received: 1000 + i as u64,
-            sent: 200 + i as u64,
-            lost: (i % 5) as u64 * 60,
-        };
-        match i % 4 {
-            0 => {
-                r.route = RouteView {
-                    channel: "wp/gcs".into(),
-                    acknowledged: true,
-                };
-                r.mode = ControlMode::Waypoints;
-                r.mission = Some(MissionProgress {
-                    id: 1,
-                    next: 1,
-                    total: 3,
-                });
-            }
-            1 => {
-                r.route = RouteView {
-                    channel: "joy/0".into(),
-                    acknowledged: false,
-                };
-                r.mode = ControlMode::Twist;
-            }
-            2 => {
-                r.link = LinkState::Stale;
-                r.failsafe = FailsafeState::ChannelSilent;
-                r.route = RouteView {
-                    channel: "offboard/robot_3".into(),
-                    acknowledged: true,
-                };
-                r.computation = Computation::Offboard;
-                r.health = Health::Degraded;
-            }
-            _ => {
-                r.link = LinkState::Lost;
-                r.failsafe = FailsafeState::RouterLost;
-            }
-        }
-        robots.push(r);
-    }
     FleetSnapshot {
-        robots,
+        robots: (0..n).map(|i| robot(i, n)).collect(),
         security: Security::Authenticated,
         rejected: 0,
         replay: None,
@@ -102,12 +36,80 @@ pub fn fleet(n: usize) -> FleetSnapshot {
     }
 }
 
+/// Robot `i` of a ring of `n`: its place, platform, battery, speed and
+/// link quality vary with `i`, and its route and state with `i % 4`.
+fn robot(i: usize, n: usize) -> RobotView {
+    let a = i as f64 * std::f64::consts::TAU / n.max(1) as f64;
+    let radius = 1.5 + (i % 3) as f64 * 0.5;
+    let mut r = RobotView::at(
+        &format!("robot_{}", i + 1),
+        (i + 1) as u16,
+        PLATFORMS[i % PLATFORMS.len()],
+        radius * a.cos(),
+        radius * a.sin(),
+        a + std::f64::consts::FRAC_PI_2,
+    );
+    r.battery = Some(1.0 - (i % 10) as f64 * 0.07);
+    r.velocity = Velocity {
+        vx: 0.1 * (i % 4) as f64,
+        vy: 0.0,
+        vz: 0.0,
+        wz: 0.0,
+    };
+    r.quality = LinkQuality {
+        rx_hz: 21.0 - (i % 5) as f64,
+        tx_hz: 4.0 + (i % 3) as f64 * 10.0,
+        loss: Some((i % 5) as f64 * 0.06),
+        rtt: Some(Duration::from_micros(300 + 700 * (i % 7) as u64)),
+        window: Duration::from_secs(5),
+        received: 1000 + i as u64,
+        sent: 200 + i as u64,
+        lost: (i % 5) as u64 * 60,
+    };
+    match i % 4 {
+        0 => {
+            r.route = RouteView {
+                channel: "wp/gcs".into(),
+                acknowledged: true,
+            };
+            r.mode = ControlMode::Waypoints;
+            r.mission = Some(MissionProgress {
+                id: 1,
+                next: 1,
+                total: 3,
+            });
+        }
+        1 => {
+            r.route = RouteView {
+                channel: "joy/0".into(),
+                acknowledged: false,
+            };
+            r.mode = ControlMode::Twist;
+        }
+        2 => {
+            r.link = LinkState::Stale;
+            r.failsafe = FailsafeState::ChannelSilent;
+            r.route = RouteView {
+                channel: "offboard/robot_3".into(),
+                acknowledged: true,
+            };
+            r.computation = Computation::Offboard;
+            r.health = Health::Degraded;
+        }
+        _ => {
+            r.link = LinkState::Lost;
+            r.failsafe = FailsafeState::RouterLost;
+        }
+    }
+    r
+}
+
 /// An App showing [`fleet`]`(n)` on a `w x h` terminal, with the arena,
 /// the first robot selected and the view fitted.
 pub fn app(n: usize, w: u16, h: u16) -> App {
     let now = Instant::now();
     let mut app = App::new("127.0.0.1:7700", now);
-    app.arena = Some(ArenaBounds {
+    app.map.arena = Some(ArenaBounds {
         min_x: -3.0,
         min_y: -3.0,
         max_x: 3.0,

@@ -15,7 +15,7 @@ use crate::gamepad::DriveKey;
 pub fn on_event(app: &App, ev: &Event) -> Vec<Action> {
     match ev {
         Event::Key(k) => on_key(app, k),
-        Event::Mouse(m) if app.mouse => on_mouse(app, m).into_iter().collect(),
+        Event::Mouse(m) if app.session.mouse => on_mouse(app, m).into_iter().collect(),
         Event::Resize(w, h) => vec![Action::Resize(*w, *h)],
         _ => Vec::new(),
     }
@@ -32,10 +32,10 @@ pub fn on_key(app: &App, key: &KeyEvent) -> Vec<Action> {
     if let Some(a) = safety_key(app, key) {
         return vec![a];
     }
-    if app.show_help {
+    if app.screen.help.shown {
         return vec![help_key(key.code)];
     }
-    if app.prompt.is_some() {
+    if app.prompt.open.is_some() {
         return prompt_key(app, key);
     }
     teleop_key(app, key.code)
@@ -52,7 +52,7 @@ fn safety_key(app: &App, key: &KeyEvent) -> Option<Action> {
     let ctrl = key.modifiers.contains(KeyModifiers::CONTROL);
     match key.code {
         KeyCode::Char('x') | KeyCode::Char('X') if ctrl => Some(Action::EStop),
-        KeyCode::Char('X') if app.prompt.is_none() => Some(Action::EStop),
+        KeyCode::Char('X') if app.prompt.open.is_none() => Some(Action::EStop),
         KeyCode::Char('r') | KeyCode::Char('R') if ctrl => Some(Action::Release),
         KeyCode::Char('c') if ctrl => Some(Action::Quit),
         _ => None,
@@ -73,7 +73,7 @@ fn help_key(code: KeyCode) -> Action {
 /// Keyboard teleop, when on: arrows/WASD drive, Q/E strafe, Space stops,
 /// `t` or Esc turns it off.
 fn teleop_key(app: &App, code: KeyCode) -> Option<Action> {
-    if !app.key_teleop_on {
+    if !app.manual.keys_on {
         return None;
     }
     let drive = match code {
@@ -92,7 +92,7 @@ fn teleop_key(app: &App, code: KeyCode) -> Option<Action> {
 
 /// Waypoint mode, when on: leave, edit, send or type a waypoint.
 fn waypoint_mode_key(app: &App, code: KeyCode) -> Option<Action> {
-    if !app.waypoint_mode {
+    if !app.waypoints.placing {
         return None;
     }
     match code {
@@ -110,7 +110,7 @@ fn waypoint_mode_key(app: &App, code: KeyCode) -> Option<Action> {
 /// shows the robot in detail, `<` `>` `r` sort, Esc leaves the detail,
 /// then clears the filter (then falls through to clearing the selection).
 fn table_key(app: &App, key: &KeyEvent) -> Option<Action> {
-    if app.robots_view != RobotsView::Table || app.focus != Focus::Cards {
+    if app.screen.robots_view != RobotsView::Table || app.screen.focus != Focus::Cards {
         return None;
     }
     let shift = key.modifiers.contains(KeyModifiers::SHIFT);
@@ -139,7 +139,7 @@ fn table_key(app: &App, key: &KeyEvent) -> Option<Action> {
 /// Keys of the focused panel: the routing-table cursor, the card
 /// selection, the waypoint list.
 fn panel_key(app: &App, code: KeyCode) -> Option<Action> {
-    match (app.focus, code) {
+    match (app.screen.focus, code) {
         (Focus::Routes, KeyCode::Up) => Some(Action::RouteCursor(-1, 0)),
         (Focus::Routes, KeyCode::Down) => Some(Action::RouteCursor(1, 0)),
         (Focus::Routes, KeyCode::Left) => Some(Action::RouteCursor(0, -1)),
@@ -169,7 +169,7 @@ fn global_key(app: &App, code: KeyCode) -> Option<Action> {
         KeyCode::Esc => Action::Select(Select::Clear),
         KeyCode::Char('c') => Action::MakeCluster,
         KeyCode::Char(d @ '1'..='9') => Action::Select(Select::Cluster(format!("c{d}"))),
-        KeyCode::Char('f') => Action::WaypointMode(!app.waypoint_mode),
+        KeyCode::Char('f') => Action::WaypointMode(!app.waypoints.placing),
         KeyCode::Char('e') => Action::OpenWaypointEntry,
         KeyCode::Char('s') => Action::SendWaypoints,
         KeyCode::Char('+') | KeyCode::Char('=') => Action::Zoom(1.25),
@@ -190,7 +190,7 @@ fn global_key(app: &App, code: KeyCode) -> Option<Action> {
 }
 
 fn prompt_key(app: &App, key: &KeyEvent) -> Vec<Action> {
-    let command = matches!(app.prompt, Some(Prompt::Command(_)));
+    let command = matches!(app.prompt.open, Some(Prompt::Command(_)));
     match key.code {
         KeyCode::Esc => vec![Action::PromptCancel],
         KeyCode::Enter => vec![Action::PromptSubmit],
@@ -213,7 +213,7 @@ pub fn on_mouse(app: &App, m: &MouseEvent) -> Option<Action> {
             row: m.row,
             add,
         }),
-        MouseEventKind::Drag(MouseButton::Left) if !app.waypoint_mode => Some(Action::Drag {
+        MouseEventKind::Drag(MouseButton::Left) if !app.waypoints.placing => Some(Action::Drag {
             col: m.column,
             row: m.row,
         }),

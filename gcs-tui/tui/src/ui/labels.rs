@@ -8,7 +8,7 @@
 //! or below its mark; it never covers a mark or another text and keeps a
 //! blank cell between itself and the next text or mark on its row, or it
 //! is left out and counted. The hovered robot and the first
-//! [`FAR_SEARCHES`] selected ones, when a crowd leaves no room near their
+//! `FAR_SEARCHES` selected ones, when a crowd leaves no room near their
 //! mark, take the nearest room anywhere on the map, so they are labelled
 //! while the map has room for a short name at all. A pure function of the
 //! App and the projection, so tests read exactly what is drawn.
@@ -218,13 +218,13 @@ pub fn layout(app: &App, proj: &Projection, step: f64) -> MapText {
 
     // Every robot's mark, the selected ones drawn last (on top).
     let mut on_map = Vec::new();
-    for (i, r) in app.robots.iter().enumerate() {
+    for (i, r) in app.fleet.robots.iter().enumerate() {
         if let Some((c, row)) = cell(r.pose.x, r.pose.y) {
             grid.set(c, row, MARK);
             on_map.push((i, c, row));
         }
     }
-    let selected = |i: usize| app.selection.contains(&app.robots[i].name);
+    let selected = |i: usize| app.cards.selection.contains(&app.fleet.robots[i].name);
     out.marks = on_map.iter().map(|&(i, c, r)| (c, r, i)).collect();
     out.marks.sort_by_key(|&(_, _, i)| selected(i));
 
@@ -232,7 +232,7 @@ pub fn layout(app: &App, proj: &Projection, step: f64) -> MapText {
 
     // Labels: the hovered and selected robots first, then the ticks, then
     // the rest in name order.
-    let hovered = |i: usize| app.hover.as_deref() == Some(app.robots[i].name.as_str());
+    let hovered = |i: usize| app.map.hover.as_deref() == Some(app.fleet.robots[i].name.as_str());
     let first = |i: usize| selected(i) || hovered(i);
     let mut must: Vec<_> = on_map
         .iter()
@@ -261,7 +261,7 @@ fn label_robot(
     grid: &mut Grid,
     out: &mut MapText,
 ) {
-    let name = &app.robots[i].name;
+    let name = &app.fleet.robots[i].name;
     let short = short_name(name);
     let near = [name.as_str(), short.as_str()]
         .into_iter()
@@ -287,7 +287,7 @@ fn fixed_texts(app: &App, proj: &Projection, grid: &mut Grid, out: &mut MapText)
             out.texts.push(p);
         }
     };
-    for c in &app.clusters {
+    for c in &app.fleet.clusters {
         if let Some(k) = &c.control {
             for s in &k.slots {
                 fixed(s.x, s.y, "◇".into(), Kind::Slot);
@@ -300,7 +300,7 @@ fn fixed_texts(app: &App, proj: &Projection, grid: &mut Grid, out: &mut MapText)
             fixed(x, y, format!("✚{}", c.name), Kind::Cluster);
         }
     }
-    for (k, w) in app.waypoints.iter().enumerate() {
+    for (k, w) in app.waypoints.list.iter().enumerate() {
         fixed(w.x, w.y, format!("⚑{}", k + 1), Kind::Waypoint(k));
     }
 }
@@ -424,7 +424,7 @@ mod tests {
 
     fn map_text(app: &App) -> MapText {
         let inner = app.areas().map_inner();
-        let proj = app.viewport.project(inner.width, inner.height);
+        let proj = app.map.viewport.project(inner.width, inner.height);
         let step = crate::ui::map::grid_step(proj.metres_per_dot * 16.0);
         layout(app, &proj, step)
     }
@@ -456,20 +456,20 @@ mod tests {
         app.update(Action::Select(crate::ui::Select::Toggle(
             "robot_500".into(),
         )));
-        app.hover = Some("robot_123".into());
+        app.map.hover = Some("robot_123".into());
         let t = map_text(&app);
         assert_apart(&t);
         for i in [776, 499, 122] {
             assert!(
                 t.texts.iter().any(|p| p.kind == Kind::Robot(i)),
                 "{} labelled",
-                app.robots[i].name
+                app.fleet.robots[i].name
             );
         }
         assert!(t.hidden > 500, "a crowd: most labels left out");
         let (_, _, last) = t.marks.last().copied().unwrap();
         assert!(
-            app.selection.contains(&app.robots[last].name),
+            app.cards.selection.contains(&app.fleet.robots[last].name),
             "selected on top"
         );
     }
@@ -506,7 +506,7 @@ mod tests {
             ..Default::default()
         }));
         app.update(Action::FitFleet);
-        app.waypoints = pos
+        app.waypoints.list = pos
             .iter()
             .take(wps)
             .map(|&(x, y)| mech_proto::Waypoint {
@@ -537,24 +537,24 @@ mod tests {
             let mut app = random_app(&pos, w, h, wps);
             let chosen: Vec<usize> = picks.iter().map(|k| k.index(pos.len())).collect();
             for &i in &chosen {
-                let name = app.robots[i].name.clone();
+                let name = app.fleet.robots[i].name.clone();
                 app.update(Action::Select(crate::ui::Select::Toggle(name)));
             }
             let hovered = hover.map(|k| k.index(pos.len()));
-            app.hover = hovered.map(|i| app.robots[i].name.clone());
+            app.map.hover = hovered.map(|i| app.fleet.robots[i].name.clone());
             let t = map_text(&app);
             assert_apart(&t);
             proptest::prop_assert_eq!(t.marks.len(), pos.len(), "every robot marked");
             let labelled = t.texts.iter().filter(|p| matches!(p.kind, Kind::Robot(_))).count();
             proptest::prop_assert_eq!(labelled + t.hidden, pos.len());
             let must: Vec<usize> = (0..pos.len())
-                .filter(|&i| app.selection.contains(&app.robots[i].name) || hovered == Some(i))
+                .filter(|&i| app.cards.selection.contains(&app.fleet.robots[i].name) || hovered == Some(i))
                 .collect();
             for i in must {
                 proptest::prop_assert!(
                     t.texts.iter().any(|p| p.kind == Kind::Robot(i)),
                     "{} selected or hovered but not labelled",
-                    app.robots[i].name
+                    app.fleet.robots[i].name
                 );
             }
         }

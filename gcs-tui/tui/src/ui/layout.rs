@@ -59,98 +59,116 @@ impl Areas {
             Constraint::Length(1),
         ])
         .areas(area);
+        let frame = Areas {
+            status,
+            cards: None,
+            waypoints: None,
+            routes: None,
+            table: None,
+            map: Rect::default(),
+            log,
+            bottom,
+            wide,
+        };
         if wide {
-            let right_w = (area.width / 4).clamp(36, 56);
-            let left_w = (area.width / 4).clamp(40, 56);
-            let [left, map, right] = Layout::horizontal([
-                Constraint::Length(left_w),
-                Constraint::Min(10),
-                Constraint::Length(right_w),
-            ])
-            .areas(body);
-            let [wp, routes] =
-                Layout::vertical([Constraint::Percentage(40), Constraint::Percentage(60)])
-                    .areas(right);
-            let (cards, table, map) = if table {
-                let [both, _] =
-                    Layout::horizontal([Constraint::Min(10), Constraint::Length(right_w)])
-                        .areas(body);
-                (None, Some(both), Rect::default())
-            } else {
-                (Some(left), None, map)
-            };
-            Areas {
-                status,
-                cards,
-                waypoints: Some(wp),
-                routes: Some(routes),
-                table,
-                map,
-                log,
-                bottom,
-                wide,
-            }
+            frame.with_wide_body(body, table)
         } else if table {
-            let (waypoints, routes, table) = match side {
-                SidePanel::Cards => (None, None, body),
-                other => {
-                    let left_w = if other == SidePanel::Routes {
-                        (area.width / 2).clamp(20, 44)
-                    } else {
-                        (area.width * 2 / 5).clamp(20, 40)
-                    };
-                    let [left, rest] =
-                        Layout::horizontal([Constraint::Length(left_w), Constraint::Min(10)])
-                            .areas(body);
-                    if other == SidePanel::Routes {
-                        (None, Some(left), rest)
-                    } else {
-                        (Some(left), None, rest)
-                    }
-                }
-            };
-            Areas {
-                status,
-                cards: None,
-                waypoints,
-                routes,
-                table: Some(table),
-                map: Rect::default(),
-                log,
-                bottom,
-                wide,
-            }
+            frame.with_small_table_body(body, side)
         } else {
-            // The routing table needs the width for its channel columns.
-            let left_w = if side == SidePanel::Routes {
-                (area.width / 2).clamp(20, 44)
-            } else {
-                (area.width * 2 / 5).clamp(20, 40)
-            };
-            let [left, map] =
-                Layout::horizontal([Constraint::Length(left_w), Constraint::Min(10)]).areas(body);
-            let (cards, waypoints, routes) = match side {
-                SidePanel::Cards => (Some(left), None, None),
-                SidePanel::Waypoints => (None, Some(left), None),
-                SidePanel::Routes => (None, None, Some(left)),
-            };
-            Areas {
-                status,
-                cards,
-                waypoints,
-                routes,
-                table: None,
-                map,
-                log,
-                bottom,
-                wide,
+            frame.with_small_body(body, side)
+        }
+    }
+
+    /// Everything at once: the cards (or the table, over the map too), the
+    /// map, and the waypoints over the routing table on the right.
+    fn with_wide_body(self, body: Rect, table: bool) -> Areas {
+        let right_w = (body.width / 4).clamp(36, 56);
+        let left_w = (body.width / 4).clamp(40, 56);
+        let [left, map, right] = Layout::horizontal([
+            Constraint::Length(left_w),
+            Constraint::Min(10),
+            Constraint::Length(right_w),
+        ])
+        .areas(body);
+        let [waypoints, routes] =
+            Layout::vertical([Constraint::Percentage(40), Constraint::Percentage(60)]).areas(right);
+        let (cards, table, map) = if table {
+            let [both, _] =
+                Layout::horizontal([Constraint::Min(10), Constraint::Length(right_w)]).areas(body);
+            (None, Some(both), Rect::default())
+        } else {
+            (Some(left), None, map)
+        };
+        Areas {
+            cards,
+            waypoints: Some(waypoints),
+            routes: Some(routes),
+            table,
+            map,
+            ..self
+        }
+    }
+
+    /// A small terminal in the table view: the table alone, or beside the
+    /// side column when it shows the waypoints or the routing table.
+    fn with_small_table_body(self, body: Rect, side: SidePanel) -> Areas {
+        let (waypoints, routes, table) = match side {
+            SidePanel::Cards => (None, None, body),
+            other => {
+                let [left, rest] = Layout::horizontal([
+                    Constraint::Length(side_width(body.width, other)),
+                    Constraint::Min(10),
+                ])
+                .areas(body);
+                if other == SidePanel::Routes {
+                    (None, Some(left), rest)
+                } else {
+                    (Some(left), None, rest)
+                }
             }
+        };
+        Areas {
+            waypoints,
+            routes,
+            table: Some(table),
+            ..self
+        }
+    }
+
+    /// A small terminal: the side column (one panel) beside the map.
+    fn with_small_body(self, body: Rect, side: SidePanel) -> Areas {
+        let [left, map] = Layout::horizontal([
+            Constraint::Length(side_width(body.width, side)),
+            Constraint::Min(10),
+        ])
+        .areas(body);
+        let (cards, waypoints, routes) = match side {
+            SidePanel::Cards => (Some(left), None, None),
+            SidePanel::Waypoints => (None, Some(left), None),
+            SidePanel::Routes => (None, None, Some(left)),
+        };
+        Areas {
+            cards,
+            waypoints,
+            routes,
+            map,
+            ..self
         }
     }
 
     /// The map's drawing area (inside its border).
     pub fn map_inner(&self) -> Rect {
         inner(self.map)
+    }
+}
+
+/// The side column's width on a small terminal `width` columns wide: the
+/// routing table needs more, for its channel columns.
+fn side_width(width: u16, side: SidePanel) -> u16 {
+    if side == SidePanel::Routes {
+        (width / 2).clamp(20, 44)
+    } else {
+        (width * 2 / 5).clamp(20, 40)
     }
 }
 

@@ -58,7 +58,7 @@ pub fn format_length(m: f64) -> String {
 /// projection and grid step): see [`labels`].
 pub fn map_text(app: &App) -> MapText {
     let inner = app.areas().map_inner();
-    let proj = app.viewport.project(inner.width, inner.height);
+    let proj = app.map.viewport.project(inner.width, inner.height);
     labels::layout(app, &proj, grid_step(proj.metres_per_dot * 16.0))
 }
 
@@ -137,7 +137,7 @@ impl Widget for MapPanel<'_> {
         let app = self.app;
         let t = self.theme;
         let inner = super::layout::inner(area);
-        let proj = app.viewport.project(inner.width, inner.height);
+        let proj = app.map.viewport.project(inner.width, inner.height);
         let m = proj.metres_per_dot;
         let step = grid_step(m * 16.0);
         let text = labels::layout(app, &proj, step);
@@ -145,10 +145,10 @@ impl Widget for MapPanel<'_> {
         if text.hidden > 0 {
             title.push_str(&format!("│ {} labels hidden ", text.hidden));
         }
-        if app.waypoint_mode {
+        if app.waypoints.placing {
             title.push_str("│ WAYPOINT MODE: click to place, Esc leaves ");
         }
-        let border = if app.focus == Focus::Map {
+        let border = if app.screen.focus == Focus::Map {
             t.focused_border()
         } else {
             Style::new()
@@ -169,11 +169,11 @@ impl Widget for MapPanel<'_> {
 fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, text: &MapText, t: &Theme) {
     paint_grid(ctx, proj, step, t);
     ctx.layer();
-    if let Some(a) = app.arena {
+    if let Some(a) = app.map.arena {
         paint_arena(ctx, proj, a, t);
     }
     // Paths of the last seconds.
-    for (i, r) in app.robots.iter().enumerate() {
+    for (i, r) in app.fleet.robots.iter().enumerate() {
         ctx.draw(&Dots {
             proj,
             points: &r.trail,
@@ -181,7 +181,7 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, text: &MapT
         });
     }
     // Waypoint legs, in mission order.
-    for w in app.waypoints.windows(2) {
+    for w in app.waypoints.list.windows(2) {
         ctx.draw(&Segment {
             proj,
             from: (w[0].x, w[0].y),
@@ -263,12 +263,16 @@ fn paint_arena(ctx: &mut Context, proj: &Projection, a: ArenaBounds, t: &Theme) 
 /// Clusters: members joined to the centre, and what the controller
 /// reports when it runs the cluster.
 fn paint_clusters(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
-    if app.clusters.is_empty() {
+    if app.fleet.clusters.is_empty() {
         return;
     }
-    let by_name: HashMap<&str, &RobotView> =
-        app.robots.iter().map(|r| (r.name.as_str(), r)).collect();
-    for c in &app.clusters {
+    let by_name: HashMap<&str, &RobotView> = app
+        .fleet
+        .robots
+        .iter()
+        .map(|r| (r.name.as_str(), r))
+        .collect();
+    for c in &app.fleet.clusters {
         let centre = labels::cluster_centre(app, c);
         paint_cluster(ctx, c, centre, &by_name, proj, t);
     }
@@ -339,11 +343,11 @@ fn paint_cluster_control(
 /// Robots: heading line, and a ring round the selected ones.
 fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     let m = proj.metres_per_dot;
-    for (i, r) in app.robots.iter().enumerate() {
+    for (i, r) in app.fleet.robots.iter().enumerate() {
         let (x, y, h) = (r.pose.x, r.pose.y, r.pose.heading);
         let colour = t.robot(i);
         ctx.draw(&Segment::heading(proj, (x, y, h), 6.0 * m, colour, 1));
-        if app.selection.contains(&r.name) {
+        if app.cards.selection.contains(&r.name) {
             let ring: Vec<(f64, f64)> = (0..16)
                 .map(|k| {
                     let a = f64::from(k) * std::f64::consts::TAU / 16.0;
@@ -364,7 +368,7 @@ fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
 fn print_text(ctx: &mut Context, app: &App, proj: &Projection, text: &MapText, t: &Theme) {
     for p in &text.texts {
         let style = match p.kind {
-            Kind::Robot(i) if app.selection.contains(&app.robots[i].name) => {
+            Kind::Robot(i) if app.cards.selection.contains(&app.fleet.robots[i].name) => {
                 Style::new().fg(t.robot(i)).patch(t.title())
             }
             Kind::Robot(i) => Style::new().fg(t.robot(i)),
@@ -382,13 +386,13 @@ fn print_text(ctx: &mut Context, app: &App, proj: &Projection, text: &MapText, t
         );
     }
     for &(col, row, i) in &text.marks {
-        let selected = app.selection.contains(&app.robots[i].name);
+        let selected = app.cards.selection.contains(&app.fleet.robots[i].name);
         let mut style = Style::new().fg(t.robot(i));
         if selected {
             style = style.patch(t.selected());
         }
         // Another station's robot (read-only) is a hollow mark.
-        let glyph = match (selected, app.robots[i].remote.is_some()) {
+        let glyph = match (selected, app.fleet.robots[i].remote.is_some()) {
             (true, _) => "◉",
             (false, true) => "○",
             (false, false) => "●",

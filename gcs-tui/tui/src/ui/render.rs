@@ -20,8 +20,12 @@ use super::waypoints::WaypointPanel;
 
 impl Widget for &App {
     fn render(self, area: Rect, buf: &mut Buffer) {
-        let theme = Theme::new(self.monochrome);
-        let a = Areas::compute(area, self.side, self.robots_view == RobotsView::Table);
+        let theme = Theme::new(self.session.monochrome);
+        let a = Areas::compute(
+            area,
+            self.screen.side,
+            self.screen.robots_view == RobotsView::Table,
+        );
         StatusBar { app: self, theme }.render(a.status, buf);
         if let Some(r) = a.cards {
             CardsPanel { app: self, theme }.render(r, buf);
@@ -49,7 +53,7 @@ impl Widget for &App {
         }
         .render(a.log, buf);
         BottomBar { app: self, theme }.render(a.bottom, buf);
-        if let Some(e) = &self.prompt_error {
+        if let Some(e) = &self.prompt.error {
             let h = 2;
             let r = Rect {
                 x: area.x,
@@ -59,7 +63,7 @@ impl Widget for &App {
             };
             PromptErrorBox { error: e, theme }.render(r, buf);
         }
-        if self.estop {
+        if self.fleet.estop {
             let over = a.table.unwrap_or(a.map);
             let r = Rect {
                 x: over.x,
@@ -69,10 +73,10 @@ impl Widget for &App {
             };
             EStopBanner { theme }.render(r, buf);
         }
-        if self.show_help {
+        if self.screen.help.shown {
             HelpOverlay {
                 theme,
-                scroll: self.help_scroll,
+                scroll: self.screen.help.scroll,
             }
             .render(area, buf);
         }

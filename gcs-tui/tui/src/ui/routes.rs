@@ -34,7 +34,7 @@ impl Widget for RoutesPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
         let t = self.theme;
-        let focused = app.focus == Focus::Routes;
+        let focused = app.screen.focus == Focus::Routes;
         let border = if focused {
             t.focused_border()
         } else {
@@ -60,7 +60,7 @@ impl Widget for RoutesPanel<'_> {
 /// when the panel has focus.
 fn table_lines(app: &App, t: &Theme, inner: Rect, focused: bool) -> Vec<Line<'static>> {
     let cols = app.route_columns();
-    let w = TableWindow::new(app.route_cursor, inner, cols.len());
+    let w = TableWindow::new(app.routes.cursor, inner, cols.len());
     let (first, fit, first_row, rows_fit) = (w.first_col, w.cols, w.first_row, w.rows);
     let shown = &cols[first..(first + fit).min(cols.len())];
 
@@ -71,18 +71,25 @@ fn table_lines(app: &App, t: &Theme, inner: Rect, focused: bool) -> Vec<Line<'st
         head.push(Span::styled(clip(name, ROUTE_COL_W), t.title()));
     }
     lines.push(Line::from(head));
-    for (ri, r) in app.robots.iter().enumerate().skip(first_row).take(rows_fit) {
+    for (ri, r) in app
+        .fleet
+        .robots
+        .iter()
+        .enumerate()
+        .skip(first_row)
+        .take(rows_fit)
+    {
         let mut spans = vec![Span::styled(
             format!("{} ", clip(&r.name, ROUTE_NAME_W)),
             Style::new().fg(t.robot(ri)),
         )];
         for (k, c) in shown.iter().enumerate() {
-            let cursor = focused && app.route_cursor == (ri, first + k);
+            let cursor = focused && app.routes.cursor == (ri, first + k);
             spans.push(route_mark(&r.route, c, cursor, t));
         }
         lines.push(Line::from(spans));
     }
-    if app.robots.is_empty() {
+    if app.fleet.robots.is_empty() {
         lines.push(Line::styled("no robots", t.dim()));
     }
     lines
@@ -111,11 +118,11 @@ fn route_mark(route: &RouteView, channel: &str, cursor: bool, t: &Theme) -> Span
 
 /// The live channels, with their last publisher and rate.
 fn channel_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
-    if app.channels.is_empty() {
+    if app.fleet.channels.is_empty() {
         return;
     }
     lines.push(Line::styled("live channels", t.title()));
-    for c in &app.channels {
+    for c in &app.fleet.channels {
         lines.push(Line::raw(format!(
             " {:<10} {:<8}{:>6.1}Hz",
             c.name, c.publisher, c.rate_hz
@@ -126,7 +133,7 @@ fn channel_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
 /// Connected pads (channel, mode, dead-man) and keyboard teleop when on.
 fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
     let pads = app.pads();
-    if pads.is_empty() && !app.key_teleop_on {
+    if pads.is_empty() && !app.manual.keys_on {
         return;
     }
     lines.push(Line::styled("controllers", t.title()));
@@ -142,9 +149,9 @@ fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
             Span::styled(format!(" {}", p.name), t.dim()),
         ]));
     }
-    if app.key_teleop_on {
+    if app.manual.keys_on {
         lines.push(Line::from(vec![
-            Span::raw(format!(" {:<6} {:<8} ", app.key_channel, "twist")),
+            Span::raw(format!(" {:<6} {:<8} ", app.manual.key_channel, "twist")),
             Span::styled("keys", t.warn()),
         ]));
     }
@@ -153,12 +160,12 @@ fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
 /// Clusters, numbered for their keys, the active one highlighted, with
 /// each member's slot tracking error once a controller runs the cluster.
 fn cluster_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
-    if app.clusters.is_empty() {
+    if app.fleet.clusters.is_empty() {
         return;
     }
     lines.push(Line::styled("clusters", t.title()));
-    for (k, c) in app.clusters.iter().enumerate() {
-        let active = app.active_cluster.as_deref() == Some(c.name.as_str());
+    for (k, c) in app.fleet.clusters.iter().enumerate() {
+        let active = app.fleet.active_cluster.as_deref() == Some(c.name.as_str());
         let style = if active { t.title() } else { Style::new() };
         let mut spans = vec![Span::styled(format!(" {} {:<4}", k + 1, c.name), style)];
         match &c.control {

@@ -38,11 +38,11 @@ impl Widget for StatusBar<'_> {
 /// or `alice@embedded`.
 pub fn session(app: &App, short: bool) -> String {
     // A replay has no station: where it is in the recording says more.
-    if let Some(clock) = app.replay {
+    if let Some(clock) = app.fleet.replay {
         return clock.label();
     }
-    let at = app.attached.as_deref();
-    let op = app.operator.as_str();
+    let at = app.session.attached.as_deref();
+    let op = app.session.operator.as_str();
     match (short, at, op.is_empty()) {
         (false, Some(a), false) => format!("attached {a} as {op}"),
         (false, Some(a), true) => format!("attached {a}"),
@@ -56,25 +56,25 @@ pub fn session(app: &App, short: bool) -> String {
 
 /// The parts both bars share: e-stop, security, refusals, teleop.
 fn parts<'a>(app: &App, t: &Theme) -> (Span<'a>, Span<'a>, Span<'a>, String) {
-    let estop = if app.estop {
+    let estop = if app.fleet.estop {
         Span::styled(" E-STOP ENGAGED ", t.alarm())
     } else {
         Span::raw(" e-stop off ")
     };
     // Unsigned on the network is an alarm; the loopback demo is said
     // plainly; refusals are counted.
-    let security = match app.security {
+    let security = match app.fleet.security {
         Security::Authenticated => Span::raw(""),
         Security::LoopbackOnly => Span::raw(" unsigned, loopback │"),
         Security::Unauthenticated => Span::styled(" UNAUTHENTICATED ", t.alarm()),
     };
-    let rejected = if app.rejected > 0 {
-        Span::styled(format!(" rejected {} ", app.rejected), t.warn())
+    let rejected = if app.fleet.rejected > 0 {
+        Span::styled(format!(" rejected {} ", app.fleet.rejected), t.warn())
     } else {
         Span::raw("")
     };
-    let teleop = if app.key_teleop_on {
-        format!("{} ON", app.key_channel)
+    let teleop = if app.manual.keys_on {
+        format!("{} ON", app.manual.key_channel)
     } else {
         "key off".to_string()
     };
@@ -83,18 +83,18 @@ fn parts<'a>(app: &App, t: &Theme) -> (Span<'a>, Span<'a>, Span<'a>, String) {
 
 /// The status bar when the terminal is wide enough for all of it.
 fn wide_line<'a>(app: &App, t: &Theme) -> Line<'a> {
-    let count = |l: LinkState| app.robots.iter().filter(|r| r.link == l).count();
+    let count = |l: LinkState| app.fleet.robots.iter().filter(|r| r.link == l).count();
     let (estop, security, rejected, teleop) = parts(app, t);
     Line::from(vec![
         Span::styled(" MECH ", t.title()),
         Span::raw(format!(
             "│ {} │ robots {} ({} ok {} stale {} lost) │ sel {} │ pads {} │ {} │",
-            app.router_addr,
-            app.robots.len(),
+            app.session.router_addr,
+            app.fleet.robots.len(),
             count(LinkState::Connected),
             count(LinkState::Stale),
             count(LinkState::Lost),
-            app.selection.len(),
+            app.cards.selection.len(),
             app.pads().len(),
             teleop,
         )),
@@ -109,6 +109,7 @@ fn wide_line<'a>(app: &App, t: &Theme) -> Line<'a> {
 /// place of the router's address.
 fn narrow_line<'a>(app: &App, t: &Theme) -> Line<'a> {
     let ok = app
+        .fleet
         .robots
         .iter()
         .filter(|r| r.link == LinkState::Connected)
@@ -122,8 +123,8 @@ fn narrow_line<'a>(app: &App, t: &Theme) -> Line<'a> {
             "│ {} │ {}/{} ok │ sel {} │ pads {} │ {} │ ? help",
             session(app, true),
             ok,
-            app.robots.len(),
-            app.selection.len(),
+            app.fleet.robots.len(),
+            app.cards.selection.len(),
             app.pads().len(),
             teleop,
         )),
@@ -140,7 +141,7 @@ pub struct BottomBar<'a> {
 impl Widget for BottomBar<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let t = self.theme;
-        let line = match &self.app.prompt {
+        let line = match &self.app.prompt.open {
             Some(Prompt::Command(s)) => Line::from(vec![
                 Span::raw(":"),
                 Span::raw(s.as_str()),
@@ -157,15 +158,15 @@ impl Widget for BottomBar<'_> {
                 Span::styled(" ", t.selected()),
                 Span::styled("  name, route or state │ Enter keep │ Esc clear", t.dim()),
             ]),
-            None if self.app.waypoint_mode => Line::styled(
+            None if self.app.waypoints.placing => Line::styled(
                 "WAYPOINTS click map │ e type x,y │ ⌫ remove │ Del clear │ Enter send │ Esc done │ X E-STOP",
                 t.dim(),
             ),
-            None if self.app.key_teleop_on => Line::styled(
+            None if self.app.manual.keys_on => Line::styled(
                 "TELEOP key/0 arrows/WASD drive │ Q E strafe │ Space stop │ t off │ X E-STOP",
                 t.warn(),
             ),
-            None if self.app.robots_view == RobotsView::Table => Line::styled(
+            None if self.app.screen.robots_view == RobotsView::Table => Line::styled(
                 "v map │ ↑↓ select │ Space mark │ Enter detail │ / filter │ < > sort │ r reverse │ Tab panel │ ? help │ X E-STOP",
                 t.dim(),
             ),
@@ -243,10 +244,10 @@ mod tests {
     #[test]
     fn the_bar_says_attached_or_embedded_and_as_whom_at_any_width() {
         let mut app = fixture::app(6, 80, 24);
-        app.operator = "alice".into();
+        app.session.operator = "alice".into();
         assert!(bar(&app, 200).contains("│ embedded as alice │ ? help"));
         assert!(bar(&app, 80).contains("│ alice@embedded │"));
-        app.attached = Some("gcs.sock".into());
+        app.session.attached = Some("gcs.sock".into());
         let wide = bar(&app, 200);
         assert!(
             wide.contains("│ attached gcs.sock as alice │ ? help"),
@@ -265,9 +266,9 @@ mod tests {
             mid.contains("alice@gcs.sock") && mid.contains("? help"),
             "{mid}"
         );
-        app.operator.clear();
+        app.session.operator.clear();
         assert_eq!(session(&app, false), "attached gcs.sock");
-        app.attached = None;
+        app.session.attached = None;
         assert_eq!(session(&app, true), "embedded");
     }
 }

@@ -55,7 +55,7 @@ impl Widget for TablePanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
         let t = self.theme;
-        let focused = app.focus == Focus::Cards;
+        let focused = app.screen.focus == Focus::Cards;
         let border = if focused {
             t.focused_border()
         } else {
@@ -77,15 +77,15 @@ impl Widget for TablePanel<'_> {
             .skip(app.table.scroll)
             .take(rows)
         {
-            let r = &app.robots[i];
-            let mut line = row(r, i, app.selection.contains(&r.name), &shown, &t);
+            let r = &app.fleet.robots[i];
+            let mut line = row(r, i, app.cards.selection.contains(&r.name), &shown, &t);
             if cursor == Some(k) {
                 line = line.patch_style(if focused { t.selected() } else { t.title() });
             }
             lines.push(line);
         }
         if app.table.rows.is_empty() {
-            let why = if app.robots.is_empty() {
+            let why = if app.fleet.robots.is_empty() {
                 "no robots yet".to_string()
             } else {
                 format!("no robot matches /{}", app.table.filter)
@@ -102,7 +102,7 @@ fn title(app: &App) -> String {
     let mut s = format!(
         " Fleet {}/{} │ sort {} {arrow} ",
         app.table.rows.len(),
-        app.robots.len(),
+        app.fleet.robots.len(),
         app.table.sort.header().trim().to_lowercase(),
     );
     if !app.table.filter.is_empty() {

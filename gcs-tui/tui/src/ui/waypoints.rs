@@ -21,23 +21,28 @@ impl Widget for WaypointPanel<'_> {
     fn render(self, area: Rect, buf: &mut Buffer) {
         let app = self.app;
         let t = self.theme;
-        let border = if app.focus == Focus::Waypoints || app.waypoint_mode {
+        let border = if app.screen.focus == Focus::Waypoints || app.waypoints.placing {
             t.focused_border()
         } else {
             Style::new()
         };
-        let mode = if app.waypoint_mode { " [placing]" } else { "" };
+        let mode = if app.waypoints.placing {
+            " [placing]"
+        } else {
+            ""
+        };
         let block = Block::bordered()
-            .title(format!(" Waypoints {}{mode} ", app.waypoints.len()))
+            .title(format!(" Waypoints {}{mode} ", app.waypoints.list.len()))
             .border_style(border);
         let inner = block.inner(area);
         block.render(area, buf);
 
         let mut lines: Vec<Line> = Vec::new();
         let targets: Vec<&str> = app
+            .fleet
             .robots
             .iter()
-            .filter(|r| app.selection.contains(&r.name))
+            .filter(|r| app.cards.selection.contains(&r.name))
             .map(|r| r.name.as_str())
             .collect();
         let to = if targets.is_empty() {
@@ -51,9 +56,10 @@ impl Widget for WaypointPanel<'_> {
             Span::styled(format!(" on {WAYPOINT_CHANNEL}"), t.dim()),
         ]));
         for r in app
+            .fleet
             .robots
             .iter()
-            .filter(|r| app.selection.contains(&r.name))
+            .filter(|r| app.cards.selection.contains(&r.name))
         {
             if let Some(m) = r.mission {
                 let state = if m.next >= m.total {
@@ -67,8 +73,8 @@ impl Widget for WaypointPanel<'_> {
                 ]));
             }
         }
-        let n = app.waypoints.len();
-        for (k, w) in app.waypoints.iter().enumerate().rev() {
+        let n = app.waypoints.list.len();
+        for (k, w) in app.waypoints.list.iter().enumerate().rev() {
             let time = w.time.map(|s| format!(" t {s:.1}s")).unwrap_or_default();
             lines.push(Line::from(vec![
                 Span::styled(format!("⚑{:<3}", k + 1), Style::new().fg(t.waypoint())),

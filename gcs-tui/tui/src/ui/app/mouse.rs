@@ -17,10 +17,11 @@ impl App {
         if !inner.contains(Position::new(col, row)) {
             return None;
         }
-        let p = self.viewport.project(inner.width, inner.height);
+        let p = self.map.viewport.project(inner.width, inner.height);
         let (cx, cy) = (col - inner.x, row - inner.y);
         let (wx, wy) = p.cell_to_world(cx, cy);
-        self.robots
+        self.fleet
+            .robots
             .iter()
             .filter_map(|r| {
                 let (rc, rr) = p.world_to_cell(r.pose.x, r.pose.y)?;
@@ -37,7 +38,7 @@ impl App {
         if !inner.contains(Position::new(col, row)) {
             return None;
         }
-        let p = self.viewport.project(inner.width, inner.height);
+        let p = self.map.viewport.project(inner.width, inner.height);
         Some(p.cell_to_world(col - inner.x, row - inner.y))
     }
 
@@ -45,8 +46,8 @@ impl App {
         let areas = self.areas();
         let pos = Position::new(col, row);
         if areas.map_inner().contains(pos) {
-            self.focus = Focus::Map;
-            if self.waypoint_mode {
+            self.screen.focus = Focus::Map;
+            if self.waypoints.placing {
                 if let Some((x, y)) = self.map_point(col, row) {
                     self.add_waypoint(Waypoint {
                         x,
@@ -60,24 +61,24 @@ impl App {
             match self.robot_at_cell(col, row).map(|r| r.name.clone()) {
                 Some(name) if add => self.select(Select::Toggle(name)),
                 Some(name) => self.select(Select::Only(name)),
-                None if !add => self.drag_from = Some((col, row)),
+                None if !add => self.map.start_drag(col, row),
                 None => {}
             }
             return;
         }
         if let Some(table) = areas.table.filter(|a| a.contains(pos)) {
-            self.set_focus(Focus::Cards);
+            self.screen.set_focus(Focus::Cards);
             self.click_table(inner(table), col, row, add);
             return;
         }
         if let Some(cards) = areas.cards.filter(|a| a.contains(pos)) {
-            self.focus = Focus::Cards;
+            self.screen.focus = Focus::Cards;
             let inner = inner(cards);
             if row < inner.y {
                 return;
             }
-            let i = self.cards_scroll + usize::from(row - inner.y) / self.card_height();
-            if let Some(name) = self.robots.get(i).map(|r| r.name.clone()) {
+            let i = self.cards.scroll + usize::from(row - inner.y) / self.card_height();
+            if let Some(name) = self.fleet.robots.get(i).map(|r| r.name.clone()) {
                 self.select(if add {
                     Select::Toggle(name)
                 } else {
@@ -87,19 +88,19 @@ impl App {
             return;
         }
         if areas.waypoints.is_some_and(|a| a.contains(pos)) {
-            self.set_focus(Focus::Waypoints);
+            self.screen.set_focus(Focus::Waypoints);
         } else if let Some(routes) = areas.routes.filter(|a| a.contains(pos)) {
-            self.set_focus(Focus::Routes);
+            self.screen.set_focus(Focus::Routes);
             let inner = inner(routes);
             let cols = self.route_columns().len();
-            let w = TableWindow::new(self.route_cursor, inner, cols);
+            let w = TableWindow::new(self.routes.cursor, inner, cols);
             if let Some((r, c)) = w.cell_at(inner, col, row) {
-                if r < self.robots.len() && c < cols {
+                if r < self.fleet.robots.len() && c < cols {
                     // A click picks the cell; a click on the picked cell routes.
-                    if self.route_cursor == (r, c) {
+                    if self.routes.cursor == (r, c) {
                         self.apply_route_cursor();
                     } else {
-                        self.route_cursor = (r, c);
+                        self.routes.cursor = (r, c);
                     }
                 }
             }
@@ -124,7 +125,7 @@ impl App {
             .table
             .rows
             .get(at)
-            .map(|&i| self.robots[i].name.clone())
+            .map(|&i| self.fleet.robots[i].name.clone())
         {
             self.select(if add {
                 Select::Toggle(name)
@@ -137,17 +138,7 @@ impl App {
     /// The pointer over the map: the robot under it is labelled whatever
     /// the crowd around it.
     pub(super) fn hover(&mut self, col: u16, row: u16) {
-        self.hover = self.robot_at_cell(col, row).map(|r| r.name.clone());
-    }
-
-    pub(super) fn drag(&mut self, col: u16, row: u16) {
-        let Some((c0, r0)) = self.drag_from else {
-            return;
-        };
-        let dx = f64::from(c0) - f64::from(col);
-        let dy = f64::from(row) - f64::from(r0);
-        self.viewport.pan_cells(dx, dy);
-        self.drag_from = Some((col, row));
+        self.map.hover = self.robot_at_cell(col, row).map(|r| r.name.clone());
     }
 
     pub(super) fn scroll(&mut self, col: u16, row: u16, steps: i32) {
@@ -161,19 +152,14 @@ impl App {
             return;
         }
         match self.map_point(col, row) {
-            Some((x, y)) => self.viewport.zoom_about(factor, x, y),
+            Some((x, y)) => self.map.viewport.zoom_about(factor, x, y),
             None => {
-                if self
+                let over_cards = self
                     .areas()
                     .cards
-                    .is_some_and(|a| a.contains(Position::new(col, row)))
-                {
-                    if steps < 0 {
-                        self.cards_scroll =
-                            (self.cards_scroll + 1).min(self.robots.len().saturating_sub(1));
-                    } else {
-                        self.cards_scroll = self.cards_scroll.saturating_sub(1);
-                    }
+                    .is_some_and(|a| a.contains(Position::new(col, row)));
+                if over_cards {
+                    self.cards.wheel(steps, self.fleet.robots.len());
                 }
             }
         }

@@ -1,23 +1,47 @@
-//! The fleet table on the App: switching to it and back, keeping its rows
-//! (filtered and sorted) current, sorting, the `/` filter, moving the
-//! cursor (which selects, as the cards' arrows do) and the detail view.
+//! The fleet table's state (its order, filter, rows, cursor, scroll and
+//! whether the cursor's robot is shown in detail), and on the App:
+//! switching to it and back, keeping its rows (filtered and sorted)
+//! current, sorting, the `/` filter, moving the cursor (which selects, as
+//! the cards' arrows do) and the detail view.
 
 use super::{App, Focus, Prompt, RobotsView, Select};
 use crate::ui::columns::{Column, sorted_rows};
+
+/// The fleet table: its order, filter, rows, cursor and whether the
+/// cursor's robot is shown in detail.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct TableState {
+    pub sort: Column,
+    pub descending: bool,
+    /// Text the rows must contain (name, route or state), any case.
+    pub filter: String,
+    /// Indices into the fleet's robots ([`super::FleetState::robots`]),
+    /// filtered and sorted: kept up to date by `update`, so drawing only
+    /// reads them.
+    pub rows: Vec<usize>,
+    /// The robot the keys act on, by name, so it stays put when rows
+    /// re-sort (a speed column re-sorts every frame).
+    pub cursor: Option<String>,
+    /// First row shown.
+    pub scroll: usize,
+    /// The cursor's robot in detail (card, events, counters) in place of
+    /// the table.
+    pub detail: bool,
+}
 
 impl App {
     /// The table in place of the cards and the map, or back. The table
     /// takes the keys of the robots panel.
     pub(super) fn toggle_table(&mut self) {
-        self.robots_view = match self.robots_view {
+        self.screen.robots_view = match self.screen.robots_view {
             RobotsView::Cards => RobotsView::Table,
             RobotsView::Table => RobotsView::Cards,
         };
         self.table.detail = false;
-        if self.robots_view == RobotsView::Table {
-            self.set_focus(Focus::Cards);
+        if self.screen.robots_view == RobotsView::Table {
+            self.screen.set_focus(Focus::Cards);
             if self.table.cursor.is_none() {
-                self.table.cursor = self.selection.iter().next().cloned();
+                self.table.cursor = self.cards.selection.iter().next().cloned();
             }
             self.refresh_rows();
             self.keep_cursor_visible();
@@ -27,7 +51,7 @@ impl App {
     /// Recomputes the rows from the robots, the filter and the order.
     pub(super) fn refresh_rows(&mut self) {
         let t = &self.table;
-        self.table.rows = sorted_rows(&self.robots, t.sort, t.descending, &t.filter);
+        self.table.rows = sorted_rows(&self.fleet.robots, t.sort, t.descending, &t.filter);
         let max = self.table.rows.len().saturating_sub(self.table_page());
         self.table.scroll = self.table.scroll.min(max);
     }
@@ -47,11 +71,11 @@ impl App {
     /// Shows the table and starts typing its filter (what was typed before
     /// is kept, to edit).
     pub(super) fn open_filter(&mut self) {
-        if self.robots_view != RobotsView::Table {
+        if self.screen.robots_view != RobotsView::Table {
             self.toggle_table();
         }
         self.table.detail = false;
-        self.prompt = Some(Prompt::Filter(self.table.filter.clone()));
+        self.prompt.open = Some(Prompt::Filter(self.table.filter.clone()));
     }
 
     pub(super) fn set_filter(&mut self, filter: String) {
@@ -72,12 +96,12 @@ impl App {
             .table
             .cursor
             .as_ref()
-            .and_then(|c| rows.iter().position(|&i| &self.robots[i].name == c));
+            .and_then(|c| rows.iter().position(|&i| &self.fleet.robots[i].name == c));
         let to = match at {
             Some(i) => (i as i64 + i64::from(n)).clamp(0, last as i64) as usize,
             None => 0,
         };
-        let name = self.robots[rows[to]].name.clone();
+        let name = self.fleet.robots[rows[to]].name.clone();
         self.select(Select::Only(name));
     }
 
@@ -94,7 +118,7 @@ impl App {
         self.table
             .rows
             .iter()
-            .position(|&i| &self.robots[i].name == c)
+            .position(|&i| &self.fleet.robots[i].name == c)
     }
 
     /// Scrolls so that the cursor's row is on screen.

@@ -1,0 +1,170 @@
+//! The fleet as this screen holds it: the robots (in natural name order:
+//! `robot_2` before `robot_10`), the live channels, the clusters (as the
+//! station reports them, and those made here until it does) with the one a
+//! pad in cluster mode drives, the fleet e-stop, the station's security and
+//! refusals, and a replay's clock. Taking a station's snapshot, making a
+//! cluster from the selection and switching the selected robots'
+//! navigation are here too.
+
+use super::{App, LogLevel, Request};
+use crate::ui::view::{
+    ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView, Security,
+};
+use mech_core::names::natural_cmp;
+
+/// What the station last reported, as the screen shows it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FleetState {
+    pub robots: Vec<RobotView>,
+    pub channels: Vec<ChannelView>,
+    pub clusters: Vec<ClusterOnScreen>,
+    /// Cluster a pad in cluster mode drives (the last one made or selected).
+    pub active_cluster: Option<String>,
+    /// Fleet-wide e-stop engaged (requested here or reported by the core).
+    pub estop: bool,
+    /// Whether the station checks signatures (shown in the status bar).
+    pub security: Security,
+    /// Messages the station refused, as last reported.
+    pub rejected: u64,
+    /// A replay's clock, when the TUI shows a recording.
+    pub replay: Option<ReplayClock>,
+}
+
+impl FleetState {
+    pub fn robot(&self, name: &str) -> Option<&RobotView> {
+        self.robots.iter().find(|r| r.name == name)
+    }
+
+    /// Robot `name`'s place in the fleet (its colour, its card).
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.robots.iter().position(|r| r.name == name)
+    }
+
+    /// Takes the station's state as it is: the e-stop, robots (sorted),
+    /// channels and (when the source keeps them) clusters.
+    pub fn apply(&mut self, s: FleetSnapshot) {
+        self.estop = s.estop;
+        self.security = s.security;
+        self.rejected = s.rejected;
+        self.replay = s.replay;
+        self.robots = s.robots;
+        // Already in order from the station: a stable sort then costs one
+        // comparison per robot.
+        self.robots.sort_by(|a, b| natural_cmp(&a.name, &b.name));
+        self.channels = s.channels;
+        if let Some(c) = s.clusters {
+            self.clusters = c;
+        }
+    }
+
+    /// The first free cluster name: `c1`, `c2`...
+    fn next_cluster_name(&self) -> String {
+        let mut n = self.clusters.len() + 1;
+        while self.clusters.iter().any(|c| c.name == format!("c{n}")) {
+            n += 1;
+        }
+        format!("c{n}")
+    }
+}
+
+impl App {
+    /// Takes the station's state; keeps only the selected robots that are
+    /// still there, and fits the map once, to the first robots that
+    /// reported where they are (a robot that registered has no position
+    /// until its first telemetry, and reads as the origin).
+    pub(super) fn apply_snapshot(&mut self, s: FleetSnapshot) {
+        let placed = s.robots.iter().any(|r| r.pose.x != 0.0 || r.pose.y != 0.0);
+        self.fleet.apply(s);
+        let fleet = &self.fleet;
+        self.cards
+            .selection
+            .retain(|n| fleet.robots.iter().any(|r| &r.name == n));
+        self.refresh_rows();
+        if placed && self.map.first_fit() {
+            self.fit_fleet();
+        }
+    }
+
+    /// A cluster of the selected robots (two at least), named `c<n>`, made
+    /// the active one and asked of the station.
+    pub(super) fn make_cluster(&mut self) {
+        let members = self.selected_robots();
+        if members.len() < 2 {
+            self.log(
+                LogLevel::Warn,
+                "select at least two robots to make a cluster",
+            );
+            return;
+        }
+        let name = self.fleet.next_cluster_name();
+        self.log(
+            LogLevel::Info,
+            format!("cluster {name}: {}", members.join(" ")),
+        );
+        self.outbox.push(Request::DefineCluster {
+            name: name.clone(),
+            members: members.clone(),
+        });
+        self.fleet.clusters.push(ClusterOnScreen {
+            name: name.clone(),
+            members,
+            control: None,
+        });
+        self.fleet.active_cluster = Some(name);
+    }
+
+    /// Asks the station to move the selected robots' waypoint navigation
+    /// to the other side (onboard <-> offboard).
+    pub(super) fn toggle_nav(&mut self) {
+        let robots = self.selected_robots();
+        if robots.is_empty() {
+            self.log(
+                LogLevel::Warn,
+                "select a robot to switch onboard/offboard navigation",
+            );
+            return;
+        }
+        self.log(
+            LogLevel::Info,
+            format!("navigation onboard/offboard switch: {}", robots.join(" ")),
+        );
+        self.outbox.push(Request::ToggleNav { robots });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn snapshot(names: &[&str]) -> FleetSnapshot {
+        FleetSnapshot {
+            robots: names
+                .iter()
+                .map(|n| RobotView::at(n, 1, "kiwi", 0.0, 0.0, 0.0))
+                .collect(),
+            ..FleetSnapshot::default()
+        }
+    }
+
+    #[test]
+    fn robots_are_kept_in_natural_name_order_and_clusters_only_when_reported() {
+        let mut f = FleetState::default();
+        f.clusters.push(ClusterOnScreen {
+            name: "c1".into(),
+            members: vec!["robot_2".into()],
+            control: None,
+        });
+        f.apply(snapshot(&["robot_10", "robot_2", "robot_1"]));
+        let names: Vec<&str> = f.robots.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["robot_1", "robot_2", "robot_10"]);
+        assert_eq!(f.index_of("robot_10"), Some(2));
+        assert_eq!(f.clusters.len(), 1, "a source without clusters keeps ours");
+        assert_eq!(f.next_cluster_name(), "c2");
+        f.apply(FleetSnapshot {
+            clusters: Some(Vec::new()),
+            ..snapshot(&[])
+        });
+        assert!(f.clusters.is_empty());
+        assert_eq!(f.next_cluster_name(), "c1");
+    }
+}
