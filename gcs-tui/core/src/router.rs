@@ -290,3 +290,110 @@ impl Router {
         tracing::info!("router stopped");
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::OnceLock;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::time::Duration;
+
+    use mech_proto::{Body, Envelope, Header, Hello};
+
+    use super::*;
+    use crate::event::Stamped;
+
+    /// A sink that, for every event, tries the router's tables and reads
+    /// its counters, as a fleet model reading the router from its `apply`
+    /// would.
+    #[derive(Debug, Default)]
+    struct TablesProbe {
+        router: OnceLock<RouterHandle>,
+        applied: AtomicU64,
+        /// Events applied while the tables lock was held.
+        under_lock: AtomicU64,
+    }
+
+    impl EventSink for TablesProbe {
+        fn apply(&self, _: &Stamped) {
+            if let Some(router) = self.router.get() {
+                match router.shared().tables.try_lock() {
+                    Ok(tables) => {
+                        drop(tables);
+                        // Would wait for ever if this thread held them.
+                        router.counters();
+                    }
+                    Err(_) => {
+                        self.under_lock.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+            self.applied.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    fn hello(name: &str) -> Vec<u8> {
+        let header = Header {
+            sender: name.into(),
+            destination: "router".into(),
+            ..Header::default()
+        };
+        let hello = Hello {
+            name: name.into(),
+            platform: "diff-drive".into(),
+            capabilities: vec![],
+            motors: 2,
+            max_speed: 1.0,
+            max_yaw_rate: 2.0,
+            agent_version: "t".into(),
+        };
+        mech_proto::encode(&Envelope::new(header, Body::Hello(hello))).unwrap()
+    }
+
+    /// The sink runs after the tables lock is released, on every path that
+    /// makes events: a UDP worker (registrations, bad packets), the handle
+    /// (route, e-stop) and the timers (link states).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn the_sink_runs_without_the_tables_lock_on_every_path() {
+        let probe = Arc::new(TablesProbe::default());
+        let config = RouterConfig {
+            udp: "127.0.0.1:0".parse().unwrap(),
+            tcp: None,
+            stale_after: Duration::from_millis(40),
+            lost_after: Duration::from_millis(80),
+            ..RouterConfig::default()
+        };
+        let router = Router::start(config, None, probe.clone()).await.unwrap();
+        let handle = router.handle();
+        probe.router.set(handle.clone()).unwrap();
+        let mut events = handle.subscribe(64, false);
+        let sock = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let to = handle.udp_addr();
+        sock.send_to(&hello("robot_1"), to).await.unwrap();
+        sock.send_to(&[0x99, 0x01], to).await.unwrap();
+        let decided =
+            |c: crate::Counters| c.robots.contains_key("robot_1") && c.dropped.bad_packet > 0;
+        let started = Instant::now();
+        while !decided(handle.counters()) {
+            assert!(
+                started.elapsed() < Duration::from_secs(30),
+                "{:?}",
+                handle.counters()
+            );
+            tokio::task::yield_now().await;
+        }
+        handle.set_route("robot_1", Some("joy/0")).await.unwrap();
+        handle.estop().await;
+        // Silent since its Hello: the timers report it stale, then lost.
+        loop {
+            let e = events.recv().await.expect("router running");
+            if matches!(&e.event, Event::Link { state, .. } if *state == crate::LinkState::Lost) {
+                break;
+            }
+        }
+        router.shutdown().await;
+        // Registered, bad packet, route changed, e-stop (+ complete or
+        // not), stale, lost: each applied, none under the lock.
+        assert!(probe.applied.load(Ordering::Relaxed) >= 6);
+        assert_eq!(probe.under_lock.load(Ordering::Relaxed), 0);
+    }
+}
