@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use mech_proto::framing::{SerialDecoder, write_serial_message};
+use mech_proto::framing::{SerialDecoder, SerialRead, write_serial_message};
 
 use crate::router::tables::Peer;
 use crate::router::{RouterError, SerialEndpoint, Shared};
@@ -341,23 +341,10 @@ fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
     let mut buf = [0u8; 1024];
     let from = Peer::Serial(index);
     while !shared.stopped() {
-        let n = match port.read(&mut buf) {
-            Ok(0) => {
-                tracing::warn!(port = %name, "radio port closed");
-                return;
-            }
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut
-                        | std::io::ErrorKind::WouldBlock
-                        | std::io::ErrorKind::Interrupted
-                ) =>
-            {
-                continue;
-            }
-            Err(e) => {
+        let n = match SerialRead::of(port.read(&mut buf)) {
+            SerialRead::Bytes(n) => n,
+            SerialRead::Idle => continue,
+            SerialRead::Failed(e) => {
                 tracing::warn!(port = %name, error = %e, "radio read failed");
                 return;
             }
