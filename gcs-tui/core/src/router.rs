@@ -5,20 +5,20 @@
 //! (repeating them until acknowledged).
 //!
 //! Layers, as in mini-redis:
-//! - [`net`] owns the sockets, radios and timers: it binds the endpoints,
+//! - `net` owns the sockets, radios and timers: it binds the endpoints,
 //!   receives (a UDP worker thread per socket, a task per TCP peer, a
 //!   reader thread per radio, one timer task) and sends what was decided;
-//! - [`tables`] decides what to do with each message: synchronous, under
+//! - `tables` decides what to do with each message: synchronous, under
 //!   one short lock, each concern owning its part of the state;
-//! - [`events`] delivers the events the tables made to the fleet model and
-//!   subscribers ([`bus`]) after that lock is released, in the order the
+//! - `events` delivers the events the tables made to the fleet model and
+//!   subscribers (`bus`) after that lock is released, in the order the
 //!   tables made them;
 //! - [`RouterHandle`] (in `handle`) is the API the rest of the GCS uses,
 //!   and [`Publisher`] (in `publisher`) an in-process controller: its
 //!   messages go through exactly the same decision code as UDP and TCP
 //!   peers'.
 //!
-//! [`Shared`] ties them together: every path a message or request takes
+//! `Shared` ties them together: every path a message or request takes
 //! is decide (tables lock held; events queued before it is released),
 //! deliver the events, then send.
 
