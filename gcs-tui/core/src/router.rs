@@ -396,4 +396,65 @@ mod tests {
         assert!(probe.applied.load(Ordering::Relaxed) >= 6);
         assert_eq!(probe.under_lock.load(Ordering::Relaxed), 0);
     }
+
+    /// Records the id of every e-stop event applied.
+    #[derive(Debug, Default)]
+    struct EStopsApplied(Mutex<Vec<u32>>);
+
+    impl EventSink for EStopsApplied {
+        fn apply(&self, e: &Stamped) {
+            if let Event::EStop { id, .. } = e.event {
+                lock(&self.0).push(id);
+            }
+        }
+    }
+
+    /// A recording starts from the fleet model with every event made before
+    /// it applied, and the events made while that model is read (not yet
+    /// applied to it) follow the start: none is in both, none in neither.
+    #[tokio::test]
+    async fn a_recording_starts_from_a_fleet_with_every_earlier_event_and_gets_the_later_ones() {
+        let sink = Arc::new(EStopsApplied::default());
+        let config = RouterConfig {
+            udp: "127.0.0.1:0".parse().unwrap(),
+            tcp: None,
+            ..RouterConfig::default()
+        };
+        let router = Router::start(config, None, sink.clone()).await.unwrap();
+        let (handle, shared) = (router.handle(), router.handle.shared());
+        let estop =
+            |fx: &mut Effects| shared.decide(Peer::Local, fx, |t, cx| t.start_estop(true, cx));
+        // Decided and queued, not yet delivered.
+        let mut fx = Effects::default();
+        let (before, _) = estop(&mut fx);
+        let (tx, rx) = std::sync::mpsc::sync_channel(16);
+        let counts = (Arc::default(), Arc::default());
+        let tap = Tap::new(tx, handle.started(), counts.0, counts.1);
+        let mut during = None;
+        handle.put_tap(tap, || {
+            assert_eq!(*lock(&sink.0), [before], "applied before the fleet is read");
+            // Another thread's decision while the fleet model is read.
+            let (id, ticket) = estop(&mut Effects::default());
+            during = Some((id, ticket));
+            Fleet::new(crate::FleetConfig::default())
+        });
+        let (during, ticket) = during.unwrap();
+        shared.events.deliver(ticket);
+        assert_eq!(*lock(&sink.0), [before, during]);
+        let tapped: Vec<Tapped> = rx.try_iter().collect();
+        assert!(matches!(tapped[0], Tapped::Begin { .. }), "{tapped:?}");
+        let ids: Vec<u32> = tapped[1..]
+            .iter()
+            .filter_map(|t| match t {
+                Tapped::Event(s) => match s.event {
+                    Event::EStop { id, .. } => Some(id),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        assert_eq!(ids, [during], "what the recording has after its start");
+        drop(handle.take_tap());
+        router.shutdown().await;
+    }
 }
