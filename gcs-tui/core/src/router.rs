@@ -97,9 +97,9 @@ impl Shared {
         *self.stop.borrow()
     }
 
-    /// Runs `f` on the tables at `now` for a request from `from`, and
-    /// queues its events before the tables lock is released. What to send
-    /// is left in `fx.out`.
+    /// Runs `f` on the tables, for a message or request from `from`, and
+    /// queues its events before the tables lock is released; returns where
+    /// they stand in the queue. What to send is left in `fx.out`.
     fn decide<R>(
         &self,
         from: Peer,
