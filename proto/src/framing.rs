@@ -4,7 +4,8 @@
 //! framing: one datagram is one message.
 //!
 //! Decoders are push-based (feed them whatever `read` returned) and never
-//! allocate more than one maximum-size frame.
+//! allocate more than one maximum-size frame; [`SerialRead`] says what a
+//! serial port's `read` returned means for its reader.
 
 use crate::MAX_MESSAGE_LEN;
 use crate::envelope::{Envelope, decode, encode_into};
@@ -191,6 +192,43 @@ impl SerialDecoder {
     }
 }
 
+/// What one `read` from a serial port means for its reader: the radio
+/// reader at the station and the agent's serial link read a port the same
+/// way (a port opened with a read timeout).
+#[derive(Debug)]
+pub enum SerialRead {
+    /// This many bytes arrived: push them into the [`SerialDecoder`].
+    Bytes(usize),
+    /// Nothing arrived (the port's read timeout, a signal): read again.
+    Idle,
+    /// The port closed (a read of 0 bytes: `UnexpectedEof`) or failed:
+    /// give it up.
+    Failed(std::io::Error),
+}
+
+impl SerialRead {
+    /// Classifies the result of `read` on a serial port.
+    pub fn of(result: std::io::Result<usize>) -> SerialRead {
+        use std::io::ErrorKind;
+        match result {
+            Ok(0) => SerialRead::Failed(std::io::Error::new(
+                ErrorKind::UnexpectedEof,
+                "serial port closed",
+            )),
+            Ok(n) => SerialRead::Bytes(n),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+                ) =>
+            {
+                SerialRead::Idle
+            }
+            Err(e) => SerialRead::Failed(e),
+        }
+    }
+}
+
 /// Undoes COBS and checks the CRC of one frame (without its delimiter).
 fn decode_serial_frame(encoded: &[u8]) -> Result<Vec<u8>, Error> {
     let raw = cobs_decode(encoded)?;
@@ -256,4 +294,36 @@ pub fn cobs_decode(encoded: &[u8]) -> Result<Vec<u8>, Error> {
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{Error, ErrorKind};
+
+    use super::SerialRead;
+
+    #[test]
+    fn a_serial_read_is_bytes_idle_or_the_end_of_the_port() {
+        assert!(matches!(SerialRead::of(Ok(12)), SerialRead::Bytes(12)));
+        for idle in [
+            ErrorKind::TimedOut,
+            ErrorKind::WouldBlock,
+            ErrorKind::Interrupted,
+        ] {
+            let read = SerialRead::of(Err(Error::from(idle)));
+            assert!(matches!(read, SerialRead::Idle), "{idle:?}");
+        }
+        let closed = SerialRead::of(Ok(0));
+        assert!(
+            matches!(&closed, SerialRead::Failed(e) if e.kind() == ErrorKind::UnexpectedEof),
+            "{closed:?}"
+        );
+        for gone in [ErrorKind::BrokenPipe, ErrorKind::PermissionDenied] {
+            let read = SerialRead::of(Err(Error::from(gone)));
+            assert!(
+                matches!(&read, SerialRead::Failed(e) if e.kind() == gone),
+                "{read:?}"
+            );
+        }
+    }
 }

@@ -10,7 +10,7 @@
 use std::io::{Read, Write};
 
 use mech_proto::Envelope;
-use mech_proto::framing::{SerialDecoder, write_serial_message};
+use mech_proto::framing::{SerialDecoder, SerialRead, write_serial_message};
 use tokio::sync::mpsc;
 
 use crate::runtime::Io;
@@ -83,22 +83,10 @@ impl<S: Read> SerialLink<S> {
             return Ok(Some(bytes));
         }
         let mut buf = [0u8; 512];
-        match self.stream.read(&mut buf) {
-            Ok(0) => {
-                return Err(std::io::Error::new(
-                    std::io::ErrorKind::UnexpectedEof,
-                    "serial port closed",
-                ));
-            }
-            Ok(n) => self.decoder.push(&buf[..n]),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut
-                        | std::io::ErrorKind::WouldBlock
-                        | std::io::ErrorKind::Interrupted
-                ) => {}
-            Err(e) => return Err(e),
+        match SerialRead::of(self.stream.read(&mut buf)) {
+            SerialRead::Bytes(n) => self.decoder.push(&buf[..n]),
+            SerialRead::Idle => {}
+            SerialRead::Failed(e) => return Err(e),
         }
         Ok(self.next_good())
     }

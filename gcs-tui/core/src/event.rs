@@ -254,10 +254,13 @@ pub struct Stamped {
     pub event: Event,
 }
 
-/// Where the router delivers every event synchronously, in order, before
-/// any subscriber sees it: the fleet model implements it, so the model never
-/// misses a route or link change even when a subscriber lags. Keep
-/// [`EventSink::apply`] short: the router calls it holding its tables.
+/// Where the router delivers every event, in the order its tables made
+/// them, before any subscriber sees it: the fleet model implements it, so
+/// the model never misses a route or link change even when a subscriber
+/// lags. Keep [`EventSink::apply`] short: the router calls it after it has
+/// released its tables, holding its delivery lock, so other events wait
+/// for it. It may read the router (counters, channels) but must not make it
+/// act (route, publish, e-stop), which would wait for that same lock.
 pub trait EventSink: Send + Sync + std::fmt::Debug {
     fn apply(&self, event: &Stamped);
 }

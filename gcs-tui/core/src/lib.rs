@@ -16,7 +16,7 @@
 //! - [`fleet`]: the fleet model, an [`EventSink`] fed by the router;
 //! - [`record`]: recording what the router sees to MCAP;
 //! - [`replay`]: reading a recording back, as events and fleet models;
-//! - [`station`]: [`Gcs`], the router and fleet model started together.
+//! - [`gcs`]: [`Gcs`], the router and fleet model started together.
 //!
 //! Start a [`Gcs`], read the fleet with [`Gcs::snapshot`] /
 //! [`Gcs::with_fleet`], and act through [`Gcs::router`].
@@ -28,20 +28,20 @@ pub mod config;
 pub mod counters;
 pub mod event;
 pub mod fleet;
+pub mod gcs;
 pub mod names;
 pub mod record;
 pub mod replay;
 pub mod router;
-pub mod station;
 pub mod sync;
 
 pub use config::ConfigError;
 pub use counters::{ChannelStatus, Counters, DropReason, Drops, LinkQuality, Traffic};
 pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 pub use fleet::{Fleet, FleetConfig};
+pub use gcs::{CoreConfig, Gcs};
 pub use record::{RecordConfig, RecordTarget, RecordingStatus};
 pub use router::{
     Delivery, Publisher, RadioStatus, Router, RouterConfig, RouterError, RouterHandle,
     SerialEndpoint, Subscription,
 };
-pub use station::{CoreConfig, Gcs};

@@ -230,8 +230,9 @@ impl Recorder {
     }
 
     /// Puts the tap on `router`, beginning with the fleet model `fleet` as
-    /// it stands (read holding the router's tables, so nothing falls
-    /// between it and the first record).
+    /// it stands with every event the router made so far applied (read
+    /// while the router delivers no event, so nothing falls between it and
+    /// the first record).
     pub(crate) fn attach(&self, router: &RouterHandle, fleet: &Mutex<Fleet>) {
         let Some(tx) = &self.tx else { return };
         let tap = Tap::new(
@@ -240,15 +241,7 @@ impl Recorder {
             self.shared.dropped.clone(),
             self.shared.queued.clone(),
         );
-        let begin = tap.clone();
-        router.set_tap(Some(tap), |received| {
-            let fleet = Box::new(lock(fleet).clone());
-            begin.offer(Tapped::Begin {
-                at: router.elapsed(),
-                fleet,
-                received,
-            });
-        });
+        drop(router.put_tap(tap, || lock(fleet).clone()));
     }
 
     /// How the recording is going.
@@ -267,7 +260,7 @@ impl Recorder {
     /// queued and finish the file, and waits for it (blocking: call from a
     /// blocking context). Returns the final status.
     pub fn finish(mut self, router: &RouterHandle) -> RecordingStatus {
-        drop(router.set_tap(None, |_| {}));
+        drop(router.take_tap());
         if let Some(tx) = self.tx.take() {
             // Waits for room: the thread is draining the queue.
             let _ = tx.send(Tapped::End {

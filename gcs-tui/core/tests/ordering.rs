@@ -1,9 +1,17 @@
-//! Commands reach a robot in the order their controller sent them, whatever
-//! the number of router workers: a controller's datagrams are received,
-//! decided and sent on by one worker (the kernel hashes each sender to one
-//! socket of the router's `SO_REUSEPORT` group). Here one controller sends a
-//! million commands in bursts while other controllers keep the workers busy,
-//! and the robot checks every sequence number it gets.
+//! Order through the router, whatever the number of its workers.
+//!
+//! Commands reach a robot in the order their controller sent them: a
+//! controller's datagrams are received, decided and sent on by one worker
+//! (the kernel hashes each sender to one socket of the router's
+//! `SO_REUSEPORT` group). Here one controller sends a million commands in
+//! bursts while other controllers keep the workers busy, and the robot
+//! checks every sequence number it gets.
+//!
+//! Events reach the fleet model in the order the tables made them, though
+//! they are delivered after the tables lock is released and several threads
+//! decide at once: e-stops from many senders (spread over both workers) and
+//! from the station's handle each take the next id, and the sink must see
+//! the ids rising.
 
 #![allow(clippy::unwrap_used)]
 
@@ -16,8 +24,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use agent::{Peer, envelope, twist};
-use mech_core::Gcs;
-use mech_proto::Body;
+use mech_core::{Event, EventSink, Gcs, Router, Stamped};
+use mech_proto::{Body, EStop};
 
 const COMMANDS: u32 = 1_000_000;
 const BURST: u32 = 200;
@@ -169,4 +177,105 @@ fn a_million_commands_from_one_controller_arrive_in_order_with_both_workers_busy
     );
     drop(noisy);
     rt.block_on(gcs.shutdown());
+}
+
+/// Records the id of every e-stop event, in the order it is applied.
+#[derive(Debug, Default)]
+struct EStopIds {
+    ids: std::sync::Mutex<Vec<u32>>,
+    count: AtomicU64,
+}
+
+impl EventSink for EStopIds {
+    fn apply(&self, e: &Stamped) {
+        if let Event::EStop { id, .. } = e.event {
+            self.ids.lock().unwrap().push(id);
+            self.count.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Waits until `done`; fails the test if that takes over a minute (a lost
+/// datagram: the router would never apply its e-stop).
+fn wait_until(what: &str, done: impl Fn() -> bool) {
+    let started = Instant::now();
+    while !done() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "gave up waiting for {what}"
+        );
+        std::thread::yield_now();
+    }
+}
+
+const SENDERS: usize = 8;
+const ESTOPS_EACH: u64 = 3_000;
+const IN_FLIGHT: u64 = 64;
+
+#[test]
+fn events_reach_the_sink_in_the_order_the_tables_made_them_with_both_workers_deciding() {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let mut config = agent::config().router;
+    config.udp_workers = 2;
+    let sink = Arc::new(EStopIds::default());
+    let router = rt
+        .block_on(Router::start(config, None, sink.clone()))
+        .unwrap();
+    let handle = router.handle();
+    let to = handle.udp_addr();
+    // Each sender keeps a few e-stops in flight (so none is lost at the
+    // router's socket) while the others, and the handle, send theirs.
+    let senders: Vec<_> = (0..SENDERS)
+        .map(|i| {
+            let sink = sink.clone();
+            std::thread::spawn(move || {
+                let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+                let name = format!("estop{i}");
+                for seq in 1..=ESTOPS_EACH {
+                    wait_until("the router to keep up", || {
+                        seq <= sink.count.load(Ordering::Relaxed) / SENDERS as u64 + IN_FLIGHT
+                    });
+                    let body = Body::EStop(EStop {
+                        engage: seq % 2 == 1,
+                        id: 0,
+                    });
+                    let env = envelope(&name, "*", "", seq as u32, body);
+                    sock.send_to(&mech_proto::encode(&env).unwrap(), to)
+                        .unwrap();
+                }
+            })
+        })
+        .collect();
+    let from_handle = 500;
+    rt.block_on(async {
+        for i in 0..from_handle {
+            if i % 2 == 0 {
+                handle.estop().await;
+            } else {
+                handle.release().await;
+            }
+        }
+    });
+    for s in senders {
+        s.join().unwrap();
+    }
+    let total = SENDERS as u64 * ESTOPS_EACH + from_handle;
+    wait_until("every e-stop to be applied", || {
+        sink.count.load(Ordering::Relaxed) >= total
+    });
+    rt.block_on(router.shutdown());
+    let ids = sink.ids.lock().unwrap();
+    let out_of_order = ids
+        .windows(2)
+        .filter(|w| w[1] != w[0].wrapping_add(1))
+        .count();
+    assert_eq!(ids.len() as u64, total);
+    assert_eq!(
+        out_of_order, 0,
+        "e-stop ids applied out of the order the tables gave them"
+    );
 }

@@ -88,13 +88,10 @@ impl EventBus {
         Instant::now().saturating_duration_since(self.start)
     }
 
-    /// Delivers `event` and returns it stamped.
-    pub(crate) fn emit(&self, event: Event) -> Arc<Stamped> {
-        let stamped = Arc::new(Stamped {
-            at: self.elapsed(),
-            event,
-        });
-        self.sink.apply(&stamped);
+    /// Delivers `stamped` to the sink, then to every subscriber that
+    /// wants it.
+    pub(crate) fn deliver(&self, stamped: &Arc<Stamped>) {
+        self.sink.apply(stamped);
         // Periodic reports, per robot many times a second or every second:
         // only for subscribers that asked for them.
         let periodic = matches!(
@@ -115,8 +112,6 @@ impl EventBus {
                 Err(mpsc::error::TrySendError::Closed(_)) => false,
             }
         });
-        drop(subs);
-        stamped
     }
 
     /// Closes every subscription (after shutdown, `recv` returns `None`).
@@ -142,14 +137,20 @@ mod tests {
         let bus = EventBus::new(Instant::now(), Arc::new(Nowhere));
         let mut plain = bus.subscribe(8, false);
         let mut all = bus.subscribe(8, true);
-        bus.emit(Event::LinkQuality {
+        let stamped = |event| {
+            Arc::new(Stamped {
+                at: Duration::ZERO,
+                event,
+            })
+        };
+        bus.deliver(&stamped(Event::LinkQuality {
             robot: "robot_1".into(),
             quality: LinkQuality::default(),
-        });
-        bus.emit(Event::Bye {
+        }));
+        bus.deliver(&stamped(Event::Bye {
             robot: "robot_1".into(),
             reason: "done".into(),
-        });
+        }));
         let name = |s: &mut Subscription| s.try_recv().map(|e| e.event.name());
         assert_eq!(name(&mut plain), Some("bye"));
         assert_eq!(name(&mut all), Some("link_quality"));

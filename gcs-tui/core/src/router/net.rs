@@ -1,136 +1,279 @@
-//! The router's tasks: UDP worker threads, the TCP acceptor with a reader
-//! and a writer task per peer, and the timer task (heartbeats, link states,
-//! retries). Each hands bytes to the tables through [`super::Shared`].
-//! Every task watches the router's stop signal and ends on it; the acceptor
-//! waits for its peers, so [`super::Router::shutdown`] waits for them all.
+//! The router's network side: it binds the endpoints ([`bind`]), runs the
+//! tasks that receive ([`udp`]: a worker thread per socket of the UDP
+//! group; [`tcp`]: an acceptor and a task per peer; [`radio`]: a reader
+//! and a writer thread per serial radio; and the timer task), and sends
+//! what the tables decided ([`Net`]: `sendto`, `sendmmsg` and segmentation
+//! offload in [`batch`], the TCP peers' queues, the radios' queues).
+//!
+//! Each receiving task hands what it receives to `super::Shared`, which
+//! decides under the tables lock and delivers the events; the sending is
+//! done here, after the lock is released. Every task watches the router's
+//! stop signal and ends on it; [`Tasks::stop`] waits for them all.
 
-use std::sync::Arc;
-use std::sync::atomic::Ordering;
+mod batch;
+mod bind;
+mod radio;
+mod tcp;
+mod udp;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::os::fd::AsRawFd;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use mech_proto::framing::StreamDecoder;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
+use nix::sys::socket::{MsgFlags, SockaddrStorage, sendto};
 use tokio::sync::mpsc;
-use tokio::task::JoinSet;
-use tokio::time::{Instant, MissedTickBehavior};
-use tracing::{debug, info, warn};
+use tokio::task::JoinHandle;
+use tokio::time::MissedTickBehavior;
 
-use std::os::fd::AsRawFd;
+pub(super) use bind::{Bound, bind};
+pub use radio::RadioStatus;
+pub(super) use radio::{RadioPort, open_radios};
 
-use nix::sys::socket::MsgFlags;
-
-use super::batch::{RecvBatch, SendBatch};
+use super::Shared;
+use super::config::SerialEndpoint;
 use super::tables::{Outbox, Peer};
-use super::{Decided, Shared};
+use crate::counters::Counters;
 use crate::sync::lock;
+use radio::RadioQueue;
 
-/// One UDP worker, a thread of its own: owns one socket of the router's
-/// `SO_REUSEPORT` group, so the kernel hands it every datagram of the
-/// senders hashed to it. A sender's datagrams are therefore received,
-/// decided and sent on by one worker, in the order they arrived, whatever
-/// the number of workers, and workers never contend for a socket.
-///
-/// It blocks in `recvmmsg` until a datagram arrives (the kernel wakes this
-/// thread directly: no event loop between), takes what else is waiting in
-/// the same call, decides the batch under one hold of the tables' lock, and
-/// sends what it decided with `sendmmsg`. At low rates a batch is the one
-/// datagram that woke it: nothing waits to fill one. While traffic is
-/// dense it polls its socket for a moment before sleeping again
-/// ([`Poll`]), so that a busy sender does not pay a wake-up per datagram.
-pub(super) fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Duration) {
-    let mut received = RecvBatch::new();
-    let mut sender = SendBatch::new();
-    let mut decided = Decided::default();
-    let mut poll = Poll::new(poll);
-    let fd = socket.as_raw_fd();
-    // Set while traffic is dense: until then, take what comes next
-    // without going to sleep.
-    let mut polling_until = None;
-    while !shared.stopped() {
-        let polling = polling_until.is_some_and(|t| std::time::Instant::now() < t);
-        let flags = if polling {
-            MsgFlags::MSG_DONTWAIT
-        } else {
-            MsgFlags::MSG_WAITFORONE
+/// Times a send from a task or a plain thread retries a full socket buffer
+/// before the datagram counts as a send failure.
+const FULL_BUFFER_TRIES: usize = 1000;
+
+/// Where the router sends from: its UDP socket, the TCP peers' queues and
+/// the radios' queues, and the count of what could not be sent.
+#[derive(Debug)]
+pub(super) struct Net {
+    /// The socket that the timers, TCP peers, radio readers and in-process
+    /// publishers send from (the first of the UDP workers' group; every
+    /// one has the same address). The workers send from their own.
+    udp: Arc<std::net::UdpSocket>,
+    udp_addr: SocketAddr,
+    tcp_addr: Option<SocketAddr>,
+    /// Outgoing frame queues of the TCP peers, by connection number.
+    tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    next_conn: AtomicU64,
+    /// Length of each TCP peer's queue.
+    peer_queue: usize,
+    /// Outgoing queues of the serial radios, by place in `router.serial`.
+    radios: Vec<Arc<RadioQueue>>,
+    serial: Vec<SerialEndpoint>,
+    /// Datagrams the kernel refused (counted as dropped, `send-failed`).
+    send_failed: AtomicU64,
+    /// Frames dropped because a TCP peer's queue was full.
+    fanout_dropped: AtomicU64,
+}
+
+impl Net {
+    /// The sending side over the bound endpoints, with a queue per radio
+    /// in `serial`.
+    pub(super) fn new(bound: &Bound, serial: Vec<SerialEndpoint>, peer_queue: usize) -> Net {
+        Net {
+            udp: bound.udp[0].clone(),
+            udp_addr: bound.udp_addr,
+            tcp_addr: bound.tcp_addr,
+            tcp_peers: Mutex::new(HashMap::new()),
+            next_conn: AtomicU64::new(1),
+            peer_queue,
+            radios: serial.iter().map(|_| Arc::default()).collect(),
+            serial,
+            send_failed: AtomicU64::new(0),
+            fanout_dropped: AtomicU64::new(0),
+        }
+    }
+
+    /// The bound UDP endpoint.
+    pub(super) fn udp_addr(&self) -> SocketAddr {
+        self.udp_addr
+    }
+
+    /// The bound TCP endpoint, if enabled.
+    pub(super) fn tcp_addr(&self) -> Option<SocketAddr> {
+        self.tcp_addr
+    }
+
+    /// Adds the send failures counted here to `counters`.
+    pub(super) fn add_failures(&self, counters: &mut Counters) {
+        counters.dropped.send_failed += self.send_failed.load(Ordering::Relaxed);
+        counters.fanout_dropped += self.fanout_dropped.load(Ordering::Relaxed);
+    }
+
+    /// Every serial radio: what it sent and what waits.
+    pub(super) fn radios(&self) -> Vec<RadioStatus> {
+        self.serial
+            .iter()
+            .zip(&self.radios)
+            .map(|(s, q)| q.status(s))
+            .collect()
+    }
+
+    /// Sends the outbox from a tokio task: `raw` targets get `raw`,
+    /// `owned` ones their own bytes. The outbox keeps its allocations.
+    pub(super) async fn flush(&self, raw: &[u8], out: &mut Outbox) {
+        for i in 0..out.raw.len() {
+            self.send(out.raw[i], raw).await;
+        }
+        out.raw.clear();
+        for (peer, bytes) in out.owned.drain(..) {
+            self.send(peer, &bytes).await;
+        }
+    }
+
+    /// Sends the outbox from a plain thread (a radio's reader).
+    pub(super) fn flush_now(&self, raw: &[u8], out: &mut Outbox) {
+        for peer in out.raw.drain(..) {
+            self.send_now(peer, raw);
+        }
+        for (peer, bytes) in out.owned.drain(..) {
+            self.send_now(peer, &bytes);
+        }
+    }
+
+    /// Sends from a tokio task. The worker threads own blocking sockets;
+    /// this path must not block a tokio thread, so it sends without
+    /// waiting and, in the rare case of a full buffer, tries again after
+    /// yielding.
+    async fn send(&self, peer: Peer, bytes: &[u8]) {
+        let Peer::Udp(addr) = peer else {
+            return self.send_queued(peer, bytes);
         };
-        let n = match received.recv(fd, flags) {
-            Ok(n) if n > 0 => n,
-            // 0: shut down for reading (the stop signal is set).
-            Ok(_) => continue,
-            Err(e) => {
-                receive_error(&e);
-                if polling {
-                    // Nothing yet: let a thread that has work (the sender,
-                    // perhaps) have this core meanwhile.
-                    std::thread::yield_now();
+        let to = SockaddrStorage::from(addr);
+        let fd = self.udp.as_raw_fd();
+        for _ in 0..FULL_BUFFER_TRIES {
+            match sendto(fd, bytes, &to, MsgFlags::MSG_DONTWAIT) {
+                Ok(_) => return,
+                Err(nix::errno::Errno::EAGAIN) => tokio::task::yield_now().await,
+                Err(e) => {
+                    tracing::debug!(%addr, error = %e, "UDP send failed");
+                    break;
                 }
-                continue;
             }
+        }
+        self.send_failed.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Sends from a plain thread: UDP without blocking for long, others
+    /// through their queues.
+    fn send_now(&self, peer: Peer, bytes: &[u8]) {
+        let Peer::Udp(addr) = peer else {
+            return self.send_queued(peer, bytes);
         };
-        if !polling {
-            poll.woke_with(n);
+        let to = SockaddrStorage::from(addr);
+        for _ in 0..FULL_BUFFER_TRIES {
+            match sendto(self.udp.as_raw_fd(), bytes, &to, MsgFlags::MSG_DONTWAIT) {
+                Ok(_) => return,
+                Err(nix::errno::Errno::EAGAIN) => std::thread::yield_now(),
+                Err(_) => break,
+            }
         }
-        shared.decide_batch(&received, n, &mut decided);
-        shared.send_decided(fd, &mut sender, &received, &mut decided);
-        polling_until = poll.until();
+        self.send_failed.fetch_add(1, Ordering::Relaxed);
     }
-}
 
-/// A receive error concerns one peer (ICMP errors from earlier sends
-/// surface here) or none (nothing waiting, a signal), never the router:
-/// logged when worth it, and the worker carries on.
-fn receive_error(e: &std::io::Error) {
-    if !matches!(
-        e.kind(),
-        std::io::ErrorKind::WouldBlock
-            | std::io::ErrorKind::TimedOut
-            | std::io::ErrorKind::Interrupted
-    ) {
-        debug!(error = %e, "UDP receive error");
-    }
-}
-
-/// When a UDP worker polls its socket instead of sleeping.
-///
-/// Sleeping in `recvmmsg` costs the next datagram's sender a wake-up of this
-/// thread (on a virtual machine, an inter-processor interrupt and a
-/// hypervisor exit), and this thread a context switch. When datagrams queue
-/// up faster than the worker wakes for them, that is most of the cost of a
-/// datagram. So when a wake-up finds more than one datagram waiting, the
-/// worker polls (yielding the core between tries) for up to `budget` after
-/// each batch, for as long as datagrams keep coming within it, and only
-/// then sleeps. A wake-up that finds one datagram means the worker keeps
-/// up: it sleeps at once, so traffic it keeps up with (a 2 kHz command
-/// stream, a fleet's telemetry) costs no polling CPU and no latency. A
-/// zero budget turns polling off.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Poll {
-    budget: Duration,
-    queued: bool,
-}
-
-impl Poll {
-    pub(super) fn new(budget: Duration) -> Poll {
-        Poll {
-            budget,
-            queued: false,
+    /// Sends to a peer that is not a UDP address: a TCP peer gets a
+    /// length-prefixed frame through its bounded queue (a full queue drops
+    /// and counts, never waits), a radio gets the message in its priority
+    /// queue; in-process publishers get nothing.
+    fn send_queued(&self, peer: Peer, bytes: &[u8]) {
+        if let Peer::Serial(port) = peer {
+            if let Some(q) = self.radios.get(usize::from(port)) {
+                q.push(bytes);
+            }
+            return;
+        }
+        let Peer::Tcp(conn) = peer else { return };
+        let tx = lock(&self.tcp_peers).get(&conn).cloned();
+        let Some(tx) = tx else { return };
+        let mut frame = Vec::with_capacity(bytes.len() + 4);
+        frame.extend_from_slice(&(bytes.len() as u32).to_be_bytes());
+        frame.extend_from_slice(bytes);
+        if tx.try_send(frame).is_err() {
+            self.fanout_dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    /// A blocking receive returned `n` datagrams.
-    pub(super) fn woke_with(&mut self, n: usize) {
-        self.queued = !self.budget.is_zero() && n >= 2;
+    /// Counts datagrams a worker's batch send could not hand the kernel.
+    fn count_send_failures(&self, n: usize) {
+        self.send_failed.fetch_add(n as u64, Ordering::Relaxed);
+    }
+}
+
+/// The router's running tasks: the UDP workers' threads (with their
+/// sockets), the radios' threads, and the tokio tasks (timers, the TCP
+/// acceptor).
+#[derive(Debug)]
+pub(super) struct Tasks {
+    tokio: Vec<JoinHandle<()>>,
+    workers: Vec<udp::Worker>,
+    /// The radios' reader and writer threads.
+    radio_threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Tasks {
+    /// Starts every task on the bound endpoints and opened radios: a
+    /// thread per UDP socket (polling for up to `poll`), a reader and a
+    /// writer thread per radio, the timers every `tick`, the TCP acceptor.
+    pub(super) fn start(
+        shared: &Arc<Shared>,
+        bound: Bound,
+        ports: Vec<RadioPort>,
+        poll: Duration,
+        tick: Duration,
+    ) -> Result<Tasks, super::RouterError> {
+        let workers = udp::start_workers(shared, bound.udp, poll)?;
+        let radio_threads = radio::start(shared, ports)?;
+        let mut tokio = vec![tokio::spawn(timers(shared.clone(), tick))];
+        if let Some(listener) = bound.tcp {
+            tokio.push(tokio::spawn(tcp::accept(shared.clone(), listener)));
+        }
+        Ok(Tasks {
+            tokio,
+            workers,
+            radio_threads,
+        })
     }
 
-    /// Until when to poll after a batch just handled; `None`: sleep at once.
-    pub(super) fn until(&self) -> Option<std::time::Instant> {
-        self.queued.then(|| std::time::Instant::now() + self.budget)
+    /// Waits until every task has ended (the stop signal is set): wakes
+    /// each UDP worker out of its receive, waits for the tokio tasks (the
+    /// acceptor waits for its peers), closes the radios' queues and waits
+    /// for their threads, then drops every TCP peer's queue.
+    pub(super) async fn stop(self, net: &Net) {
+        for (thread, socket) in self.workers {
+            // Wakes the worker out of its receive at once.
+            let _ =
+                nix::sys::socket::shutdown(socket.as_raw_fd(), nix::sys::socket::Shutdown::Read);
+            if tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .is_err()
+            {
+                tracing::warn!("a UDP worker ended abnormally");
+            }
+        }
+        for t in self.tokio {
+            if let Err(e) = t.await {
+                tracing::warn!(error = %e, "a router task ended abnormally");
+            }
+        }
+        for q in &net.radios {
+            q.close();
+        }
+        for thread in self.radio_threads {
+            // Readers notice the stop within their port's read timeout.
+            if tokio::task::spawn_blocking(move || thread.join())
+                .await
+                .is_err()
+            {
+                tracing::warn!("a radio thread ended abnormally");
+            }
+        }
+        lock(&net.tcp_peers).clear();
     }
 }
 
 /// Drives every timer of the router at the configured resolution.
-pub(super) async fn timers(shared: Arc<Shared>, tick: Duration) {
+async fn timers(shared: Arc<Shared>, tick: Duration) {
     let mut interval = tokio::time::interval(tick);
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut stop = shared.stop.subscribe();
@@ -139,122 +282,6 @@ pub(super) async fn timers(shared: Arc<Shared>, tick: Duration) {
             _ = interval.tick() => {}
             _ = stop.wait_for(|s| *s) => return,
         }
-        shared.apply(|t, now, out, ev| t.tick(now, out, ev)).await;
-    }
-}
-
-/// Accepts TCP controllers and tools, a task per peer; on stop, waits for
-/// every peer task to end.
-pub(super) async fn tcp_accept(shared: Arc<Shared>, listener: TcpListener) {
-    let mut peers = JoinSet::new();
-    let mut stop = shared.stop.subscribe();
-    loop {
-        let accepted = tokio::select! {
-            a = listener.accept() => a,
-            Some(_) = peers.join_next(), if !peers.is_empty() => continue,
-            _ = stop.wait_for(|s| *s) => break,
-        };
-        match accepted {
-            Ok((stream, addr)) => {
-                let conn = shared.next_conn.fetch_add(1, Ordering::Relaxed);
-                info!(%addr, conn, "TCP peer connected");
-                peers.spawn(tcp_peer(shared.clone(), stream, conn));
-            }
-            Err(e) => {
-                warn!(error = %e, "TCP accept failed");
-                tokio::time::sleep(Duration::from_millis(50)).await;
-            }
-        }
-    }
-    drop(listener);
-    while peers.join_next().await.is_some() {}
-}
-
-/// One TCP peer: frames in, dispatched like datagrams; frames out through a
-/// bounded queue so a slow peer only loses its own messages.
-async fn tcp_peer(shared: Arc<Shared>, stream: TcpStream, conn: u64) {
-    let _ = stream.set_nodelay(true);
-    let (mut rd, mut wr) = stream.into_split();
-    let (tx, mut rx) = mpsc::channel::<Vec<u8>>(shared.subscriber_queue);
-    lock(&shared.tcp_peers).insert(conn, tx);
-    let writer = tokio::spawn(async move {
-        while let Some(frame) = rx.recv().await {
-            if wr.write_all(&frame).await.is_err() {
-                break;
-            }
-        }
-    });
-    let mut decoder = StreamDecoder::new();
-    let mut buf = vec![0u8; 65_536];
-    let mut out = Outbox::default();
-    let mut events = Vec::new();
-    let started = Instant::now();
-    let mut stop = shared.stop.subscribe();
-    'read: loop {
-        let read = tokio::select! {
-            r = rd.read(&mut buf) => r,
-            _ = stop.wait_for(|s| *s) => break,
-        };
-        let n = match read {
-            Ok(0) | Err(_) => break,
-            Ok(n) => n,
-        };
-        decoder.push(&buf[..n]);
-        loop {
-            let frame = match decoder.next_frame() {
-                None => break,
-                Some(Ok(frame)) => frame.to_vec(),
-                Some(Err(e)) => {
-                    // Only a bad length prefix is an error here, and it
-                    // leaves the stream out of step for good.
-                    warn!(conn, error = %e, "TCP stream out of step, closing it");
-                    shared
-                        .apply(|t, _, _, ev| t.count_bad(Peer::Tcp(conn), e.to_string(), ev))
-                        .await;
-                    break 'read;
-                }
-            };
-            shared
-                .dispatch(&frame, Peer::Tcp(conn), &mut out, &mut events)
-                .await;
-        }
-    }
-    lock(&shared.tcp_peers).remove(&conn);
-    lock(&shared.tables).forget_peer(Peer::Tcp(conn));
-    writer.abort();
-    let _ = writer.await;
-    info!(
-        conn,
-        secs = started.elapsed().as_secs_f64(),
-        "TCP peer disconnected"
-    );
-}
-
-#[cfg(test)]
-mod tests {
-    use super::Poll;
-    use std::time::Duration;
-
-    #[test]
-    fn a_worker_polls_only_when_datagrams_queue_up() {
-        let mut poll = Poll::new(Duration::from_micros(30));
-        // Before any traffic, and while each wake-up finds one datagram
-        // (the worker keeps up), it sleeps at once after each batch.
-        assert!(poll.until().is_none());
-        poll.woke_with(1);
-        assert!(poll.until().is_none());
-        // Datagrams queued while it slept: it polls, for the budget.
-        poll.woke_with(2);
-        let until = poll.until().expect("polls");
-        assert!(until <= std::time::Instant::now() + Duration::from_micros(30));
-        poll.woke_with(32);
-        assert!(poll.until().is_some());
-        // Keeping up again: back to sleeping at once.
-        poll.woke_with(1);
-        assert!(poll.until().is_none());
-        // Off: never polls.
-        let mut off = Poll::new(Duration::ZERO);
-        off.woke_with(32);
-        assert!(off.until().is_none());
+        shared.apply(|t, cx| t.tick(cx)).await;
     }
 }

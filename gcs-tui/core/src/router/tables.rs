@@ -1,25 +1,35 @@
-//! The router's shared state and the decision for each message: who is
-//! registered where, the routing table, live channels, pending missions and
-//! e-stops, external subscribers and counters.
+//! The router's state and the decision for each message, split by concern.
+//! Each file under `tables/` owns its part of the state, so the rules that
+//! hold over it read in one place, and handles the message kinds of its
+//! concern:
+//! - [`registration`]: the registry of robots (Hello, Bye, liveness, the
+//!   router's heartbeats, senders that must register again);
+//! - [`routes`]: each robot's route, its changes and acknowledgements;
+//! - [`commands`]: commands, fleet and cluster commands (the hot path);
+//! - [`channels`]: live channels, their publishers and rates, discovery;
+//! - [`missions`], [`estop`], [`autopilot`];
+//! - [`telemetry`]: telemetry and its external subscribers, position
+//!   fixes, notices;
+//! - [`links`] (a robot's links and failover) and [`link_quality`] (each
+//!   robot's measured link quality);
+//! - [`gate`]: the authenticated control plane (what comes in is checked,
+//!   what goes out is signed);
+//! - [`tap`]: the recorder's tap.
 //!
-//! Everything here is synchronous and runs under one `std::sync::Mutex` held
-//! for a few hash lookups; the socket tasks call [`Tables::handle`] and then
-//! send what it put in the [`Outbox`] after releasing the lock. Events are
-//! collected and emitted after the lock is released, too.
+//! Everything here is synchronous and runs under the router's tables lock,
+//! held for one decision (or one batch of datagrams): a few hash lookups,
+//! and for signed traffic a MAC check and a MAC. A decision does no I/O and
+//! calls nothing outside the tables: it leaves what to send and what
+//! happened in its [`Ctx`]. The caller queues the events in order before it
+//! releases the lock, then delivers them and sends (see `super::Shared`).
 //!
 //! [`Tables::handle`] reads the header, then hands the message to one
-//! function per message kind, grouped by concern: [`registration`] (Hello,
-//! Bye, liveness, heartbeats), [`commands`] (commands, fleet and cluster
-//! commands: the hot path), [`routes`] (route changes and acks),
-//! [`missions`], [`estop`] and [`telemetry`] (telemetry, subscriptions,
-//! position fixes, channel discovery, notices), [`autopilot`] (operators'
-//! requests to a robot's autopilot), [`links`] (a robot's links and
-//! failover) and [`link_quality`] (each robot's measured link quality).
-//! [`Tables::tick`] runs each concern's timers.
-use std::collections::{HashMap, HashSet};
+//! function per message kind; [`Tables::tick`] runs each concern's timers.
+
 use std::net::SocketAddr;
 
 mod autopilot;
+mod channels;
 mod commands;
 mod estop;
 mod gate;
@@ -36,14 +46,11 @@ use tokio::time::Instant;
 use tracing::{debug, warn};
 
 use super::config::RouterConfig;
-use super::rate::RateMeter;
+use tap::{MessageTap, Tap, TapSlot};
 
-use mech_proto::auth::Stamper;
-use tap::{MessageTap, Tap};
-
-use crate::auth::Keyring;
-use crate::counters::{Counters, DropReason, Drops, Rejections, Traffic};
-use crate::event::{Event, LinkState};
+use crate::auth::{Identity, Keyring};
+use crate::counters::{Counters, DropReason, Drops, Rejections};
+use crate::event::Event;
 
 /// Where a message came from, and where a reply goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -54,7 +61,8 @@ pub(crate) enum Peer {
     /// A serial radio, by its place in `router.serial`: every robot on it
     /// hears what is sent (the destination picks the robot).
     Serial(u16),
-    /// A publisher inside the GCS process.
+    /// The station itself: a publisher inside the GCS process, the
+    /// router's handle or its timers.
     Local,
 }
 
@@ -82,6 +90,51 @@ impl Outbox {
     pub(crate) fn is_empty(&self) -> bool {
         self.raw.is_empty() && self.owned.is_empty()
     }
+
+    pub(crate) fn clear(&mut self) {
+        self.raw.clear();
+        self.owned.clear();
+    }
+}
+
+/// What decisions make: messages to send and events. Kept by each caller
+/// between decisions, so its allocations are reused.
+#[derive(Debug, Default)]
+pub(crate) struct Effects {
+    pub(crate) out: Outbox,
+    pub(crate) events: Vec<Event>,
+}
+
+/// One decision's context: when it is made, who asked, and where what it
+/// makes goes.
+#[derive(Debug)]
+pub(crate) struct Ctx<'a> {
+    pub(crate) now: Instant,
+    /// Where the message being decided came from; [`Peer::Local`] for the
+    /// station's own requests and timers.
+    pub(crate) from: Peer,
+    fx: &'a mut Effects,
+}
+
+impl<'a> Ctx<'a> {
+    pub(crate) fn new(now: Instant, from: Peer, fx: &'a mut Effects) -> Ctx<'a> {
+        Ctx { now, from, fx }
+    }
+
+    /// Sends the received message on to `to`, bytes unchanged.
+    fn forward(&mut self, to: Peer) {
+        self.fx.out.raw.push(to);
+    }
+
+    /// Sends `bytes`, a message the router made or signed, to `to`.
+    fn send(&mut self, to: Peer, bytes: Vec<u8>) {
+        self.fx.out.owned.push((to, bytes));
+    }
+
+    /// Reports what happened.
+    fn event(&mut self, e: Event) {
+        self.fx.events.push(e);
+    }
 }
 
 /// What happened to one message, for in-process publishers.
@@ -95,95 +148,30 @@ pub enum Delivery {
     Consumed,
 }
 
-#[derive(Debug)]
-struct RobotEntry {
-    id: u16,
-    /// Where the robot is heard (UDP, a radio), and so where to send.
-    links: links::Links,
-    last_seen: Instant,
-    link: LinkState,
-    route: Option<String>,
-    epoch: u32,
-    /// The robot acknowledged `epoch`.
-    acked: bool,
-    route_sent: Instant,
-    heartbeat_sent: Instant,
-    traffic: Traffic,
-    /// Rates each way, loss and round trip (see [`link_quality`]).
-    meter: link_quality::LinkMeter,
-}
-
-#[derive(Debug)]
-struct ChannelEntry {
-    publisher: String,
-    last: Instant,
-    rate: RateMeter,
-    traffic: Traffic,
-}
-
-#[derive(Debug)]
-struct PendingMission {
-    robot: String,
-    id: u32,
-    /// The mission message without its `auth` element: each (re)send is
-    /// signed afresh, since a receiver refuses a repeated stamp.
-    region: Vec<u8>,
-    reply_to: Peer,
-    /// Who sent it, for relaying the acknowledgement.
-    sender: String,
-    first: Instant,
-    last: Instant,
-}
-
-#[derive(Debug)]
-struct EStopRun {
-    engage: bool,
-    id: u32,
-    pending: HashSet<String>,
-    last: Instant,
+/// Router-wide message counts (per robot and per channel are kept with
+/// each robot and channel). Send failures are counted where sending is
+/// done, in `super::net`.
+#[derive(Debug, Default, Clone, Copy)]
+struct Totals {
+    received: u64,
+    forwarded: u64,
+    dropped: Drops,
 }
 
 /// The router's state. See the module docs.
 #[derive(Debug)]
 pub(crate) struct Tables {
     config: RouterConfig,
-    robots: HashMap<String, RobotEntry>,
-    channels: HashMap<String, ChannelEntry>,
-    /// Last address of each controller or tool, by sender name, for replies.
-    peers: HashMap<String, Peer>,
-    /// External telemetry subscribers: when their subscription lapses, and
-    /// their name (to sign what they are sent).
-    subscribers: HashMap<Peer, (Instant, String)>,
-    missions: Vec<PendingMission>,
-    estop: Option<EStopRun>,
-    /// E-stop engaged and not released: robots that register get it too.
-    estop_latched: Option<u32>,
-    next_estop_id: u32,
-    next_mission_id: u32,
+    robots: registration::Robots,
+    channels: channels::Channels,
+    subscribers: telemetry::Subscribers,
+    missions: missions::Missions,
+    estop: estop::EStops,
+    gate: gate::Gate,
+    totals: Totals,
+    tap: TapSlot,
+    /// Sequence number of the router's own messages.
     seq: u32,
-    received: u64,
-    forwarded: u64,
-    dropped: Drops,
-    fanout_dropped: u64,
-    /// Keys and stream freshness; `None` when the station runs
-    /// unauthenticated.
-    auth: Option<Keyring>,
-    /// Stamps of what the router signs.
-    stamper: Stamper,
-    rejected: Rejections,
-    /// When each source's last rejection was logged.
-    reject_logged: HashMap<String, Instant>,
-    /// When each key's last time request was answered.
-    time_answers: HashMap<u32, Instant>,
-    /// When the router started, for the uptime in its heartbeats.
-    started: Instant,
-    /// The recorder's tap, while recording.
-    pub(super) tap: Option<Tap>,
-    /// Why the message being decided was refused or unreadable, kept for
-    /// the tap (only while recording).
-    refusal: Option<String>,
-    /// When each unknown robot was last told to register again.
-    unknown_told: HashMap<String, Instant>,
 }
 
 /// A seed for ids that must not repeat across GCS restarts (an agent treats a
@@ -194,44 +182,29 @@ fn clock_seed() -> u32 {
         .wrapping_mul(16)
 }
 
-/// A message being handled: its header and where it came from.
+/// A message being decided: its header and its bytes as received (for
+/// messages forwarded unchanged).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Incoming<'a> {
     pub(crate) header: &'a Header,
-    /// The bytes as received, for messages forwarded unchanged.
     pub(crate) bytes: &'a [u8],
-    pub(crate) from: Peer,
-    pub(crate) now: Instant,
 }
 
 impl Tables {
     pub(crate) fn new(config: RouterConfig, auth: Option<Keyring>) -> Tables {
         let seed = clock_seed();
+        let now = Instant::now();
         Tables {
             config,
-            robots: HashMap::new(),
-            channels: HashMap::new(),
-            peers: HashMap::new(),
-            subscribers: HashMap::new(),
-            missions: Vec::new(),
-            estop: None,
-            estop_latched: None,
-            next_estop_id: seed,
-            next_mission_id: seed,
+            robots: registration::Robots::new(now),
+            channels: channels::Channels::default(),
+            subscribers: telemetry::Subscribers::default(),
+            missions: missions::Missions::new(seed),
+            estop: estop::EStops::new(seed),
+            gate: gate::Gate::new(auth),
+            totals: Totals::default(),
+            tap: TapSlot::default(),
             seq: 0,
-            received: 0,
-            forwarded: 0,
-            dropped: Default::default(),
-            fanout_dropped: 0,
-            auth,
-            stamper: Stamper::default(),
-            rejected: Rejections::default(),
-            reject_logged: HashMap::new(),
-            time_answers: HashMap::new(),
-            started: Instant::now(),
-            tap: None,
-            refusal: None,
-            unknown_told: HashMap::new(),
         }
     }
 
@@ -249,7 +222,7 @@ impl Tables {
         match mech_proto::encode(&Envelope::new(header, body)) {
             Ok(mut b) => {
                 b.pop(); // the nil auth element: signed for the receiver
-                let sealed = self.seal(&b, destination);
+                let sealed = self.gate.seal(&b, destination);
                 if sealed.is_some() {
                     self.count_sent(destination);
                 }
@@ -262,10 +235,13 @@ impl Tables {
         }
     }
 
-    fn bad(&mut self, from: Peer, error: String, events: &mut Vec<Event>) -> Delivery {
-        self.dropped.count(DropReason::BadPacket);
-        self.note_refusal(|| error.clone());
-        let n = self.dropped.bad_packet;
+    /// A message that cannot be read or is not expected: counted, logged
+    /// (rate-limited) and reported.
+    fn bad(&mut self, error: String, cx: &mut Ctx<'_>) -> Delivery {
+        self.totals.dropped.count(DropReason::BadPacket);
+        self.tap.note_refusal(|| error.clone());
+        let n = self.totals.dropped.bad_packet;
+        let from = cx.from;
         // Logged at warn for the 1st, 2nd, 4th, 8th... so a flood of garbage
         // cannot flood the log; every one is counted and reported as an event.
         if n.is_power_of_two() {
@@ -273,57 +249,43 @@ impl Tables {
         } else {
             debug!(%from, %error, "bad packet");
         }
-        events.push(Event::BadPacket {
+        cx.event(Event::BadPacket {
             from: from.to_string(),
             error,
         });
         Delivery::Dropped(DropReason::BadPacket)
     }
 
-    /// Keeps why the message being decided was refused, for the tap.
-    fn note_refusal(&mut self, why: impl FnOnce() -> String) {
-        if self.tap.is_some() {
-            self.refusal = Some(why());
-        }
+    /// Counts a message dropped for `reason` router-wide.
+    fn drop_for(&mut self, reason: DropReason) -> Delivery {
+        self.totals.dropped.count(reason);
+        Delivery::Dropped(reason)
     }
 
     /// Decides what to do with one received message, and offers it with the
     /// decision to the recorder's tap when recording.
-    pub(crate) fn handle(
-        &mut self,
-        bytes: &[u8],
-        from: Peer,
-        now: Instant,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
-    ) -> Delivery {
-        self.received += 1;
-        let delivery = self.decide(bytes, from, now, out, events);
-        if let Some(tap) = &self.tap {
+    pub(crate) fn handle(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
+        self.totals.received += 1;
+        let delivery = self.decide(bytes, cx);
+        let detail = self.tap.take_refusal();
+        if let Some(tap) = self.tap.get() {
             tap.message(MessageTap {
-                now,
-                number: self.received,
-                from,
+                now: cx.now,
+                number: self.totals.received,
+                from: cx.from,
                 bytes,
                 delivery,
-                detail: self.refusal.take(),
+                detail,
             });
         }
         delivery
     }
 
     /// The decision for one received message.
-    fn decide(
-        &mut self,
-        bytes: &[u8],
-        from: Peer,
-        now: Instant,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
-    ) -> Delivery {
+    fn decide(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
         let head = match mech_proto::peek(bytes) {
             Ok(h) => h,
-            Err(e) => return self.bad(from, e.to_string(), events),
+            Err(e) => return self.bad(e.to_string(), cx),
         };
         if head.kind == mech_proto::COMMAND_KIND {
             // The body is checked (a truncated or out-of-range command is
@@ -331,165 +293,151 @@ impl Tables {
             // Checked in place: no envelope is built for a forwarded command.
             let command = match mech_proto::check_command(bytes, &head) {
                 Ok(c) => c,
-                Err(e) => return self.bad(from, e.to_string(), events),
+                Err(e) => return self.bad(e.to_string(), cx),
             };
-            let admitted = match self.admit(bytes, head.sender, from, true, events) {
+            let admitted = match self.admit(bytes, head.sender, true, cx) {
                 Ok((id, _)) => id,
                 Err(d) => return d,
             };
             let body = Body::Command(command);
-            if let Err(d) = self.permit(admitted, &body, head.channel, from, events) {
+            if let Err(d) = self.permit(admitted, &body, head.channel, cx) {
                 return d;
             }
-            return self.route_command(&head, bytes, from, now, out, events);
+            return self.route_command(&head, bytes, cx);
         }
         let env = match mech_proto::decode(bytes) {
             Ok(env) => env,
-            Err(e) => return self.bad(from, e.to_string(), events),
+            Err(e) => return self.bad(e.to_string(), cx),
         };
         let sender = env.header.sender.as_str();
         // A time request is answered whatever its stamp: the requester does
         // not know the station's time yet.
         let fresh = !matches!(env.body, Body::TimeRequest(_));
-        let (admitted, tag) = match self.admit(bytes, sender, from, fresh, events) {
+        let (admitted, tag) = match self.admit(bytes, sender, fresh, cx) {
             Ok(a) => a,
             Err(d) => return d,
         };
-        if let Err(d) = self.permit(admitted, &env.body, &env.header.channel, from, events) {
+        if let Err(d) = self.permit(admitted, &env.body, &env.header.channel, cx) {
             return d;
         }
         if let Body::TimeRequest(request) = env.body {
-            return self.answer_time(request, tag, sender, from, now, out);
+            return self.answer_time(request, tag, sender, cx);
         }
-        if matches!(from, Peer::Udp(_) | Peer::Serial(_)) {
-            self.seen_robot(sender, env.header.seq, from, now, events);
+        if matches!(cx.from, Peer::Udp(_) | Peer::Serial(_)) {
+            self.seen_robot(sender, env.header.seq, cx);
         }
         let m = Incoming {
             header: &env.header,
             bytes,
-            from,
-            now,
         };
-        self.dispatch(m, env.body, out, events)
+        self.dispatch(m, env.body, cx)
     }
 
     /// One function per message kind (commands took the hot path above).
-    fn dispatch(
-        &mut self,
-        m: Incoming<'_>,
-        body: Body,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
-    ) -> Delivery {
+    fn dispatch(&mut self, m: Incoming<'_>, body: Body, cx: &mut Ctx<'_>) -> Delivery {
         match body {
-            Body::Hello(hello) => self.on_hello(m, hello, out, events),
-            Body::Heartbeat(hb) => self.on_heartbeat(m, hb, out),
-            Body::Telemetry(t) => self.on_telemetry(m, t, out, events),
-            Body::FleetCommand(fc) => self.on_fleet_command(m, fc, out, events),
-            Body::Mission(mission) => self.on_mission(m, mission, out, events),
-            Body::MissionAck(ack) => self.on_mission_ack(m, ack, out, events),
-            Body::RouteAck(ack) => self.on_route_ack(m, ack, events),
-            Body::EStop(e) => self.on_estop(m, e, out, events),
-            Body::EStopAck(ack) => self.on_estop_ack(m, ack, events),
-            Body::ChannelsRequest(_) => self.on_channels_request(m, out),
-            Body::Subscribe(s) => self.on_subscribe(m, s),
-            Body::PositionFix(fix) => self.on_position_fix(m, fix, out),
-            Body::Notice(notice) => self.on_notice(m, notice, events),
-            Body::Cluster(command) => self.on_cluster(m, command, events),
-            Body::Bye(bye) => self.on_bye(m, bye, events),
+            Body::Hello(hello) => self.on_hello(m, hello, cx),
+            Body::Heartbeat(hb) => self.on_heartbeat(m, hb, cx),
+            Body::Telemetry(t) => self.on_telemetry(m, t, cx),
+            Body::FleetCommand(fc) => self.on_fleet_command(m, fc, cx),
+            Body::Mission(mission) => self.on_mission(m, mission, cx),
+            Body::MissionAck(ack) => self.on_mission_ack(m, ack, cx),
+            Body::RouteAck(ack) => self.on_route_ack(m, ack, cx),
+            Body::EStop(e) => self.on_estop(m, e, cx),
+            Body::EStopAck(ack) => self.on_estop_ack(m, ack, cx),
+            Body::ChannelsRequest(_) => self.on_channels_request(m, cx),
+            Body::Subscribe(s) => self.on_subscribe(m, s, cx),
+            Body::PositionFix(fix) => self.on_position_fix(m, fix, cx),
+            Body::Notice(notice) => self.on_notice(m, notice, cx),
+            Body::Cluster(command) => self.on_cluster(m, command, cx),
+            Body::Bye(bye) => self.on_bye(m, bye, cx),
             Body::TimeRequest(_) => Delivery::Consumed,
-            Body::Autopilot(request) => self.on_autopilot(m, request, out),
+            Body::Autopilot(request) => self.on_autopilot(m, request, cx),
             Body::Command(_)
             | Body::Welcome(_)
             | Body::Route(_)
             | Body::Channels(_)
             | Body::Time(_) => {
                 let what = format!("unexpected {} message", body.kind());
-                self.bad(m.from, what, events)
+                self.bad(what, cx)
             }
         }
     }
 
     /// Timers: link states, heartbeats, retries, lapsed subscriptions.
-    pub(crate) fn tick(&mut self, now: Instant, out: &mut Outbox, events: &mut Vec<Event>) {
-        self.update_links(now, events);
-        self.report_links(now, events);
-        self.roll_link_quality(now, events);
-        self.send_heartbeats(now, out);
-        self.retry_routes(now, out);
-        self.retry_estop(now, out);
-        self.retry_missions(now, out, events);
-        self.subscribers.retain(|_, (until, _)| *until > now);
+    pub(crate) fn tick(&mut self, cx: &mut Ctx<'_>) {
+        self.update_links(cx);
+        self.report_links(cx);
+        self.roll_link_quality(cx);
+        self.send_heartbeats(cx);
+        self.retry_routes(cx);
+        self.retry_estop(cx);
+        self.retry_missions(cx);
+        self.subscribers.lapse(cx.now);
     }
 
+    /// A copy of the counters the tables keep (send failures are added by
+    /// the caller, from `super::net`).
     pub(crate) fn counters(&self) -> Counters {
         Counters {
-            robots: self
-                .robots
-                .iter()
-                .map(|(n, r)| (n.clone(), r.traffic))
-                .collect(),
-            channels: self
-                .channels
-                .iter()
-                .map(|(n, c)| (n.clone(), c.traffic))
-                .collect(),
-            received: self.received,
-            forwarded: self.forwarded,
-            dropped: self.dropped,
-            fanout_dropped: self.fanout_dropped,
-            rejected: self.rejected,
+            robots: self.robots.traffic(),
+            channels: self.channels.traffic(),
+            received: self.totals.received,
+            forwarded: self.totals.forwarded,
+            dropped: self.totals.dropped,
+            fanout_dropped: 0,
+            rejected: self.gate.rejections(),
         }
     }
 
     /// Messages received so far.
-    pub(crate) fn counters_received(&self) -> u64 {
-        self.received
+    pub(crate) fn received(&self) -> u64 {
+        self.totals.received
     }
 
     pub(crate) fn rejections(&self) -> Rejections {
-        self.rejected
+        self.gate.rejections()
     }
 
-    pub(crate) fn count_send_failure(&mut self, fanout: bool) {
-        if fanout {
-            self.fanout_dropped += 1;
-        } else {
-            self.dropped.count(DropReason::SendFailed);
-        }
+    /// Counts a bad frame seen outside [`Tables::handle`] (a radio frame
+    /// that failed its checksum, a TCP stream out of step).
+    pub(crate) fn count_bad(&mut self, error: String, cx: &mut Ctx<'_>) {
+        self.bad(error, cx);
     }
 
-    /// Counts a bad frame seen outside [`Tables::handle`].
-    pub(crate) fn count_bad(&mut self, from: Peer, error: String, events: &mut Vec<Event>) {
-        self.bad(from, error, events);
-    }
-
-    /// Forgets a peer that went away (its subscription and reply address).
+    /// Forgets a peer that went away (its telemetry subscription).
     pub(crate) fn forget_peer(&mut self, peer: Peer) {
-        self.subscribers.remove(&peer);
-        self.peers.retain(|_, p| *p != peer);
+        self.subscribers.remove(peer);
+    }
+
+    /// Whether messages are checked and signed.
+    pub(crate) fn auth_on(&self) -> bool {
+        self.gate.on()
     }
 
     /// Adds a key to the keyring (none when unauthenticated).
-    pub(crate) fn add_key(&mut self, identity: crate::auth::Identity) {
-        if let Some(keys) = self.auth.as_mut() {
-            keys.add(identity);
-        }
+    pub(crate) fn add_key(&mut self, identity: Identity) {
+        self.gate.add_key(identity);
     }
 
     /// The identity of a key id, when authenticating.
-    pub(crate) fn identity(&self, key_id: u32) -> Option<crate::auth::Identity> {
-        self.auth.as_ref()?.identity(key_id).cloned()
-    }
-
-    /// The configured serial radios.
-    pub(crate) fn radio_config(&self) -> Vec<super::config::SerialEndpoint> {
-        self.config.serial.clone()
+    pub(crate) fn identity(&self, key_id: u32) -> Option<Identity> {
+        self.gate.identity(key_id)
     }
 
     /// Whether `robot` is registered.
     pub(crate) fn knows_robot(&self, robot: &str) -> bool {
-        self.robots.contains_key(robot)
+        self.robots.contains(robot)
+    }
+
+    /// The recorder's tap, while recording.
+    pub(crate) fn tap(&self) -> Option<&Tap> {
+        self.tap.get()
+    }
+
+    /// Puts a tap on (or takes it off), returning the one that was on.
+    pub(crate) fn set_tap(&mut self, tap: Option<Tap>) -> Option<Tap> {
+        self.tap.set(tap)
     }
 }
 
@@ -501,7 +449,75 @@ mod tests {
 
     use mech_proto::{Body, Envelope, Header, Hello, Mission, Waypoint};
 
+    use crate::event::LinkState;
+
     use super::*;
+
+    /// Runs `f` in a context at `now` from `from`, its messages and events
+    /// appended to `out` and `ev`.
+    fn in_ctx<R>(
+        now: Instant,
+        from: Peer,
+        out: &mut Outbox,
+        ev: &mut Vec<Event>,
+        f: impl FnOnce(&mut Ctx<'_>) -> R,
+    ) -> R {
+        let mut fx = Effects {
+            out: std::mem::take(out),
+            events: std::mem::take(ev),
+        };
+        let r = f(&mut Ctx::new(now, from, &mut fx));
+        (*out, *ev) = (fx.out, fx.events);
+        r
+    }
+
+    /// The tables' entry points with time, source and effects spelt out.
+    impl Tables {
+        fn handle_at(
+            &mut self,
+            bytes: &[u8],
+            from: Peer,
+            now: Instant,
+            out: &mut Outbox,
+            ev: &mut Vec<Event>,
+        ) -> Delivery {
+            in_ctx(now, from, out, ev, |cx| self.handle(bytes, cx))
+        }
+
+        fn tick_at(&mut self, now: Instant, out: &mut Outbox, ev: &mut Vec<Event>) {
+            in_ctx(now, Peer::Local, out, ev, |cx| self.tick(cx))
+        }
+
+        fn set_route_at(
+            &mut self,
+            robot: &str,
+            channel: Option<&str>,
+            now: Instant,
+            out: &mut Outbox,
+            ev: &mut Vec<Event>,
+        ) -> Option<u32> {
+            in_ctx(now, Peer::Local, out, ev, |cx| {
+                self.set_route(robot, channel, cx)
+            })
+        }
+
+        fn start_estop_at(
+            &mut self,
+            engage: bool,
+            now: Instant,
+            out: &mut Outbox,
+            ev: &mut Vec<Event>,
+        ) -> u32 {
+            in_ctx(now, Peer::Local, out, ev, |cx| self.start_estop(engage, cx))
+        }
+
+        fn farewell_at(&mut self, out: &mut Outbox) {
+            let now = Instant::now();
+            in_ctx(now, Peer::Local, out, &mut Vec::new(), |cx| {
+                self.farewell(cx)
+            })
+        }
+    }
 
     fn bytes(sender: &str, destination: &str, channel: &str, body: Body) -> Vec<u8> {
         let header = Header {
@@ -530,7 +546,7 @@ mod tests {
         let mut t = Tables::new(RouterConfig::default(), None);
         let robot = Peer::Udp("127.0.0.1:9000".parse().unwrap());
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
-        t.handle(&hello("robot_1"), robot, t0, &mut out, &mut ev);
+        t.handle_at(&hello("robot_1"), robot, t0, &mut out, &mut ev);
         (t, robot)
     }
 
@@ -549,12 +565,12 @@ mod tests {
         let (mut t, _) = registered(t0);
         let ms = |v| t0 + Duration::from_millis(v);
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
-        t.tick(ms(499), &mut out, &mut ev);
+        t.tick_at(ms(499), &mut out, &mut ev);
         assert!(links(&ev).is_empty());
-        t.tick(ms(500), &mut out, &mut ev);
+        t.tick_at(ms(500), &mut out, &mut ev);
         assert_eq!(links(&ev), vec![LinkState::Stale]);
-        t.tick(ms(999), &mut out, &mut ev);
-        t.tick(ms(1000), &mut out, &mut ev);
+        t.tick_at(ms(999), &mut out, &mut ev);
+        t.tick_at(ms(1000), &mut out, &mut ev);
         assert_eq!(links(&ev), vec![LinkState::Stale, LinkState::Lost]);
     }
 
@@ -579,7 +595,7 @@ mod tests {
         .enumerate()
         {
             let peer = Peer::Udp(format!("127.0.0.1:{}", 9000 + k).parse().unwrap());
-            t.handle(&hello(name), peer, t0, &mut out, &mut ev);
+            t.handle_at(&hello(name), peer, t0, &mut out, &mut ev);
         }
         assert_eq!(
             welcomed_ids(&ev),
@@ -599,7 +615,7 @@ mod tests {
     fn a_stopping_router_says_bye_to_every_robot() {
         let (mut t, robot) = registered(Instant::now());
         let mut out = Outbox::default();
-        t.farewell(&mut out);
+        t.farewell_at(&mut out);
         let byes: Vec<_> = out
             .owned
             .iter()
@@ -626,7 +642,7 @@ mod tests {
         let mut out = Outbox::default();
         let mut ev = Vec::new();
         for ms in (20..=1000).step_by(20) {
-            t.tick(t0 + Duration::from_millis(ms), &mut out, &mut ev);
+            t.tick_at(t0 + Duration::from_millis(ms), &mut out, &mut ev);
         }
         // A quarter second after the last, on the 20 ms timer grid: at
         // 0.26, 0.52 and 0.78 s (the next is due at 1.03 s).
@@ -655,9 +671,9 @@ mod tests {
             b @ Body::Hello(_) => b,
             _ => unreachable!(),
         };
-        t.handle(&numbered(1, hello), robot, t0, &mut out, &mut ev);
+        t.handle_at(&numbered(1, hello), robot, t0, &mut out, &mut ev);
         // The router's heartbeat at 260 ms; its sequence number is the echo's.
-        t.tick(t0 + Duration::from_millis(260), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(260), &mut out, &mut ev);
         let beat = out
             .owned
             .iter()
@@ -671,10 +687,10 @@ mod tests {
                 held_us: 400_000,
             });
             let hb = Body::Heartbeat(mech_proto::Heartbeat { uptime_ms: 0, echo });
-            t.handle(&numbered(seq, hb), robot, at, &mut out, &mut ev);
+            t.handle_at(&numbered(seq, hb), robot, at, &mut out, &mut ev);
         }
         ev.clear();
-        t.tick(t0 + Duration::from_millis(1000), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(1000), &mut out, &mut ev);
         let q = ev
             .iter()
             .find_map(|e| match e {
@@ -709,7 +725,7 @@ mod tests {
             start_index: 0,
         });
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
-        t.handle(
+        t.handle_at(
             &bytes("gcs", "robot_1", "wp/gcs", mission),
             Peer::Local,
             t0,
@@ -726,13 +742,13 @@ mod tests {
         };
         assert_eq!(sends(&out), 1);
         let mut out = Outbox::default();
-        t.tick(t0 + Duration::from_millis(199), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(199), &mut out, &mut ev);
         assert_eq!(sends(&out), 0);
-        t.tick(t0 + Duration::from_millis(200), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(200), &mut out, &mut ev);
         assert_eq!(sends(&out), 1);
-        t.tick(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
         assert!(!ev.iter().any(|e| matches!(e, Event::MissionFailed { .. })));
-        t.tick(t0 + Duration::from_millis(5_000), &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(5_000), &mut out, &mut ev);
         assert!(
             ev.iter()
                 .any(|e| matches!(e, Event::MissionFailed { id: 7, .. }))
@@ -752,8 +768,8 @@ mod tests {
             "",
             Body::Heartbeat(mech_proto::Heartbeat::new(1)),
         );
-        t.handle(&hb, radio, ms(10), &mut out, &mut ev);
-        t.set_route("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);
+        t.handle_at(&hb, radio, ms(10), &mut out, &mut ev);
+        t.set_route_at("robot_1", Some("joy/0"), ms(20), &mut out, &mut ev);
         let twist = bytes(
             "pad",
             "robot_1",
@@ -765,24 +781,24 @@ mod tests {
         );
         let sent_to = |t: &mut Tables, at| {
             let mut out = Outbox::default();
-            t.handle(&twist, Peer::Local, at, &mut out, &mut Vec::new());
+            t.handle_at(&twist, Peer::Local, at, &mut out, &mut Vec::new());
             out.raw
         };
         assert_eq!(sent_to(&mut t, ms(100)), vec![wifi], "UDP while live");
-        t.handle(&hb, radio, ms(350), &mut out, &mut ev);
+        t.handle_at(&hb, radio, ms(350), &mut out, &mut ev);
         assert_eq!(
             sent_to(&mut t, ms(400)),
             vec![radio],
             "UDP silent 400 ms: the radio"
         );
-        t.handle(&hb, wifi, ms(500), &mut out, &mut ev);
+        t.handle_at(&hb, wifi, ms(500), &mut out, &mut ev);
         assert_eq!(sent_to(&mut t, ms(510)), vec![wifi], "UDP back");
         let mut out = Outbox::default();
-        t.start_estop(true, ms(520), &mut out, &mut ev);
+        t.start_estop_at(true, ms(520), &mut out, &mut ev);
         let estops: Vec<Peer> = out.owned.iter().map(|(p, _)| *p).collect();
         assert_eq!(estops, vec![wifi, radio], "the e-stop on every link");
         let mut ev = Vec::new();
-        t.tick(ms(530), &mut Outbox::default(), &mut ev);
+        t.tick_at(ms(530), &mut Outbox::default(), &mut ev);
         let links = ev.iter().find_map(|e| match e {
             Event::Links { links, .. } => Some(links.clone()),
             _ => None,
@@ -803,11 +819,11 @@ mod tests {
             Body::Subscribe(mech_proto::Subscribe { telemetry: true }),
         );
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
-        t.handle(&sub, tool, t0, &mut out, &mut ev);
-        t.tick(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
-        assert!(t.subscribers.contains_key(&tool));
-        t.tick(t0 + Duration::from_millis(5_001), &mut out, &mut ev);
-        assert!(!t.subscribers.contains_key(&tool), "lapsed");
+        t.handle_at(&sub, tool, t0, &mut out, &mut ev);
+        t.tick_at(t0 + Duration::from_millis(4_999), &mut out, &mut ev);
+        assert!(t.subscribers.contains(tool));
+        t.tick_at(t0 + Duration::from_millis(5_001), &mut out, &mut ev);
+        assert!(!t.subscribers.contains(tool), "lapsed");
         let _ = robot;
     }
 }

@@ -6,7 +6,7 @@
 use mech_proto::AutopilotRequest;
 use tracing::info;
 
-use super::{Delivery, Incoming, Outbox, Tables};
+use super::{Ctx, Delivery, Incoming, Tables};
 use crate::counters::DropReason;
 
 impl Tables {
@@ -14,25 +14,23 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         request: AutopilotRequest,
-        out: &mut Outbox,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let Some(entry) = self.robots.get_mut(&request.robot) else {
-            self.dropped.count(DropReason::UnknownRobot);
-            return Delivery::Dropped(DropReason::UnknownRobot);
+            return self.drop_for(DropReason::UnknownRobot);
         };
         entry.traffic.forwarded += 1;
-        let Some(to) = self.target(&request.robot, m.now) else {
-            self.dropped.count(DropReason::UnknownRobot);
-            return Delivery::Dropped(DropReason::UnknownRobot);
+        let Some(to) = self.target(&request.robot, cx.now) else {
+            return self.drop_for(DropReason::UnknownRobot);
         };
-        self.forwarded += 1;
+        self.totals.forwarded += 1;
         info!(
             robot = %request.robot,
             action = request.action.as_str(),
             from = %m.header.sender,
             "autopilot request"
         );
-        self.pass_on(m.bytes, to, &request.robot, out);
+        self.pass_on(m.bytes, to, &request.robot, cx);
         Delivery::Forwarded(1)
     }
 }

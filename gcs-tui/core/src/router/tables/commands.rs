@@ -5,13 +5,11 @@
 //! serves the channel. Every publisher is noted with its channel's rate.
 
 use mech_proto::{Body, ClusterCommand, Envelope, FleetCommand, Header};
-use tokio::time::Instant;
-use tracing::{info, warn};
+use tracing::warn;
 
-use super::{ChannelEntry, Delivery, Incoming, Outbox, Peer, Tables};
-use crate::counters::{DropReason, Traffic};
+use super::{Ctx, Delivery, Incoming, Peer, Tables};
+use crate::counters::DropReason;
 use crate::event::Event;
-use crate::router::rate::RateMeter;
 
 impl Tables {
     /// The hot path: forward a command if its robot is routed to its channel.
@@ -19,20 +17,16 @@ impl Tables {
         &mut self,
         head: &mech_proto::Peek<'_>,
         bytes: &[u8],
-        from: Peer,
-        now: Instant,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let (sender, destination, channel) = (head.sender, head.destination, head.channel);
         if channel.is_empty() {
-            self.dropped.count(DropReason::NotRouted);
-            return Delivery::Dropped(DropReason::NotRouted);
+            return self.drop_for(DropReason::NotRouted);
         }
-        self.note_publisher(sender, channel, from, now, events);
-        match self.check_route(destination, channel, now) {
+        self.note_publisher(sender, channel, cx);
+        match self.check_route(destination, channel, cx) {
             Ok(to) => {
-                self.pass_on(bytes, to, destination, out);
+                self.pass_on(bytes, to, destination, cx);
                 Delivery::Forwarded(1)
             }
             Err(reason) => Delivery::Dropped(reason),
@@ -43,14 +37,13 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         fc: FleetCommand,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let (h, channel) = (m.header, m.header.channel.as_str());
-        self.note_publisher(&h.sender, channel, m.from, m.now, events);
+        self.note_publisher(&h.sender, channel, cx);
         let mut delivered = 0;
         for part in fc.parts {
-            let Ok(target) = self.check_route(&part.robot, channel, m.now) else {
+            let Ok(target) = self.check_route(&part.robot, channel, cx) else {
                 continue;
             };
             let header = Header {
@@ -60,8 +53,8 @@ impl Tables {
             match mech_proto::encode(&Envelope::new(header, Body::Command(part.command))) {
                 Ok(mut b) => {
                     b.pop(); // the nil auth element: signed for the robot
-                    if let Some(b) = self.seal(&b, &part.robot) {
-                        out.owned.push((target, b));
+                    if let Some(b) = self.gate.seal(&b, &part.robot) {
+                        cx.send(target, b);
                         delivered += 1;
                     }
                 }
@@ -77,104 +70,52 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         command: ClusterCommand,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let channel = &m.header.channel;
-        self.note_publisher(&m.header.sender, channel, m.from, m.now, events);
-        events.push(Event::ClusterCommand {
+        self.note_publisher(&m.header.sender, channel, cx);
+        cx.event(Event::ClusterCommand {
             channel: channel.clone(),
             command,
         });
         Delivery::Consumed
     }
 
-    /// Counts a message published on `channel` and remembers its publisher.
-    pub(super) fn note_publisher(
-        &mut self,
-        sender: &str,
-        channel: &str,
-        from: Peer,
-        now: Instant,
-        events: &mut Vec<Event>,
-    ) {
-        if channel.is_empty() {
-            return;
-        }
-        if from != Peer::Local && self.peers.get(sender) != Some(&from) {
-            self.peers.insert(sender.to_string(), from);
-        }
-        let changed = match self.channels.get_mut(channel) {
-            Some(c) => {
-                c.traffic.received += 1;
-                c.last = now;
-                c.rate.record(now);
-                if c.publisher != sender {
-                    c.publisher.clear();
-                    c.publisher.push_str(sender);
-                    true
-                } else {
-                    false
-                }
-            }
-            None => {
-                let mut rate = RateMeter::new(now);
-                rate.record(now);
-                let traffic = Traffic {
-                    received: 1,
-                    ..Traffic::default()
-                };
-                let entry = ChannelEntry {
-                    publisher: sender.to_string(),
-                    last: now,
-                    rate,
-                    traffic,
-                };
-                self.channels.insert(channel.to_string(), entry);
-                true
-            }
-        };
-        if changed {
-            info!(channel, publisher = sender, %from, "channel publisher");
-            events.push(Event::ChannelPublisher {
-                channel: channel.to_string(),
-                publisher: sender.to_string(),
-            });
-        }
-    }
-
     /// Whether `robot` obeys `channel` now, and on which link to send to
     /// it; counts the outcome for the robot and the channel (which
     /// [`Tables::note_publisher`] created).
-    pub(super) fn check_route(
+    fn check_route(
         &mut self,
         robot: &str,
         channel: &str,
-        now: Instant,
+        cx: &mut Ctx<'_>,
     ) -> Result<Peer, DropReason> {
         let timeout = self.config.link_timeout;
         let outcome = match self.robots.get_mut(robot) {
             None => Err(DropReason::UnknownRobot),
-            Some(r) if r.route.as_deref() == Some(channel) => {
+            Some(r) if r.route.is(channel) => {
                 r.traffic.forwarded += 1;
                 r.meter.sent();
-                r.links.target(now, timeout).ok_or(DropReason::UnknownRobot)
+                r.links
+                    .target(cx.now, timeout)
+                    .ok_or(DropReason::UnknownRobot)
             }
             Some(r) => {
                 r.traffic.dropped.count(DropReason::NotRouted);
                 Err(DropReason::NotRouted)
             }
         };
-        let traffic = self.channels.get_mut(channel).map(|c| &mut c.traffic);
+        let traffic = self.channels.traffic_mut(channel);
         match outcome {
             Ok(_) => {
-                self.forwarded += 1;
+                self.totals.forwarded += 1;
                 if let Some(t) = traffic {
                     t.forwarded += 1;
                 }
             }
             Err(reason) => match traffic {
                 Some(t) => t.dropped.count(reason),
-                None => self.dropped.count(reason),
+                None => self.totals.dropped.count(reason),
             },
         }
         outcome

@@ -11,7 +11,7 @@ use std::time::Duration;
 use mech_proto::{Echo, Heartbeat};
 use tokio::time::Instant;
 
-use super::{Delivery, Incoming, Outbox, Tables};
+use super::{Ctx, Delivery, Incoming, Tables};
 use crate::counters::LinkQuality;
 use crate::event::Event;
 
@@ -187,15 +187,15 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         hb: Heartbeat,
-        out: &mut Outbox,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         match self.robots.get_mut(&m.header.sender) {
             Some(r) => {
                 if let Some(echo) = hb.echo {
-                    r.meter.echoed(echo, m.now);
+                    r.meter.echoed(echo, cx.now);
                 }
             }
-            None => self.unknown_robot(m, out),
+            None => self.unknown_robot(m, cx),
         }
         Delivery::Consumed
     }
@@ -208,10 +208,10 @@ impl Tables {
     }
 
     /// Closes each robot's step once a second and reports its figures.
-    pub(super) fn roll_link_quality(&mut self, now: Instant, events: &mut Vec<Event>) {
+    pub(super) fn roll_link_quality(&mut self, cx: &mut Ctx<'_>) {
         for (name, r) in self.robots.iter_mut() {
-            if let Some(quality) = r.meter.roll(now) {
-                events.push(Event::LinkQuality {
+            if let Some(quality) = r.meter.roll(cx.now) {
+                cx.event(Event::LinkQuality {
                     robot: name.clone(),
                     quality,
                 });

@@ -8,10 +8,9 @@
 
 use std::net::SocketAddr;
 
-use mech_proto::{Body, Level, Notice, NoticeCode};
 use tokio::time::Instant;
 
-use super::{Incoming, Outbox, Peer, Tables};
+use super::{Ctx, Peer, Tables};
 use crate::event::{Event, LinkAddr, RobotLinks};
 
 /// Share of a radio's bandwidth given to the robots' telemetry; the rest
@@ -21,10 +20,6 @@ const TELEMETRY_SHARE: f64 = 0.5;
 /// Bytes of a telemetry frame on the radio before one is measured
 /// (a signed telemetry message, its checksum and COBS framing).
 const DEFAULT_TELEMETRY_FRAME: f64 = 200.0;
-
-/// Most unknown senders remembered for rate-limiting the "register again"
-/// notice; beyond it the memory is cleared.
-const UNKNOWN_SENDERS: usize = 4096;
 
 /// Where one robot was heard, and when.
 #[derive(Debug, Clone)]
@@ -132,8 +127,8 @@ impl Tables {
         let baud = self.config.serial.get(usize::from(port))?.baud;
         let robots = self
             .robots
-            .values()
-            .filter(|r| r.links.radio() == Some(port))
+            .iter()
+            .filter(|(_, r)| r.links.radio() == Some(port))
             .count()
             .max(1);
         let hz = f64::from(baud) / 10.0 * TELEMETRY_SHARE / robots as f64 / frame;
@@ -146,31 +141,35 @@ impl Tables {
         })
     }
 
+    /// What a robot's links look like at `now`, as [`Event::Links`] says.
+    fn links_report(&self, l: &Links, now: Instant) -> RobotLinks {
+        let timeout = self.config.link_timeout;
+        let live = |at: Instant| now.saturating_duration_since(at) < timeout;
+        RobotLinks {
+            udp: l.udp.is_some_and(|(_, t)| live(t)),
+            radio: l
+                .radio
+                .filter(|(_, t)| live(*t))
+                .map(|(p, _)| self.radio_name(p)),
+            active: match l.target(now, timeout) {
+                Some(Peer::Udp(_)) if l.udp.is_some_and(|(_, t)| live(t)) => "udp",
+                Some(Peer::Serial(_)) if l.radio.is_some_and(|(_, t)| live(t)) => "radio",
+                _ => "",
+            },
+            radio_budget_hz: l.radio().and_then(|p| self.radio_budget(p, l.radio_frame)),
+        }
+    }
+
     /// Reports every robot with a radio whose live links (or radio budget)
     /// changed. A robot on UDP alone has one link: its link state says it.
-    pub(super) fn report_links(&mut self, now: Instant, events: &mut Vec<Event>) {
-        let timeout = self.config.link_timeout;
+    pub(super) fn report_links(&mut self, cx: &mut Ctx<'_>) {
         let mut changed = Vec::new();
-        for (name, r) in &self.robots {
-            let live = |at: Instant| now.saturating_duration_since(at) < timeout;
-            let l = &r.links;
-            if l.radio.is_none() {
+        for (name, r) in self.robots.iter() {
+            if r.links.radio.is_none() {
                 continue;
             }
-            let report = RobotLinks {
-                udp: l.udp.is_some_and(|(_, t)| live(t)),
-                radio: l
-                    .radio
-                    .filter(|(_, t)| live(*t))
-                    .map(|(p, _)| self.radio_name(p)),
-                active: match l.target(now, timeout) {
-                    Some(Peer::Udp(_)) if l.udp.is_some_and(|(_, t)| live(t)) => "udp",
-                    Some(Peer::Serial(_)) if l.radio.is_some_and(|(_, t)| live(t)) => "radio",
-                    _ => "",
-                },
-                radio_budget_hz: l.radio().and_then(|p| self.radio_budget(p, l.radio_frame)),
-            };
-            if report != l.reported {
+            let report = self.links_report(&r.links, cx.now);
+            if report != r.links.reported {
                 changed.push((name.clone(), report));
             }
         }
@@ -178,41 +177,10 @@ impl Tables {
             if let Some(r) = self.robots.get_mut(&name) {
                 r.links.reported = report.clone();
             }
-            events.push(Event::Links {
+            cx.event(Event::Links {
                 robot: name,
                 links: report,
             });
-        }
-    }
-
-    /// A robot's message from a sender the router does not know (the
-    /// station restarted and forgot it): the robot is told to register
-    /// again at once, rather than after its router timeout. At most one
-    /// notice per sender every `heartbeat_period`.
-    pub(super) fn unknown_robot(&mut self, m: Incoming<'_>, out: &mut Outbox) {
-        if !matches!(m.from, Peer::Udp(_) | Peer::Serial(_)) {
-            return;
-        }
-        let sender = m.header.sender.as_str();
-        let gap = self.config.heartbeat_period;
-        let recent = self
-            .unknown_told
-            .get(sender)
-            .is_some_and(|t| m.now.saturating_duration_since(*t) < gap);
-        if recent {
-            return;
-        }
-        if self.unknown_told.len() >= UNKNOWN_SENDERS {
-            self.unknown_told.clear();
-        }
-        self.unknown_told.insert(sender.to_string(), m.now);
-        let notice = Body::Notice(Notice {
-            level: Level::Warn,
-            code: NoticeCode::UnknownRobot,
-            text: "not registered with this router: send Hello".into(),
-        });
-        if let Some(b) = self.make(sender, notice) {
-            out.owned.push((m.from, b));
         }
     }
 }

@@ -1,54 +1,137 @@
 //! Missions: forwarded to their robot, repeated until it acknowledges the
 //! id or reported failed after `mission_give_up`; the acknowledgement goes
 //! back to whoever sent the mission.
+//!
+//! [`Missions`] holds the pending ones: at most one per robot and id (a
+//! mission sent again replaces the pending one), each removed by its
+//! acknowledgement or when given up.
+
+use std::time::Duration;
 
 use mech_proto::{Mission, MissionAck};
 use tokio::time::Instant;
 use tracing::{info, warn};
 
-use super::{Delivery, Incoming, Outbox, Peer, PendingMission, Tables};
+use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::DropReason;
 use crate::event::Event;
+
+/// Missions waiting for their acknowledgement, and the ids handed out.
+#[derive(Debug)]
+pub(super) struct Missions {
+    pending: Vec<PendingMission>,
+    next_id: u32,
+}
+
+#[derive(Debug)]
+struct PendingMission {
+    robot: String,
+    id: u32,
+    /// The mission message without its `auth` element: each (re)send is
+    /// signed afresh, since a receiver refuses a repeated stamp.
+    region: Vec<u8>,
+    reply_to: Peer,
+    /// Who sent it, for relaying the acknowledgement.
+    sender: String,
+    first: Instant,
+    last: Instant,
+}
+
+/// What the mission timers found due: resends and missions given up.
+#[derive(Debug, Default)]
+struct Due {
+    /// (robot, signed region) to send again.
+    resend: Vec<(String, Vec<u8>)>,
+    /// (robot, id) not acknowledged in time.
+    given_up: Vec<(String, u32)>,
+}
+
+impl Missions {
+    /// Ids start from `seed` (see `super::clock_seed`).
+    pub(super) fn new(seed: u32) -> Missions {
+        Missions {
+            pending: Vec::new(),
+            next_id: seed,
+        }
+    }
+
+    /// A fresh mission id.
+    fn next_id(&mut self) -> u32 {
+        self.next_id = self.next_id.wrapping_add(1);
+        self.next_id
+    }
+
+    /// Adds a mission to wait for, in place of one with the same robot and
+    /// id.
+    fn add(&mut self, mission: PendingMission) {
+        self.pending
+            .retain(|p| !(p.robot == mission.robot && p.id == mission.id));
+        self.pending.push(mission);
+    }
+
+    /// The pending mission `id` of `robot`, acknowledged: no longer pending.
+    fn acknowledged(&mut self, robot: &str, id: u32) -> Option<PendingMission> {
+        let i = self
+            .pending
+            .iter()
+            .position(|p| p.robot == robot && p.id == id)?;
+        Some(self.pending.remove(i))
+    }
+
+    /// Missions due again at `now` (every `retry`) and those given up
+    /// (after `give_up`, no longer pending).
+    fn due(&mut self, now: Instant, retry: Duration, give_up: Duration) -> Due {
+        let mut due = Due::default();
+        self.pending.retain_mut(|m| {
+            if now.saturating_duration_since(m.first) >= give_up {
+                due.given_up.push((m.robot.clone(), m.id));
+                return false;
+            }
+            if now.saturating_duration_since(m.last) >= retry {
+                m.last = now;
+                due.resend.push((m.robot.clone(), m.region.clone()));
+            }
+            true
+        });
+        due
+    }
+}
 
 impl Tables {
     pub(super) fn on_mission(
         &mut self,
         m: Incoming<'_>,
         mission: Mission,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let h = m.header;
         let robot = h.destination.clone();
-        self.note_publisher(&h.sender, &h.channel, m.from, m.now, events);
+        self.note_publisher(&h.sender, &h.channel, cx);
         let Some(entry) = self.robots.get_mut(&robot) else {
-            self.dropped.count(DropReason::UnknownRobot);
-            return Delivery::Dropped(DropReason::UnknownRobot);
+            return self.drop_for(DropReason::UnknownRobot);
         };
         entry.traffic.forwarded += 1;
-        let to = self.target(&robot, m.now);
-        self.forwarded += 1;
+        let to = self.target(&robot, cx.now);
+        self.totals.forwarded += 1;
         let region = match mech_proto::auth::split(m.bytes) {
             Ok((region, _)) => region.to_vec(),
-            Err(e) => return self.bad(m.from, e.to_string(), events),
+            Err(e) => return self.bad(e.to_string(), cx),
         };
-        if let (Some(b), Some(to)) = (self.seal(&region, &robot), to) {
-            out.owned.push((to, b));
+        if let (Some(b), Some(to)) = (self.gate.seal(&region, &robot), to) {
+            cx.send(to, b);
             self.count_sent(&robot);
         }
-        self.missions
-            .retain(|p| !(p.robot == robot && p.id == mission.id));
-        self.missions.push(PendingMission {
+        self.missions.add(PendingMission {
             robot: robot.clone(),
             id: mission.id,
             region,
-            reply_to: m.from,
+            reply_to: cx.from,
             sender: h.sender.clone(),
-            first: m.now,
-            last: m.now,
+            first: cx.now,
+            last: cx.now,
         });
         info!(%robot, id = mission.id, waypoints = mission.waypoints.len(), channel = %h.channel, "mission sent");
-        events.push(Event::MissionSent {
+        cx.event(Event::MissionSent {
             robot,
             channel: h.channel.clone(),
             id: mission.id,
@@ -62,20 +145,14 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         ack: MissionAck,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let sender = m.header.sender.as_str();
-        let Some(i) = self
-            .missions
-            .iter()
-            .position(|p| p.robot == sender && p.id == ack.id)
-        else {
+        let Some(pending) = self.missions.acknowledged(sender, ack.id) else {
             return Delivery::Consumed;
         };
-        let pending = self.missions.remove(i);
         if pending.reply_to != Peer::Local {
-            self.pass_on(m.bytes, pending.reply_to, &pending.sender, out);
+            self.pass_on(m.bytes, pending.reply_to, &pending.sender, cx);
         }
         info!(
             robot = sender,
@@ -83,7 +160,7 @@ impl Tables {
             accepted = ack.accepted,
             "mission acknowledged"
         );
-        events.push(Event::MissionAcked {
+        cx.event(Event::MissionAcked {
             robot: sender.to_string(),
             id: ack.id,
             accepted: ack.accepted,
@@ -92,48 +169,30 @@ impl Tables {
         Delivery::Consumed
     }
 
-    /// A fresh mission id (see [`clock_seed`]).
+    /// A fresh mission id (see `super::clock_seed`).
     pub(crate) fn mission_id(&mut self) -> u32 {
-        self.next_mission_id = self.next_mission_id.wrapping_add(1);
-        self.next_mission_id
+        self.missions.next_id()
     }
 
     /// Resends unacknowledged missions every `mission_retry`; gives up on
     /// one after `mission_give_up`.
-    pub(super) fn retry_missions(
-        &mut self,
-        now: Instant,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
-    ) {
+    pub(super) fn retry_missions(&mut self, cx: &mut Ctx<'_>) {
         let (retry, give_up) = (self.config.mission_retry, self.config.mission_give_up);
-        let timeout = self.config.link_timeout;
-        let robots = &self.robots;
-        let mut due = Vec::new();
-        self.missions.retain_mut(|m| {
-            if now.saturating_duration_since(m.first) >= give_up {
-                warn!(robot = %m.robot, id = m.id, "mission not acknowledged, giving up");
-                events.push(Event::MissionFailed {
-                    robot: m.robot.clone(),
-                    id: m.id,
-                    reason: format!("not acknowledged within {:.1} s", give_up.as_secs_f64()),
-                });
-                return false;
-            }
-            if now.saturating_duration_since(m.last) >= retry {
-                m.last = now;
-                if let Some(to) = robots
-                    .get(&m.robot)
-                    .and_then(|r| r.links.target(now, timeout))
-                {
-                    due.push((to, m.robot.clone(), m.region.clone()));
-                }
-            }
-            true
-        });
-        for (to, robot, region) in due {
-            if let Some(b) = self.seal(&region, &robot) {
-                out.owned.push((to, b));
+        let due = self.missions.due(cx.now, retry, give_up);
+        for (robot, id) in due.given_up {
+            warn!(%robot, id, "mission not acknowledged, giving up");
+            cx.event(Event::MissionFailed {
+                robot,
+                id,
+                reason: format!("not acknowledged within {:.1} s", give_up.as_secs_f64()),
+            });
+        }
+        for (robot, region) in due.resend {
+            let Some(to) = self.target(&robot, cx.now) else {
+                continue;
+            };
+            if let Some(b) = self.gate.seal(&region, &robot) {
+                cx.send(to, b);
                 self.count_sent(&robot);
             }
         }

@@ -53,9 +53,10 @@ pub(crate) enum Tapped {
     Message(TappedMessage),
     Event(Arc<Stamped>),
     Operator(OperatorRecord),
-    /// Recording starts: the fleet model at that instant (taken under the
-    /// tables' lock, so no message or event falls between it and what
-    /// follows) and the router time.
+    /// Recording starts: the fleet model with every event made so far
+    /// applied (taken while the router delivers no event; the events made
+    /// meanwhile follow it, so no message or event falls between it and
+    /// what follows) and the router time.
     Begin {
         at: Duration,
         fleet: Box<crate::fleet::Fleet>,
@@ -66,6 +67,37 @@ pub(crate) enum Tapped {
     End {
         received: u64,
     },
+}
+
+/// The tap as the tables hold it: on while recording, with why the message
+/// being decided was refused (noted only while recording, for its record).
+#[derive(Debug, Default)]
+pub(crate) struct TapSlot {
+    tap: Option<Tap>,
+    refusal: Option<String>,
+}
+
+impl TapSlot {
+    pub(crate) fn get(&self) -> Option<&Tap> {
+        self.tap.as_ref()
+    }
+
+    /// Puts `tap` on (or takes it off), returning the one that was on.
+    pub(crate) fn set(&mut self, tap: Option<Tap>) -> Option<Tap> {
+        std::mem::replace(&mut self.tap, tap)
+    }
+
+    /// Keeps why the message being decided was refused, while recording.
+    pub(crate) fn note_refusal(&mut self, why: impl FnOnce() -> String) {
+        if self.tap.is_some() {
+            self.refusal = Some(why());
+        }
+    }
+
+    /// Why the message just decided was refused, if it was.
+    pub(crate) fn take_refusal(&mut self) -> Option<String> {
+        self.refusal.take()
+    }
 }
 
 /// The sending end, held by the router's tables while recording.

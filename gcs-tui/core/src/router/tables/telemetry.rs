@@ -1,54 +1,103 @@
 //! Telemetry and the other traffic for the station itself: telemetry fans
 //! out to external subscribers and becomes an event; subscriptions lapse
-//! unless renewed; position fixes go to their robot; channel discovery and
-//! notices.
+//! unless renewed; position fixes go to their robot; notices.
+//!
+//! [`Subscribers`] holds the external telemetry subscribers (a tool over
+//! UDP or TCP), each until its subscription lapses.
 
-use mech_proto::{Body, Channels, Notice, PositionFix, Subscribe, Telemetry};
+use std::collections::HashMap;
+
+use mech_proto::{Notice, PositionFix, Subscribe, Telemetry};
 use tokio::time::Instant;
 
-use super::{Delivery, Incoming, Outbox, Peer, Tables};
-use crate::counters::{ChannelStatus, DropReason};
+use super::{Ctx, Delivery, Incoming, Peer, Tables};
+use crate::counters::DropReason;
 use crate::event::Event;
+
+/// External telemetry subscribers, by where they are.
+#[derive(Debug, Default)]
+pub(super) struct Subscribers {
+    by_peer: HashMap<Peer, Subscriber>,
+}
+
+#[derive(Debug)]
+struct Subscriber {
+    /// When the subscription lapses unless renewed.
+    until: Instant,
+    /// The subscriber's name, to sign what it is sent.
+    name: String,
+}
+
+impl Subscribers {
+    fn subscribe(&mut self, peer: Peer, name: &str, until: Instant) {
+        self.by_peer.insert(
+            peer,
+            Subscriber {
+                until,
+                name: name.to_string(),
+            },
+        );
+    }
+
+    pub(super) fn remove(&mut self, peer: Peer) {
+        self.by_peer.remove(&peer);
+    }
+
+    /// Drops the subscriptions that lapsed by `now`.
+    pub(super) fn lapse(&mut self, now: Instant) {
+        self.by_peer.retain(|_, s| s.until > now);
+    }
+
+    /// Every subscriber: where, and its name.
+    fn list(&self) -> Vec<(Peer, String)> {
+        self.by_peer
+            .iter()
+            .map(|(peer, s)| (*peer, s.name.clone()))
+            .collect()
+    }
+
+    #[cfg(test)]
+    pub(super) fn contains(&self, peer: Peer) -> bool {
+        self.by_peer.contains_key(&peer)
+    }
+}
 
 impl Tables {
     pub(super) fn on_telemetry(
         &mut self,
         m: Incoming<'_>,
         t: Telemetry,
-        out: &mut Outbox,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
         let sender = m.header.sender.as_str();
         let Some(robot) = self.robots.get_mut(sender) else {
-            self.dropped.count(DropReason::UnknownRobot);
-            self.unknown_robot(m, out);
-            return Delivery::Dropped(DropReason::UnknownRobot);
+            self.unknown_robot(m, cx);
+            return self.drop_for(DropReason::UnknownRobot);
         };
-        if let Peer::Serial(_) = m.from {
+        if let Peer::Serial(_) = cx.from {
             robot.links.radio_telemetry(m.bytes.len());
         }
-        let subscribers: Vec<(Peer, String)> = self
-            .subscribers
-            .iter()
-            .map(|(peer, (_, name))| (*peer, name.clone()))
-            .collect();
-        for (peer, name) in subscribers {
-            self.pass_on(m.bytes, peer, &name, out);
+        for (peer, name) in self.subscribers.list() {
+            self.pass_on(m.bytes, peer, &name, cx);
         }
-        events.push(Event::Telemetry {
+        cx.event(Event::Telemetry {
             robot: sender.to_string(),
             telemetry: t,
         });
         Delivery::Consumed
     }
 
-    pub(super) fn on_subscribe(&mut self, m: Incoming<'_>, s: Subscribe) -> Delivery {
+    pub(super) fn on_subscribe(
+        &mut self,
+        m: Incoming<'_>,
+        s: Subscribe,
+        cx: &mut Ctx<'_>,
+    ) -> Delivery {
         if s.telemetry {
-            let until = m.now + self.config.subscriber_timeout;
-            self.subscribers
-                .insert(m.from, (until, m.header.sender.clone()));
+            let until = cx.now + self.config.subscriber_timeout;
+            self.subscribers.subscribe(cx.from, &m.header.sender, until);
         } else {
-            self.subscribers.remove(&m.from);
+            self.subscribers.remove(cx.from);
         }
         Delivery::Consumed
     }
@@ -57,77 +106,28 @@ impl Tables {
         &mut self,
         m: Incoming<'_>,
         fix: PositionFix,
-        out: &mut Outbox,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
-        match self.target(&fix.robot, m.now) {
+        match self.target(&fix.robot, cx.now) {
             Some(to) => {
-                self.pass_on(m.bytes, to, &fix.robot, out);
+                self.pass_on(m.bytes, to, &fix.robot, cx);
                 self.count_sent(&fix.robot);
                 Delivery::Consumed
             }
-            None => {
-                self.dropped.count(DropReason::UnknownRobot);
-                Delivery::Dropped(DropReason::UnknownRobot)
-            }
+            None => self.drop_for(DropReason::UnknownRobot),
         }
-    }
-
-    pub(super) fn on_channels_request(&mut self, m: Incoming<'_>, out: &mut Outbox) -> Delivery {
-        let channels = self
-            .channel_status(m.now)
-            .into_iter()
-            .map(|c| mech_proto::ChannelInfo {
-                name: c.name,
-                publisher: c.publisher,
-                rate_hz: c.rate_hz,
-                robots: c.robots,
-                idle_ms: c.idle.as_millis() as u64,
-            })
-            .collect();
-        let body = Body::Channels(Channels { channels });
-        if let Some(b) = self.make(&m.header.sender, body) {
-            out.owned.push((m.from, b));
-        }
-        Delivery::Consumed
     }
 
     pub(super) fn on_notice(
         &mut self,
         m: Incoming<'_>,
         notice: Notice,
-        events: &mut Vec<Event>,
+        cx: &mut Ctx<'_>,
     ) -> Delivery {
-        events.push(Event::Notice {
+        cx.event(Event::Notice {
             from: m.header.sender.clone(),
             notice,
         });
         Delivery::Consumed
-    }
-
-    /// Live channels (published within `channel_live_for`), by name.
-    pub(crate) fn channel_status(&self, now: Instant) -> Vec<ChannelStatus> {
-        let mut list: Vec<ChannelStatus> = self
-            .channels
-            .iter()
-            .filter(|(_, c)| now.saturating_duration_since(c.last) < self.config.channel_live_for)
-            .map(|(name, c)| {
-                let mut robots: Vec<String> = self
-                    .robots
-                    .iter()
-                    .filter(|(_, r)| r.route.as_deref() == Some(name.as_str()))
-                    .map(|(n, _)| n.clone())
-                    .collect();
-                robots.sort();
-                ChannelStatus {
-                    name: name.clone(),
-                    publisher: c.publisher.clone(),
-                    rate_hz: c.rate.rate_hz(now),
-                    robots,
-                    idle: now.saturating_duration_since(c.last),
-                }
-            })
-            .collect();
-        list.sort_by(|a, b| a.name.cmp(&b.name));
-        list
     }
 }

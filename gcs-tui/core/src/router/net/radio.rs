@@ -3,8 +3,8 @@
 //! the robot), framed with the protocol's COBS + CRC-32 serial framing.
 //!
 //! Each port has a reader thread, which splits the byte stream into
-//! messages and hands each to the tables exactly as a datagram
-//! ([`super::Shared::decide_frame`]), and a writer thread, which sends from
+//! messages and has each decided exactly as a datagram
+//! (`crate::router::Shared::decide_frame`), and a writer thread, which sends from
 //! a [`RadioQueue`]: e-stops first, then commands, routes, missions and the
 //! other control traffic, then heartbeats and the rest. A newer message for
 //! the same robot, kind and channel replaces one still waiting (newest
@@ -19,10 +19,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use mech_proto::framing::{SerialDecoder, write_serial_message};
+use mech_proto::framing::{SerialDecoder, SerialRead, write_serial_message};
 
-use super::Shared;
-use super::tables::Peer;
+use crate::router::tables::Peer;
+use crate::router::{RouterError, SerialEndpoint, Shared};
 use crate::sync::lock;
 
 /// Messages waiting for one radio, at most: beyond it the lowest class is
@@ -135,6 +135,20 @@ impl RadioQueue {
         }
     }
 
+    /// What the radio on `port` sent and what waits.
+    pub(super) fn status(&self, port: &SerialEndpoint) -> RadioStatus {
+        let count = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        RadioStatus {
+            port: port.port.clone(),
+            baud: port.baud,
+            frames: count(&self.counters.frames),
+            bytes: count(&self.counters.bytes),
+            replaced: count(&self.counters.replaced),
+            dropped: count(&self.counters.dropped),
+            waiting: self.len(),
+        }
+    }
+
     /// Messages waiting.
     pub(crate) fn len(&self) -> usize {
         lock(&self.pending).waiting.len()
@@ -203,9 +217,101 @@ impl Pacer {
     }
 }
 
+/// One serial radio at the station, as `RouterHandle::radios` reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RadioStatus {
+    pub port: String,
+    pub baud: u32,
+    /// Frames and bytes sent.
+    pub frames: u64,
+    pub bytes: u64,
+    /// Messages replaced in the queue by a newer one (newest wins).
+    pub replaced: u64,
+    /// Messages dropped because the queue was full.
+    pub dropped: u64,
+    /// Messages waiting to be sent.
+    pub waiting: usize,
+}
+
+/// A radio's port, opened: the reader's and the writer's handles, and
+/// where it is configured.
+pub(in crate::router) type RadioPort =
+    (Box<dyn Read + Send>, Box<dyn Write + Send>, SerialEndpoint);
+
+/// Opens every configured radio (before anything starts, so a missing
+/// device is a clear error at startup).
+#[cfg(feature = "serial")]
+pub(in crate::router) fn open_radios(
+    serial: &[SerialEndpoint],
+) -> Result<Vec<RadioPort>, RouterError> {
+    serial
+        .iter()
+        .map(|s| {
+            let err = |e: serialport::Error| RouterError::Serial {
+                port: s.port.clone(),
+                message: e.to_string(),
+            };
+            let port = serialport::new(&s.port, s.baud)
+                .timeout(Duration::from_millis(50))
+                .open()
+                .map_err(err)?;
+            let writer = port.try_clone().map_err(err)?;
+            Ok((
+                Box::new(port) as Box<dyn Read + Send>,
+                Box::new(writer) as _,
+                s.clone(),
+            ))
+        })
+        .collect()
+}
+
+#[cfg(not(feature = "serial"))]
+pub(in crate::router) fn open_radios(
+    serial: &[SerialEndpoint],
+) -> Result<Vec<RadioPort>, RouterError> {
+    match serial.first() {
+        None => Ok(Vec::new()),
+        Some(s) => Err(RouterError::Serial {
+            port: s.port.clone(),
+            message: "this build has no serial support (feature `serial`)".into(),
+        }),
+    }
+}
+
+/// Starts a reader and a writer thread per radio.
+pub(super) fn start(
+    shared: &Arc<Shared>,
+    ports: Vec<RadioPort>,
+) -> Result<Vec<std::thread::JoinHandle<()>>, RouterError> {
+    let mut threads = Vec::new();
+    for (i, (read, write, s)) in ports.into_iter().enumerate() {
+        let spawn_err = |source| RouterError::Serial {
+            port: s.port.clone(),
+            message: format!("cannot start its thread: {source}"),
+        };
+        let (sh, name) = (shared.clone(), s.port.clone());
+        let index = i as u16;
+        threads.push(
+            std::thread::Builder::new()
+                .name(format!("mech-radio-rx-{i}"))
+                .spawn(move || reader(sh, index, read, name))
+                .map_err(spawn_err)?,
+        );
+        let (q, name, baud) = (shared.net.radios[i].clone(), s.port.clone(), s.baud);
+        threads.push(
+            std::thread::Builder::new()
+                .name(format!("mech-radio-tx-{i}"))
+                .spawn(move || writer(q, write, baud, name))
+                .map_err(spawn_err)?,
+        );
+        tracing::info!(port = %s.port, baud = s.baud, "radio open");
+    }
+    Ok(threads)
+}
+
 /// Sends the queue's messages as serial frames until the queue closes or
 /// the port fails.
-pub(super) fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, name: String) {
+fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, name: String) {
     let mut pacer = Pacer::new(baud);
     let mut frame = Vec::with_capacity(512);
     while let Some(bytes) = queue.pop() {
@@ -230,28 +336,15 @@ pub(super) fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, na
 /// each good message is decided like a datagram, each bad frame counted.
 /// `port` must return from `read` periodically (a port timeout) so the
 /// thread sees the router stop.
-pub(super) fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
+fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
     let mut decoder = SerialDecoder::new();
     let mut buf = [0u8; 1024];
     let from = Peer::Serial(index);
     while !shared.stopped() {
-        let n = match port.read(&mut buf) {
-            Ok(0) => {
-                tracing::warn!(port = %name, "radio port closed");
-                return;
-            }
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut
-                        | std::io::ErrorKind::WouldBlock
-                        | std::io::ErrorKind::Interrupted
-                ) =>
-            {
-                continue;
-            }
-            Err(e) => {
+        let n = match SerialRead::of(port.read(&mut buf)) {
+            SerialRead::Bytes(n) => n,
+            SerialRead::Idle => continue,
+            SerialRead::Failed(e) => {
                 tracing::warn!(port = %name, error = %e, "radio read failed");
                 return;
             }
@@ -260,7 +353,7 @@ pub(super) fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name:
         while let Some(frame) = decoder.next_bytes() {
             match frame {
                 Ok(bytes) => shared.decide_frame(&bytes, from),
-                Err(e) => shared.count_bad_frame(from, e.to_string()),
+                Err(e) => shared.count_bad(from, e.to_string()),
             }
         }
     }

@@ -112,19 +112,20 @@ impl Gcs {
     /// Reads the fleet model in place (no copy); keep `f` short, the router
     /// waits for it to apply events.
     ///
-    /// Lock order: the router holds its tables while it applies events to
-    /// the fleet model (tables, then fleet). So never ask the router for
-    /// anything that locks its tables (`channels()`, `counters()`,
-    /// `set_route`, publishing) from inside `f`: read those first, then take
-    /// the fleet, as [`Gcs::snapshot`] does. The same holds for
-    /// [`Gcs::update_fleet`].
+    /// Lock order: the router applies events to the fleet model holding its
+    /// delivery lock (delivery, then fleet), never its tables. So reading
+    /// the router from inside `f` (`channels()`, `counters()`) is safe, but
+    /// never make it act (`set_route`, publishing, e-stop: anything that
+    /// makes events waits for the delivery lock). [`Gcs::snapshot`] reads
+    /// the router first anyway, so the fleet is held for the copy alone.
+    /// The same holds for [`Gcs::update_fleet`].
     pub fn with_fleet<R>(&self, f: impl FnOnce(&Fleet) -> R) -> R {
         f(&lock(&self.fleet))
     }
 
     /// Changes GCS-side state of the fleet model (clusters, waypoint drafts,
-    /// log lines). Same lock order as [`Gcs::with_fleet`]: nothing that locks
-    /// the router's tables inside `f`.
+    /// log lines). Same lock order as [`Gcs::with_fleet`]: nothing that makes
+    /// the router act inside `f`.
     pub fn update_fleet<R>(&self, f: impl FnOnce(&mut Fleet) -> R) -> R {
         f(&mut lock(&self.fleet))
     }
