@@ -845,6 +845,7 @@ impl Agent {
                 .map(MissionRun::progress),
             stale: self.stale_total(),
             velocity_source,
+            safety: None,
         }
     }
 
