@@ -65,9 +65,17 @@ pub struct SafetyConfig {
     pub stale_after: f64,
     /// The crawl, m/s.
     pub crawl_speed: f64,
-    /// How fast a diff-drive blocked by a neighbour turns right to yield,
-    /// rad/s.
+    /// Fastest turn of a diff-drive while it yields, rad/s.
     pub yield_turn_rate: f64,
+    /// How long a robot blocked by a neighbour yields to the right before
+    /// its command has its way again, s.
+    pub yield_time: f64,
+    /// How far to the right of the blocked direction it heads meanwhile,
+    /// rad.
+    pub yield_angle: f64,
+    /// How far ahead, s, a robot looks for neighbours its command would
+    /// meet, to swerve right in time (0: never).
+    pub horizon: f64,
 }
 
 impl Default for SafetyConfig {
@@ -79,6 +87,9 @@ impl Default for SafetyConfig {
             stale_after: 0.3,
             crawl_speed: 0.05,
             yield_turn_rate: 1.0,
+            yield_time: 2.0,
+            yield_angle: std::f64::consts::FRAC_PI_2,
+            horizon: 2.0,
         }
     }
 }
@@ -107,7 +118,16 @@ impl SafetyConfig {
         nonnegative(self.reaction_time, "reaction_time")?;
         positive(self.stale_after, "stale_after")?;
         nonnegative(self.crawl_speed, "crawl_speed")?;
-        nonnegative(self.yield_turn_rate, "yield_turn_rate")
+        nonnegative(self.yield_turn_rate, "yield_turn_rate")?;
+        nonnegative(self.yield_time, "yield_time")?;
+        nonnegative(self.horizon, "horizon")?;
+        if !(0.0..=std::f64::consts::FRAC_PI_2).contains(&self.yield_angle) {
+            return Err(format!(
+                "`safety.yield_angle` must be between 0 and pi/2, got {}",
+                self.yield_angle
+            ));
+        }
+        Ok(())
     }
 
     pub fn braking(&self) -> Braking {
@@ -127,6 +147,15 @@ struct ArenaInForce {
     fence: Option<Fence>,
 }
 
+/// A robot blocked by a neighbour yields: it heads to the right of where
+/// it wanted to go, for a while.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Yield {
+    /// Where it heads, m/s, map frame.
+    target: Vec2,
+    until: Duration,
+}
+
 /// What [`SafetyLayer::filter`] returns: the outputs to write and why they
 /// differ from the controller's.
 #[derive(Debug, Clone, PartialEq)]
@@ -142,6 +171,7 @@ pub struct SafetyLayer {
     config: SafetyConfig,
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
+    yielding: Option<Yield>,
     intervention: Intervention,
     counts: InterventionCounts,
 }
@@ -152,6 +182,7 @@ impl SafetyLayer {
             config,
             arena: None,
             neighbours: None,
+            yielding: None,
             intervention: Intervention::None,
             counts: InterventionCounts::default(),
         }
@@ -245,6 +276,7 @@ impl SafetyLayer {
             .max(desired.norm())
             .max(velocity.norm());
         let reach = braking.distance(fastest);
+        let margin = fence.margin;
         let mut c = Constraints::new(position, braking);
         fence.constrain(&mut c, self.config.radius, reach);
         if let Some(n) = &self.neighbours {
@@ -265,14 +297,71 @@ impl SafetyLayer {
             holonomic: platform.holonomic(),
             heading: pose.heading,
             yield_turn_rate: self.config.yield_turn_rate,
+            yaw_rate: twist.wz,
+            reaction_time: self.config.reaction_time,
+            velocity,
         };
-        let decision = decide(&c, desired, &mobility);
+        let decision = self.decide(&c, desired, &twist, &mobility, margin, now);
         let out = if decision.intervention == Intervention::None {
             outputs.to_vec()
         } else {
             mapping::outputs_for(platform, pose.heading, &twist, &decision)
         };
         self.noted(out, decision.intervention)
+    }
+
+    /// The decision, yielding to the right for `yield_time` once a
+    /// neighbour blocks the way (while the command asks for any motion:
+    /// a stop ends it).
+    fn decide(
+        &mut self,
+        c: &Constraints,
+        desired: Vec2,
+        twist: &mech_proto::Twist,
+        mobility: &Mobility,
+        margin: f64,
+        now: Duration,
+    ) -> Decision {
+        let wants_motion = [twist.vx, twist.vy, twist.wz]
+            .iter()
+            .any(|v| v.abs() > 1e-9);
+        if !wants_motion {
+            self.yielding = None;
+        }
+        if let Some(y) = self.yielding.filter(|y| now < y.until) {
+            return filter::steer(c, y.target, mobility);
+        }
+        self.yielding = None;
+        let swerve = self.neighbours.as_ref().and_then(|n| {
+            n.anticipate(
+                c.position,
+                desired,
+                self.config.radius,
+                margin,
+                self.config.horizon,
+                now,
+            )
+        });
+        if let Some(target) = swerve {
+            if !mobility.holonomic && self.config.yield_time > 0.0 {
+                // A diff-drive needs time to turn: the swerve is held.
+                self.yielding = Some(Yield {
+                    target,
+                    until: now + Duration::from_secs_f64(self.config.yield_time),
+                });
+            }
+            return filter::steer(c, target, mobility);
+        }
+        let decision = decide(c, desired, mobility);
+        if decision.blocked && self.config.yield_time > 0.0 {
+            let target = desired.rotated(-self.config.yield_angle);
+            self.yielding = Some(Yield {
+                target,
+                until: now + Duration::from_secs_f64(self.config.yield_time),
+            });
+            return filter::steer(c, target, mobility);
+        }
+        decision
     }
 
     /// Records this period's intervention (counting each one that begins).

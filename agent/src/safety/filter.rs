@@ -12,11 +12,17 @@
 //!   along it; rotation on the spot never moves its disc, so its turn rate
 //!   is kept.
 //!
+//! A robot whose present motion already goes beyond what the constraints
+//! allow (its actuators lag the commands, a neighbour came closer than
+//! predicted) is told to stop: braking is always within what it promised.
+//!
 //! When a neighbour blocks the way (less than half the desired speed is
-//! allowed), both kinds yield to the right, as ships and Zhou et al.'s
-//! buffered Voronoi cells do: the holonomic robot aims to the right of its
-//! desired velocity, the diff-drive turns right. Two robots meeting
-//! head-on both do, and pass.
+//! allowed), the decision says so, and the layer has the robot yield to
+//! the right for a while ([`steer`] towards a direction to the right of
+//! the desired one), as ships and Zhou et al.'s buffered Voronoi cells do.
+//! Two robots meeting head-on both do and pass; robots jammed in a ring
+//! all move the same way round it, as at a roundabout, until their own
+//! ways open.
 
 use mech_proto::Intervention;
 
@@ -37,6 +43,9 @@ pub struct Decision {
     /// Why `velocity` differs from the desired one ([`Intervention::None`]:
     /// it does not).
     pub intervention: Intervention,
+    /// A neighbour blocks the way (less than half the desired speed is
+    /// allowed): the robot should yield ([`steer`]).
+    pub blocked: bool,
 }
 
 /// How the robot can move, for [`decide`].
@@ -46,8 +55,42 @@ pub struct Mobility {
     pub holonomic: bool,
     /// Its heading, rad: the only direction a non-holonomic robot moves.
     pub heading: f64,
-    /// How fast a non-holonomic robot turns right to yield, rad/s.
+    /// Fastest turn of a non-holonomic robot while yielding, rad/s.
     pub yield_turn_rate: f64,
+    /// The commanded yaw rate, rad/s: a turning robot's velocity turns with
+    /// it, so its braking path is checked at the direction it has now and
+    /// the one it will have when braking starts.
+    pub yaw_rate: f64,
+    /// The reaction time of [`crate::safety::Braking`], s.
+    pub reaction_time: f64,
+    /// The velocity the robot has now, m/s, map frame: a robot whose own
+    /// braking path no longer fits (its actuators lag the commands, a
+    /// neighbour came closer) is told to stop, whatever was commanded.
+    pub velocity: Vec2,
+}
+
+/// Speeds below this, m/s, are taken as standing still when judging the
+/// current motion (an actuator's exponential tail never quite reaches
+/// zero, and a robot at rest must be able to move away).
+const AT_REST: f64 = 1e-4;
+
+impl Mobility {
+    /// The angle the velocity turns through before braking starts, at yaw
+    /// rate `wz`.
+    fn sweep(&self, wz: f64) -> f64 {
+        wz * self.reaction_time
+    }
+}
+
+/// The fastest speed along `dir` that is allowed now and after turning
+/// through `sweep` rad, and the constraint that sets it.
+fn swept_limit(c: &Constraints, dir: Vec2, sweep: f64) -> (f64, Intervention) {
+    let now = c.limit(dir);
+    if sweep.abs() < 1e-9 {
+        return now;
+    }
+    let later = c.limit(dir.rotated(sweep));
+    if later.0 < now.0 { later } else { now }
 }
 
 /// The velocity a robot may have this period, given the one its command
@@ -57,38 +100,87 @@ pub fn decide(c: &Constraints, desired: Vec2, mobility: &Mobility) -> Decision {
         velocity: desired,
         yaw_rate: None,
         intervention: Intervention::None,
+        blocked: false,
     };
     let speed = desired.norm();
+    if let Some(stop) = overrun(c, mobility) {
+        return stop;
+    }
     let Some(dir) = desired.unit() else {
         return pass;
     };
-    let (allowed, why) = c.limit(dir);
+    let (allowed, why) = swept_limit(c, dir, mobility.sweep(mobility.yaw_rate));
     if speed <= allowed * (1.0 + 1e-9) {
         return pass;
     }
     let blocked = why == Intervention::Separation && allowed < 0.5 * speed;
-    if !mobility.holonomic {
-        return Decision {
-            velocity: dir * allowed,
-            yaw_rate: blocked.then_some(-mobility.yield_turn_rate.abs()),
-            intervention: why,
-        };
-    }
-    let target = if blocked {
-        desired + dir.right() * (0.5 * speed)
+    let velocity = if mobility.holonomic {
+        closest_allowed(c, desired, mobility.sweep(mobility.yaw_rate))
     } else {
-        desired
+        dir * allowed
     };
     Decision {
-        velocity: closest_allowed(c, target),
+        velocity,
         yaw_rate: None,
         intervention: why,
+        blocked,
     }
 }
 
+/// A stop when the robot's present motion already goes beyond what the
+/// constraints allow.
+fn overrun(c: &Constraints, mobility: &Mobility) -> Option<Decision> {
+    let moving = mobility.velocity.unit()?;
+    let (fits, why) = swept_limit(c, moving, mobility.sweep(mobility.yaw_rate));
+    (mobility.velocity.norm() > fits + AT_REST).then_some(Decision {
+        velocity: Vec2::ZERO,
+        yaw_rate: None,
+        intervention: why,
+        blocked: false,
+    })
+}
+
+/// Yield: move towards `target` (map frame) as far as the constraints
+/// allow, whatever the command. A holonomic robot takes the allowed
+/// velocity closest to it; a diff-drive turns towards it and drives along
+/// its heading once within [`TURN_FIRST`] of it.
+pub fn steer(c: &Constraints, target: Vec2, mobility: &Mobility) -> Decision {
+    if let Some(stop) = overrun(c, mobility) {
+        return stop;
+    }
+    let yielding = |velocity, yaw_rate| Decision {
+        velocity,
+        yaw_rate,
+        intervention: Intervention::Separation,
+        blocked: false,
+    };
+    if mobility.holonomic {
+        let v = closest_allowed(c, target, mobility.sweep(mobility.yaw_rate));
+        return yielding(v, None);
+    }
+    let Some(dir) = target.unit() else {
+        return yielding(Vec2::ZERO, None);
+    };
+    let err = mech_proto::wrap_angle(dir.angle() - mobility.heading);
+    let turn = mobility.yield_turn_rate.abs();
+    let wz = (3.0 * err).clamp(-turn, turn);
+    let heading = Vec2::from_angle(mobility.heading);
+    let forward = if err.abs() < TURN_FIRST {
+        target.norm() * err.cos()
+    } else {
+        0.0
+    };
+    let allowed = swept_limit(c, heading, mobility.sweep(wz)).0;
+    yielding(heading * forward.min(allowed), Some(wz))
+}
+
+/// Heading error, rad, beyond which a yielding diff-drive turns on the
+/// spot before driving.
+pub const TURN_FIRST: f64 = 0.6;
+
 /// The allowed velocity closest to `target` among directions within 90°
 /// of it (each at the speed nearest the target's projection on it).
-fn closest_allowed(c: &Constraints, target: Vec2) -> Vec2 {
+fn closest_allowed(c: &Constraints, target: Vec2, sweep: f64) -> Vec2 {
     let Some(dir) = target.unit() else {
         return Vec2::ZERO;
     };
@@ -102,7 +194,7 @@ fn closest_allowed(c: &Constraints, target: Vec2) -> Vec2 {
         if want <= 0.0 {
             continue;
         }
-        let s = want.min(c.limit(d).0);
+        let s = want.min(swept_limit(c, d, sweep).0);
         let u = d * s;
         let cost = (u - target).dot(u - target);
         if cost < best.0 - 1e-15 {
@@ -133,6 +225,9 @@ mod tests {
             holonomic: true,
             heading: 0.0,
             yield_turn_rate: 1.0,
+            yaw_rate: 0.0,
+            reaction_time: 0.1,
+            velocity: Vec2::ZERO,
         }
     }
 
@@ -195,12 +290,48 @@ mod tests {
         });
         let d = decide(&c, Vec2::new(0.5, 0.0), &holonomic());
         assert_eq!(d.intervention, Intervention::Separation);
+        assert!(d.blocked);
+        let right = Vec2::new(0.5, 0.0).rotated(-1.0);
+        let d = steer(&c, right, &holonomic());
         assert!(d.velocity.y < -0.1, "to the right: {:?}", d.velocity);
         let mobility = Mobility {
             holonomic: false,
             ..holonomic()
         };
-        let d = decide(&c, Vec2::new(0.5, 0.0), &mobility);
-        assert_eq!(d.yaw_rate, Some(-1.0));
+        let d = steer(&c, right, &mobility);
+        assert_eq!(d.yaw_rate, Some(-1.0), "turns right first");
+        assert_eq!(d.velocity, Vec2::ZERO);
+        let turned = Mobility {
+            heading: -1.0,
+            ..mobility
+        };
+        let d = steer(&c, right, &turned);
+        assert!(d.velocity.norm() > 0.1, "then drives: {d:?}");
+    }
+
+    #[test]
+    fn a_robot_already_moving_too_fast_for_its_room_is_told_to_stop() {
+        let mut c = constraints();
+        c.walls.push(Wall {
+            segment: Segment::new(Vec2::new(0.3, -5.0), Vec2::new(0.3, 5.0)),
+            radius: 0.25,
+            reason: Intervention::Fence,
+        });
+        let moving = Mobility {
+            velocity: Vec2::new(0.4, 0.0),
+            ..holonomic()
+        };
+        let d = decide(&c, Vec2::new(0.01, 0.0), &moving);
+        assert_eq!(
+            (d.velocity, d.intervention),
+            (Vec2::ZERO, Intervention::Fence)
+        );
+        // At rest (an actuator's tail), it may move away.
+        let resting = Mobility {
+            velocity: Vec2::new(0.00005, 0.0),
+            ..holonomic()
+        };
+        let d = decide(&c, Vec2::new(-0.2, 0.0), &resting);
+        assert_eq!(d.intervention, Intervention::None);
     }
 }

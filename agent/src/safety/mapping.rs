@@ -73,6 +73,7 @@ mod tests {
             velocity,
             yaw_rate: None,
             intervention: Intervention::Fence,
+            blocked: false,
         }
     }
 

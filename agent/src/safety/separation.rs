@@ -150,6 +150,87 @@ impl NeighbourSet {
     }
 }
 
+/// Steps of the right turn tried by [`NeighbourSet::anticipate`], over
+/// half a circle.
+const ANTICIPATION_STEPS: usize = 36;
+
+impl NeighbourSet {
+    /// Anticipation, the cooperative half of separation: if moving at
+    /// `desired` would bring this robot (at `p`, of `radius`) within
+    /// `radius + r_j + margin` of a neighbour moving on at its own velocity
+    /// within `horizon` seconds, the same velocity turned right by the
+    /// smallest angle that avoids every such contact, or if none up to half
+    /// a circle does, the one that puts the first contact off longest.
+    /// `None` when `desired` is clear (or nothing better is found). Every robot turning right, two meeting head-on
+    /// or crossing pass each other with a small swerve each, well before
+    /// their braking paths meet; the constraints never rely on it.
+    pub fn anticipate(
+        &self,
+        p: Vec2,
+        desired: Vec2,
+        radius: f64,
+        margin: f64,
+        horizon: f64,
+        now: Duration,
+    ) -> Option<Vec2> {
+        let others: Vec<(Vec2, Vec2, f64)> = self
+            .robots
+            .iter()
+            .map(|n| {
+                let (q, _) = self.predict(n, now);
+                (q, Vec2::new(n.vx, n.vy), radius + n.radius + margin)
+            })
+            .filter(|(q, _, need)| (*q - p).norm() < need + horizon * 4.0)
+            .collect();
+        // The soonest contact at velocity `u` (infinite if none within the
+        // horizon).
+        let soonest = |u: Vec2| {
+            others
+                .iter()
+                .filter_map(|&(q, w, need)| contact_time(q - p, u - w, need))
+                .filter(|t| *t <= horizon)
+                .fold(f64::INFINITY, f64::min)
+        };
+        if desired.norm() < 1e-9 || soonest(desired).is_infinite() {
+            return None;
+        }
+        // Turn right until clear; if no turn up to half a circle clears,
+        // the one that puts contact off longest (robots jammed together
+        // back away from each other).
+        let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
+        let mut best = (soonest(desired), desired);
+        for k in 1..=ANTICIPATION_STEPS {
+            let u = desired.rotated(-(k as f64) * step);
+            let t = soonest(u);
+            if t.is_infinite() {
+                return Some(u);
+            }
+            if t > best.0 + 1e-9 {
+                best = (t, u);
+            }
+        }
+        (best.1 != desired).then_some(best.1)
+    }
+}
+
+/// When a point at `d` (relative position) moving at `-w` relative to us
+/// first comes within `need`: the first `t >= 0` with `|d - w t| < need`.
+/// `Some(0.0)` if it already is.
+fn contact_time(d: Vec2, w: Vec2, need: f64) -> Option<f64> {
+    let c = d.dot(d) - need * need;
+    if c < 0.0 {
+        // Already within: contact now unless moving apart.
+        return (w.dot(d) > 0.0).then_some(0.0);
+    }
+    let a = w.dot(w);
+    let b = w.dot(d);
+    if a < 1e-18 || b <= 0.0 {
+        return None;
+    }
+    let disc = b * b - a * c;
+    (disc > 0.0).then(|| (b - disc.sqrt()) / a)
+}
+
 fn theirs_length(s: &Segment) -> f64 {
     (s.b - s.a).norm()
 }
@@ -224,6 +305,47 @@ mod tests {
         // 3 s old: somewhere about 1.5 m away, give or take 4.5 m.
         let ancient = limit_toward(&s, Duration::from_secs(3));
         assert_eq!(ancient, 0.0, "information this old still blocks");
+    }
+
+    #[test]
+    fn head_on_both_swerve_right_and_a_clear_way_is_left_alone() {
+        let s = set(vec![neighbour(2.0, 0.0, -0.3, true)]);
+        let u = s
+            .anticipate(
+                Vec2::ZERO,
+                Vec2::new(0.3, 0.0),
+                0.15,
+                0.1,
+                3.0,
+                Duration::ZERO,
+            )
+            .unwrap();
+        assert!(
+            u.y < 0.0 && (u.norm() - 0.3).abs() < 1e-9,
+            "to the right: {u:?}"
+        );
+        let w = Vec2::new(0.3, 0.0) - Vec2::new(-0.3, 0.0);
+        let after = contact_time(Vec2::new(2.0, 0.0), u - Vec2::new(-0.3, 0.0), 0.4);
+        assert!(after.is_none_or(|t| t > 3.0), "{after:?} {w:?}");
+        let away = s.anticipate(
+            Vec2::ZERO,
+            Vec2::new(-0.3, 0.0),
+            0.15,
+            0.1,
+            3.0,
+            Duration::ZERO,
+        );
+        assert_eq!(away, None);
+        // Far in time: not yet.
+        let far = s.anticipate(
+            Vec2::ZERO,
+            Vec2::new(0.3, 0.0),
+            0.15,
+            0.1,
+            1.0,
+            Duration::ZERO,
+        );
+        assert_eq!(far, None);
     }
 
     #[test]
