@@ -915,7 +915,10 @@ mod tests {
         assert_eq!(c.safety.get_ref().radius, 0.2);
         assert_eq!(c.safety.get_ref().max_deceleration, 2.0);
         let e = error(&format!("{MINIMAL}[safety]\nradius = -0.2\n"));
-        assert!(e.contains("bad.toml:6") && e.contains("safety.radius"), "{e}");
+        assert!(
+            e.contains("bad.toml:6") && e.contains("safety.radius"),
+            "{e}"
+        );
         let e = error(&format!("{MINIMAL}[safety]\nradios = 0.2\n"));
         assert!(e.contains("bad.toml:7") && e.contains("radios"), "{e}");
     }

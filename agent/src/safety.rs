@@ -197,10 +197,10 @@ impl SafetyLayer {
     /// (ids compared as wrapping counters; a repeat of the current one is
     /// acknowledged again).
     pub fn apply_arena(&mut self, arena: &Arena) -> Option<ArenaAck> {
-        if let Some(now) = &self.arena {
-            if (arena.id.wrapping_sub(now.id) as i32) < 0 {
-                return None;
-            }
+        if let Some(now) = &self.arena
+            && (arena.id.wrapping_sub(now.id) as i32) < 0
+        {
+            return None;
         }
         self.arena = Some(ArenaInForce {
             id: arena.id,
@@ -332,16 +332,21 @@ impl SafetyLayer {
             return filter::steer(c, y.target, mobility);
         }
         self.yielding = None;
-        let swerve = self.neighbours.as_ref().and_then(|n| {
-            n.anticipate(
-                c.position,
-                desired,
-                self.config.radius,
-                margin,
-                self.config.horizon,
-                now,
-            )
-        });
+        let look_ahead = self.config.horizon > 0.0;
+        let swerve = self
+            .neighbours
+            .as_ref()
+            .filter(|_| look_ahead)
+            .and_then(|n| {
+                n.anticipate(
+                    c.position,
+                    desired,
+                    self.config.radius,
+                    margin,
+                    self.config.horizon,
+                    now,
+                )
+            });
         if let Some(target) = swerve {
             if !mobility.holonomic && self.config.yield_time > 0.0 {
                 // A diff-drive needs time to turn: the swerve is held.

@@ -770,8 +770,8 @@ fn the_largest_arena_and_neighbour_list_fit_one_datagram() {
                 let a = i as f64 / n as f64 * std::f64::consts::TAU;
                 // Coordinates that need a full float64 each.
                 Point {
-                    x: 1000.123_456_789 + r * a.cos(),
-                    y: -1000.987_654_321 + r * a.sin(),
+                    x: 1_000.123_456_789 + r * a.cos(),
+                    y: -1_000.987_654_321 + r * a.sin(),
                 }
             })
             .collect()
