@@ -203,6 +203,96 @@ fn a_robot_driven_at_the_wall_stops_at_the_margin() {
     }
 }
 
+/// Every way of commanding a robot at the wall, at full speed: raw
+/// actuator outputs, steering-throttle, velocity-heading, twist and an
+/// onboard mission to a point beyond the wall.
+fn every_mode(spec: &PlatformSpec, layer_on: bool) -> Vec<(&'static str, SafetyTrial)> {
+    use mech_proto::{Actuators, Command, SteeringThrottle, VelocityHeading};
+    let platform = spec.build();
+    let full = platform.mix(&mech_proto::Twist {
+        vx: platform.limits().max_speed,
+        ..mech_proto::Twist::default()
+    });
+    let mut commands = vec![
+        ("actuators", Command::Actuators(Actuators { outputs: full })),
+        (
+            "velocity-heading",
+            Command::VelocityHeading(VelocityHeading {
+                speed: platform.limits().max_speed,
+                heading: 0.0,
+            }),
+        ),
+        ("twist", twist(platform.as_ref(), 1.0, 0.0, 0.0)),
+    ];
+    if platform
+        .capabilities()
+        .contains(&mech_proto::CommandKind::SteeringThrottle)
+    {
+        commands.push((
+            "steering-throttle",
+            Command::SteeringThrottle(SteeringThrottle {
+                steering: 0.0,
+                throttle: 1.0,
+            }),
+        ));
+    }
+    let mut runs: Vec<(&'static str, SafetyTrial)> = commands
+        .into_iter()
+        .map(|(name, cmd)| {
+            let mut t = trial(layer_on);
+            let i = t.add(spec, pose(1.0, 1.4, 0.0));
+            t.command(i, &cmd);
+            t.run_for(10.0);
+            (name, t)
+        })
+        .collect();
+    let mut t = trial(layer_on);
+    let i = t.add(spec, pose(1.0, 1.4, 0.0));
+    let beyond = Waypoint {
+        x: 5.0,
+        y: 1.4,
+        z: 0.0,
+        time: None,
+    };
+    t.mission(
+        i,
+        Mission {
+            id: 1,
+            waypoints: vec![beyond],
+            looped: false,
+            arrival_radius: 0.05,
+            start_index: 0,
+        },
+    );
+    t.run_for(15.0);
+    runs.push(("mission", t));
+    runs
+}
+
+#[test]
+fn every_command_mode_is_limited_alike() {
+    for spec in platforms() {
+        for (mode, t) in every_mode(&spec, true) {
+            let m = t.metrics();
+            assert_eq!(
+                m.margin_violations + m.breaches,
+                0,
+                "{spec:?} {mode}: {m:?}"
+            );
+            assert!(
+                m.min_clearance < MARGIN + 0.05,
+                "{spec:?} {mode} got there: {m:?}"
+            );
+        }
+        for (mode, t) in every_mode(&spec, false) {
+            assert!(
+                t.metrics().breaches > 0,
+                "{spec:?} {mode} without the layer"
+            );
+        }
+    }
+}
+
 /// The head-on run with the station's neighbour messages lost after the
 /// first second.
 fn head_on_without_news(layer_on: bool) -> SafetyTrial {
