@@ -172,6 +172,9 @@ pub struct SafetyLayer {
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
     yielding: Option<Yield>,
+    /// Registered with a router since the last arena: the next arena and
+    /// neighbour list apply whatever their id and stamp.
+    fresh_station: bool,
     intervention: Intervention,
     counts: InterventionCounts,
 }
@@ -183,6 +186,7 @@ impl SafetyLayer {
             arena: None,
             neighbours: None,
             yielding: None,
+            fresh_station: false,
             intervention: Intervention::None,
             counts: InterventionCounts::default(),
         }
@@ -198,10 +202,12 @@ impl SafetyLayer {
     /// acknowledged again).
     pub fn apply_arena(&mut self, arena: &Arena) -> Option<ArenaAck> {
         if let Some(now) = &self.arena
+            && !self.fresh_station
             && (arena.id.wrapping_sub(now.id) as i32) < 0
         {
             return None;
         }
+        self.fresh_station = false;
         self.arena = Some(ArenaInForce {
             id: arena.id,
             enabled: arena.enabled,
@@ -220,11 +226,21 @@ impl SafetyLayer {
             .neighbours
             .as_ref()
             .is_some_and(|held| n.stamp_us < held.stamp_us)
+            && !self.fresh_station
         {
             return false;
         }
         self.neighbours = Some(NeighbourSet::new(n, now));
         true
+    }
+
+    /// The robot registered (again) with a router, which may have
+    /// restarted and numbers arenas afresh: the next arena applies whatever
+    /// its id, and so does any neighbour list until then. Until it comes,
+    /// the arena and neighbours held stay in force (the robot is no less
+    /// safe for a station restart).
+    pub fn registered(&mut self) {
+        self.fresh_station = true;
     }
 
     /// Whether the layer enforces anything.
@@ -448,6 +464,20 @@ mod tests {
         let mut l = SafetyLayer::new(SafetyConfig::default());
         l.apply_arena(&arena(u32::MAX, true)).unwrap();
         assert!(l.apply_arena(&arena(0, true)).is_some());
+    }
+
+    #[test]
+    fn after_registering_again_a_restarted_stations_arena_applies() {
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.apply_arena(&arena(40, true)).unwrap();
+        l.apply_neighbours(&neighbours(5_000, vec![]), Duration::ZERO);
+        assert_eq!(l.apply_arena(&arena(1, false)), None, "older, same station");
+        l.registered();
+        assert_eq!(l.state(), SafetyState::On, "the old arena holds meanwhile");
+        assert!(l.apply_neighbours(&neighbours(10, vec![]), Duration::ZERO));
+        assert_eq!(l.apply_arena(&arena(1, false)).unwrap().id, 1);
+        assert_eq!(l.state(), SafetyState::Off);
+        assert_eq!(l.apply_arena(&arena(0, true)), None, "ordered again");
     }
 
     #[test]
