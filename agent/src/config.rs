@@ -71,6 +71,10 @@ pub struct RobotConfig {
     /// (`docs/autopilots.md`); it then also gives the position.
     #[serde(default)]
     pub autopilot: Option<Spanned<crate::autopilot::AutopilotConfig>>,
+    /// `[safety]`: the robot's footprint and braking for the fleet safety
+    /// layer (`docs/safety.md`), which the station's arena switches on.
+    #[serde(default = "spanned_default")]
+    pub safety: Spanned<crate::safety::SafetyConfig>,
 }
 
 /// `[auth]`: signing and checking with the router.
@@ -474,7 +478,11 @@ impl RobotConfig {
         self.validate_filter()?;
         self.validate_actuators()?;
         self.validate_encoders()?;
-        self.validate_autopilot()
+        self.validate_autopilot()?;
+        self.safety
+            .get_ref()
+            .validate()
+            .map_err(|m| (at(self.safety.span()), format!("[safety]: {m}")))
     }
 
     /// An autopilot gives the position and takes the place of actuators.
@@ -893,6 +901,26 @@ mod tests {
         RobotConfig::parse(text, "bad.toml")
             .unwrap_err()
             .to_string()
+    }
+
+    #[test]
+    fn the_safety_table_has_defaults_and_its_mistakes_are_located() {
+        let c = RobotConfig::parse(MINIMAL, "r1.toml").unwrap();
+        assert_eq!(*c.safety.get_ref(), crate::safety::SafetyConfig::default());
+        let c = RobotConfig::parse(
+            &format!("{MINIMAL}[safety]\nradius = 0.2\nmax_deceleration = 2.0\n"),
+            "r1.toml",
+        )
+        .unwrap();
+        assert_eq!(c.safety.get_ref().radius, 0.2);
+        assert_eq!(c.safety.get_ref().max_deceleration, 2.0);
+        let e = error(&format!("{MINIMAL}[safety]\nradius = -0.2\n"));
+        assert!(
+            e.contains("bad.toml:6") && e.contains("safety.radius"),
+            "{e}"
+        );
+        let e = error(&format!("{MINIMAL}[safety]\nradios = 0.2\n"));
+        assert!(e.contains("bad.toml:7") && e.contains("radios"), "{e}");
     }
 
     #[test]

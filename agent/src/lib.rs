@@ -11,6 +11,8 @@
 //! - [`platform`]: differential drive, kiwi, quadcopter.
 //! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
+//! - [`safety`]: fleet safety, the geofence and separation filter every
+//!   obeyed command passes through.
 //! - [`wheels`], [`fusion`]: wheel encoders (measured speed, closed-loop
 //!   wheel speed, stall detection) and odometry fused with position fixes.
 //! - [`agent`]: the socket-free core, one state machine per concern
@@ -39,6 +41,7 @@ pub mod links;
 pub mod order;
 pub mod platform;
 pub mod runtime;
+pub mod safety;
 pub mod sim;
 pub mod wheels;
 

@@ -7,6 +7,7 @@ pub mod agent;
 pub mod encoder;
 pub mod noise;
 pub mod robot;
+pub mod safety_trial;
 pub mod trial;
 
 use std::net::SocketAddr;

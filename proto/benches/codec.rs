@@ -58,6 +58,7 @@ fn bench(c: &mut Criterion) {
             }),
             stale: 0,
             velocity_source: mech_proto::VelocitySource::Measured,
+            safety: None,
         }),
     );
     for (name, env) in [("command", &command), ("telemetry", &telemetry)] {

@@ -9,6 +9,7 @@ use serde_repr::{Deserialize_repr, Serialize_repr};
 
 use crate::command::{Command, CommandKind, finite};
 use crate::error::Error;
+use crate::safety::{Arena, ArenaAck, Neighbours, SafetyReport};
 use crate::tagged::tagged_enum;
 use crate::{MAX_FLEET_PARTS, MAX_NAME_LEN, MAX_TEXT_LEN, MAX_WAYPOINTS};
 
@@ -214,6 +215,12 @@ pub struct Telemetry {
     /// it reads as commanded.
     #[serde(default)]
     pub velocity_source: VelocitySource,
+    /// What the robot's safety layer is doing (see `docs/safety.md`);
+    /// `None` for a robot without one. Added to version 1 at the end, and
+    /// left out of the array when `None`: telemetry without it is the
+    /// array it always was, and reads as `None`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyReport>,
 }
 
 /// One point of a [`Mission`]: position in metres and an optional arrival time
@@ -574,6 +581,9 @@ tagged_enum! {
         TimeRequest(TimeRequest) = 20,
         Time(Time) = 21,
         Autopilot(AutopilotRequest) = 22,
+        Arena(Arena) = 23,
+        ArenaAck(ArenaAck) = 24,
+        Neighbours(Neighbours) = 25,
     }
 }
 
@@ -592,7 +602,7 @@ pub(crate) fn name(v: &str, what: &str) -> Result<(), Error> {
     Ok(())
 }
 
-fn nonempty_name(v: &str, what: &str) -> Result<(), Error> {
+pub(crate) fn nonempty_name(v: &str, what: &str) -> Result<(), Error> {
     if v.is_empty() {
         return Err(Error::invalid(format!("{what} is empty")));
     }
@@ -663,6 +673,9 @@ impl Body {
             Body::Bye(b) => text(&b.reason, "bye reason"),
             Body::TimeRequest(_) | Body::Time(_) => Ok(()),
             Body::Autopilot(a) => a.validate(),
+            Body::Arena(a) => a.validate(),
+            Body::ArenaAck(a) => nonempty_name(&a.robot, "robot name"),
+            Body::Neighbours(n) => n.validate(),
         }
     }
 }
@@ -705,6 +718,9 @@ impl Telemetry {
         count(self.actuators.len(), crate::MAX_MOTORS, "actuator outputs")?;
         for a in &self.actuators {
             finite(*a, "actuator output")?;
+        }
+        if let Some(s) = &self.safety {
+            s.validate()?;
         }
         Ok(())
     }

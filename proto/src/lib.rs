@@ -21,6 +21,7 @@ mod command;
 mod envelope;
 mod error;
 pub mod framing;
+mod safety;
 mod tagged;
 mod units;
 
@@ -41,6 +42,11 @@ pub use envelope::{
     peek, signed_region,
 };
 pub use error::{Error, ErrorKind};
+pub use safety::{
+    Arena, ArenaAck, Disc, Intervention, InterventionCounts, MAX_BOUNDARY_VERTICES, MAX_EXTENT,
+    MAX_KEEP_OUTS, MAX_NEIGHBOURS, MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_SLOW_ZONES, Neighbour,
+    Neighbours, Obstacle, Point, SafetyReport, SafetyState, SlowZone, check_polygon,
+};
 pub use units::{unix_micros, wrap_angle};
 
 /// Protocol version this build speaks. A message with another version is

@@ -85,6 +85,7 @@ fn samples() -> Vec<Envelope> {
                 mission: None,
                 stale: 0,
                 velocity_source: mech_proto::VelocitySource::Measured,
+                safety: None,
             }),
         ),
         Envelope::new(

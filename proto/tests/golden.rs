@@ -330,3 +330,81 @@ fn an_autopilot_request_has_the_documented_bytes() {
     unknown[29] = 0x06;
     assert!(decode(&unknown).is_err());
 }
+
+#[rustfmt::skip]
+const ARENA_ACK: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x18,                                     // kind 24 = ArenaAck
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // sender "robot_1"
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // destination "router"
+    0xa0,                                     // channel ""
+    0x92,                                     // body: fixarray, 2 fields
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', //   robot "robot_1"
+    0xcd, 0x01, 0x2c,                         //   id: uint16 300
+    0xc0,                                     // auth: nil
+];
+
+#[rustfmt::skip]
+const ARENA_TRIANGLE: &[u8] = &[
+    0x99,                                     // envelope, 9 elements
+    0x01,                                     // version 1
+    0x17,                                     // kind 23 = Arena
+    0x07,                                     // seq 7
+    0xce, 0x00, 0x0f, 0x42, 0x40,             // stamp_us 1_000_000
+    0xa6, b'r', b'o', b'u', b't', b'e', b'r', // sender "router"
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', // destination "robot_1"
+    0xa0,                                     // channel ""
+    0x97,                                     // body: fixarray, 7 fields
+    0xa7, b'r', b'o', b'b', b'o', b't', b'_', b'1', //   robot "robot_1"
+    0x02,                                     //   id 2
+    0xc3,                                     //   enabled: true
+    0x93,                                     //   boundary: 3 points
+    0x92, 0xcb, 0, 0, 0, 0, 0, 0, 0, 0,       //     [x 0.0,
+          0xcb, 0, 0, 0, 0, 0, 0, 0, 0,       //      y 0.0]
+    0x92, 0xcb, 0x40, 0x10, 0, 0, 0, 0, 0, 0, //     [x 4.0,
+          0xcb, 0, 0, 0, 0, 0, 0, 0, 0,       //      y 0.0]
+    0x92, 0xcb, 0, 0, 0, 0, 0, 0, 0, 0,       //     [x 0.0,
+          0xcb, 0x40, 0x08, 0, 0, 0, 0, 0, 0, //      y 3.0]
+    0x90,                                     //   keep_out: none
+    0x90,                                     //   slow_zones: none
+    0xcb, 0x3f, 0xb9, 0x99, 0x99, 0x99, 0x99, 0x99, 0x9a, // margin 0.1 m
+    0xc0,                                     // auth: nil
+];
+
+#[test]
+fn arena_messages_have_the_documented_bytes() {
+    use mech_proto::{Arena, ArenaAck, Point};
+    let ack = Envelope::new(
+        header("robot_1", "router", ""),
+        Body::ArenaAck(ArenaAck {
+            robot: "robot_1".into(),
+            id: 300,
+        }),
+    );
+    assert_eq!(encode(&ack).as_deref(), Ok(ARENA_ACK));
+    assert_eq!(decode(ARENA_ACK), Ok(ack));
+    let p = |x, y| Point { x, y };
+    let arena = Envelope::new(
+        header("router", "robot_1", ""),
+        Body::Arena(Arena {
+            robot: "robot_1".into(),
+            id: 2,
+            enabled: true,
+            boundary: vec![p(0.0, 0.0), p(4.0, 0.0), p(0.0, 3.0)],
+            keep_out: vec![],
+            slow_zones: vec![],
+            margin: 0.1,
+        }),
+    );
+    assert_eq!(encode(&arena).as_deref(), Ok(ARENA_TRIANGLE));
+    assert_eq!(decode(ARENA_TRIANGLE), Ok(arena));
+    // Two points make no boundary: refused on decode.
+    let mut short = ARENA_TRIANGLE.to_vec();
+    let at = short.iter().position(|b| *b == 0x93).unwrap();
+    short[at] = 0x92;
+    short.drain(at + 1 + 2 * 19..at + 1 + 3 * 19);
+    assert!(decode(&short).is_err());
+}

@@ -66,6 +66,126 @@ fn route() -> impl Strategy<Value = Route> {
     })
 }
 
+fn point() -> impl Strategy<Value = Point> {
+    (-1.0e4..1.0e4f64, -1.0e4..1.0e4f64).prop_map(|(x, y)| Point { x, y })
+}
+
+/// A simple polygon: `n` vertices at increasing angles around a centre, each
+/// at its own radius (star-shaped about the centre, so its edges never
+/// cross).
+fn polygon(max: usize) -> impl Strategy<Value = Vec<Point>> {
+    (point(), vec(0.1..50.0f64, 3..=max)).prop_map(|(c, radii)| {
+        let n = radii.len() as f64;
+        radii
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let a = i as f64 / n * std::f64::consts::TAU;
+                Point {
+                    x: c.x + r * a.cos(),
+                    y: c.y + r * a.sin(),
+                }
+            })
+            .collect()
+    })
+}
+
+fn arena() -> impl Strategy<Value = Arena> {
+    (
+        (name(), any::<u32>(), any::<bool>()),
+        proptest::option::of(polygon(MAX_BOUNDARY_VERTICES)),
+        vec(polygon(12), 0..4),
+        vec((polygon(12), 0.0..2.0f64), 0..3),
+        0.0..1.0f64,
+    )
+        .prop_map(|((robot, id, enabled), boundary, keep_out, slow, margin)| {
+            // Keep-outs and slow zones need a boundary.
+            let (keep_out, slow) = match boundary {
+                Some(_) => (keep_out, slow),
+                None => (vec![], vec![]),
+            };
+            Arena {
+                robot,
+                id,
+                enabled,
+                boundary: boundary.unwrap_or_default(),
+                keep_out,
+                slow_zones: slow
+                    .into_iter()
+                    .map(|(polygon, max_speed)| SlowZone { polygon, max_speed })
+                    .collect(),
+                margin,
+            }
+        })
+}
+
+fn neighbours() -> impl Strategy<Value = Neighbours> {
+    let neighbour = (
+        any::<u16>(),
+        (point(), -100.0..100.0f64),
+        (-10.0..10.0f64, -10.0..10.0f64, -5.0..5.0f64),
+        (0.0..5.0f64, any::<u32>(), any::<bool>()),
+    )
+        .prop_map(
+            |(id, (p, z), (vx, vy, vz), (radius, age_ms, cooperative))| Neighbour {
+                id,
+                x: p.x,
+                y: p.y,
+                z,
+                vx,
+                vy,
+                vz,
+                radius,
+                age_ms,
+                cooperative,
+            },
+        );
+    let obstacle = prop_oneof![
+        (point(), 0.0..10.0f64).prop_map(|(c, radius)| Obstacle::Disc(Disc {
+            x: c.x,
+            y: c.y,
+            radius
+        })),
+        polygon(MAX_POLYGON_VERTICES).prop_map(Obstacle::Polygon),
+    ];
+    (
+        name(),
+        any::<u64>(),
+        vec(neighbour, 0..20),
+        vec(obstacle, 0..4),
+    )
+        .prop_map(|(robot, stamp_us, robots, obstacles)| Neighbours {
+            robot,
+            stamp_us,
+            robots,
+            obstacles,
+        })
+}
+
+fn safety_report() -> impl Strategy<Value = SafetyReport> {
+    (
+        0..3usize,
+        any::<u32>(),
+        0..Intervention::ALL.len(),
+        vec(any::<u32>(), 6),
+        0.0..5.0f64,
+    )
+        .prop_map(|(state, arena, intervention, c, radius)| SafetyReport {
+            state: [SafetyState::NoArena, SafetyState::On, SafetyState::Off][state],
+            arena,
+            intervention: Intervention::ALL[intervention],
+            counts: InterventionCounts {
+                fence: c[0],
+                keep_out: c[1],
+                separation: c[2],
+                stale_neighbours: c[3],
+                slow_zone: c[4],
+                returning: c[5],
+            },
+            radius,
+        })
+}
+
 fn body() -> impl Strategy<Value = Body> {
     let hello = (
         name(),
@@ -106,7 +226,11 @@ fn body() -> impl Strategy<Value = Body> {
         fraction(),
         vec(unit(), 0..8),
         proptest::option::of((any::<u32>(), any::<u32>(), any::<u32>())),
-        (any::<u32>(), any::<bool>()),
+        (
+            any::<u32>(),
+            any::<bool>(),
+            proptest::option::of(safety_report()),
+        ),
     )
         .prop_map(
             |(
@@ -119,7 +243,7 @@ fn body() -> impl Strategy<Value = Body> {
                 q,
                 actuators,
                 mission,
-                (stale, measured),
+                (stale, measured, safety),
             )| {
                 Body::Telemetry(Telemetry {
                     pose,
@@ -157,6 +281,7 @@ fn body() -> impl Strategy<Value = Body> {
                     } else {
                         VelocitySource::Commanded
                     },
+                    safety,
                 })
             },
         );
@@ -332,6 +457,9 @@ fn body() -> impl Strategy<Value = Body> {
                 altitude,
             })
         }),
+        arena().prop_map(Body::Arena),
+        (name(), any::<u32>()).prop_map(|(robot, id)| Body::ArenaAck(ArenaAck { robot, id })),
+        neighbours().prop_map(Body::Neighbours),
     ]
 }
 
@@ -534,6 +662,7 @@ fn telemetry_with(stale: u32, velocity_source: VelocitySource) -> Telemetry {
         mission: None,
         stale,
         velocity_source,
+        safety: None,
     }
 }
 
@@ -553,4 +682,137 @@ fn telemetry_from_before_the_velocity_source_reads_as_commanded() {
         panic!("not telemetry")
     };
     assert_eq!(t, telemetry_with(7, VelocitySource::Commanded));
+}
+
+#[test]
+fn telemetry_without_a_safety_report_keeps_its_old_bytes_and_one_with_it_round_trips() {
+    // No report: the 13-element array of before (older_telemetry relies
+    // on it too), which reads back as no report.
+    let plain = telemetry_with(7, VelocitySource::Measured);
+    let env = Envelope::new(Header::default(), Body::Telemetry(plain.clone()));
+    let bytes = encode(&env).unwrap();
+    assert!(bytes.contains(&0x9d), "13 fields");
+    assert!(!bytes.contains(&0x9e), "not 14");
+    let reported = Telemetry {
+        safety: Some(SafetyReport {
+            state: SafetyState::Off,
+            arena: 3,
+            intervention: Intervention::Separation,
+            counts: InterventionCounts {
+                separation: 2,
+                ..InterventionCounts::default()
+            },
+            radius: 0.12,
+        }),
+        ..plain
+    };
+    let env = Envelope::new(Header::default(), Body::Telemetry(reported));
+    let bytes = encode(&env).unwrap();
+    assert!(bytes.contains(&0x9e), "14 fields");
+    assert_eq!(decode(&bytes).unwrap(), env);
+}
+
+#[test]
+fn arenas_that_a_robot_could_not_use_are_refused() {
+    let square = |x: f64| {
+        vec![
+            Point { x, y: 0.0 },
+            Point { x: x + 1.0, y: 0.0 },
+            Point { x: x + 1.0, y: 1.0 },
+            Point { x, y: 1.0 },
+        ]
+    };
+    let good = Arena {
+        robot: "robot_1".into(),
+        id: 1,
+        enabled: true,
+        boundary: square(0.0),
+        keep_out: vec![square(0.2)],
+        slow_zones: vec![],
+        margin: 0.05,
+    };
+    let check = |a: &Arena| Body::Arena(a.clone()).validate();
+    assert!(check(&good).is_ok());
+    let mut bad = good.clone();
+    bad.margin = -0.1;
+    assert!(check(&bad).is_err(), "negative margin");
+    let mut bad = good.clone();
+    bad.margin = f64::NAN;
+    assert!(check(&bad).is_err(), "NaN margin");
+    let mut bad = good.clone();
+    bad.boundary.swap(1, 2);
+    assert!(check(&bad).is_err(), "a bow tie");
+    let mut bad = good.clone();
+    bad.boundary.clear();
+    assert!(check(&bad).is_err(), "keep-outs without a boundary");
+    let mut bad = good.clone();
+    bad.keep_out = vec![square(0.0); MAX_KEEP_OUTS + 1];
+    assert!(check(&bad).is_err(), "too many keep-outs");
+    let mut bad = good.clone();
+    bad.slow_zones = vec![SlowZone {
+        polygon: square(0.0),
+        max_speed: -1.0,
+    }];
+    assert!(check(&bad).is_err(), "negative speed cap");
+    let cleared = Arena {
+        boundary: vec![],
+        keep_out: vec![],
+        ..good
+    };
+    assert!(cleared.is_empty() && check(&cleared).is_ok(), "no arena");
+}
+
+#[test]
+fn the_largest_arena_and_neighbour_list_fit_one_datagram() {
+    let ring = |n: usize, r: f64| -> Vec<Point> {
+        (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                // Coordinates that need a full float64 each.
+                Point {
+                    x: 1_000.123_456_789 + r * a.cos(),
+                    y: -1_000.987_654_321 + r * a.sin(),
+                }
+            })
+            .collect()
+    };
+    let arena = Arena {
+        robot: "r".repeat(MAX_NAME_LEN),
+        id: u32::MAX,
+        enabled: true,
+        boundary: ring(MAX_BOUNDARY_VERTICES, 90.0),
+        keep_out: vec![ring(MAX_POLYGON_VERTICES, 1.0); MAX_KEEP_OUTS],
+        slow_zones: vec![
+            SlowZone {
+                polygon: ring(MAX_POLYGON_VERTICES, 2.0),
+                max_speed: 0.1,
+            };
+            MAX_SLOW_ZONES
+        ],
+        margin: 0.1,
+    };
+    let n = Neighbour {
+        id: u16::MAX,
+        x: 1.1,
+        y: 2.2,
+        z: 3.3,
+        vx: 0.1,
+        vy: 0.2,
+        vz: 0.3,
+        radius: 0.15,
+        age_ms: u32::MAX,
+        cooperative: true,
+    };
+    let neighbours = Neighbours {
+        robot: "r".repeat(MAX_NAME_LEN),
+        stamp_us: u64::MAX,
+        robots: vec![n; MAX_NEIGHBOURS],
+        obstacles: vec![Obstacle::Polygon(ring(MAX_POLYGON_VERTICES, 1.0)); MAX_OBSTACLES],
+    };
+    for body in [Body::Arena(arena), Body::Neighbours(neighbours)] {
+        let env = Envelope::new(Header::default(), body);
+        let bytes = encode(&env).unwrap();
+        assert!(bytes.len() <= MAX_MESSAGE_LEN, "{} bytes", bytes.len());
+        assert_eq!(decode(&bytes).unwrap(), env);
+    }
 }

@@ -154,6 +154,7 @@ fn the_python_decoder_reads_what_mech_proto_writes() {
         }),
         stale: 4,
         velocity_source: VelocitySource::Measured,
+        safety: None,
     };
     let messages = [
         Body::Telemetry(telemetry),

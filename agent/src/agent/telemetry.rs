@@ -74,6 +74,7 @@ impl Snapshot<'_> {
             mission: self.mission,
             stale: self.stale,
             velocity_source: self.motion.velocity_source,
+            safety: None,
         }
     }
 }

@@ -262,6 +262,7 @@ impl SimRobot {
             stale: 0,
             // The true motion: what ideal encoders would measure.
             velocity_source: mech_proto::VelocitySource::Measured,
+            safety: None,
         }
     }
 

@@ -81,6 +81,7 @@ async fn bare_agent(router: SocketAddr, seen: mpsc::UnboundedSender<(Instant, En
                     mission: mission.filter(|_| channel == "wp/gcs"),
                     stale: 0,
                     velocity_source: mech_proto::VelocitySource::Commanded,
+                    safety: None,
                 };
                 let _ = socket.send_to(&send(Body::Telemetry(t)), router).await;
             }

@@ -127,6 +127,7 @@ fn telemetry(name: &str, x: f64) -> Vec<u8> {
         mission: None,
         stale: 0,
         velocity_source: mech_proto::VelocitySource::Commanded,
+        safety: None,
     };
     env(name, "router", "", 0, Body::Telemetry(t))
 }

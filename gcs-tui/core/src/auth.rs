@@ -268,7 +268,8 @@ impl Identity {
             | Body::Telemetry(_)
             | Body::MissionAck(_)
             | Body::RouteAck(_)
-            | Body::EStopAck(_) => role == Role::Robot,
+            | Body::EStopAck(_)
+            | Body::ArenaAck(_) => role == Role::Robot,
             Body::Heartbeat(_) | Body::Notice(_) | Body::Bye(_) | Body::TimeRequest(_) => true,
             Body::Command(_) | Body::FleetCommand(_) | Body::Cluster(_) | Body::Mission(_) => {
                 self.may_publish(channel)
@@ -279,7 +280,15 @@ impl Identity {
             }
             Body::EStop(e) => role == Role::Operator || (e.engage && role == Role::Estop),
             Body::Autopilot(_) => role == Role::Operator,
-            Body::Welcome(_) | Body::Route(_) | Body::Channels(_) | Body::Time(_) => false,
+            // The station's own: only the router sends them (an arena with
+            // the layer switched off, too, comes from an operator's command
+            // at the station, never from a peer).
+            Body::Welcome(_)
+            | Body::Route(_)
+            | Body::Channels(_)
+            | Body::Time(_)
+            | Body::Arena(_)
+            | Body::Neighbours(_) => false,
         };
         if ok {
             return None;
@@ -555,5 +564,40 @@ mod tests {
             .verify(&region, Some(tag), "matlab", 3 * hour, true)
             .unwrap_err();
         assert_eq!(e.reason, RejectReason::Replay, "the same message again");
+    }
+
+    /// Arenas and neighbour lists come from the station alone: no peer,
+    /// not even an operator, may send them (switching a robot's layer off
+    /// is an operator's command at the station); only robots acknowledge.
+    #[test]
+    fn only_the_station_sends_arenas_and_neighbours_and_only_robots_ack_them() {
+        let arena = Body::Arena(mech_proto::Arena {
+            robot: "robot_1".into(),
+            id: 1,
+            enabled: false,
+            boundary: vec![],
+            keep_out: vec![],
+            slow_zones: vec![],
+            margin: 0.1,
+        });
+        let neighbours = Body::Neighbours(mech_proto::Neighbours {
+            robot: "robot_1".into(),
+            stamp_us: 1,
+            robots: vec![],
+            obstacles: vec![],
+        });
+        let ack = Body::ArenaAck(mech_proto::ArenaAck {
+            robot: "robot_1".into(),
+            id: 1,
+        });
+        for role in [Role::Robot, Role::Controller, Role::Operator, Role::Estop] {
+            let who = Identity::new(role, "x", Key::new(&[1; 32]), vec![]);
+            assert!(who.permits(&arena, "").is_some(), "{role:?} arena");
+            assert!(
+                who.permits(&neighbours, "").is_some(),
+                "{role:?} neighbours"
+            );
+            assert_eq!(who.permits(&ack, "").is_none(), role == Role::Robot);
+        }
     }
 }

@@ -323,6 +323,7 @@ impl Fleet {
         r.mission = t.mission;
         r.stale = t.stale;
         r.velocity_source = t.velocity_source;
+        r.safety = t.safety;
         if t.health != Health::Fault && t.failsafe != FailsafeState::Fault {
             r.fault = None;
         }
@@ -557,6 +558,7 @@ mod tests {
             mission,
             stale: 0,
             velocity_source: mech_proto::VelocitySource::Commanded,
+            safety: None,
         }
     }
 

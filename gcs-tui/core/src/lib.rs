@@ -9,6 +9,9 @@
 //!   control plane;
 //! - [`names`]: robot names as an operator reads them (the number a name
 //!   ends with, natural order);
+//! - [`arena`]: the `[arena]` section and the arena message robots
+//!   enforce; [`neighbours`]: choosing each robot's neighbours from the
+//!   fleet's states (fleet safety, `docs/safety.md`);
 //! - [`event`]: what the station saw happen, and the [`EventSink`] the
 //!   router delivers it to;
 //! - [`counters`]: traffic counters and live channels;
@@ -23,6 +26,7 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
+pub mod arena;
 pub mod auth;
 pub mod config;
 pub mod counters;
@@ -30,11 +34,13 @@ pub mod event;
 pub mod fleet;
 pub mod gcs;
 pub mod names;
+pub mod neighbours;
 pub mod record;
 pub mod replay;
 pub mod router;
 pub mod sync;
 
+pub use arena::ArenaConfig;
 pub use config::ConfigError;
 pub use counters::{ChannelStatus, Counters, DropReason, Drops, LinkQuality, Traffic};
 pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};

@@ -43,6 +43,7 @@ fn telemetry(x: f64) -> Body {
         },
         velocity: Velocity::default(),
         velocity_source: Default::default(),
+        safety: None,
         mode: ControlMode::Twist,
         channel: "joy/0".into(),
         computation: Computation::Onboard,

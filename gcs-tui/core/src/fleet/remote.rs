@@ -222,6 +222,7 @@ mod tests {
             },
             velocity: Default::default(),
             velocity_source: Default::default(),
+            safety: None,
             mode: mech_proto::ControlMode::Twist,
             channel: "ext/x".into(),
             computation: Default::default(),

@@ -133,6 +133,9 @@ pub struct Robot {
     /// Whether `velocity` was measured by wheel encoders or follows from
     /// the commanded outputs (telemetry).
     pub velocity_source: VelocitySource,
+    /// What the robot's safety layer reports (telemetry); `None` for a
+    /// robot without one.
+    pub safety: Option<mech_proto::SafetyReport>,
     /// The robot's last driver fault notice ("left wheel stalled: ..."),
     /// kept while its telemetry reports the fault.
     pub fault: Option<String>,
@@ -177,6 +180,7 @@ impl Robot {
             stale: 0,
             quality: LinkQuality::default(),
             velocity_source: VelocitySource::Commanded,
+            safety: None,
             fault: None,
             remote: None,
         }
@@ -233,6 +237,7 @@ impl Robot {
             mission: self.mission,
             stale: self.stale,
             velocity_source: self.velocity_source,
+            safety: self.safety,
         }
     }
 

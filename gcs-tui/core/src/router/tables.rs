@@ -357,7 +357,10 @@ impl Tables {
             | Body::Welcome(_)
             | Body::Route(_)
             | Body::Channels(_)
-            | Body::Time(_) => {
+            | Body::Time(_)
+            | Body::Arena(_)
+            | Body::ArenaAck(_)
+            | Body::Neighbours(_) => {
                 let what = format!("unexpected {} message", body.kind());
                 self.bad(what, cx)
             }

@@ -79,6 +79,7 @@ pub fn telemetry(x: f64, y: f64, channel: &str, mission: Option<MissionProgress>
         mission,
         stale: 0,
         velocity_source: mech_proto::VelocitySource::Commanded,
+        safety: None,
     }
 }
 

@@ -1,0 +1,569 @@
+//! Fleet safety at the robot: whatever command the agent is about to obey
+//! (any mode, any controller, an onboard mission), [`SafetyLayer::filter`]
+//! limits it so the robot stays inside its arena, out of keep-outs, and
+//! apart from its neighbours, and says when and why it did.
+//!
+//! - [`geometry`]: vectors, segments, polygons, a disc swept along a ray;
+//! - [`constraints`]: braking paths and the constraints on them;
+//! - [`geofence`]: the arena's constraints ([`Fence`]);
+//! - [`separation`]: the neighbours' constraints ([`NeighbourSet`]);
+//! - [`filter`]: the pure decision from constraints and a desired velocity;
+//! - [`mapping`]: actuator outputs to world velocity and back, per platform.
+//!
+//! # The seam
+//!
+//! The agent calls [`SafetyLayer::filter`] once per control period, on the
+//! outputs its controller computed for the command it obeys (after
+//! `Controller::update`, before the wheel speed loops and the actuators),
+//! with its pose estimate, its world-frame velocity estimate (the one its
+//! telemetry reports) and `now`; it writes the outputs returned. It hands
+//! the layer every [`Arena`] addressed to it ([`SafetyLayer::apply_arena`],
+//! answering with the [`ArenaAck`] returned) and every [`Neighbours`]
+//! ([`SafetyLayer::apply_neighbours`]), and puts [`SafetyLayer::report`] in
+//! its telemetry. Nothing here reads a clock or does I/O.
+//!
+//! The guarantees and their assumptions are in `docs/safety.md`.
+
+pub mod constraints;
+pub mod filter;
+pub mod geofence;
+pub mod geometry;
+pub mod mapping;
+pub mod separation;
+
+use std::time::Duration;
+
+use mech_proto::{
+    Arena, ArenaAck, Intervention, InterventionCounts, Neighbours, Pose, SafetyReport, SafetyState,
+};
+use serde::Deserialize;
+
+pub use constraints::{Braking, Constraints};
+pub use filter::{Decision, Mobility, decide};
+pub use geofence::Fence;
+pub use geometry::Vec2;
+pub use separation::NeighbourSet;
+
+use crate::platform::Platform;
+
+/// The robot's safety settings, the `[safety]` table of its config.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// Radius of a disc around the robot's position that contains all of
+    /// it, m.
+    pub radius: f64,
+    /// The deceleration the robot is sure to reach when its outputs go to
+    /// zero, m/s² (measure it: drive at full speed, stop, halve
+    /// speed²/distance for a margin).
+    pub max_deceleration: f64,
+    /// Time a commanded velocity lasts before braking starts: a control
+    /// period plus the actuators' lag, s.
+    pub reaction_time: f64,
+    /// Neighbour information older than this slows the robot to a crawl,
+    /// s.
+    pub stale_after: f64,
+    /// The crawl, m/s.
+    pub crawl_speed: f64,
+    /// Fastest turn of a diff-drive while it yields, rad/s.
+    pub yield_turn_rate: f64,
+    /// How long a robot blocked by a neighbour yields to the right before
+    /// its command has its way again, s.
+    pub yield_time: f64,
+    /// How far to the right of the blocked direction it heads meanwhile,
+    /// rad.
+    pub yield_angle: f64,
+    /// How far ahead, s, a robot looks for neighbours its command would
+    /// meet, to swerve right in time (0: never).
+    pub horizon: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        SafetyConfig {
+            radius: 0.15,
+            max_deceleration: 1.0,
+            reaction_time: 0.1,
+            stale_after: 0.3,
+            crawl_speed: 0.05,
+            yield_turn_rate: 1.0,
+            yield_time: 2.0,
+            yield_angle: std::f64::consts::FRAC_PI_2,
+            horizon: 2.0,
+        }
+    }
+}
+
+impl SafetyConfig {
+    /// Checks every value; `Err` names the one that is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |v: f64, what: &str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!(
+                    "`safety.{what}` must be a positive number, got {v}"
+                ))
+            }
+        };
+        let nonnegative = |v: f64, what: &str| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(format!("`safety.{what}` must be zero or more, got {v}"))
+            }
+        };
+        positive(self.radius, "radius")?;
+        positive(self.max_deceleration, "max_deceleration")?;
+        nonnegative(self.reaction_time, "reaction_time")?;
+        positive(self.stale_after, "stale_after")?;
+        nonnegative(self.crawl_speed, "crawl_speed")?;
+        nonnegative(self.yield_turn_rate, "yield_turn_rate")?;
+        nonnegative(self.yield_time, "yield_time")?;
+        nonnegative(self.horizon, "horizon")?;
+        if !(0.0..=std::f64::consts::FRAC_PI_2).contains(&self.yield_angle) {
+            return Err(format!(
+                "`safety.yield_angle` must be between 0 and pi/2, got {}",
+                self.yield_angle
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn braking(&self) -> Braking {
+        Braking {
+            reaction_time: self.reaction_time,
+            deceleration: self.max_deceleration,
+        }
+    }
+}
+
+/// The arena the robot obeys now.
+#[derive(Debug, Clone, PartialEq)]
+struct ArenaInForce {
+    id: u32,
+    enabled: bool,
+    /// `None` for an empty arena (nothing to enforce).
+    fence: Option<Fence>,
+}
+
+/// A robot blocked by a neighbour yields: it heads to the right of where
+/// it wanted to go, for a while.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Yield {
+    /// Where it heads, m/s, map frame.
+    target: Vec2,
+    until: Duration,
+}
+
+/// What [`SafetyLayer::filter`] returns: the outputs to write and why they
+/// differ from the controller's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Filtered {
+    pub outputs: Vec<f64>,
+    pub intervention: Intervention,
+}
+
+/// The robot's safety layer: the arena and neighbours it was told of, and
+/// what it did to the commands.
+#[derive(Debug, Clone)]
+pub struct SafetyLayer {
+    config: SafetyConfig,
+    arena: Option<ArenaInForce>,
+    neighbours: Option<NeighbourSet>,
+    yielding: Option<Yield>,
+    /// Registered with a router since the last arena: the next arena and
+    /// neighbour list apply whatever their id and stamp.
+    fresh_station: bool,
+    intervention: Intervention,
+    counts: InterventionCounts,
+}
+
+impl SafetyLayer {
+    pub fn new(config: SafetyConfig) -> SafetyLayer {
+        SafetyLayer {
+            config,
+            arena: None,
+            neighbours: None,
+            yielding: None,
+            fresh_station: false,
+            intervention: Intervention::None,
+            counts: InterventionCounts::default(),
+        }
+    }
+
+    pub fn config(&self) -> &SafetyConfig {
+        &self.config
+    }
+
+    /// Takes an arena addressed to this robot. Returns the acknowledgement
+    /// to send, or `None` when the arena is older than the one in force
+    /// (ids compared as wrapping counters; a repeat of the current one is
+    /// acknowledged again).
+    pub fn apply_arena(&mut self, arena: &Arena) -> Option<ArenaAck> {
+        if let Some(now) = &self.arena
+            && !self.fresh_station
+            && (arena.id.wrapping_sub(now.id) as i32) < 0
+        {
+            return None;
+        }
+        self.fresh_station = false;
+        self.arena = Some(ArenaInForce {
+            id: arena.id,
+            enabled: arena.enabled,
+            fence: (!arena.is_empty()).then(|| Fence::from_arena(arena)),
+        });
+        Some(ArenaAck {
+            robot: arena.robot.clone(),
+            id: arena.id,
+        })
+    }
+
+    /// Takes a neighbour list that arrived at `now`; `false` if it is older
+    /// than the one held (by its station stamp) and so ignored.
+    pub fn apply_neighbours(&mut self, n: &Neighbours, now: Duration) -> bool {
+        if self
+            .neighbours
+            .as_ref()
+            .is_some_and(|held| n.stamp_us < held.stamp_us)
+            && !self.fresh_station
+        {
+            return false;
+        }
+        self.neighbours = Some(NeighbourSet::new(n, now));
+        true
+    }
+
+    /// The robot registered (again) with a router, which may have
+    /// restarted and numbers arenas afresh: the next arena applies whatever
+    /// its id, and so does any neighbour list until then. Until it comes,
+    /// the arena and neighbours held stay in force (the robot is no less
+    /// safe for a station restart).
+    pub fn registered(&mut self) {
+        self.fresh_station = true;
+    }
+
+    /// Whether the layer enforces anything.
+    pub fn state(&self) -> SafetyState {
+        match &self.arena {
+            Some(a) if !a.enabled => SafetyState::Off,
+            Some(ArenaInForce { fence: Some(_), .. }) => SafetyState::On,
+            _ => SafetyState::NoArena,
+        }
+    }
+
+    /// Whether the neighbour information is older than `stale_after` at
+    /// `now` (or there has been none).
+    pub fn stale(&self, now: Duration) -> bool {
+        self.neighbours
+            .as_ref()
+            .is_none_or(|n| n.age(now).as_secs_f64() > self.config.stale_after)
+    }
+
+    /// The outputs to write this control period instead of `outputs` (the
+    /// controller's, for the command being obeyed), for a robot of
+    /// `platform` at `pose` moving at `velocity` (m/s, map frame).
+    pub fn filter(
+        &mut self,
+        platform: &dyn Platform,
+        pose: &Pose,
+        velocity: Vec2,
+        outputs: &[f64],
+        now: Duration,
+    ) -> Filtered {
+        let fence = match &self.arena {
+            Some(ArenaInForce {
+                enabled: true,
+                fence: Some(fence),
+                ..
+            }) => fence,
+            _ => return self.noted(outputs.to_vec(), Intervention::None),
+        };
+        let position = Vec2::new(pose.x, pose.y);
+        if !(position.is_finite() && pose.heading.is_finite() && velocity.is_finite()) {
+            // No pose to judge by: hold still.
+            return self.noted(vec![0.0; outputs.len()], Intervention::Fence);
+        }
+        let (twist, desired) = mapping::commanded_motion(platform, pose.heading, outputs);
+        let braking = self.config.braking();
+        let fastest = platform
+            .limits()
+            .max_speed
+            .max(desired.norm())
+            .max(velocity.norm());
+        let reach = braking.distance(fastest);
+        let margin = fence.margin;
+        let mut c = Constraints::new(position, braking);
+        fence.constrain(&mut c, self.config.radius, reach);
+        if let Some(n) = &self.neighbours {
+            n.constrain(
+                &mut c,
+                velocity,
+                self.config.radius,
+                fence.margin,
+                reach,
+                now,
+            );
+        }
+        if self.stale(now) {
+            c.caps
+                .push((self.config.crawl_speed, Intervention::StaleNeighbours));
+        }
+        let mobility = Mobility {
+            holonomic: platform.holonomic(),
+            heading: pose.heading,
+            yield_turn_rate: self.config.yield_turn_rate,
+            yaw_rate: twist.wz,
+            reaction_time: self.config.reaction_time,
+            velocity,
+        };
+        let decision = self.decide(&c, desired, &twist, &mobility, margin, now);
+        let out = if decision.intervention == Intervention::None {
+            outputs.to_vec()
+        } else {
+            mapping::outputs_for(platform, pose.heading, &twist, &decision)
+        };
+        self.noted(out, decision.intervention)
+    }
+
+    /// The decision, yielding to the right for `yield_time` once a
+    /// neighbour blocks the way (while the command asks for any motion:
+    /// a stop ends it).
+    fn decide(
+        &mut self,
+        c: &Constraints,
+        desired: Vec2,
+        twist: &mech_proto::Twist,
+        mobility: &Mobility,
+        margin: f64,
+        now: Duration,
+    ) -> Decision {
+        let wants_motion = [twist.vx, twist.vy, twist.wz]
+            .iter()
+            .any(|v| v.abs() > 1e-9);
+        if !wants_motion {
+            self.yielding = None;
+        }
+        if let Some(y) = self.yielding.filter(|y| now < y.until) {
+            return filter::steer(c, y.target, mobility);
+        }
+        self.yielding = None;
+        let look_ahead = self.config.horizon > 0.0;
+        let swerve = self
+            .neighbours
+            .as_ref()
+            .filter(|_| look_ahead)
+            .and_then(|n| {
+                n.anticipate(
+                    c.position,
+                    desired,
+                    self.config.radius,
+                    margin,
+                    self.config.horizon,
+                    now,
+                )
+            });
+        if let Some(target) = swerve {
+            if !mobility.holonomic && self.config.yield_time > 0.0 {
+                // A diff-drive needs time to turn: the swerve is held.
+                self.yielding = Some(Yield {
+                    target,
+                    until: now + Duration::from_secs_f64(self.config.yield_time),
+                });
+            }
+            return filter::steer(c, target, mobility);
+        }
+        let decision = decide(c, desired, mobility);
+        if decision.blocked && self.config.yield_time > 0.0 {
+            let target = desired.rotated(-self.config.yield_angle);
+            self.yielding = Some(Yield {
+                target,
+                until: now + Duration::from_secs_f64(self.config.yield_time),
+            });
+            return filter::steer(c, target, mobility);
+        }
+        decision
+    }
+
+    /// Records this period's intervention (counting each one that begins).
+    fn noted(&mut self, outputs: Vec<f64>, intervention: Intervention) -> Filtered {
+        if intervention != self.intervention {
+            self.counts.count(intervention);
+            self.intervention = intervention;
+        }
+        Filtered {
+            outputs,
+            intervention,
+        }
+    }
+
+    /// The layer's state for telemetry.
+    pub fn report(&self) -> SafetyReport {
+        SafetyReport {
+            state: self.state(),
+            arena: self.arena.as_ref().map_or(0, |a| a.id),
+            intervention: self.intervention,
+            counts: self.counts,
+            radius: self.config.radius,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::platform::PlatformSpec;
+    use mech_proto::{Neighbour, Point, Twist};
+
+    fn arena(id: u32, enabled: bool) -> Arena {
+        let p = |x, y| Point { x, y };
+        Arena {
+            robot: "robot_1".into(),
+            id,
+            enabled,
+            boundary: vec![p(0.0, 0.0), p(4.0, 0.0), p(4.0, 3.0), p(0.0, 3.0)],
+            keep_out: vec![],
+            slow_zones: vec![],
+            margin: 0.1,
+        }
+    }
+
+    fn neighbours(stamp_us: u64, robots: Vec<Neighbour>) -> Neighbours {
+        Neighbours {
+            robot: "robot_1".into(),
+            stamp_us,
+            robots,
+            obstacles: vec![],
+        }
+    }
+
+    fn forward(platform: &dyn Platform, speed: f64) -> Vec<f64> {
+        platform.mix(&Twist {
+            vx: speed,
+            ..Twist::default()
+        })
+    }
+
+    #[test]
+    fn arenas_apply_in_order_and_are_acknowledged() {
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        assert_eq!(l.state(), SafetyState::NoArena);
+        assert_eq!(l.apply_arena(&arena(5, true)).unwrap().id, 5);
+        assert_eq!(l.state(), SafetyState::On);
+        assert_eq!(l.apply_arena(&arena(4, false)), None, "older: ignored");
+        assert_eq!(l.state(), SafetyState::On);
+        assert_eq!(l.apply_arena(&arena(5, true)).unwrap().id, 5, "a repeat");
+        l.apply_arena(&arena(6, false)).unwrap();
+        assert_eq!(l.state(), SafetyState::Off);
+        assert!(l.report().alarm());
+        let mut empty = arena(7, true);
+        empty.boundary.clear();
+        l.apply_arena(&empty).unwrap();
+        assert_eq!(l.state(), SafetyState::NoArena);
+        // Wrapping: 0 follows u32::MAX.
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.apply_arena(&arena(u32::MAX, true)).unwrap();
+        assert!(l.apply_arena(&arena(0, true)).is_some());
+    }
+
+    #[test]
+    fn after_registering_again_a_restarted_stations_arena_applies() {
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.apply_arena(&arena(40, true)).unwrap();
+        l.apply_neighbours(&neighbours(5_000, vec![]), Duration::ZERO);
+        assert_eq!(l.apply_arena(&arena(1, false)), None, "older, same station");
+        l.registered();
+        assert_eq!(l.state(), SafetyState::On, "the old arena holds meanwhile");
+        assert!(l.apply_neighbours(&neighbours(10, vec![]), Duration::ZERO));
+        assert_eq!(l.apply_arena(&arena(1, false)).unwrap().id, 1);
+        assert_eq!(l.state(), SafetyState::Off);
+        assert_eq!(l.apply_arena(&arena(0, true)), None, "ordered again");
+    }
+
+    #[test]
+    fn older_neighbour_lists_are_ignored() {
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        assert!(l.stale(Duration::ZERO), "none yet");
+        assert!(l.apply_neighbours(&neighbours(10, vec![]), Duration::ZERO));
+        assert!(!l.apply_neighbours(&neighbours(9, vec![]), Duration::ZERO));
+        assert!(!l.stale(Duration::from_millis(300)));
+        assert!(l.stale(Duration::from_millis(301)));
+    }
+
+    #[test]
+    fn off_or_without_an_arena_the_outputs_pass_untouched() {
+        let dd = PlatformSpec::diff_drive().build();
+        let out = forward(dd.as_ref(), 0.5);
+        let at_wall = Pose {
+            x: 3.8,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        let f = l.filter(dd.as_ref(), &at_wall, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(
+            (f.outputs, f.intervention),
+            (out.clone(), Intervention::None)
+        );
+        l.apply_arena(&arena(1, false));
+        let f = l.filter(dd.as_ref(), &at_wall, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(f.outputs, out);
+        l.apply_arena(&arena(2, true));
+        let f = l.filter(dd.as_ref(), &at_wall, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(f.intervention, Intervention::Returning);
+        assert!(f.outputs.iter().all(|u| u.abs() < 1e-12), "{:?}", f.outputs);
+    }
+
+    #[test]
+    fn stale_neighbours_slow_the_robot_to_a_crawl_and_count_once() {
+        let kiwi = PlatformSpec::kiwi().build();
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.apply_arena(&arena(1, true));
+        let mid = Pose {
+            x: 2.0,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let out = forward(kiwi.as_ref(), 0.3);
+        l.apply_neighbours(&neighbours(1, vec![]), Duration::ZERO);
+        let f = l.filter(
+            kiwi.as_ref(),
+            &mid,
+            Vec2::ZERO,
+            &out,
+            Duration::from_millis(100),
+        );
+        assert_eq!(f.intervention, Intervention::None);
+        for ms in [400, 420, 440] {
+            let f = l.filter(
+                kiwi.as_ref(),
+                &mid,
+                Vec2::ZERO,
+                &out,
+                Duration::from_millis(ms),
+            );
+            assert_eq!(f.intervention, Intervention::StaleNeighbours);
+            let speed = kiwi.motion(&f.outputs).vx;
+            assert!((speed - 0.05).abs() < 1e-9, "{speed}");
+        }
+        let r = l.report();
+        assert_eq!(r.counts.stale_neighbours, 1);
+        assert_eq!(r.intervention, Intervention::StaleNeighbours);
+        assert_eq!(r.state, SafetyState::On);
+    }
+
+    #[test]
+    fn config_values_are_checked() {
+        assert!(SafetyConfig::default().validate().is_ok());
+        let bad = SafetyConfig {
+            max_deceleration: 0.0,
+            ..SafetyConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("max_deceleration"));
+        let bad = SafetyConfig {
+            radius: f64::NAN,
+            ..SafetyConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("radius"));
+    }
+}
