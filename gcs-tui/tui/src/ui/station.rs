@@ -2,7 +2,7 @@
 //! multiplexes the render tick, terminal input, gamepads and what the
 //! station sends, feeds them to [`App::update`], and carries the App's
 //! [`Request`]s to the station over the attach protocol
-//! ([`crate::station`]), whether it runs in this process or elsewhere.
+//! ([`mech_station`]), whether it runs in this process or elsewhere.
 
 use std::time::{Duration, Instant};
 
@@ -17,9 +17,9 @@ use tokio::sync::mpsc;
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
 use super::view::ArenaBounds;
 use crate::gamepad::PadEvent;
-use crate::station::client::Attached;
-use crate::station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation, Welcome};
 use mech_control::lang::quote;
+use mech_station::client::Attached;
+use mech_station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation, Welcome};
 
 /// Frames per second of the render tick.
 const FPS: u64 = 30;

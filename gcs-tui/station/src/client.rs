@@ -13,7 +13,7 @@ use serde_json::{Value, json};
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::sync::mpsc;
 
-use super::wire::{
+use crate::wire::{
     FromStation, LineResult, MAX_LINE, PROTOCOL, Streams, ToStation, Welcome, challenge_region,
     hex, read_message, to_line, unhex,
 };
