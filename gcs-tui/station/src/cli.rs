@@ -44,7 +44,7 @@ pub struct Args {
     /// TCP endpoint of the router (overrides the configuration).
     #[arg(long, value_name = "ADDR", global = true)]
     pub tcp: Option<SocketAddr>,
-    /// The control socket of the station (overrides [station] socket).
+    /// The control socket of the station (overrides `[station] socket`).
     #[arg(long, value_name = "PATH", global = true)]
     pub socket: Option<PathBuf>,
     /// Record everything the router sees to this MCAP file (Foxglove and
