@@ -5,8 +5,10 @@
 //! site-a's robots off the network; site-b freezes (SIGSTOP: no goodbye,
 //! its connection stays open but silent), and site-a shows its robots lost
 //! when the Zenoh lease runs out. Also: `mech-zenoh serve` bridges while an
-//! operator attaches with `mech-gcs --attach`, and a station name that
-//! cannot be a key chunk is refused with the reason.
+//! operator attaches with `mech-gcs --attach`; `mech-zenoh` on a terminal
+//! shows its station in `mech-gcs`'s TUI, attached on a socket of its own
+//! that is gone when the operator quits; and a station name that cannot be
+//! a key chunk is refused with the reason.
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
@@ -282,4 +284,69 @@ fn a_served_station_bridges_while_operators_attach() {
     assert!(term.success());
     let status = served.0.wait().expect("serve exits");
     assert!(status.success(), "{status:?}");
+}
+
+/// `mech-zenoh` with no `serve` or `--script` on a terminal (tmux): its
+/// station, bridge and simulated robots run in it, and the TUI is
+/// `mech-gcs` attached to a control socket private to it; quitting the TUI
+/// stops the station and removes the socket.
+#[test]
+fn on_a_terminal_the_station_is_shown_in_mech_gcs_attached() {
+    use crate::tmux::Tmux;
+    if Command::new("tmux").arg("-V").output().is_err() {
+        println!("skipped: tmux is not installed");
+        return;
+    }
+    let state = std::env::temp_dir().join(format!("mech-e2e-zenoh-tui-{}", std::process::id()));
+    std::fs::create_dir_all(&state).expect("temp dir");
+    let tmux = Tmux {
+        socket: format!("mech-e2e-zenoh-tui-{}", std::process::id()),
+        session: "zenoh".into(),
+        state: state.clone(),
+    };
+    let cmd = format!(
+        "XDG_STATE_HOME={dir} XDG_RUNTIME_DIR={dir} {} --station site-t --listen {} --demo 2 \
+         --no-mouse --udp 127.0.0.1:0 --tcp 127.0.0.1:0 2>{dir}/zenoh.err; \
+         echo exited $? >{dir}/exit",
+        mech_e2e::binary("mech-zenoh").display(),
+        free_endpoint(),
+        dir = state.display(),
+    );
+    let out = tmux.run(&[
+        "new-session",
+        "-d",
+        "-s",
+        "zenoh",
+        "-x",
+        "160",
+        "-y",
+        "48",
+        &cmd,
+    ]);
+    assert!(out.status.success(), "tmux new-session: {out:?}");
+    let screen = tmux.wait_for("two robots, attached", Duration::from_secs(60), |s| {
+        s.contains("Robots 2/2") && s.contains("2/2 ok") && s.contains("@mech-zenoh-")
+    });
+    assert!(screen.contains("robot_1"), "{screen}");
+    let socket = std::fs::read_dir(state.join("mech"))
+        .expect("the socket's directory")
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.to_string_lossy().ends_with(".sock"))
+        .expect("a private control socket");
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(&socket).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o600, "the owner's alone");
+    tmux.keys(&["q"]);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let exit = loop {
+        if let Ok(text) = std::fs::read_to_string(state.join("exit")) {
+            break text;
+        }
+        let err = std::fs::read_to_string(state.join("zenoh.err")).unwrap_or_default();
+        assert!(Instant::now() < deadline, "mech-zenoh did not stop: {err}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(exit.trim(), "exited 0");
+    assert!(!socket.exists(), "{} is left behind", socket.display());
 }

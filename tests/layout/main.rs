@@ -1,5 +1,6 @@
 //! The workspace's shape, checked: no import cycles between the modules of
 //! any crate, a station core that needs no terminal, gamepad or simulator,
+//! a station service and a Zenoh station that need no terminal or gamepad,
 //! and a default build without Zenoh.
 //!
 //! Modules may depend on their parent and their children freely (a parent
@@ -20,6 +21,7 @@ const CRATES: &[&str] = &[
     "agent/src",
     "gcs-tui/core/src",
     "gcs-tui/control/src",
+    "gcs-tui/station/src",
     "gcs-tui/tui/src",
     "gcs-tui/zenoh/src",
 ];
@@ -332,25 +334,7 @@ fn the_cycle_finder_sees_a_cycle_through_a_use_group() {
 fn the_station_core_needs_no_terminal_gamepad_or_simulator() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     for krate in ["mech-core", "mech-control"] {
-        let out = Command::new(&cargo)
-            .current_dir(workspace())
-            .args([
-                "tree",
-                "-p",
-                krate,
-                "-e",
-                "normal,build",
-                "--prefix",
-                "none",
-            ])
-            .output()
-            .expect("cargo tree runs");
-        assert!(
-            out.status.success(),
-            "cargo tree -p {krate}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let tree = String::from_utf8_lossy(&out.stdout);
+        let tree = normal_tree(&cargo, krate);
         for banned in ["ratatui ", "crossterm ", "gilrs ", "mech-agent ", "libudev"] {
             assert!(
                 !tree.lines().any(|l| l.starts_with(banned)),
@@ -373,6 +357,69 @@ fn the_station_core_needs_no_terminal_gamepad_or_simulator() {
     }
 }
 
+/// `cargo tree -p KRATE -e normal,build` (what the crate's library and
+/// binaries link), one crate a line.
+fn normal_tree(cargo: &str, krate: &str) -> String {
+    let out = Command::new(cargo)
+        .current_dir(workspace())
+        .args([
+            "tree",
+            "-p",
+            krate,
+            "-e",
+            "normal,build",
+            "--prefix",
+            "none",
+        ])
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        out.status.success(),
+        "cargo tree -p {krate}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn the_station_service_and_the_zenoh_station_need_no_terminal_or_gamepad() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    for krate in ["mech-station", "mech-zenoh"] {
+        let tree = normal_tree(&cargo, krate);
+        assert!(
+            tree.lines().any(|l| l.starts_with("mech-control ")),
+            "{krate}'s tree is read: {tree}"
+        );
+        for banned in ["ratatui ", "crossterm ", "gilrs ", "mech-gcs ", "libudev"] {
+            assert!(
+                !tree.lines().any(|l| l.starts_with(banned)),
+                "{krate} depends on {banned}:\n{tree}"
+            );
+        }
+    }
+    // The Foxglove live view adds no terminal either.
+    let out = Command::new(&cargo)
+        .current_dir(workspace())
+        .args(["tree", "-p", "mech-station", "--features", "foxglove"])
+        .args(["-e", "normal,build", "--prefix", "none"])
+        .output()
+        .expect("cargo tree runs");
+    let tree = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        tree.lines().any(|l| l.starts_with("tokio-tungstenite ")),
+        "{tree}"
+    );
+    for banned in ["ratatui ", "crossterm ", "gilrs "] {
+        assert!(
+            !tree.lines().any(|l| l.starts_with(banned)),
+            "mech-station with foxglove depends on {banned}"
+        );
+    }
+    // Dependencies point one way: the TUI on the station, not back.
+    let gcs = normal_tree(&cargo, "mech-gcs");
+    assert!(gcs.lines().any(|l| l.starts_with("mech-station ")), "{gcs}");
+}
+
 #[test]
 fn the_default_build_leaves_zenoh_out() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
@@ -384,6 +431,7 @@ fn the_default_build_leaves_zenoh_out() {
     assert!(!defaults.contains("zenoh"), "{defaults}");
     for krate in [
         "mech-gcs",
+        "mech-station",
         "mech-agent",
         "mech-control",
         "mech-core",

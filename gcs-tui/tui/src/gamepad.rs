@@ -15,7 +15,7 @@ pub mod mapping;
 pub mod shaping;
 pub mod teleop;
 
-pub use config::GamepadConfig;
+pub use config::{GamepadConfig, teleop_config};
 pub use input::{
     GamepadError, GilrsSource, InputSource, PadAxis, PadButton, PadEvent, PadEventKind, PadId,
     ScriptedSource, spawn_pump,

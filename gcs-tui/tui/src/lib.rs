@@ -1,29 +1,19 @@
-//! `mech-gcs`: the MECH ground-control station program: the terminal UI,
-//! gamepads, the simulator for `--demo`, logging and the configuration file,
-//! over the station core (`mech-core`) and its controllers and command
-//! language (`mech-control`).
+//! `mech-gcs`: the MECH ground-control station's terminal: the TUI and
+//! gamepads, attached to a station (`mech-station`) with the attach
+//! protocol, whether that station is a `mech-gcs serve` elsewhere or one
+//! this process starts for itself.
 //!
 //! - [`ui`]: robot cards, braille map, waypoints, routing table, events;
-//! - [`view`]: the fleet as the screen shows it (what a station sends);
-//! - [`gamepad`]: gamepads and keyboard teleop turned into channel commands;
-//! - [`config`]: `gcs.toml`, assembled from each layer's section;
-//! - [`foxglove`]: the Foxglove live view (`--foxglove`, cargo feature
-//!   `foxglove`);
-//! - [`logging`]: rolling log files;
-//! - [`replay`]: `mech-gcs replay`, a recording read back;
-//! - [`sim`]: simulated agents for `spawn` and `--demo`;
-//! - [`station`]: `mech-gcs serve`, the attach protocol, attaching.
+//! - [`view`]: the fleet as the screen shows it (what a station sends:
+//!   `mech_station::view`);
+//! - [`gamepad`]: gamepads and keyboard teleop turned into channel
+//!   commands, and the `[gamepad]` section;
+//! - [`replay`]: `mech-gcs replay` in the TUI, a recording read back.
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
-pub mod config;
-pub mod foxglove;
 pub mod gamepad;
-pub mod logging;
 pub mod replay;
-pub mod sim;
-pub mod station;
 pub mod ui;
-pub mod view;
 
-pub use config::GcsConfig;
+pub use mech_station::view;

@@ -7,11 +7,11 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use mech_core::{CoreConfig, Gcs};
-use mech_gcs::station::client::{AttachOptions, attach_stream};
-use mech_gcs::station::wire::{FromStation, Streams};
-use mech_gcs::station::{Station, StationConfig};
 use mech_gcs::ui::{Action, App, LinkState, Select, StationLink};
 use mech_proto::Waypoint;
+use mech_station::client::{AttachOptions, attach_stream};
+use mech_station::wire::{FromStation, Streams};
+use mech_station::{Station, StationConfig};
 use tokio::sync::mpsc;
 
 /// A station with simulated robots, and a TUI's App attached to it.
@@ -33,7 +33,7 @@ impl Rig {
         let station = Station::start(
             gcs,
             &[],
-            Some(mech_gcs::sim::simulator()),
+            Some(mech_station::sim::simulator()),
             &StationConfig::default(),
         );
         let opts = AttachOptions {
@@ -478,7 +478,7 @@ async fn a_route_change_by_one_operator_reaches_the_others_snapshot_at_once() {
     for i in 0..40u64 {
         let channel = format!("joy/flip{}", i % 2);
         let sent = Instant::now();
-        a.to.send(mech_gcs::station::wire::ToStation::Line {
+        a.to.send(mech_station::wire::ToStation::Line {
             id: i,
             text: format!("route robot_2 {channel}"),
         })
@@ -542,10 +542,7 @@ fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
         },
     }));
     let mut app = App::new("127.0.0.1:7400", Instant::now());
-    app.update(Action::Fleet(mech_gcs::station::snapshot(
-        &fleet,
-        Vec::new(),
-    )));
+    app.update(Action::Fleet(mech_station::snapshot(&fleet, Vec::new())));
     let mut term =
         ratatui::Terminal::new(ratatui::backend::TestBackend::new(120, 36)).expect("terminal");
     term.draw(|f| f.render_widget(&app, f.area()))
@@ -567,7 +564,7 @@ fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
     };
     fleet.remote_info("site-b", "robot_9", &info);
     fleet.remote_link("site-b", "robot_9", LinkState::Connected);
-    let snap = mech_gcs::station::snapshot(&fleet, vec![]);
+    let snap = mech_station::snapshot(&fleet, vec![]);
     assert_eq!(snap.robots[0].remote.as_deref(), Some("site-b"));
     let mut app = App::new("127.0.0.1:7700", Instant::now());
     app.update(Action::Resize(120, 36));

@@ -1,37 +1,40 @@
 //! `mech-zenoh`: a ground station on the Zenoh network. It runs the same
-//! station as `mech-gcs` ([`mech_gcs::station::Station`]: the TUI,
-//! `--script` headless, or `serve` as a service) from the same
-//! configuration file, plus its `[zenoh]` section, with a [`Bridge`]
+//! station as `mech-gcs` ([`mech_station::Station`], started from the same
+//! configuration file, plus its `[zenoh]` section) with a [`Bridge`]
 //! beside it: its robots are published, commands and route requests come
 //! in through its router, and other stations' robots are shown read-only.
+//! Its station runs as a service (`serve`), runs a script headless
+//! (`--script`), or is shown in the TUI: `mech-gcs --attach` on a control
+//! socket private to this process, as a child process on this terminal
+//! (this program has no terminal code in it).
 
-use std::io::Read;
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use mech_core::Gcs;
-use mech_gcs::station::client::{self, AttachOptions, Attached, attach_stream};
-use mech_gcs::station::serve::{self, Stop};
-use mech_gcs::station::wire::Streams;
-use mech_gcs::station::{Station, login_name};
-use mech_gcs::{GcsConfig, logging, sim};
+use mech_station::cli::{self, Args, runtime};
+use mech_station::client::{AttachOptions, Attached, attach_stream};
+use mech_station::serve::{self, Stop};
+use mech_station::wire::Streams;
+use mech_station::{ConfigFile, Launched, Recording, Station, bind_unix, logging, login_name};
 use mech_zenoh::{Bridge, ZenohConfig};
+
+/// The program's name in its messages.
+const PROGRAM: &str = "mech-zenoh";
 
 /// MECH ground-control station on the Zenoh network: publishes its robots
 /// under mech/<station>/..., takes commands and route requests, shows other
-/// stations' robots read-only.
+/// stations' robots read-only. With --script, a last JSON line gives the
+/// bridge's counters.
 #[derive(Debug, Parser)]
 #[command(name = "mech-zenoh", version)]
 struct Cli {
-    /// Configuration file (TOML): mech-gcs's sections plus [zenoh].
-    #[arg(long, value_name = "FILE", global = true)]
-    config: Option<PathBuf>,
+    #[command(flatten)]
+    station: Args,
     /// This station's name on Zenoh (overrides zenoh.station).
-    #[arg(long, value_name = "NAME", global = true)]
-    station: Option<String>,
+    #[arg(long = "station", value_name = "NAME", global = true)]
+    name: Option<String>,
     /// Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable;
     /// replaces zenoh.listen).
     #[arg(long, value_name = "ENDPOINT", global = true)]
@@ -40,26 +43,6 @@ struct Cli {
     /// (repeatable; replaces zenoh.connect).
     #[arg(long, value_name = "ENDPOINT", global = true)]
     connect: Vec<String>,
-    /// Start a simulated fleet of N robots (default 4); the router then
-    /// listens on loopback only unless configured otherwise.
-    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "4", global = true)]
-    demo: Option<usize>,
-    /// Run a command script headless ("-" for stdin): one JSON line per
-    /// event and result, then the bridge's counters.
-    #[arg(long, value_name = "FILE")]
-    script: Option<PathBuf>,
-    /// Do not capture the mouse in the TUI.
-    #[arg(long)]
-    no_mouse: bool,
-    /// UDP endpoint of the router (overrides the configuration).
-    #[arg(long, value_name = "ADDR", global = true)]
-    udp: Option<SocketAddr>,
-    /// TCP endpoint of the router (overrides the configuration).
-    #[arg(long, value_name = "ADDR", global = true)]
-    tcp: Option<SocketAddr>,
-    /// The control socket of a served station (overrides [station] socket).
-    #[arg(long, value_name = "PATH", global = true)]
-    socket: Option<PathBuf>,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -67,20 +50,17 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the station with its bridge as a service, as `mech-gcs serve`
-    /// does (`mech-gcs --attach` attaches to it); stops on SIGTERM.
-    Serve {
-        /// Record to this MCAP file (default: rotating files in the
-        /// [record] or [log] directory, as `mech-gcs serve` does).
-        #[arg(long, value_name = "FILE")]
-        record: Option<PathBuf>,
-    },
+    /// does (`mech-gcs --attach` attaches to it; it records to --record
+    /// FILE, else to rotating files in the [record] or [log] directory);
+    /// stops on SIGTERM.
+    Serve,
 }
 
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("mech-zenoh: {e:#}");
+            eprintln!("{PROGRAM}: {e:#}");
             ExitCode::from(2)
         }
     }
@@ -88,46 +68,32 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let (config, zenoh) = load(&cli)?;
-    if let Some(Command::Serve { record }) = cli.command {
+    let demo = cli.station.demo;
+    if let Some(Command::Serve) = cli.command {
         let _log = logging::init(&config.log, Some("info")).context("cannot start logging")?;
         let beside = |station: Station| start_bridge(station, zenoh);
-        runtime()?.block_on(serve::serve_with(config, cli.demo, record, beside))?;
+        let record = cli.station.record.clone();
+        runtime()?.block_on(serve::serve_with(config, demo, record, beside))?;
         return Ok(ExitCode::SUCCESS);
     }
-    let source = cli.script.as_deref().map(read_script).transpose()?;
+    let source = cli.station.read_script()?;
     let stderr = source.as_ref().map(|_| "warn");
     let _log = logging::init(&config.log, stderr).context("cannot start logging")?;
-    let station = Embedded {
-        config,
-        zenoh,
-        demo: cli.demo,
-    };
-    let code = match source {
-        Some(source) => runtime()?.block_on(station.script(&source))?,
-        None => runtime()?
-            .block_on(station.tui(!cli.no_mouse))
-            .map(|()| 0)?,
-    };
+    let recording = cli
+        .station
+        .record
+        .clone()
+        .map_or(Recording::Off, Recording::File);
+    let code = runtime()?.block_on(async {
+        let embedded = Embedded::start(&config, &zenoh, recording).await?;
+        let code = match &source {
+            Some(source) => embedded.script(demo, source).await,
+            None => embedded.tui(&cli, demo).await,
+        };
+        embedded.shutdown().await;
+        code
+    })?;
     Ok(ExitCode::from(code))
-}
-
-fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")
-}
-
-fn read_script(path: &Path) -> anyhow::Result<String> {
-    if path.as_os_str() == "-" {
-        let mut s = String::new();
-        std::io::stdin()
-            .read_to_string(&mut s)
-            .context("cannot read the script from stdin")?;
-        return Ok(s);
-    }
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// Starts the bridge beside a running station: route requests typed in any
@@ -143,18 +109,10 @@ async fn start_bridge(station: Station, zenoh: ZenohConfig) -> anyhow::Result<St
 
 /// The configuration file's station sections and its `[zenoh]` section,
 /// with the command line's overrides, checked.
-fn load(cli: &Cli) -> anyhow::Result<(GcsConfig, ZenohConfig)> {
-    let (mut config, mut zenoh) = match &cli.config {
-        Some(path) => read(path)?,
-        None => (GcsConfig::default(), ZenohConfig::default()),
-    };
-    config.override_with(&mech_gcs::config::Overrides {
-        demo_without_file: cli.demo.is_some() && cli.config.is_none(),
-        udp: cli.udp,
-        tcp: cli.tcp,
-        socket: cli.socket.clone(),
-    });
-    if let Some(s) = &cli.station {
+fn load(cli: &Cli) -> anyhow::Result<(ConfigFile, ZenohConfig)> {
+    let config = cli.station.load()?;
+    let mut zenoh = zenoh_section(&config, cli.station.config.as_deref())?;
+    if let Some(s) = &cli.name {
         zenoh.station.clone_from(s);
     }
     if !cli.listen.is_empty() {
@@ -163,117 +121,89 @@ fn load(cli: &Cli) -> anyhow::Result<(GcsConfig, ZenohConfig)> {
     if !cli.connect.is_empty() {
         zenoh.connect.clone_from(&cli.connect);
     }
-    config.validate()?;
     zenoh.validate()?;
     Ok((config, zenoh))
 }
 
-/// Reads a configuration file: `[zenoh]` is this program's, the rest is
-/// `mech-gcs`'s. Files it names are found next to it.
-fn read(path: &Path) -> anyhow::Result<(GcsConfig, ZenohConfig)> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mut table: toml::Table =
-        toml::from_str(&text).with_context(|| format!("{}", path.display()))?;
-    let mut zenoh: ZenohConfig = match table.remove("zenoh") {
-        Some(section) => section
-            .try_into()
-            .with_context(|| format!("{}: [zenoh]", path.display()))?,
-        None => ZenohConfig::default(),
+/// The `[zenoh]` section of the file at `path` (the defaults without a
+/// file or section), with the files it names found next to the file.
+fn zenoh_section(config: &ConfigFile, path: Option<&Path>) -> anyhow::Result<ZenohConfig> {
+    let Some(path) = path else {
+        return Ok(ZenohConfig::default());
     };
-    let rest = toml::to_string(&table).context("re-reading the configuration")?;
-    let mut config = GcsConfig::parse(&rest).with_context(|| format!("{}", path.display()))?;
+    let mut zenoh: ZenohConfig = config
+        .zenoh
+        .read("zenoh")
+        .with_context(|| path.display().to_string())?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let beside = |p: &mut PathBuf| {
         if p.is_relative() {
             *p = dir.join(&*p);
         }
     };
-    config
-        .auth
-        .keys
-        .iter_mut()
-        .for_each(|k| beside(&mut k.file));
     zenoh.operator_key.as_mut().map(beside);
     zenoh.zenoh_config.as_mut().map(beside);
-    Ok((config, zenoh))
+    Ok(zenoh)
 }
 
-/// A station with its bridge in this process, as the TUI or a script runs
-/// it (attached in process, as `mech-gcs` does with its own station).
+/// A station with its bridge in this process, for a script or the TUI.
 struct Embedded {
-    config: GcsConfig,
-    zenoh: ZenohConfig,
-    demo: Option<usize>,
+    launched: Launched,
+    bridge: Bridge,
 }
 
 impl Embedded {
-    /// Starts the router, the station (with the simulator) and the bridge,
-    /// and attaches to the station in process.
-    async fn start(&self, stream: Streams) -> anyhow::Result<(Station, Bridge, Attached)> {
-        let gcs = Gcs::start(self.config.core())
-            .await
-            .context("cannot start the router")?;
-        let bridge = match Bridge::start(&gcs, &self.zenoh).await {
+    /// Starts the station (with the simulator, the live view when
+    /// configured, recording as asked) and the bridge beside it.
+    async fn start(
+        config: &ConfigFile,
+        zenoh: &ZenohConfig,
+        recording: Recording,
+    ) -> anyhow::Result<Embedded> {
+        let launched = Launched::start(config, recording).await?;
+        let bridge = match Bridge::start(launched.station().gcs(), zenoh).await {
             Ok(b) => b,
             Err(e) => {
-                gcs.shutdown().await;
+                launched.shutdown().await;
                 return Err(e).context("cannot start the Zenoh bridge");
             }
         };
-        let sim = Some(sim::simulator());
-        let station = Station::start(gcs, &self.config.cluster, sim, &self.config.station);
-        station.set_remote_routes(bridge.route_requests());
+        launched
+            .station()
+            .set_remote_routes(bridge.route_requests());
+        tracing::info!(station = bridge.station(), "on Zenoh");
+        Ok(Embedded { launched, bridge })
+    }
+
+    fn station(&self) -> &Station {
+        self.launched.station()
+    }
+
+    /// Attaches to the station in process, as `login_name()`.
+    async fn attach(&self, stream: Streams) -> anyhow::Result<Attached> {
         let opts = AttachOptions {
             operator: Some(login_name()),
             key: None,
             stream,
         };
-        let attached = attach_stream(station.attach_local(), opts).await?;
-        Ok((station, bridge, attached))
+        Ok(attach_stream(self.station().attach_local(), opts).await?)
     }
 
-    async fn tui(self, mouse: bool) -> anyhow::Result<()> {
-        let teleop = self
-            .config
-            .gamepad
-            .teleop()
-            .context("invalid [gamepad] configuration")?;
-        let stream = Streams {
-            snapshots: true,
-            log: true,
-            events: false,
-        };
-        let (station, bridge, attached) = self.start(stream).await?;
-        let mut options = mech_gcs::ui::RunOptions {
-            mouse,
-            teleop,
-            ..mech_gcs::ui::RunOptions::default()
-        };
-        if let Some(n) = self.demo {
-            options.startup.push(format!("spawn {n}"));
-            options.arena = Some(sim::demo_arena());
-        }
-        let result = mech_gcs::ui::run(attached, options).await;
-        bridge.shutdown().await;
-        station.shutdown().await;
-        result.context("terminal error")
-    }
-
-    /// Runs `source` as `mech-gcs --attach --script` would on this station,
-    /// then prints the bridge's counters as one more JSON line.
-    async fn script(self, source: &str) -> anyhow::Result<u8> {
+    /// Runs `source` as `mech-gcs --attach --script` would on this station
+    /// (after `demo` simulated robots start), then prints the bridge's
+    /// counters as one more JSON line.
+    async fn script(&self, demo: Option<usize>, source: &str) -> anyhow::Result<u8> {
         let stream = Streams {
             snapshots: false,
             log: false,
             events: true,
         };
-        let (station, bridge, mut attached) = self.start(stream).await?;
-        let code = match self.demo {
-            Some(n) => match serve::spawn_demo(&station, n).await {
+        let mut attached = self.attach(stream).await?;
+        let code = match demo {
+            Some(n) => match serve::spawn_demo(self.station(), n).await {
                 Ok(()) => None,
                 Err(e) => {
-                    eprintln!("mech-zenoh: {e:#}");
+                    eprintln!("{PROGRAM}: {e:#}");
                     Some(1)
                 }
             },
@@ -281,34 +211,80 @@ impl Embedded {
         };
         let code = match code {
             Some(c) => c,
-            None => run_script(&mut attached, source).await,
+            None => cli::run_script(PROGRAM, &mut attached, source).await,
         };
-        let stats = serde_json::json!({"type": "zenoh", "station": bridge.station(), "stats": bridge.stats()});
+        let stats = serde_json::json!({"type": "zenoh", "station": self.bridge.station(), "stats": self.bridge.stats()});
         println!("{stats}");
-        drop(attached);
-        bridge.shutdown().await;
-        station.shutdown().await;
         Ok(code)
+    }
+
+    /// Shows the station in the TUI: `demo` simulated robots first, then
+    /// `mech-gcs --attach` on a control socket of this process's own, on
+    /// this terminal, until the operator quits it; its exit code.
+    async fn tui(&self, cli: &Cli, demo: Option<usize>) -> anyhow::Result<u8> {
+        if let Some(n) = demo {
+            serve::spawn_demo(self.station(), n).await?;
+        }
+        let socket = private_socket();
+        self.station().listen_unix(bind_unix(&socket, 0o600)?);
+        let mut tui = std::process::Command::new(tui_program());
+        tui.arg("--attach").arg(&socket);
+        if let Some(config) = &cli.station.config {
+            tui.arg("--config").arg(config);
+        }
+        if cli.station.no_mouse {
+            tui.arg("--no-mouse");
+        }
+        let status = tokio::task::spawn_blocking(move || tui.status()).await;
+        let _ = std::fs::remove_file(&socket);
+        let status = status
+            .context("the TUI's waiter failed")?
+            .with_context(|| {
+                format!(
+                    "cannot start the TUI ({}): build mech-gcs beside mech-zenoh \
+                     (cargo build --release -p mech-gcs), or run `mech-zenoh serve` \
+                     and attach with `mech-gcs --attach`",
+                    tui_program().display()
+                )
+            })?;
+        Ok(status.code().map_or(1, |c| u8::try_from(c).unwrap_or(1)))
+    }
+
+    /// Stops the bridge, then the station.
+    async fn shutdown(self) {
+        self.bridge.shutdown().await;
+        self.launched.shutdown().await;
     }
 }
 
-/// The script's exit code: 0 when every command succeeded, 130 on Ctrl-C.
-async fn run_script(attached: &mut Attached, source: &str) -> u8 {
-    let mut out = std::io::stdout();
-    tokio::select! {
-        outcome = client::run_script(attached, source, &mut out) => {
-            if let mech_control::script::ScriptOutcome::Failed { error, .. } = &outcome {
-                eprintln!("mech-zenoh: script failed at {error}");
-            }
-            outcome.exit_code() as u8
-        }
-        _ = tokio::signal::ctrl_c() => 130,
-    }
+/// A control socket for this process's TUI alone (owner only), beside the
+/// station's default one.
+fn private_socket() -> PathBuf {
+    let name = format!("mech-zenoh-{}.sock", std::process::id());
+    mech_station::default_socket().with_file_name(name)
+}
+
+/// The TUI program: `mech-gcs` next to this program if it is there (a
+/// build puts both in one directory), else `mech-gcs` on the PATH.
+fn tui_program() -> PathBuf {
+    let beside = std::env::current_exe()
+        .ok()
+        .map(|exe| exe.with_file_name("mech-gcs"))
+        .filter(|p| p.is_file());
+    beside.unwrap_or_else(|| PathBuf::from("mech-gcs"))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Reads a configuration file as `--config` does: `[zenoh]` is this
+    /// program's, the rest the station's.
+    fn read(path: &Path) -> anyhow::Result<(ConfigFile, ZenohConfig)> {
+        let config = ConfigFile::load(path)?;
+        let zenoh = zenoh_section(&config, Some(path))?;
+        Ok((config, zenoh))
+    }
 
     #[test]
     fn the_example_configuration_reads_with_paths_beside_it() {

@@ -1,8 +1,10 @@
 //! The gamepad section of the configuration (`[gamepad]`): shaping,
 //! dead-man and other buttons, rate and limits, checked and turned into the
-//! station's [`TeleopConfig`].
+//! station's [`TeleopConfig`]. The station's configuration file carries
+//! the section for the TUI, which reads it ([`teleop_config`]).
 
 use mech_core::ConfigError;
+use mech_station::ConfigFile;
 use serde::Deserialize;
 
 use super::{Limits, PadButton, Shaping, TeleopConfig, TeleopMode};
@@ -127,6 +129,15 @@ fn mode(key: &str, name: &str) -> Result<TeleopMode, ConfigError> {
         })
 }
 
+/// The teleop settings of a configuration file's `[gamepad]` section (the
+/// defaults without one), or what is wrong in it.
+pub fn teleop_config(
+    config: &ConfigFile,
+) -> Result<TeleopConfig, mech_station::config::ConfigError> {
+    let section: GamepadConfig = config.gamepad.read("gamepad")?;
+    Ok(section.teleop()?)
+}
+
 impl GamepadConfig {
     /// The teleop settings these values describe, or the first value at
     /// fault.
@@ -213,5 +224,63 @@ impl GamepadConfig {
             }
         }
         Ok((deadman, mode_button, estop_button))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The teleop settings of a whole configuration file's text.
+    fn teleop_of(text: &str) -> Result<TeleopConfig, mech_station::config::ConfigError> {
+        teleop_config(&ConfigFile::parse(text)?)
+    }
+
+    #[test]
+    fn gamepad_section_reaches_the_teleop_settings() {
+        let t = teleop_of(
+            "[gamepad]\ndeadzone = 0.2\nexpo = 0\ndeadman = \"right-bumper\"\n\
+             mode_button = \"north\"\nestop_button = \"mode\"\nrate_hz = 50\n\
+             initial_mode = \"cluster\"\nmax_speed = 0.8\n",
+        )
+        .unwrap();
+        assert_eq!(t.deadman, Some(PadButton::RightBumper));
+        assert_eq!(t.mode_button, PadButton::North);
+        assert_eq!(t.estop_button, PadButton::Mode);
+        assert_eq!(t.rate_hz, 50.0);
+        assert_eq!(t.initial_mode, TeleopMode::Cluster);
+        assert_eq!(
+            t.shaping,
+            Shaping {
+                deadzone: 0.2,
+                expo: 0.0
+            }
+        );
+        assert_eq!(t.limits.max_speed, 0.8);
+        assert_eq!(t.limits.max_yaw_rate, Limits::default().max_yaw_rate);
+        let none = teleop_of("[gamepad]\ndeadman = \"none\"\n").unwrap();
+        assert_eq!(none.deadman, None);
+        assert_eq!(teleop_of("").unwrap(), TeleopConfig::default());
+        assert_eq!(
+            GamepadConfig::default().teleop().unwrap(),
+            TeleopConfig::default()
+        );
+    }
+
+    #[test]
+    fn bad_gamepad_values_say_what_is_wrong() {
+        let err = |text: &str| teleop_of(text).unwrap_err().to_string();
+        assert!(err("[gamepad]\ndeadzone = 1.0\n").contains("gamepad.deadzone"));
+        assert!(err("[gamepad]\nexpo = -0.1\n").contains("gamepad.expo"));
+        assert!(err("[gamepad]\nrate_hz = 1\n").contains("gamepad.rate_hz"));
+        assert!(err("[gamepad]\nmax_speed = 0\n").contains("gamepad.max_speed"));
+        let e = err("[gamepad]\ndeadman = \"LB\"\n");
+        assert!(
+            e.contains("unknown button \"LB\"") && e.contains("left-bumper"),
+            "{e}"
+        );
+        assert!(err("[gamepad]\nestop_button = \"left-bumper\"\n").contains("different"));
+        assert!(err("[gamepad]\ninitial_mode = \"fly\"\n").contains("modes are"));
+        assert!(err("[gamepad]\nbogus = 1\n").contains("bogus"));
     }
 }

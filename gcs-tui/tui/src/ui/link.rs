@@ -9,7 +9,7 @@ use mech_proto::Waypoint;
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
-use crate::station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation};
+use mech_station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation};
 use mech_control::lang::quote;
 
 /// Byte offset of character `chars` in `s` (its end when shorter).

@@ -2,7 +2,7 @@
 //! loop that multiplexes the render tick, terminal input, gamepads and
 //! what the station sends, feeds them to [`App::update`], and hands the
 //! App's [`Request`](super::app::Request)s to the [`StationLink`], which carries them to the
-//! station over the attach protocol ([`crate::station`]), whether it runs
+//! station over the attach protocol ([`mech_station`]), whether it runs
 //! in this process or elsewhere.
 
 use std::time::{Duration, Instant};
@@ -16,8 +16,8 @@ use super::app::{Action, App, LogLevel};
 use super::link::StationLink;
 use super::view::ArenaBounds;
 use crate::gamepad::PadEvent;
-use crate::station::client::Attached;
-use crate::station::wire::{FromStation, Welcome};
+use mech_station::client::Attached;
+use mech_station::wire::{FromStation, Welcome};
 
 /// Frames per second of the render tick.
 const FPS: u64 = 30;

@@ -53,7 +53,7 @@ pub async fn station(core: CoreConfig, zenoh: ZenohConfig, robots: usize) -> Sta
     let gcs = Gcs::start(core).await.unwrap();
     let bridge = Bridge::start(&gcs, &zenoh).await.unwrap();
     let mut exec = Executor::new(gcs.clone())
-        .with_spawner(mech_gcs::sim::simulator())
+        .with_spawner(mech_station::sim::simulator())
         .with_remote_routes(bridge.route_requests());
     if robots > 0 {
         exec.execute_line(&format!("spawn {robots}")).await.unwrap();

@@ -1,9 +1,11 @@
-//! [`Station`]: the running station clients attach to. It owns what
-//! outlives any one client: the core ([`Gcs`]), the controllers
-//! ([`ControlHub`]) and simulator every session shares, the snapshot and
-//! log feed, the listeners and the sessions.
+//! [`Station`]: the running station clients attach to, and its
+//! `[station]` section ([`StationConfig`]: where it listens, how often it
+//! sends snapshots). It owns what outlives any one client: the core
+//! ([`Gcs`]), the controllers ([`ControlHub`]) and simulator every session
+//! shares, the snapshot and log feed, the listeners and the sessions.
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -12,11 +14,11 @@ use mech_control::{ClusterSpec, ControlHub};
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
 use mech_core::sync::lock;
+use serde::Deserialize;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 
-use super::StationConfig;
-use super::feed::Feed;
+use crate::feed::Feed;
 use crate::view::ArenaBounds;
 
 /// How long a stopping station waits for its sessions to say goodbye.
@@ -24,7 +26,75 @@ const CLOSE_WAIT: Duration = Duration::from_secs(2);
 
 /// Sessions at once; more are refused (a runaway client cannot exhaust
 /// the station).
-pub(super) const MAX_SESSIONS: usize = 64;
+pub(crate) const MAX_SESSIONS: usize = 64;
+
+/// `[station]`: where a served station listens for clients.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StationConfig {
+    /// The local control socket (default [`default_socket`]).
+    pub socket: Option<PathBuf>,
+    /// Permission bits of the socket: owner and group by default (0o660);
+    /// its directory, when the station creates it, gets the same read and
+    /// search bits (0o750).
+    pub socket_mode: u32,
+    /// TCP endpoint for operators on other machines; each proves an
+    /// operator key (`[auth]`). None by default.
+    pub tcp: Option<SocketAddr>,
+    /// Fleet snapshots per second sent to each TUI (a route change or
+    /// other event is sent at once, between them).
+    pub snapshot_rate: f64,
+}
+
+impl Default for StationConfig {
+    fn default() -> Self {
+        StationConfig {
+            socket: None,
+            socket_mode: 0o660,
+            tcp: None,
+            snapshot_rate: 20.0,
+        }
+    }
+}
+
+impl StationConfig {
+    pub fn validate(&self) -> Result<(), mech_core::ConfigError> {
+        let bad = |m: String| Err(mech_core::ConfigError(format!("[station] {m}")));
+        if !(self.snapshot_rate.is_finite() && (1.0..=100.0).contains(&self.snapshot_rate)) {
+            return bad(format!(
+                "snapshot_rate = {} is not between 1 and 100 per second",
+                self.snapshot_rate
+            ));
+        }
+        if self.socket_mode & !0o777 != 0 || self.socket_mode & 0o600 != 0o600 {
+            return bad(format!(
+                "socket_mode = {:o} must give the owner read and write and have no bits beyond 0o777",
+                self.socket_mode
+            ));
+        }
+        if self.socket_mode & 0o007 != 0 {
+            return bad(format!(
+                "socket_mode = {:o} lets every user on the machine command the robots; give owner and group only (0o660)",
+                self.socket_mode
+            ));
+        }
+        Ok(())
+    }
+
+    /// The control socket's path.
+    pub fn socket_path(&self) -> PathBuf {
+        self.socket.clone().unwrap_or_else(default_socket)
+    }
+}
+
+/// `$XDG_RUNTIME_DIR/mech/gcs.sock`, or `/tmp/mech-UID/gcs.sock` without a
+/// runtime directory: private to the user by default.
+pub fn default_socket() -> PathBuf {
+    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(d) => PathBuf::from(d).join("mech/gcs.sock"),
+        None => PathBuf::from(format!("/tmp/mech-{}/gcs.sock", nix::unistd::getuid())),
+    }
+}
 
 /// How a client reached the station.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -50,11 +120,11 @@ impl std::fmt::Display for Via {
 /// A running station. Cloning is cheap; every clone is the same station.
 #[derive(Debug, Clone)]
 pub struct Station {
-    pub(super) inner: Arc<Inner>,
+    pub(crate) inner: Arc<Inner>,
 }
 
 #[derive(Debug)]
-pub(super) struct Inner {
+pub(crate) struct Inner {
     pub gcs: Gcs,
     pub control: ControlHub,
     pub spawner: Option<SharedSpawner>,
@@ -126,12 +196,12 @@ impl Station {
     }
 
     /// Starts a task serving a listener; it stops with the station.
-    pub(super) fn add_listener(&self, task: tokio::task::JoinHandle<()>) {
+    pub(crate) fn add_listener(&self, task: tokio::task::JoinHandle<()>) {
         lock(&self.inner.listeners).push(task);
     }
 
     /// Writes a line to the station's event log (every client sees it).
-    pub(super) fn log(&self, severity: Severity, text: String) {
+    pub(crate) fn log(&self, severity: Severity, text: String) {
         self.inner.gcs.update_fleet(|f| f.log(severity, text));
     }
 
@@ -152,5 +222,23 @@ impl Station {
             s.shutdown_all().await;
         }
         self.inner.gcs.shutdown().await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_socket_open_to_everyone_is_refused() {
+        let mut c = StationConfig::default();
+        assert!(c.validate().is_ok());
+        c.socket_mode = 0o666;
+        assert!(c.validate().unwrap_err().0.contains("every user"));
+        c.socket_mode = 0o060;
+        assert!(c.validate().is_err());
+        c.socket_mode = 0o600;
+        c.snapshot_rate = 0.0;
+        assert!(c.validate().is_err());
     }
 }

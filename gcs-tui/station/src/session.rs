@@ -20,13 +20,13 @@ use serde_json::Value;
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
 
-use super::feed::{LOG_HISTORY, LogCursor};
-use super::server::{MAX_SESSIONS, Station, Via};
-use super::wire::{
+use crate::feed::{LOG_HISTORY, LogCursor};
+use crate::operator::{check_operator, login_name};
+use crate::server::{MAX_SESSIONS, Station, Via};
+use crate::wire::{
     FromStation, LineResult, MAX_CLIENT_LINE, PROTOCOL, ReadError, Streams, ToStation, Welcome,
     challenge_region, hex, read_message, to_line, unhex,
 };
-use super::{check_operator, login_name};
 use mech_core::auth::Role;
 
 /// Time a client has to say Hello (and answer the challenge).
@@ -55,7 +55,7 @@ impl Station {
     }
 
     /// Serves one client on `stream` until it leaves or the station stops.
-    pub(super) fn spawn_session<S>(&self, stream: S, via: Via)
+    pub(crate) fn spawn_session<S>(&self, stream: S, via: Via)
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
     {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use tokio::net::{TcpListener, UnixListener};
 
-use super::server::{Station, Via};
+use crate::server::{Station, Via};
 
 /// Why a listener could not start.
 #[derive(Debug, thiserror::Error)]

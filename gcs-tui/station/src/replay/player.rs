@@ -11,10 +11,10 @@ use std::time::Duration;
 use mech_core::replay::{Cursor, Replay};
 use tokio::sync::mpsc;
 
-use crate::station::client::Attached;
-use crate::station::wire::{FromStation, LineResult, PROTOCOL, ToStation, Welcome};
-use crate::station::{LogCursor, snapshot};
+use crate::client::Attached;
+use crate::feed::{LogCursor, snapshot};
 use crate::view::{FleetSnapshot, ReplayClock, Security};
+use crate::wire::{FromStation, LineResult, PROTOCOL, ToStation, Welcome};
 
 /// Snapshots per second while playing (and the clock's resolution).
 const RATE_HZ: u64 = 20;

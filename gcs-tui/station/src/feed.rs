@@ -15,21 +15,21 @@ use mech_core::Gcs;
 use mech_core::fleet::{Fleet, LogEntry, Robot, Severity};
 use tokio::sync::watch;
 
-use super::wire::{FromStation, LogLevel, to_line};
 use crate::view::{
     ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView, RouteView,
     Security, TRAIL_SECONDS,
 };
+use crate::wire::{FromStation, LogLevel, to_line};
 
 /// Recent log lines a client gets when it attaches.
-pub(super) const LOG_HISTORY: usize = 50;
+pub(crate) const LOG_HISTORY: usize = 50;
 
 /// Shortest time between two snapshots (an event storm is coalesced).
 const MIN_GAP: Duration = Duration::from_millis(3);
 
 /// The shared feed: subscribe to snapshots and log lines.
 #[derive(Debug)]
-pub(super) struct Feed {
+pub(crate) struct Feed {
     snapshots: watch::Sender<Arc<str>>,
     log_seq: watch::Sender<u64>,
     task: tokio::task::JoinHandle<()>,

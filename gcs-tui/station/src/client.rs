@@ -13,7 +13,7 @@ use serde_json::{Value, json};
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::sync::mpsc;
 
-use super::wire::{
+use crate::wire::{
     FromStation, LineResult, MAX_LINE, PROTOCOL, Streams, ToStation, Welcome, challenge_region,
     hex, read_message, to_line, unhex,
 };
@@ -156,7 +156,7 @@ pub async fn attach(addr: &Address, opts: AttachOptions) -> Result<Attached, Att
 }
 
 /// Attaches over an open stream (a socket, or the embedded station's
-/// [`super::Station::attach_local`] pipe).
+/// [`crate::Station::attach_local`] pipe).
 pub async fn attach_stream<S>(stream: S, opts: AttachOptions) -> Result<Attached, AttachError>
 where
     S: AsyncRead + AsyncWrite + Send + 'static,

@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
-use mech_core::{Gcs, RecordTarget};
 use sd_notify::NotifyState;
 use tokio::signal::unix::{SignalKind, signal};
 
-use super::listen::{bind_tcp, bind_unix};
-use super::server::Station;
-use crate::GcsConfig;
+use crate::config::ConfigFile;
+use crate::launch::{Launched, Recording};
+use crate::listen::{bind_tcp, bind_unix};
+use crate::server::Station;
 
 /// Stops what [`serve_with`] started beside the station.
 pub type Stop = futures::future::BoxFuture<'static, ()>;
@@ -23,7 +23,7 @@ pub type Stop = futures::future::BoxFuture<'static, ()>;
 /// Starts the station and serves until SIGTERM or SIGINT. `demo`: start
 /// that many simulated robots first.
 pub async fn serve(
-    config: GcsConfig,
+    config: ConfigFile,
     demo: Option<usize>,
     record: Option<PathBuf>,
 ) -> anyhow::Result<()> {
@@ -36,7 +36,7 @@ pub async fn serve(
 /// the station, such as a bridge to other stations. What it returns is
 /// awaited, to stop it, before the station stops.
 pub async fn serve_with<F, Fut>(
-    config: GcsConfig,
+    config: ConfigFile,
     demo: Option<usize>,
     record: Option<PathBuf>,
     beside: F,
@@ -47,42 +47,25 @@ where
 {
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
-        "mech-gcs serve starting"
+        "{} serve starting",
+        program()
     );
     // The socket first: if a station already runs, this one must not start
     // a second router beside it.
     let socket = config.station.socket_path();
     let listener = bind_unix(&socket, config.station.socket_mode)?;
-    let started = Gcs::start(config.core()).await;
-    let gcs = match started {
-        Ok(gcs) => gcs,
+    let launched = match Launched::start(&config, Recording::Service(record)).await {
+        Ok(l) => l,
         Err(e) => {
-            let _ = std::fs::remove_file(&socket);
-            return Err(e).context("cannot start the router");
-        }
-    };
-    let live = match crate::foxglove::Live::start(&gcs, &config.foxglove).await {
-        Ok(live) => live,
-        Err(e) => {
-            gcs.shutdown().await;
             let _ = std::fs::remove_file(&socket);
             return Err(e);
         }
     };
-    let mut recording = start_recording(&gcs, &config, record);
-    if let Some(view) = live.describe() {
-        recording = format!("{recording}; {view}");
-    }
-    let station = Station::start(
-        gcs,
-        &config.cluster,
-        Some(crate::sim::simulator()),
-        &config.station,
-    );
-    station.set_record_dir(config.record.dir.clone().or_else(|| config.log.dir.clone()));
+    let station = launched.station().clone();
     let result = match beside(station.clone()).await {
         Ok(stop) => {
             station.listen_unix(listener);
+            let recording = launched.describe();
             let result = run(&station, &config, &socket, demo, &recording).await;
             let _ = sd_notify::notify(&[NotifyState::Stopping]);
             stop.await;
@@ -90,35 +73,15 @@ where
         }
         Err(e) => Err(e),
     };
-    live.stop();
-    station.shutdown().await;
+    launched.shutdown().await;
     let _ = std::fs::remove_file(&socket);
-    tracing::info!("mech-gcs serve stopped");
+    tracing::info!("{} serve stopped", program());
     result
-}
-
-/// A served station records by default: to `--record FILE`, or in rotating
-/// files in `[record] dir` (or the log directory). A recording that cannot
-/// start is reported, and the station runs without one.
-fn start_recording(gcs: &Gcs, config: &GcsConfig, file: Option<PathBuf>) -> String {
-    let started = match (file, &config.log.dir) {
-        (Some(f), _) => gcs.start_recording(RecordTarget::File(f)),
-        (None, Some(dir)) => gcs.start_default_recording(dir),
-        (None, None) if config.record.dir.is_some() => gcs.start_default_recording(Path::new(".")),
-        (None, None) => return "not recording (no [log] or [record] directory)".into(),
-    };
-    match started {
-        Ok(path) => format!("recording to {}", path.display()),
-        Err(e) => {
-            tracing::error!(error = %e, "cannot record");
-            format!("NOT recording: {e}")
-        }
-    }
 }
 
 async fn run(
     station: &Station,
-    config: &GcsConfig,
+    config: &ConfigFile,
     socket: &Path,
     demo: Option<usize>,
     recording: &str,
@@ -144,7 +107,7 @@ async fn run(
     Ok(())
 }
 
-fn ready_line(station: &Station, socket: &Path, config: &GcsConfig) -> String {
+fn ready_line(station: &Station, socket: &Path, config: &ConfigFile) -> String {
     let router = station.gcs().router();
     let tcp = config
         .station

@@ -1,4 +1,5 @@
-//! The TUI's replay player on a real recording: a router on loopback
+//! The replay player (the station a TUI attaches to for `mech-gcs replay`)
+//! on a real recording: a router on loopback
 //! recorded while a test robot reported moving along x, then played back.
 
 #![allow(clippy::unwrap_used)]
@@ -12,9 +13,9 @@ use std::time::Duration;
 use agent::{Peer, config, telemetry};
 use mech_core::replay::Replay;
 use mech_core::{Gcs, RecordTarget};
-use mech_gcs::replay::player::{self, Player};
-use mech_gcs::station::wire::{FromStation, ToStation};
 use mech_proto::{Command, Stop};
+use mech_station::replay::player::{self, Player};
+use mech_station::wire::{FromStation, ToStation};
 
 /// Records robot_1 reporting x = 0, 1, ... 9, 50 ms apart.
 async fn recording(file: &Path) {

@@ -1,6 +1,7 @@
-//! The view model: what the UI shows about the fleet, as a plain snapshot
-//! of robots, channels and clusters refreshed from the GCS core's fleet
-//! model (`mech_core::fleet`) and router.
+//! The view model: what a station sends about the fleet and a UI shows, as
+//! a plain snapshot of robots, channels and clusters refreshed from the
+//! core's fleet model (`mech_core::fleet`) and router; the attach protocol
+//! carries it ([`crate::wire`]).
 //!
 //! The UI never derives link state, routes or failsafes itself; it copies
 //! them from the core, so screens and tests can be built from fixed values.

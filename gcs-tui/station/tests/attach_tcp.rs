@@ -6,11 +6,11 @@ use std::time::Duration;
 
 use mech_core::auth::{AuthConfig, AuthMode, KeyEntry, KeyFile, Role};
 use mech_core::{CoreConfig, Gcs};
-use mech_gcs::station::client::{Address, AttachError, AttachOptions, KeyFileRef, attach};
-use mech_gcs::station::wire::{
+use mech_station::client::{Address, AttachError, AttachOptions, KeyFileRef, attach};
+use mech_station::wire::{
     FromStation, MAX_LINE, PROTOCOL, ToStation, challenge_region, hex, read_message, to_line, unhex,
 };
-use mech_gcs::station::{ListenError, Station, StationConfig, bind_tcp};
+use mech_station::{ListenError, Station, StationConfig, bind_tcp};
 use tempfile::TempDir;
 use tokio::io::{AsyncWriteExt, BufReader};
 

@@ -1,0 +1,284 @@
+//! The station's configuration file (`gcs.toml`), assembled from the
+//! sections each layer owns: `[router]`, `[fleet]`, `[auth]` and `[record]`
+//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[station]` and
+//! `[foxglove]` (this crate). The sections of the programs on top of the
+//! station, `[gamepad]` (mech-gcs's TUI) and `[zenoh]` (mech-zenoh's
+//! bridge), are carried as written ([`ProgramSection`]), each read and
+//! checked by the program that uses it, so one file serves every program
+//! of a site.
+//! Every field has a default, so an empty file (or none) gives a working
+//! ground station on port 7400.
+
+use std::path::{Path, PathBuf};
+
+use mech_control::ClusterSpec;
+use mech_core::auth::AuthConfig;
+use mech_core::{CoreConfig, FleetConfig, RecordConfig, RouterConfig};
+use serde::Deserialize;
+use serde::de::DeserializeOwned;
+
+use crate::foxglove::FoxgloveConfig;
+use crate::logging::LogConfig;
+use crate::server::StationConfig;
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    // The causes are printed in the message, not chained as sources, so a
+    // report that prints the chain does not say them twice.
+    #[error("cannot read {path}: {error}")]
+    Read {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("{path}: {error}")]
+    Parse {
+        path: PathBuf,
+        error: Box<toml::de::Error>,
+    },
+    /// A program's section (`[gamepad]`, `[zenoh]`) that its program
+    /// cannot read.
+    #[error("[{name}]: {error}")]
+    Section {
+        name: String,
+        error: Box<toml::de::Error>,
+    },
+    #[error(transparent)]
+    Invalid(#[from] mech_core::ConfigError),
+}
+
+/// The station's whole configuration: every section of the file.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ConfigFile {
+    pub router: RouterConfig,
+    pub log: LogConfig,
+    pub fleet: FleetConfig,
+    /// Keys and roles of the authenticated control plane.
+    pub auth: AuthConfig,
+    /// Clusters defined at start-up (`[[cluster]]` tables: name, members,
+    /// formation, spacing, offsets).
+    pub cluster: Vec<ClusterSpec>,
+    /// Recordings: directory, file size cap, rotation, queue.
+    pub record: RecordConfig,
+    /// Where a served station listens for TUIs and scripts.
+    pub station: StationConfig,
+    /// The Foxglove live view (`--foxglove`).
+    pub foxglove: FoxgloveConfig,
+    /// Gamepad teleop (shaping, dead-man and other buttons, rate, limits):
+    /// read by mech-gcs's TUI, which drives the pads.
+    pub gamepad: ProgramSection,
+    /// The bridge to other stations: read by mech-zenoh.
+    pub zenoh: ProgramSection,
+}
+
+/// A section that a program on top of the station reads (`[gamepad]`,
+/// `[zenoh]`), kept as the file wrote it: the station neither uses nor
+/// checks it, the program does, with [`ProgramSection::read`].
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(transparent)]
+pub struct ProgramSection(Option<toml::Table>);
+
+impl ProgramSection {
+    /// The section as the program's type `T`; `T`'s defaults when the file
+    /// has none. `name` is the section's, for the error.
+    pub fn read<T: DeserializeOwned + Default>(&self, name: &str) -> Result<T, ConfigError> {
+        match &self.0 {
+            None => Ok(T::default()),
+            Some(table) => toml::Value::Table(table.clone())
+                .try_into()
+                .map_err(|error| ConfigError::Section {
+                    name: name.to_string(),
+                    error: Box::new(error),
+                }),
+        }
+    }
+}
+
+/// The command line's settings that override the configuration file's.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// `--demo` without `--config`: the simulated fleet lives in this
+    /// process, so the router is not exposed beyond this machine.
+    pub demo_without_file: bool,
+    /// `--udp`, `--tcp`: the router's endpoints.
+    pub udp: Option<std::net::SocketAddr>,
+    pub tcp: Option<std::net::SocketAddr>,
+    /// `--socket`: the station's control socket.
+    pub socket: Option<PathBuf>,
+}
+
+impl ConfigFile {
+    /// Applies the command line's settings over the file's.
+    pub fn override_with(&mut self, o: &Overrides) {
+        if o.demo_without_file {
+            self.router.udp.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+        }
+        if let Some(udp) = o.udp {
+            self.router.udp = udp;
+        }
+        if let Some(tcp) = o.tcp {
+            self.router.tcp = Some(tcp);
+        }
+        if let Some(socket) = &o.socket {
+            self.station.socket = Some(socket.clone());
+        }
+    }
+
+    /// Reads and checks a TOML file.
+    pub fn load(path: &Path) -> Result<ConfigFile, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {
+            path: path.to_owned(),
+            error,
+        })?;
+        let mut cfg = ConfigFile::parse_at(&text, path)?;
+        // Key files are found next to the configuration that names them.
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for k in &mut cfg.auth.keys {
+            if k.file.is_relative() {
+                k.file = dir.join(&k.file);
+            }
+        }
+        Ok(cfg)
+    }
+
+    /// Parses and checks TOML text.
+    pub fn parse(text: &str) -> Result<ConfigFile, ConfigError> {
+        ConfigFile::parse_at(text, Path::new("<config>"))
+    }
+
+    fn parse_at(text: &str, path: &Path) -> Result<ConfigFile, ConfigError> {
+        let cfg: ConfigFile = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            error: Box::new(e),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The sections the station core runs with.
+    pub fn core(&self) -> CoreConfig {
+        CoreConfig {
+            router: self.router.clone(),
+            fleet: self.fleet.clone(),
+            auth: self.auth.clone(),
+            record: self.record.clone(),
+        }
+    }
+
+    /// Checks every section the station reads, each by the layer that owns
+    /// it (the programs' sections are their programs' to check).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.core().validate()?;
+        for c in &self.cluster {
+            c.formation()
+                .map_err(|e| mech_core::ConfigError(format!("cluster {:?}: {e}", c.name)))?;
+        }
+        self.station.validate()?;
+        self.foxglove.validate()?;
+        Ok(())
+    }
+
+    /// Where `record start` without a file name records: `[record] dir`,
+    /// else the log directory.
+    pub fn record_dir(&self) -> Option<PathBuf> {
+        self.record.dir.clone().or_else(|| self.log.dir.clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn empty_file_gives_defaults_on_port_7400() {
+        let cfg = ConfigFile::parse("").unwrap();
+        assert_eq!(cfg.router.udp.port(), 7400);
+        assert_eq!(cfg.router.lost_after, Duration::from_secs(1));
+        assert!(cfg.router.default_route.is_none());
+    }
+
+    #[test]
+    fn seconds_and_default_route_are_read() {
+        let cfg = ConfigFile::parse(
+            "[router]\nlost_after = 2.5\nstale_after = 1\ndefault_route = \"joy/0\"\n",
+        )
+        .unwrap();
+        assert_eq!(cfg.router.lost_after, Duration::from_millis(2500));
+        assert_eq!(cfg.router.default_route.as_deref(), Some("joy/0"));
+    }
+
+    #[test]
+    fn bad_values_are_errors() {
+        assert!(ConfigFile::parse("[router]\nstale_after = 3\n").is_err());
+        assert!(ConfigFile::parse("[router]\nbogus = 1\n").is_err());
+        assert!(ConfigFile::parse("[router]\ntick = -1\n").is_err());
+        let e = ConfigFile::parse("[router]\nudp_poll = 0.01\n").unwrap_err();
+        assert!(e.to_string().contains("router.udp_poll"), "{e}");
+    }
+
+    #[test]
+    fn udp_polling_is_read_and_can_be_turned_off() {
+        let cfg = ConfigFile::parse("[router]\nudp_poll = 0.00005\n").unwrap();
+        assert_eq!(cfg.router.udp_poll, Duration::from_micros(50));
+        let off = ConfigFile::parse("[router]\nudp_poll = 0\n").unwrap();
+        assert!(off.router.udp_poll.is_zero());
+        // The shipped file says what the default is.
+        let shipped = ConfigFile::parse(include_str!("../../../config/gcs.toml")).unwrap();
+        assert_eq!(
+            shipped.router.udp_poll,
+            ConfigFile::parse("").unwrap().router.udp_poll
+        );
+    }
+
+    #[test]
+    fn gcs_channels_must_be_names() {
+        let err = |text: &str| ConfigFile::parse(text).unwrap_err().to_string();
+        assert!(err("[fleet]\nmission_channel = \"\"\n").contains("fleet.mission_channel"));
+        assert!(err("[fleet]\ncommand_channel = \"cmd gcs\"\n").contains("fleet.command_channel"));
+    }
+
+    #[test]
+    fn shipped_config_parses() {
+        let text = include_str!("../../../config/gcs.toml");
+        ConfigFile::parse(text).unwrap();
+    }
+
+    /// A section the station does not read but a program on top of it
+    /// does, with a stand-in for the program's type.
+    #[derive(Debug, Default, PartialEq, serde::Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Pads {
+        deadzone: f64,
+    }
+
+    #[test]
+    fn the_programs_sections_are_carried_for_them_to_read() {
+        let cfg =
+            ConfigFile::parse("[gamepad]\ndeadzone = 0.2\n[zenoh]\nstation = \"a\"\n").unwrap();
+        assert_eq!(cfg.gamepad.read::<Pads>("gamepad").unwrap().deadzone, 0.2);
+        let zenoh: toml::Table = cfg.zenoh.read("zenoh").unwrap();
+        assert_eq!(zenoh["station"].as_str(), Some("a"));
+        let none = ConfigFile::parse("").unwrap();
+        assert_eq!(
+            none.gamepad.read::<Pads>("gamepad").unwrap(),
+            Pads::default()
+        );
+        // The program's type decides what its section may hold.
+        let bad = ConfigFile::parse("[gamepad]\nbogus = 1\n").unwrap();
+        let e = bad.gamepad.read::<Pads>("gamepad").unwrap_err().to_string();
+        assert!(e.contains("[gamepad]") && e.contains("bogus"), "{e}");
+        // Sections nobody owns are still refused.
+        let e = ConfigFile::parse("[gamepda]\ndeadzone = 0.2\n").unwrap_err();
+        assert!(e.to_string().contains("gamepda"), "{e}");
+    }
+
+    #[test]
+    fn record_start_records_in_the_record_or_else_the_log_directory() {
+        let cfg = ConfigFile::parse("[log]\ndir = \"/l\"\n").unwrap();
+        assert_eq!(cfg.record_dir(), Some(PathBuf::from("/l")));
+        let cfg = ConfigFile::parse("[log]\ndir = \"/l\"\n[record]\ndir = \"/r\"\n").unwrap();
+        assert_eq!(cfg.record_dir(), Some(PathBuf::from("/r")));
+    }
+}
