@@ -16,12 +16,16 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
+use mech_proto::{
+    FailsafeState, Health, Hello, Intervention, Notice, NoticeCode, SafetyState, Telemetry,
+    Waypoint,
+};
 
 pub use config::FleetConfig;
 pub use remote::{RemoteInfo, remote_name};
 pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
 
+use crate::arena::ArenaShape;
 use crate::counters::{ChannelStatus, Counters};
 use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 use crate::sync::lock;
@@ -93,6 +97,9 @@ pub struct Fleet {
     /// Router endpoints once bound.
     pub udp: Option<SocketAddr>,
     pub tcp: Option<SocketAddr>,
+    /// The arena robots are sent (and the map draws), if the station has
+    /// one.
+    pub arena: Option<ArenaShape>,
     /// Router time of the last applied event.
     pub now: Duration,
     /// Sequence number of the last log line.
@@ -112,6 +119,7 @@ impl Fleet {
             stations: BTreeMap::new(),
             udp: None,
             tcp: None,
+            arena: None,
             now: Duration::ZERO,
             log_seq: 0,
             config,
@@ -242,6 +250,16 @@ impl Fleet {
                 Severity::Warn,
                 format!("rejected from {from} ({}): {detail}", reason.as_str()),
             ),
+            Event::Arena { arena } => self.arena_changed(arena),
+            Event::SafetySwitched { robot, enabled, id } => {
+                self.safety_switched(robot, *enabled, *id)
+            }
+            Event::ArenaAcked { robot, id, enabled } => self.arena_acked(robot, *id, *enabled),
+            Event::Safety {
+                robot,
+                state,
+                intervention,
+            } => self.safety_reported(robot, *state, *intervention),
         }
     }
 
@@ -473,6 +491,61 @@ impl Fleet {
             r.link = LinkState::Lost;
         }
         self.log(Severity::Warn, format!("{robot} left: {reason}"));
+    }
+
+    fn arena_changed(&mut self, arena: &Option<ArenaShape>) {
+        self.arena.clone_from(arena);
+        let text = match arena {
+            Some(a) => format!("arena: {}", a.summary()),
+            None => "arena cleared: robots keep no fence".to_string(),
+        };
+        self.log(Severity::Info, text);
+    }
+
+    fn safety_switched(&mut self, robot: &str, enabled: bool, id: u32) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.safety_enabled = enabled;
+        }
+        if enabled {
+            self.log(
+                Severity::Info,
+                format!("{robot}: safety on requested (arena {id})"),
+            );
+        } else {
+            self.log(
+                Severity::Warn,
+                format!("{robot}: safety OFF requested by an operator (arena {id})"),
+            );
+        }
+    }
+
+    fn arena_acked(&mut self, robot: &str, id: u32, enabled: bool) {
+        let on = if enabled { "on" } else { "OFF" };
+        self.log(
+            Severity::Info,
+            format!("{robot} acknowledged arena {id} (safety {on})"),
+        );
+    }
+
+    /// A robot's layer reports a new state or intervention. The
+    /// interventions themselves reach the log as the robot's notices (at
+    /// most one a second each); a state change is logged here.
+    fn safety_reported(&mut self, robot: &str, state: SafetyState, _intervention: Intervention) {
+        let Some(r) = self.robots.get(robot) else {
+            return;
+        };
+        let was = r.safety.map(|s| s.state);
+        if was == Some(state) {
+            return;
+        }
+        match state {
+            SafetyState::Off => self.log(
+                Severity::Warn,
+                format!("{robot} reports safety OFF: not kept inside the arena or apart"),
+            ),
+            SafetyState::On => self.log(Severity::Info, format!("{robot} reports safety on")),
+            SafetyState::NoArena => {}
+        }
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {

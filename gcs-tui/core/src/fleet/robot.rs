@@ -136,6 +136,9 @@ pub struct Robot {
     /// What the robot's safety layer reports (telemetry); `None` for a
     /// robot without one.
     pub safety: Option<mech_proto::SafetyReport>,
+    /// Whether the station has this robot's safety layer on (an operator's
+    /// `safety off` clears it; the robot's report says when it applies).
+    pub safety_enabled: bool,
     /// The robot's last driver fault notice ("left wheel stalled: ..."),
     /// kept while its telemetry reports the fault.
     pub fault: Option<String>,
@@ -181,6 +184,7 @@ impl Robot {
             quality: LinkQuality::default(),
             velocity_source: VelocitySource::Commanded,
             safety: None,
+            safety_enabled: true,
             fault: None,
             remote: None,
         }
@@ -257,6 +261,12 @@ impl Robot {
             return Some(sent.id);
         }
         None
+    }
+
+    /// Whether the robot's safety layer is off, or asked to be: an alarm
+    /// on its card, in the status bar and in `status`.
+    pub fn safety_alarm(&self) -> bool {
+        !self.safety_enabled || self.safety.is_some_and(|s| s.alarm())
     }
 
     /// Whether the robot obeys `kind` commands.

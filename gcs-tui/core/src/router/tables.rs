@@ -8,6 +8,8 @@
 //! - [`commands`]: commands, fleet and cluster commands (the hot path);
 //! - [`channels`]: live channels, their publishers and rates, discovery;
 //! - [`missions`], [`estop`], [`autopilot`];
+//! - [`safety`]: the arena and each robot's safety switch, delivered
+//!   reliably, the neighbour lists, what robots report of their layer;
 //! - [`telemetry`]: telemetry and its external subscribers, position
 //!   fixes, notices;
 //! - [`links`] (a robot's links and failover) and [`link_quality`] (each
@@ -38,6 +40,7 @@ mod links;
 mod missions;
 mod registration;
 mod routes;
+mod safety;
 pub(crate) mod tap;
 mod telemetry;
 
@@ -167,6 +170,7 @@ pub(crate) struct Tables {
     subscribers: telemetry::Subscribers,
     missions: missions::Missions,
     estop: estop::EStops,
+    safety: safety::SiteSafety,
     gate: gate::Gate,
     totals: Totals,
     tap: TapSlot,
@@ -201,6 +205,7 @@ impl Tables {
             subscribers: telemetry::Subscribers::default(),
             missions: missions::Missions::new(seed),
             estop: estop::EStops::new(seed),
+            safety: safety::SiteSafety::new(seed),
             gate: gate::Gate::new(auth),
             totals: Totals::default(),
             tap: TapSlot::default(),
@@ -353,13 +358,13 @@ impl Tables {
             Body::Bye(bye) => self.on_bye(m, bye, cx),
             Body::TimeRequest(_) => Delivery::Consumed,
             Body::Autopilot(request) => self.on_autopilot(m, request, cx),
+            Body::ArenaAck(ack) => self.on_arena_ack(m, ack, cx),
             Body::Command(_)
             | Body::Welcome(_)
             | Body::Route(_)
             | Body::Channels(_)
             | Body::Time(_)
             | Body::Arena(_)
-            | Body::ArenaAck(_)
             | Body::Neighbours(_) => {
                 let what = format!("unexpected {} message", body.kind());
                 self.bad(what, cx)
@@ -376,6 +381,7 @@ impl Tables {
         self.retry_routes(cx);
         self.retry_estop(cx);
         self.retry_missions(cx);
+        self.retry_arenas(cx);
         self.subscribers.lapse(cx.now);
     }
 
