@@ -50,6 +50,6 @@ pub use columns::Column;
 pub use link::StationLink;
 pub use terminal::{RunOptions, run};
 pub use view::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
-    LinkState, RobotView, RouteView, SlotView,
+    ArenaBounds, ArenaShape, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot,
+    LinkQuality, LinkState, RobotView, RouteView, SafetyView, SlotView,
 };
