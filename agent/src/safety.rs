@@ -87,9 +87,9 @@ impl Default for SafetyConfig {
             stale_after: 0.3,
             crawl_speed: 0.05,
             yield_turn_rate: 1.0,
-            yield_time: 2.0,
+            yield_time: 0.4,
             yield_angle: std::f64::consts::FRAC_PI_2,
-            horizon: 2.0,
+            horizon: 1.5,
         }
     }
 }
