@@ -141,6 +141,14 @@ pub fn event_json(s: &Stamped) -> Value {
             reason,
             detail,
         } => json!({"from": from, "reason": reason.as_str(), "detail": detail}),
+        Event::Refused {
+            count,
+            sources,
+            by_reason,
+            from,
+            detail,
+        } => json!({"count": count, "sources": sources, "by_reason": by_reason,
+                    "from": from, "detail": detail}),
     };
     if let Value::Object(m) = &mut v {
         m.insert("type".into(), json!("event"));

@@ -405,6 +405,13 @@ impl Keyring {
         self.by_id.get(&key_id)
     }
 
+    /// Whether `stamp_us` is within the freshness window of the station's
+    /// clock `now_us`: a stamp from a peer whose clock agrees with the
+    /// station's, so its freshness can be judged.
+    pub fn near_clock(&self, stamp_us: u64, now_us: u64) -> bool {
+        stamp_us.abs_diff(now_us) <= self.freshness.window_us
+    }
+
     /// Checks a message's tag over `region` and that `sender` is the key's
     /// name; with `fresh`, also that its stamp is new on its stream (and
     /// records it). `now_us` is the station's clock.

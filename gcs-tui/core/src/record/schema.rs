@@ -240,6 +240,7 @@ pub const EVENT_NAMES: &[&str] = &[
     "notice",
     "bad_packet",
     "rejected",
+    "refused",
 ];
 
 fn decision() -> Value {
@@ -331,7 +332,7 @@ mod tests {
     #[test]
     fn every_event_name_is_listed_and_topics_name_their_robot() {
         let names: Vec<&str> = EVENT_NAMES.to_vec();
-        assert!(names.contains(&"estop_complete") && names.len() == 18);
+        assert!(names.contains(&"estop_complete") && names.len() == 19);
         assert_eq!(
             telemetry_robot(&telemetry_topic("robot_1")),
             Some("robot_1")
@@ -383,6 +384,15 @@ mod tests {
             Event::BadPacket {
                 from: "gcs".into(),
                 error: "e".into(),
+            },
+            Event::Refused {
+                count: 3,
+                sources: 2,
+                by_reason: [("bad-tag".to_string(), 2), ("shed".to_string(), 1)]
+                    .into_iter()
+                    .collect(),
+                from: "udp:1.2.3.4:5".into(),
+                detail: "x".into(),
             },
         ];
         for e in events {

@@ -14,6 +14,7 @@
 //!   robot's measured link quality);
 //! - [`gate`]: the authenticated control plane (what comes in is checked,
 //!   what goes out is signed);
+//! - [`refusals`]: how refused traffic is reported (counted summaries);
 //! - [`tap`]: the recorder's tap.
 //!
 //! Everything here is synchronous and runs under the router's tables lock,
@@ -36,6 +37,7 @@ mod gate;
 mod link_quality;
 mod links;
 mod missions;
+mod refusals;
 mod registration;
 mod routes;
 pub(crate) mod tap;
@@ -43,10 +45,12 @@ mod telemetry;
 
 use mech_proto::{Body, Envelope, Header};
 use tokio::time::Instant;
-use tracing::{debug, warn};
+use tracing::warn;
 
 use super::config::RouterConfig;
 use tap::{MessageTap, Tap, TapSlot};
+
+pub(crate) use refusals::SOURCES_COUNTED;
 
 use crate::auth::{Identity, Keyring};
 use crate::counters::{Counters, DropReason, Drops, Rejections};
@@ -168,6 +172,7 @@ pub(crate) struct Tables {
     missions: missions::Missions,
     estop: estop::EStops,
     gate: gate::Gate,
+    refusals: refusals::Refusals,
     totals: Totals,
     tap: TapSlot,
     /// Sequence number of the router's own messages.
@@ -202,6 +207,7 @@ impl Tables {
             missions: missions::Missions::new(seed),
             estop: estop::EStops::new(seed),
             gate: gate::Gate::new(auth),
+            refusals: refusals::Refusals::default(),
             totals: Totals::default(),
             tap: TapSlot::default(),
             seq: 0,
@@ -235,25 +241,28 @@ impl Tables {
         }
     }
 
-    /// A message that cannot be read or is not expected: counted, logged
-    /// (rate-limited) and reported.
+    /// A message that cannot be read or is not expected: counted, and
+    /// reported and logged summarized (see [`refusals`]).
     fn bad(&mut self, error: String, cx: &mut Ctx<'_>) -> Delivery {
         self.totals.dropped.count(DropReason::BadPacket);
         self.tap.note_refusal(|| error.clone());
-        let n = self.totals.dropped.bad_packet;
-        let from = cx.from;
-        // Logged at warn for the 1st, 2nd, 4th, 8th... so a flood of garbage
-        // cannot flood the log; every one is counted and reported as an event.
-        if n.is_power_of_two() {
-            warn!(%from, %error, count = n, "bad packet");
-        } else {
-            debug!(%from, %error, "bad packet");
-        }
-        cx.event(Event::BadPacket {
-            from: from.to_string(),
-            error,
-        });
+        let from = refusals::Source::Peer(cx.from);
+        self.refused(refusals::Why::BadPacket, from, || error, cx);
         Delivery::Dropped(DropReason::BadPacket)
+    }
+
+    /// Reports a refusal, summarized: the first after a quiet second at
+    /// once, the rest counted into the next summary (see [`Tables::tick`]).
+    fn refused(
+        &mut self,
+        why: refusals::Why,
+        from: refusals::Source,
+        detail: impl FnOnce() -> String,
+        cx: &mut Ctx<'_>,
+    ) {
+        if let Some(e) = self.refusals.note(why, from, detail, cx.now) {
+            cx.event(e);
+        }
     }
 
     /// Counts a message dropped for `reason` router-wide.
@@ -295,7 +304,7 @@ impl Tables {
                 Ok(c) => c,
                 Err(e) => return self.bad(e.to_string(), cx),
             };
-            let admitted = match self.admit(bytes, head.sender, true, cx) {
+            let admitted = match self.admit(bytes, head.sender, gate::Fresh::Always, cx) {
                 Ok((id, _)) => id,
                 Err(d) => return d,
             };
@@ -310,9 +319,12 @@ impl Tables {
             Err(e) => return self.bad(e.to_string(), cx),
         };
         let sender = env.header.sender.as_str();
-        // A time request is answered whatever its stamp: the requester does
-        // not know the station's time yet.
-        let fresh = !matches!(env.body, Body::TimeRequest(_));
+        // A time request's stamp can be judged only if the requester's
+        // clock is right: it may not know the station's time yet.
+        let fresh = match env.body {
+            Body::TimeRequest(_) => gate::Fresh::NearClock,
+            _ => gate::Fresh::Always,
+        };
         let (admitted, tag) = match self.admit(bytes, sender, fresh, cx) {
             Ok(a) => a,
             Err(d) => return d,
@@ -377,6 +389,9 @@ impl Tables {
         self.retry_estop(cx);
         self.retry_missions(cx);
         self.subscribers.lapse(cx.now);
+        if let Some(e) = self.refusals.due(cx.now) {
+            cx.event(e);
+        }
     }
 
     /// A copy of the counters the tables keep (send failures are added by
