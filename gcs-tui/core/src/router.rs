@@ -42,9 +42,9 @@ pub use handle::RouterHandle;
 pub use net::RadioStatus;
 pub use publisher::{Publisher, Publishers};
 pub use tables::Delivery;
-pub(crate) use tables::{Peer, SOURCES_COUNTED};
 pub use tables::tap::OperatorRecord;
 pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
+pub(crate) use tables::{Peer, SOURCES_COUNTED};
 
 use crate::auth::Keyring;
 use crate::counters::DropReason;

@@ -759,7 +759,10 @@ async fn garbage_is_counted_never_fatal() {
     let rest = format!("refused {} messages", garbage.len() - 1);
     let summarized = || {
         let log = gcs.snapshot().log;
-        let single = log.iter().filter(|l| l.text.starts_with("bad packet")).count();
+        let single = log
+            .iter()
+            .filter(|l| l.text.starts_with("bad packet"))
+            .count();
         let summary = log.iter().filter(|l| l.text.starts_with(&rest)).count();
         (single, summary)
     };

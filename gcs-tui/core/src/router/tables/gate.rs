@@ -337,7 +337,11 @@ mod tests {
     /// before the router started).
     fn tables() -> Tables {
         let robot = Identity::new(Role::Robot, "robot_1", key(), vec![]);
-        let ring = Keyring::new(vec![robot], Duration::from_secs(10), mech_proto::unix_micros());
+        let ring = Keyring::new(
+            vec![robot],
+            Duration::from_secs(10),
+            mech_proto::unix_micros(),
+        );
         Tables::new(RouterConfig::default(), Some(ring))
     }
 
@@ -407,7 +411,10 @@ mod tests {
         assert_eq!(decide(&mut t, &captured, peer(9000), t0), [peer(9000)]);
         let mut restarted = tables();
         let later = t0 + Duration::from_secs(60);
-        assert_eq!(decide(&mut restarted, &captured, attacker, later), [attacker]);
+        assert_eq!(
+            decide(&mut restarted, &captured, attacker, later),
+            [attacker]
+        );
         let later = later + Duration::from_secs(1);
         assert_eq!(decide(&mut restarted, &captured, attacker, later), []);
     }

@@ -194,7 +194,11 @@ mod tests {
             }
         }
         events.extend(r.due(t0 + Duration::from_secs(11)));
-        assert!(matches!(events[0], Event::BadPacket { .. }), "{:?}", events[0]);
+        assert!(
+            matches!(events[0], Event::BadPacket { .. }),
+            "{:?}",
+            events[0]
+        );
         assert!(events.len() <= 12, "{} reports", events.len());
         let summed: u64 = events
             .iter()

@@ -146,7 +146,11 @@ mod tests {
         let mut robot_stamp = 1_000_000;
         for step in 0..300u64 {
             let mut copy = old[step as usize % old.len()];
-            copy.from = if step % 2 == 0 { peer(9000) } else { peer(6666) };
+            copy.from = if step % 2 == 0 {
+                peer(9000)
+            } else {
+                peer(6666)
+            };
             let _ = t.judge(copy, ms(step * 10));
             if step % 25 == 0 {
                 robot_stamp += 250_000;
