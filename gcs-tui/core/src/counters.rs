@@ -35,6 +35,10 @@ pub enum DropReason {
     Stopped,
     /// Refused by the authenticated control plane (see [`Rejections`]).
     Rejected,
+    /// Not read at all: the router was behind and the datagram's source
+    /// address had been refused many times in the last second (and is not
+    /// a peer it knows).
+    Shed,
 }
 
 impl DropReason {
@@ -46,6 +50,7 @@ impl DropReason {
             DropReason::BadPacket => "bad-packet",
             DropReason::Stopped => "router-stopped",
             DropReason::Rejected => "rejected",
+            DropReason::Shed => "shed",
         }
     }
 }
@@ -59,6 +64,7 @@ pub struct Drops {
     pub bad_packet: u64,
     pub stopped: u64,
     pub rejected: u64,
+    pub shed: u64,
 }
 
 impl Drops {
@@ -69,6 +75,7 @@ impl Drops {
             + self.bad_packet
             + self.stopped
             + self.rejected
+            + self.shed
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -79,6 +86,7 @@ impl Drops {
             DropReason::BadPacket => self.bad_packet += 1,
             DropReason::Stopped => self.stopped += 1,
             DropReason::Rejected => self.rejected += 1,
+            DropReason::Shed => self.shed += 1,
         }
     }
 
@@ -91,6 +99,7 @@ impl Drops {
             DropReason::BadPacket => self.bad_packet,
             DropReason::Stopped => self.stopped,
             DropReason::Rejected => self.rejected,
+            DropReason::Shed => self.shed,
         }
     }
 }

@@ -15,6 +15,7 @@
 //! - [`gate`]: the authenticated control plane (what comes in is checked,
 //!   what goes out is signed);
 //! - [`refusals`]: how refused traffic is reported (counted summaries);
+//! - [`sources`]: known peers first and failure budgets, under a flood;
 //! - [`tap`]: the recorder's tap.
 //!
 //! Everything here is synchronous and runs under the router's tables lock,
@@ -40,6 +41,7 @@ mod missions;
 mod refusals;
 mod registration;
 mod routes;
+mod sources;
 pub(crate) mod tap;
 mod telemetry;
 
@@ -51,6 +53,7 @@ use super::config::RouterConfig;
 use tap::{MessageTap, Tap, TapSlot};
 
 pub(crate) use refusals::SOURCES_COUNTED;
+pub(crate) use sources::Treatment;
 
 use crate::auth::{Identity, Keyring};
 use crate::counters::{Counters, DropReason, Drops, Rejections};
@@ -173,6 +176,7 @@ pub(crate) struct Tables {
     estop: estop::EStops,
     gate: gate::Gate,
     refusals: refusals::Refusals,
+    sources: sources::Sources,
     totals: Totals,
     tap: TapSlot,
     /// Sequence number of the router's own messages.
@@ -208,6 +212,7 @@ impl Tables {
             estop: estop::EStops::new(seed),
             gate: gate::Gate::new(auth),
             refusals: refusals::Refusals::default(),
+            sources: sources::Sources::default(),
             totals: Totals::default(),
             tap: TapSlot::default(),
             seq: 0,
@@ -276,6 +281,64 @@ impl Tables {
     pub(crate) fn handle(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
         self.totals.received += 1;
         let delivery = self.decide(bytes, cx);
+        if let Peer::Udp(addr) = cx.from {
+            match delivery {
+                Delivery::Dropped(DropReason::Rejected | DropReason::BadPacket) => {
+                    self.sources.refused(addr.ip(), cx.now);
+                }
+                Delivery::Dropped(DropReason::Stopped | DropReason::Shed) => {}
+                _ => self.sources.vouch(addr, cx.now),
+            }
+        }
+        self.offer(bytes, delivery, cx);
+        delivery
+    }
+
+    /// Orders a batch of `n` received datagrams from `from(i)` (see
+    /// [`sources`]): read it with [`Tables::batch_item`].
+    pub(crate) fn order_batch(
+        &mut self,
+        n: usize,
+        from: impl Fn(usize) -> Peer,
+        behind: bool,
+        now: Instant,
+    ) {
+        let addr = |i| match from(i) {
+            Peer::Udp(a) => Some(a),
+            _ => None,
+        };
+        self.sources.order(n, addr, behind, now);
+    }
+
+    /// The `k`-th datagram of the batch last ordered, and what it gets.
+    pub(crate) fn batch_item(&self, k: usize) -> (usize, Treatment) {
+        self.sources.ordered(k)
+    }
+
+    /// A datagram shed unread (see [`sources`]): counted, reported
+    /// (summarized) and offered to the recording.
+    pub(crate) fn shed(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
+        self.totals.received += 1;
+        let delivery = self.drop_for(DropReason::Shed);
+        if let Peer::Udp(addr) = cx.from {
+            let refused = self.sources.failing(addr.ip(), cx.now).unwrap_or(0);
+            let why = || {
+                format!(
+                    "not read: the router was behind, and {} had {refused} messages refused \
+                     in the last second",
+                    addr.ip()
+                )
+            };
+            self.tap.note_refusal(why);
+            let from = refusals::Source::Peer(cx.from);
+            self.refused(refusals::Why::Shed, from, why, cx);
+        }
+        self.offer(bytes, delivery, cx);
+        delivery
+    }
+
+    /// Offers a decided message to the recording, when recording.
+    fn offer(&mut self, bytes: &[u8], delivery: Delivery, cx: &mut Ctx<'_>) {
         let detail = self.tap.take_refusal();
         if let Some(tap) = self.tap.get() {
             tap.message(MessageTap {
@@ -287,7 +350,6 @@ impl Tables {
                 detail,
             });
         }
-        delivery
     }
 
     /// The decision for one received message.
@@ -296,6 +358,9 @@ impl Tables {
             Ok(h) => h,
             Err(e) => return self.bad(e.to_string(), cx),
         };
+        if let Err(d) = self.screen(bytes, head.sender, cx) {
+            return d;
+        }
         if head.kind == mech_proto::COMMAND_KIND {
             // The body is checked (a truncated or out-of-range command is
             // never forwarded) but not re-encoded: the received bytes go on.

@@ -102,6 +102,29 @@ impl Gate {
 }
 
 impl Tables {
+    /// The gate's checks that cost no MAC ([`Keyring::screen`]), made
+    /// before a message's body is read: a forgery without a tag, with a key
+    /// the station does not list or with another's key costs no decoding
+    /// and no MAC. On failure the rejection is counted and reported.
+    pub(super) fn screen(
+        &mut self,
+        bytes: &[u8],
+        sender: &str,
+        cx: &mut Ctx<'_>,
+    ) -> Result<(), Delivery> {
+        let Some(keys) = self.gate.keys.as_ref().filter(|_| cx.from != Peer::Local) else {
+            return Ok(());
+        };
+        let checked = match split(bytes) {
+            Err(e) => Err(Rejection {
+                reason: RejectReason::BadTag,
+                detail: format!("from {sender:?}: {e}"),
+            }),
+            Ok((_, tag)) => keys.screen(tag, sender),
+        };
+        checked.map_err(|r| self.reject(r, cx))
+    }
+
     /// Checks the tag and freshness of a message from `cx.from`. On failure
     /// the rejection is counted (and reported, summarized) and the delivery
     /// to return is given.
