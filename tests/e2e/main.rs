@@ -4,6 +4,7 @@ mod autopilot;
 mod cli;
 mod cluster_script;
 mod fleet_scale;
+mod hostile;
 mod octave;
 mod python;
 mod radio;

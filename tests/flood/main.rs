@@ -457,7 +457,7 @@ fn main() {
             let socks: Vec<UdpSocket> = (0..sources)
                 .map(|_| UdpSocket::bind("127.0.0.1:0").expect("flooder binds"))
                 .collect();
-            let mut rng = SmallRng::seed_from_u64(0x464c_4f4f_44);
+            let mut rng = SmallRng::seed_from_u64(0x0046_4c4f_4f44);
             let mut ctl = Signer::new("ctl", Key::new(&ctl_key));
             let mut stranger = Signer::new("ctl", Key::new(&[0x33; 32]));
             let total = rate * secs;

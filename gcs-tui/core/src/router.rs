@@ -262,6 +262,11 @@ impl Router {
         let bound = net::bind(&config).await?;
         let ports = net::open_radios(&config.serial)?;
         let (poll, tick) = (config.udp_poll, config.tick);
+        let tcp_limits = net::TcpLimits {
+            max_peers: config.tcp_max_peers,
+            per_address: config.tcp_peers_per_address,
+            idle: config.tcp_idle,
+        };
         let (udp, tcp) = (bound.udp_addr, bound.tcp_addr);
         let shared = Arc::new(Shared {
             net: Net::new(&bound, config.serial.clone(), config.subscriber_queue),
@@ -273,7 +278,7 @@ impl Router {
         });
         tracing::info!(%udp, ?tcp, "router started");
         shared.events.emit(vec![Event::Listening { udp, tcp }]);
-        let tasks = Tasks::start(&shared, bound, ports, poll, tick)?;
+        let tasks = Tasks::start(&shared, bound, ports, poll, tick, tcp_limits)?;
         Ok(Router {
             handle: RouterHandle::new(shared),
             tasks,
