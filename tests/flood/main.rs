@@ -14,6 +14,8 @@
 //! ```
 //!
 //! `hog` adds a thread spinning on every core for the whole run.
+//! `MECH_FLOOD_GCS=PATH` runs another `mech-gcs` binary (to compare two
+//! builds under the same load).
 
 use std::collections::{HashMap, HashSet};
 use std::io::{BufRead, BufReader, Write};
@@ -279,7 +281,9 @@ fn main() {
         })
         .collect();
     let load_before = load_average();
-    let child = Command::new(mech_e2e::binary("mech-gcs"))
+    let program = std::env::var_os("MECH_FLOOD_GCS")
+        .map_or_else(|| mech_e2e::binary("mech-gcs"), std::path::PathBuf::from);
+    let child = Command::new(program)
         .arg("serve")
         .arg("--config")
         .arg(&config)
@@ -509,22 +513,18 @@ fn main() {
     let tsent = tsent.len();
     let cpu = ticks as f64 / elapsed.as_secs_f64();
     println!(
-        "flood: {} datagrams from {sources} sources in {:.1} s{}; forged commands delivered: {}",
+        "flood: {} datagrams from {sources} sources{}; forged commands delivered: {}",
         tally.flood_sent.load(Ordering::Relaxed),
-        flood_took.as_secs_f64(),
-        if hog {
-            ", a spinning thread per core"
-        } else {
-            ""
-        },
+        if hog { ", a spinning thread per core" } else { "" },
         tally.forged_received.load(Ordering::Relaxed),
     );
     println!(
-        "| commands delivered | latency p50 / p99 / max (ms) | telemetry delivered | station CPU (% of a core) | operator log lines | load average before / after |"
+        "| flood sent in (s) | commands delivered | latency p50 / p99 / max (ms) | telemetry delivered | station CPU (% of a core) | operator log lines | load average before / after |"
     );
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {got}/{sent} ({:.1}%) | {:.2} / {:.2} / {:.2} | {tgot}/{tsent} ({:.1}%) | {cpu:.0} | {} | {load_before:.2} / {load_after:.2} |",
+        "| {:.1} | {got}/{sent} ({:.1}%) | {:.2} / {:.2} / {:.2} | {tgot}/{tsent} ({:.1}%) | {cpu:.0} | {} | {load_before:.2} / {load_after:.2} |",
+        flood_took.as_secs_f64(),
         100.0 * got as f64 / sent.max(1) as f64,
         percentile(&lat, 0.5),
         percentile(&lat, 0.99),
