@@ -247,6 +247,17 @@ state = {"odom": {}, "tf": {}, "battery": {}, "diagnostics": {}, "markers": {}}
 stamped = False
 
 
+def plain(v):
+    """JSON without NaN or infinities (which JSON lacks): null instead."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: plain(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [plain(x) for x in v]
+    return v
+
+
 def num(v):
     return float(v) if isinstance(v, str) else v
 
@@ -372,7 +383,7 @@ def handle(cmd):
         return {"ok": True}
     if op == "state":
         with lock:
-            return json.loads(json.dumps(state, default=str).replace("NaN", "null"))
+            return plain(state)
     if op == "drive":
         drive(cmd)
         return {"ok": True}
