@@ -57,11 +57,13 @@ pub fn local_us() -> u64 {
 }
 
 /// One identity's socket to the router. Sending takes the sealer's lock for
-/// the time it takes to encode and sign one message; the socket is shared
-/// with the reader task [`StationLink::spawn_reader`] starts.
+/// the time it takes to encode and sign one message, and sends on a
+/// non-blocking copy of the socket, so any thread or task may send; the
+/// socket itself is read by the task [`StationLink::spawn_reader`] starts.
 #[derive(Debug)]
 pub struct StationLink {
     socket: Arc<UdpSocket>,
+    sender: std::net::UdpSocket,
     sealer: Mutex<Sealer>,
     router: SocketAddr,
     stats: Arc<Stats>,
@@ -89,12 +91,16 @@ impl StationLink {
         } else {
             SocketAddr::from(([0, 0, 0, 0], 0))
         };
-        let socket = UdpSocket::bind(bind).await.map_err(sock_err)?;
-        socket.connect(router).await.map_err(sock_err)?;
+        let socket = std::net::UdpSocket::bind(bind).map_err(sock_err)?;
+        socket.connect(router).map_err(sock_err)?;
+        socket.set_nonblocking(true).map_err(sock_err)?;
+        let sender = socket.try_clone().map_err(sock_err)?;
+        let socket = UdpSocket::from_std(socket).map_err(sock_err)?;
         let signs = key.is_some();
         let opener_key = key.clone();
         let link = StationLink {
             socket: Arc::new(socket),
+            sender,
             sealer: Mutex::new(Sealer::new(name, key)),
             router,
             stats,
@@ -169,11 +175,7 @@ impl StationLink {
             sealer.seal(destination, channel, body, local_us())
         };
         let result = match bytes {
-            Ok(b) => self
-                .socket
-                .try_send(&b)
-                .map(|_| ())
-                .map_err(|e| e.to_string()),
+            Ok(b) => self.sender.send(&b).map(|_| ()).map_err(|e| e.to_string()),
             Err(e) => Err(e.to_string()),
         };
         if let Err(e) = result {

@@ -262,3 +262,73 @@ fn goal_pose_gets_a_robot_there_and_an_estop_from_ros_stops_every_robot() {
     assert!(last["stats"]["wrong_frame"].as_u64() >= Some(5), "{last}");
     assert!(last["stats"]["goals_acked"].as_u64() >= Some(1), "{last}");
 }
+
+#[test]
+fn at_a_station_with_keys_the_bridge_is_a_controller_its_auth_section_limits() {
+    if rig::skip_unless_available() {
+        return;
+    }
+    // The bridge's key may publish on ros2/* only: its goals (on
+    // ros2goal/*) are refused by the router's gate.
+    let station = "[auth]\nmode = \"required\"\n\
+        [[auth.keys]]\nrole = \"controller\"\nname = \"ros2\"\nfile = \"ros2.key\"\n\
+        channels = [\"ros2/*\"]\n\
+        [[auth.keys]]\nrole = \"estop\"\nname = \"ros2-estop\"\nfile = \"ros2-estop.key\"\n";
+    let mut rig = Rig::start_with(
+        2,
+        Some(station),
+        &["ros2", "ros2-estop"],
+        &[
+            "--key",
+            "@DIR@/ros2.key",
+            "--estop-key",
+            "@DIR@/ros2-estop.key",
+        ],
+        false,
+    );
+    let s = eventually(
+        &mut rig,
+        "odometry of both robots, signed all the way",
+        |s| (odom(s, "robot_1").is_some() && odom(s, "robot_2").is_some()).then(|| s.clone()),
+    );
+    let (x0, y0, _, _) = odom(&s, "robot_1").unwrap();
+    rig.script("route robot_1 ros2/robot_1\n");
+    rig.node
+        .ask(json!({"op": "drive", "robot": "robot_1", "vx": 0.3}));
+    eventually(&mut rig, "robot_1 driving on signed cmd_vel", |s| {
+        let (x, y, _, _) = odom(s, "robot_1")?;
+        ((x - x0).hypot(y - y0) > 0.2).then_some(())
+    });
+    rig.node.ask(json!({"op": "halt", "robot": "robot_1"}));
+
+    rig.script("route robot_2 ros2goal/robot_2\n");
+    rig.node
+        .ask(json!({"op": "goal", "robot": "robot_2", "x": 0.0, "y": 0.0, "frame": "map"}));
+    eventually(&mut rig, "the goal refused by the station's gate", |s| {
+        (counter(s, "goals_sent") == 1
+            && counter(s, "goals_unacked") == 1
+            && counter(s, "goals_acked") == 0)
+            .then_some(())
+    });
+    let station_log = std::fs::read_to_string(rig.dir.path().join("station.log")).unwrap();
+    assert!(
+        station_log
+            .lines()
+            .any(|l| l.contains("rejected") && l.contains("ros2goal/robot_2")),
+        "the router says why:\n{station_log}"
+    );
+
+    rig.node.ask(json!({"op": "estop"}));
+    eventually(
+        &mut rig,
+        "both robots e-stopped through the e-stop key",
+        |s| {
+            (diag(s, "robot_1", "failsafe") == Some("estopped")
+                && diag(s, "robot_2", "failsafe") == Some("estopped"))
+            .then_some(())
+        },
+    );
+    let last = rig.stop_bridge();
+    assert_eq!(last["stats"]["link_rejected"], 0, "{last}");
+    assert_eq!(last["stats"]["estops_refused"], 0, "{last}");
+}

@@ -179,13 +179,44 @@ impl Rig {
     /// Starts the station with `robots` simulated robots, the bridge with
     /// `bridge_args`, and the node watching every robot.
     pub fn start(robots: usize, bridge_args: &[&str], stamped: bool) -> Rig {
+        Rig::start_with(robots, None, &[], bridge_args, stamped)
+    }
+
+    /// [`Rig::start`] for a station configured by `station_toml` (in the
+    /// rig's directory, beside the keys `keys` names, made with `mech-gcs
+    /// keygen NAME` as `NAME.key`); `@DIR@` in `bridge_args` is that
+    /// directory.
+    pub fn start_with(
+        robots: usize,
+        station_toml: Option<&str>,
+        keys: &[&str],
+        bridge_args: &[&str],
+        stamped: bool,
+    ) -> Rig {
         let ns = Netns::create();
         let dir = tempfile::tempdir().expect("temp dir");
+        for k in keys {
+            let out = Command::new(binary("mech-gcs"))
+                .args(["keygen", k, "--out"])
+                .arg(dir.path().join(format!("{k}.key")))
+                .output()
+                .expect("mech-gcs keygen runs");
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
         let socket = dir.path().join("gcs.sock");
         let log = |name: &str| std::fs::File::create(dir.path().join(name)).expect("log file");
         let mut station = ns.command(binary("mech-gcs"));
+        station.args(["serve", "--demo", &robots.to_string(), "--udp", ROUTER]);
+        if let Some(toml) = station_toml {
+            let path = dir.path().join("gcs.toml");
+            std::fs::write(&path, toml).expect("station config");
+            station.arg("--config").arg(path);
+        }
         station
-            .args(["serve", "--demo", &robots.to_string(), "--udp", ROUTER])
             .args(["--tcp", "127.0.0.1:17401", "--socket"])
             .arg(&socket)
             .env("XDG_STATE_HOME", dir.path())
@@ -204,9 +235,10 @@ impl Rig {
         }
         std::thread::spawn(move || for _ in lines {});
         let mut bridge = ns.command(binary("mech-ros2"));
+        let dir_text = dir.path().display().to_string();
         bridge
             .args(["--router", ROUTER, "--summary-every", "1"])
-            .args(bridge_args)
+            .args(bridge_args.iter().map(|a| a.replace("@DIR@", &dir_text)))
             .stdin(Stdio::null())
             .stdout(log("bridge.out"))
             .stderr(log("bridge.log"));
