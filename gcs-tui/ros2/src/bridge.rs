@@ -22,7 +22,7 @@ use crate::link::{FromStation, StationLink, local_us};
 use crate::msgs::builtin::Time;
 use crate::msgs::diagnostic::DiagnosticArray;
 use crate::msgs::nav::TfMessage;
-use crate::msgs::std::Header;
+use crate::msgs::std::{Header, TriggerResponse};
 use crate::msgs::visualization::MarkerArray;
 use crate::outbound::diagnostics::{self, RobotContext};
 use crate::outbound::{Frames, battery, markers, odom};
@@ -126,6 +126,7 @@ impl Bridge {
             domain,
             config.cmd_vel,
             config.estop,
+            config.estop_service,
             to_bridge,
             Arc::clone(&stats),
         )?;
@@ -292,7 +293,12 @@ impl Bridge {
                     Err(e) => self.refused(&robot, "goal_pose", e),
                 }
             }
-            FromRos::EStop => self.estop(),
+            FromRos::EStop { reply } => {
+                let answer = self.estop();
+                if let Some(reply) = reply {
+                    let _ = reply.send(answer);
+                }
+            }
         }
     }
 
@@ -345,20 +351,23 @@ impl Bridge {
     }
 
     /// Engages the e-stop through the e-stop key's socket, or, at a station
-    /// that does not authenticate, through the bridge's own.
-    fn estop(&mut self) {
+    /// that does not authenticate, through the bridge's own; says which, as
+    /// the `/mech/estop` service answers.
+    fn estop(&mut self) -> TriggerResponse {
         let link = match (&self.estop_link, self.link.signs()) {
             (Some(l), _) => Arc::clone(l),
             (None, false) => Arc::clone(&self.link),
             (None, true) => {
                 let n = self.stats.estops_refused.fetch_add(1, Ordering::Relaxed) + 1;
+                let message = "ros2.estop_key is not set: the station accepts e-stops only \
+                               from an e-stop or operator key";
                 if worth_logging(n) {
-                    error!(
-                        "e-stop requested on /mech/estop, but ros2.estop_key is not set: the \
-                         station accepts e-stops only from an e-stop or operator key"
-                    );
+                    error!("e-stop requested on /mech/estop, but {message}");
                 }
-                return;
+                return TriggerResponse {
+                    success: false,
+                    message: message.into(),
+                };
             }
         };
         warn!(
@@ -368,6 +377,14 @@ impl Bridge {
         link.engage_estop();
         self.stats.estops_sent.fetch_add(1, Ordering::Relaxed);
         self.estop_until = Some(Instant::now() + ESTOP_FOR);
+        TriggerResponse {
+            success: true,
+            message: format!(
+                "e-stop engage sent to the station for every robot ({} known here); only an \
+                 operator at the station releases it",
+                self.fleet.len()
+            ),
+        }
     }
 
     /// Repeats an e-stop until every robot reports it, and goals until

@@ -17,6 +17,20 @@ pub enum CmdVelType {
     Stamped,
 }
 
+/// How the `/mech/estop` service (std_srvs/Trigger) maps onto DDS. ROS 2
+/// services have no one DDS mapping: it depends on the RMW of the node that
+/// calls (ROS 2's default, Fast DDS, uses the RPC-over-DDS "enhanced"
+/// mapping; `rmw_cyclonedds` its own).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EStopService {
+    Enhanced,
+    Cyclone,
+    Basic,
+    /// No service: the `/mech/estop` topic only.
+    Off,
+}
+
 /// `[ros2]`: where the station is, who the bridge is there, and what it
 /// accepts from ROS 2.
 #[derive(Debug, Clone, Deserialize)]
@@ -52,8 +66,10 @@ pub struct Ros2Config {
     pub max_goal_distance: f64,
     /// m: a goal counts as reached within this distance.
     pub arrival_radius: f64,
-    /// Take e-stop engage requests on `/mech/estop`.
+    /// Take e-stop engage requests on the `/mech/estop` topic.
     pub estop: bool,
+    /// ... and on the `/mech/estop` service, in this mapping.
+    pub estop_service: EStopService,
     /// s: a robot whose telemetry has not arrived for this long is shown
     /// stale on `/diagnostics`.
     pub stale_after: f64,
@@ -78,6 +94,7 @@ impl Default for Ros2Config {
             max_goal_distance: 1000.0,
             arrival_radius: 0.1,
             estop: true,
+            estop_service: EStopService::Enhanced,
             stale_after: 1.0,
             summary_every: 10.0,
         }
@@ -206,6 +223,8 @@ mod tests {
         assert!(e("[ros2]\ngoal_prefix = \"ros2/\"\n").contains("must differ"));
         assert!(e("[ros2]\nspeed = 1.0\n").contains("unknown field"));
         assert!(e("[ros2]\ncmd_vel = \"twist_stamped\"\n").contains("unknown variant"));
+        let c = Ros2Config::parse("[ros2]\nestop_service = \"cyclone\"\n").unwrap();
+        assert_eq!(c.estop_service, EStopService::Cyclone);
     }
 
     #[test]

@@ -9,7 +9,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Parser;
-use mech_ros2::config::CmdVelType;
+use mech_ros2::config::{CmdVelType, EStopService};
 use mech_ros2::{Bridge, Ros2Config};
 
 /// Bridge a MECH station's robots to ROS 2: odometry, TF, battery,
@@ -39,6 +39,11 @@ struct Cli {
     /// cmd_vel type: twist or stamped (overrides ros2.cmd_vel).
     #[arg(long, value_name = "TYPE", value_parser = ["twist", "stamped"])]
     cmd_vel: Option<String>,
+    /// The /mech/estop service's DDS mapping: enhanced (Fast DDS, ROS 2's
+    /// default), cyclone (rmw_cyclonedds), basic, or off (overrides
+    /// ros2.estop_service).
+    #[arg(long, value_name = "MAPPING", value_parser = ["enhanced", "cyclone", "basic", "off"])]
+    estop_service: Option<String>,
     /// Seconds between summary lines in the log (0: none).
     #[arg(long, value_name = "S")]
     summary_every: Option<f64>,
@@ -88,6 +93,14 @@ fn config(cli: &Cli) -> anyhow::Result<Ros2Config> {
             CmdVelType::Stamped
         } else {
             CmdVelType::Twist
+        };
+    }
+    if let Some(m) = &cli.estop_service {
+        c.estop_service = match m.as_str() {
+            "cyclone" => EStopService::Cyclone,
+            "basic" => EStopService::Basic,
+            "off" => EStopService::Off,
+            _ => EStopService::Enhanced,
         };
     }
     if let Some(s) = cli.summary_every {

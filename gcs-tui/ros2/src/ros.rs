@@ -15,25 +15,25 @@ use futures::StreamExt;
 use ros2_client::qos::{Durability, History, Liveliness, Reliability, WhenFull};
 use ros2_client::{
     Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile, Subscription,
+    QosProfile, ServiceMapping, ServiceTypeName, Subscription,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot};
 use tracing::{debug, warn};
 
-use crate::config::CmdVelType;
+use crate::config::{CmdVelType, EStopService};
 use crate::msgs::RosMessage;
 use crate::msgs::diagnostic::DiagnosticArray;
 use crate::msgs::geometry::{PoseStamped, Twist, TwistStamped};
 use crate::msgs::nav::{Odometry, TfMessage};
 use crate::msgs::sensor::BatteryState;
-use crate::msgs::std::Empty;
+use crate::msgs::std::{Empty, TriggerRequest, TriggerResponse};
 use crate::msgs::visualization::MarkerArray;
 use crate::stats::{Stats, worth_logging};
 
 /// A sample from ROS 2, as received.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug)]
 pub enum FromRos {
     CmdVel {
         robot: String,
@@ -44,8 +44,11 @@ pub enum FromRos {
         robot: String,
         goal: PoseStamped,
     },
-    /// Someone asked for the e-stop on `/mech/estop`.
-    EStop,
+    /// Someone asked for the e-stop on `/mech/estop`: on the topic (no
+    /// answer), or calling the service (answered on `reply`).
+    EStop {
+        reply: Option<oneshot::Sender<TriggerResponse>>,
+    },
 }
 
 /// A cmd_vel sample of either type.
@@ -121,11 +124,13 @@ impl std::fmt::Debug for RosNode {
 
 impl RosNode {
     /// Joins DDS domain `domain` as node `/mech_ros2` and starts its
-    /// spinner (ROS 2 graph discovery) and the `/mech/estop` reader.
+    /// spinner (ROS 2 graph discovery), the `/mech/estop` reader (with
+    /// `estop`) and the `/mech/estop` service (in `service`'s mapping).
     pub fn start(
         domain: u16,
         cmd_vel: CmdVelType,
         estop: bool,
+        service: EStopService,
         to_bridge: mpsc::Sender<FromRos>,
         stats: Arc<Stats>,
     ) -> Result<RosNode, RosError> {
@@ -160,9 +165,67 @@ impl RosNode {
         if estop {
             let sub = subscription::<Empty>(&mut ros.node, "/mech/estop", reliable_qos(10))?;
             let to = ros.to_bridge.clone();
-            spawn_reader(sub, "/mech/estop".into(), move |_| Some(FromRos::EStop), to);
+            spawn_reader(
+                sub,
+                "/mech/estop".into(),
+                move |_| Some(FromRos::EStop { reply: None }),
+                to,
+            );
+        }
+        let mapping = match service {
+            EStopService::Enhanced => Some(ServiceMapping::Enhanced),
+            EStopService::Cyclone => Some(ServiceMapping::Cyclone),
+            EStopService::Basic => Some(ServiceMapping::Basic),
+            EStopService::Off => None,
+        };
+        if let Some(mapping) = mapping {
+            ros.serve_estop(mapping)?;
         }
         Ok(ros)
+    }
+
+    /// Answers `/mech/estop` (std_srvs/Trigger) in a task of its own: each
+    /// call goes to the bridge, which engages the e-stop and says how.
+    fn serve_estop(&mut self, mapping: ServiceMapping) -> Result<(), RosError> {
+        let name = Name::parse("/mech/estop").map_err(|e| err("/mech/estop", e))?;
+        let server = self
+            .node
+            .create_server::<TriggerRequest, TriggerResponse>(
+                mapping,
+                &name,
+                &ServiceTypeName::new("std_srvs", "Trigger"),
+                reliable_qos(10),
+                reliable_qos(10),
+            )
+            .map_err(|e| err("/mech/estop service", e))?;
+        let to = self.to_bridge.clone();
+        tokio::spawn(async move {
+            loop {
+                let (id, _request) = match server.async_receive_request().await {
+                    Ok(r) => r,
+                    Err(e) => {
+                        debug!("unreadable /mech/estop request: {e:?}");
+                        continue;
+                    }
+                };
+                let (reply, answer) = oneshot::channel();
+                if to
+                    .send(FromRos::EStop { reply: Some(reply) })
+                    .await
+                    .is_err()
+                {
+                    return;
+                }
+                let response = answer.await.unwrap_or(TriggerResponse {
+                    success: false,
+                    message: "the bridge is stopping".into(),
+                });
+                if let Err(e) = server.async_send_response(id, response).await {
+                    warn!("cannot answer a /mech/estop call: {e:?}");
+                }
+            }
+        });
+        Ok(())
     }
 
     /// The DDS domain.

@@ -192,7 +192,11 @@ fn goal_pose_gets_a_robot_there_and_an_estop_from_ros_stops_every_robot() {
     if rig::skip_unless_available() {
         return;
     }
-    let mut rig = Rig::start(2, &["--cmd-vel", "stamped"], true);
+    let mut rig = Rig::start(
+        2,
+        &["--cmd-vel", "stamped", "--estop-service", "cyclone"],
+        true,
+    );
     let s = eventually(&mut rig, "odometry of both robots", |s| {
         (odom(s, "robot_1").is_some() && odom(s, "robot_2").is_some()).then(|| s.clone())
     });
@@ -242,8 +246,17 @@ fn goal_pose_gets_a_robot_there_and_an_estop_from_ros_stops_every_robot() {
         ((x - x2).hypot(y - y2) > 0.2).then_some(())
     });
 
-    // E-stop engaged from ROS 2: every robot reports it.
-    rig.node.ask(json!({"op": "estop"}));
+    // E-stop engaged from ROS 2, calling the std_srvs/Trigger service
+    // as rmw_cyclonedds does: answered, and every robot reports it.
+    let answer = rig.node.ask(json!({"op": "estop_call"}));
+    assert_eq!(answer["success"], true, "{answer}");
+    assert!(
+        answer["message"]
+            .as_str()
+            .unwrap_or("")
+            .contains("only an operator"),
+        "{answer}"
+    );
     eventually(&mut rig, "every robot e-stopped", |s| {
         (diag(s, "robot_1", "failsafe") == Some("estopped")
             && diag(s, "robot_2", "failsafe") == Some("estopped")

@@ -10,6 +10,7 @@ command per line on stdin; it answers each with one JSON line on stdout.
     {"op": "halt", "robot": "robot_1"}
     {"op": "goal", "robot": "robot_1", "x": 1.0, "y": 0.5, "frame": "map"}
     {"op": "estop"}
+    {"op": "estop_call"}                 -> the /mech/estop service's answer
     {"op": "quit"}
 
 Numbers may be given as "nan" or "inf".
@@ -235,6 +236,25 @@ class MarkerArray(IdlStruct, typename="visualization_msgs::msg::dds_::MarkerArra
     markers: sequence[Marker] = field(default_factory=list)
 
 
+@dataclass
+class TriggerRequest(IdlStruct, typename="std_srvs::srv::dds_::Trigger_Request_"):
+    """As rmw_cyclonedds sends a request: its header (the client's GUID's
+    last 8 bytes, a sequence number), then the request."""
+    guid: array[uint8, 8] = field(default_factory=lambda: [0] * 8)
+    seq_high: int32 = 0
+    seq_low: uint32 = 0
+    structure_needs_at_least_one_member: uint8 = 0
+
+
+@dataclass
+class TriggerResponse(IdlStruct, typename="std_srvs::srv::dds_::Trigger_Response_"):
+    guid: array[uint8, 8] = field(default_factory=lambda: [0] * 8)
+    seq_high: int32 = 0
+    seq_low: uint32 = 0
+    success: bool = False
+    message: str = ""
+
+
 SENSOR = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
 RELIABLE = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10))
 
@@ -367,6 +387,32 @@ def halt(cmd):
         stop.set()
 
 
+def estop_call():
+    """Calls /mech/estop (std_srvs/Trigger) as rmw_cyclonedds maps a
+    service: request on rq/mech/estopRequest, reply on rr/mech/estopReply,
+    matched by sequence number. Asks again every 0.5 s until answered."""
+    with lock:
+        w = writer("rq/mech/estopRequest", TriggerRequest, RELIABLE)
+        if "estop_reply" not in writers:
+            writers["estop_reply"] = DataReader(
+                dp, Topic(dp, "rr/mech/estopReply", TriggerResponse), qos=RELIABLE)
+    replies = writers["estop_reply"]
+    guid = [7, 7, 7, 7, 7, 7, 7, 7]
+    deadline = time.time() + 20
+    seq = 0
+    while time.time() < deadline:
+        seq += 1
+        with lock:
+            w.write(TriggerRequest(guid=guid, seq_high=0, seq_low=seq))
+        until = time.time() + 0.5
+        while time.time() < until:
+            for r in replies.take(N=16):
+                if list(r.guid) == guid and r.seq_low <= seq:
+                    return {"success": r.success, "message": r.message, "calls": seq}
+            time.sleep(0.01)
+    return {"error": "no answer from /mech/estop"}
+
+
 def handle(cmd):
     global stamped
     op = cmd["op"]
@@ -403,6 +449,8 @@ def handle(cmd):
         with lock:
             writers["rt/mech/estop"].write(Empty())
         return {"ok": True}
+    if op == "estop_call":
+        return estop_call()
     if op == "quit":
         return None
     return {"error": f"unknown op {op}"}

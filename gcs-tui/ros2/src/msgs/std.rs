@@ -39,3 +39,6 @@ pub struct TriggerResponse {
 }
 
 ros_message!(Empty => "std_msgs" / "Empty");
+
+impl ros2_client::Message for Empty {}
+impl ros2_client::Message for TriggerResponse {}
