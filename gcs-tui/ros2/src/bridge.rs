@@ -255,7 +255,10 @@ impl Bridge {
                 goal.ack = Some((ack.accepted, ack.reason));
             }
             FromStation::Notice { from, notice } => {
-                warn!(%from, code = ?notice.code, "notice from the station: {}", notice.text);
+                let n = self.stats.notices.fetch_add(1, Ordering::Relaxed) + 1;
+                if worth_logging(n) {
+                    warn!(%from, code = ?notice.code, notices = n, "notice from the station: {}", notice.text);
+                }
             }
         }
     }

@@ -39,6 +39,8 @@ pub struct Stats {
     pub link_rejected: AtomicU64,
     /// Messages the bridge could not send to the station (socket errors).
     pub send_failed: AtomicU64,
+    /// Notices the station sent the bridge (logged, thinned out).
+    pub notices: AtomicU64,
 }
 
 impl Stats {
@@ -72,6 +74,7 @@ impl Stats {
             names_rejected: get(&self.names_rejected),
             link_rejected: get(&self.link_rejected),
             send_failed: get(&self.send_failed),
+            notices: get(&self.notices),
         }
     }
 }
@@ -95,6 +98,7 @@ pub struct StatsSnapshot {
     pub names_rejected: u64,
     pub link_rejected: u64,
     pub send_failed: u64,
+    pub notices: u64,
 }
 
 impl StatsSnapshot {
@@ -118,6 +122,7 @@ impl StatsSnapshot {
             ("names_rejected", self.names_rejected),
             ("link_rejected", self.link_rejected),
             ("send_failed", self.send_failed),
+            ("notices", self.notices),
         ]
     }
 
