@@ -8,7 +8,6 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use mech_proto::FailsafeState;
 use mech_proto::auth::{Key, KeyText, private_mode};
 use tokio::sync::mpsc;
 use tracing::{error, info, warn};
@@ -394,33 +393,19 @@ impl Bridge {
     /// their robot acknowledges them.
     fn retry(&mut self, now: Instant) {
         if let Some(until) = self.estop_until {
-            let all_stopped = self
-                .fleet
-                .iter()
-                .all(|(_, r)| r.telemetry.failsafe == FailsafeState::EStopped);
-            if all_stopped || now >= until {
+            if self.fleet.all_estopped() || now >= until {
                 self.estop_until = None;
             } else {
                 let link = self.estop_link.as_ref().unwrap_or(&self.link);
                 link.engage_estop();
             }
         }
-        let mut resend = Vec::new();
-        for (name, r) in self.fleet.iter_mut() {
-            let Some(g) = r.goal.as_mut() else { continue };
-            if g.ack.is_some() || g.unacked {
-                continue;
-            }
-            if now.saturating_duration_since(g.first_sent) > GOAL_GIVE_UP {
-                g.unacked = true;
-                self.stats.goals_unacked.fetch_add(1, Ordering::Relaxed);
-                warn!(robot = %name, id = g.mission.id, "goal not acknowledged within 5 s: given up");
-            } else if now.saturating_duration_since(g.last_sent) >= GOAL_RETRY {
-                g.last_sent = now;
-                resend.push((name.clone(), g.channel.clone(), g.mission.clone()));
-            }
+        let due = self.fleet.goals_due(now, GOAL_RETRY, GOAL_GIVE_UP);
+        for (robot, id) in due.given_up {
+            self.stats.goals_unacked.fetch_add(1, Ordering::Relaxed);
+            warn!(%robot, id, "goal not acknowledged within 5 s: given up");
         }
-        for (robot, channel, mission) in resend {
+        for (robot, channel, mission) in due.resend {
             self.link.mission(&robot, &channel, mission);
         }
     }

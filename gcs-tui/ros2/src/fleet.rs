@@ -6,7 +6,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
-use mech_proto::{Mission, Telemetry, Waypoint};
+use mech_proto::{FailsafeState, Mission, Telemetry, Waypoint};
 
 /// Whether `name` can be a ROS 2 namespace token, so `/<name>/odom` is a
 /// topic: letters, digits and underscores, not starting with a digit, no
@@ -72,6 +72,15 @@ impl Robot {
     }
 }
 
+/// Goals to send again, and goals given up, at one moment.
+#[derive(Debug, Default, PartialEq)]
+pub struct GoalsDue {
+    /// (robot, channel, mission) to resend.
+    pub resend: Vec<(String, String, Mission)>,
+    /// (robot, mission id) no longer waited for.
+    pub given_up: Vec<(String, u32)>,
+}
+
 /// Every robot the bridge has heard of, by name.
 #[derive(Debug, Default)]
 pub struct Fleet {
@@ -135,6 +144,35 @@ impl Fleet {
         self.robots.len()
     }
 
+    /// Whether every robot's latest telemetry says it is e-stopped.
+    pub fn all_estopped(&self) -> bool {
+        self.robots
+            .values()
+            .all(|r| r.telemetry.failsafe == FailsafeState::EStopped)
+    }
+
+    /// The goals not yet acknowledged: those last sent `retry` ago or more
+    /// are due again (and marked sent `now`); those first sent more than
+    /// `give_up` ago are given up (and marked so, never due again).
+    pub fn goals_due(&mut self, now: Instant, retry: Duration, give_up: Duration) -> GoalsDue {
+        let mut due = GoalsDue::default();
+        for (name, r) in &mut self.robots {
+            let Some(g) = r.goal.as_mut() else { continue };
+            if g.ack.is_some() || g.unacked {
+                continue;
+            }
+            if now.saturating_duration_since(g.first_sent) > give_up {
+                g.unacked = true;
+                due.given_up.push((name.clone(), g.mission.id));
+            } else if now.saturating_duration_since(g.last_sent) >= retry {
+                g.last_sent = now;
+                due.resend
+                    .push((name.clone(), g.channel.clone(), g.mission.clone()));
+            }
+        }
+        due
+    }
+
     pub fn is_empty(&self) -> bool {
         self.robots.is_empty()
     }
@@ -173,6 +211,83 @@ pub(crate) mod tests {
             stale: 0,
             velocity_source: VelocitySource::Commanded,
         }
+    }
+
+    fn goal(now: Instant) -> Goal {
+        Goal {
+            mission: Mission {
+                id: 5,
+                waypoints: vec![Waypoint {
+                    x: 1.0,
+                    y: 2.0,
+                    z: 0.0,
+                    time: None,
+                }],
+                looped: false,
+                arrival_radius: 0.1,
+                start_index: 0,
+            },
+            channel: "ros2goal/robot_1".into(),
+            first_sent: now,
+            last_sent: now,
+            ack: None,
+            unacked: false,
+        }
+    }
+
+    #[test]
+    fn a_goal_is_resent_until_acknowledged_and_given_up_in_time() {
+        let (retry, give_up) = (Duration::from_millis(200), Duration::from_secs(5));
+        let t0 = Instant::now();
+        let mut f = Fleet::default();
+        f.update("robot_1", telemetry(0.0, 0.0), 1, t0);
+        f.get_mut("robot_1").unwrap().goal = Some(goal(t0));
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        assert_eq!(
+            f.goals_due(at(100), retry, give_up),
+            GoalsDue::default(),
+            "not yet"
+        );
+        let due = f.goals_due(at(200), retry, give_up);
+        assert_eq!(due.resend.len(), 1);
+        assert_eq!(
+            (due.resend[0].1.as_str(), due.resend[0].2.id),
+            ("ros2goal/robot_1", 5)
+        );
+        assert!(
+            f.goals_due(at(300), retry, give_up).resend.is_empty(),
+            "sent at 200 ms"
+        );
+        assert_eq!(f.goals_due(at(400), retry, give_up).resend.len(), 1);
+        let due = f.goals_due(at(5_001), retry, give_up);
+        assert_eq!(due.given_up, vec![("robot_1".to_string(), 5)]);
+        assert!(due.resend.is_empty());
+        assert_eq!(
+            f.goals_due(at(6_000), retry, give_up),
+            GoalsDue::default(),
+            "given up once"
+        );
+
+        f.get_mut("robot_1").unwrap().goal = Some(goal(at(6_000)));
+        f.get_mut("robot_1").unwrap().goal.as_mut().unwrap().ack = Some((true, String::new()));
+        assert_eq!(
+            f.goals_due(at(7_000), retry, give_up),
+            GoalsDue::default(),
+            "acknowledged"
+        );
+    }
+
+    #[test]
+    fn the_fleet_is_estopped_when_every_robot_says_so() {
+        let now = Instant::now();
+        let mut f = Fleet::default();
+        let mut stopped = telemetry(0.0, 0.0);
+        stopped.failsafe = FailsafeState::EStopped;
+        f.update("robot_1", stopped.clone(), 1, now);
+        f.update("robot_2", telemetry(0.0, 0.0), 1, now);
+        assert!(!f.all_estopped());
+        f.update("robot_2", stopped, 2, now);
+        assert!(f.all_estopped());
     }
 
     #[test]

@@ -284,3 +284,84 @@ impl StationLink {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_proto::{Envelope, Header};
+    use std::sync::atomic::Ordering;
+
+    /// A stand-in router: a UDP socket on loopback, and a link to it.
+    async fn router_and_link() -> (UdpSocket, Arc<StationLink>, Arc<Stats>) {
+        let router = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let stats = Arc::new(Stats::default());
+        let addr = router.local_addr().unwrap();
+        let link = StationLink::open(addr, "ros2", None, Arc::clone(&stats))
+            .await
+            .unwrap();
+        (router, Arc::new(link), stats)
+    }
+
+    async fn receive(router: &UdpSocket) -> (Envelope, SocketAddr) {
+        let mut buf = vec![0u8; 2048];
+        let (n, from) = router.recv_from(&mut buf).await.unwrap();
+        (mech_proto::decode(&buf[..n]).unwrap(), from)
+    }
+
+    #[tokio::test]
+    async fn the_only_estop_the_bridge_sends_is_an_engage_to_the_router() {
+        let (router, link, _) = router_and_link().await;
+        link.engage_estop();
+        let (env, _) = receive(&router).await;
+        assert_eq!(env.header.destination, mech_proto::ROUTER);
+        assert_eq!(env.header.sender, "ros2");
+        assert!(
+            matches!(env.body, Body::EStop(EStop { engage: true, .. })),
+            "{env:?}"
+        );
+    }
+
+    #[tokio::test]
+    async fn what_the_router_sends_is_passed_on_and_garbage_is_counted() {
+        let (router, link, stats) = router_and_link().await;
+        let (tx, mut rx) = mpsc::channel(8);
+        link.spawn_reader(None, tx);
+        link.subscribe(true);
+        let (env, bridge) = receive(&router).await;
+        assert!(matches!(
+            env.body,
+            Body::Subscribe(Subscribe { telemetry: true })
+        ));
+
+        router.send_to(&[0x93, 0x01], bridge).await.unwrap();
+        let telemetry = crate::fleet::tests::telemetry(1.5, 0.3);
+        let env = Envelope::new(
+            Header {
+                seq: 9,
+                stamp_us: 1_700_000_000_000_000,
+                sender: "robot_1".into(),
+                destination: "ros2".into(),
+                channel: String::new(),
+            },
+            Body::Telemetry(telemetry.clone()),
+        );
+        router
+            .send_to(&mech_proto::encode(&env).unwrap(), bridge)
+            .await
+            .unwrap();
+        let got = rx.recv().await.unwrap();
+        assert_eq!(
+            got,
+            FromStation::Telemetry {
+                robot: "robot_1".into(),
+                stamp_us: 1_700_000_000_000_000,
+                telemetry
+            }
+        );
+        assert_eq!(
+            stats.link_rejected.load(Ordering::Relaxed),
+            1,
+            "the garbage before it"
+        );
+    }
+}
