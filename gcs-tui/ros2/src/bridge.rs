@@ -23,8 +23,7 @@ use crate::msgs::diagnostic::DiagnosticArray;
 use crate::msgs::nav::TfMessage;
 use crate::msgs::std::{Header, TriggerResponse};
 use crate::msgs::visualization::MarkerArray;
-use crate::outbound::diagnostics::{self, RobotContext};
-use crate::outbound::{Frames, battery, markers, odom};
+use crate::outbound::{self, Frames, diagnostics, odom};
 use crate::ros::{CmdVel, FromRos, RosNode};
 use crate::stats::{Stats, StatsSnapshot, worth_logging};
 
@@ -410,39 +409,17 @@ impl Bridge {
         }
     }
 
-    /// Battery, diagnostics and markers; reads cmd_vel of names other
-    /// nodes publish for, so that samples for robots the station does
-    /// not have are counted.
+    /// Battery (stamped with the sample it comes from), diagnostics and
+    /// markers; reads cmd_vel of names other nodes publish for, so that
+    /// samples for robots the station does not have are counted.
     fn every_second(&mut self) {
         let now = Instant::now();
         let stamp = Time::from_micros(local_us());
-        let map = self.config.map_frame.clone();
-        let mut status = Vec::with_capacity(self.fleet.len() + 1);
-        let mut all_markers = Vec::new();
-        for (i, (name, r)) in self.fleet.iter().enumerate() {
-            let frames = Frames::new(&map, name);
-            self.ros
-                .battery(name, battery::battery(name, &r.telemetry, stamp, &frames));
-            let (cmd, goal) = (
-                self.config.cmd_channel(name),
-                self.config.goal_channel(name),
-            );
-            let cx = RobotContext {
-                cmd_channel: &cmd,
-                goal_channel: &goal,
-                now,
-                stale_after: Duration::from_secs_f64(self.config.stale_after),
-            };
-            status.push(diagnostics::robot_status(name, r, cx));
-            all_markers.extend(markers::robot_markers(
-                i as i32,
-                name,
-                &r.telemetry,
-                r.goal.as_ref(),
-                &map,
-                stamp,
-            ));
+        let out = outbound::periodic(&self.fleet, &self.config, now, stamp);
+        for (robot, b) in out.batteries {
+            self.ros.battery(&robot, b);
         }
+        let mut status = out.status;
         let snapshot = self.stats.snapshot();
         status.push(diagnostics::bridge_status(
             self.link_name(),
@@ -454,9 +431,9 @@ impl Bridge {
             frame_id: String::new(),
         };
         self.ros.diagnostics(DiagnosticArray { header, status });
-        if !all_markers.is_empty() {
+        if !out.markers.is_empty() {
             self.ros.markers(MarkerArray {
-                markers: all_markers,
+                markers: out.markers,
             });
         }
         for name in self.ros.unwatched_publishers() {
