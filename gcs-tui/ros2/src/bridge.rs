@@ -463,7 +463,22 @@ pub fn dds_port(domain: u16, port: u16) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::dds_port;
+    use super::{dds_port, read_key};
+    use mech_proto::auth::KeyText;
+    use std::os::unix::fs::PermissionsExt;
+
+    #[test]
+    fn a_key_file_others_can_read_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ros2.key");
+        std::fs::write(&path, KeyText::render("ros2", &[3; 32])).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(read_key(&path).unwrap().name, "ros2");
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let e = read_key(&path).unwrap_err().to_string();
+        assert!(e.contains("chmod 600") && e.contains("ros2.key"), "{e}");
+        assert!(read_key(&dir.path().join("missing.key")).is_err());
+    }
 
     #[test]
     fn the_station_port_is_checked_against_the_dds_domain() {
