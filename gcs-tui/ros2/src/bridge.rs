@@ -263,7 +263,7 @@ impl Bridge {
 
     fn on_ros(&mut self, ev: FromRos) {
         match ev {
-            FromRos::CmdVel { robot, twist, .. } => {
+            FromRos::CmdVel { robot, twist } => {
                 let limits = CmdVelLimits {
                     max_speed: self.config.max_speed,
                     max_yaw_rate: self.config.max_yaw_rate,

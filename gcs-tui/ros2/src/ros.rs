@@ -9,7 +9,6 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::time::Instant;
 
 use futures::StreamExt;
 use ros2_client::qos::{Durability, History, Liveliness, Reliability, WhenFull};
@@ -38,7 +37,6 @@ pub enum FromRos {
     CmdVel {
         robot: String,
         twist: CmdVel,
-        received: Instant,
     },
     Goal {
         robot: String,
@@ -273,7 +271,6 @@ impl RosNode {
                         Some(FromRos::CmdVel {
                             robot: robot.clone(),
                             twist: CmdVel::Plain(t),
-                            received: Instant::now(),
                         })
                     },
                     self.to_bridge.clone(),
@@ -288,7 +285,6 @@ impl RosNode {
                         Some(FromRos::CmdVel {
                             robot: robot.clone(),
                             twist: CmdVel::Stamped(t),
-                            received: Instant::now(),
                         })
                     },
                     self.to_bridge.clone(),
