@@ -8,8 +8,10 @@
 # minute to install once, without recommended packages), Python's msgpack
 # (the Python client and the documented controller), pymavlink (the fake
 # autopilot the MAVLink tests fly against), Python's mcap (the recording
-# test reads recordings with it) and eclipse-zenoh (the documented reader of
-# MECH's robots on Zenoh). Does nothing when they are already there.
+# test reads recordings with it), eclipse-zenoh (the documented reader of
+# MECH's robots on Zenoh) and cyclonedds (the ROS 2 node the bridge's tests
+# talk to; its wheel carries Cyclone DDS itself). Does nothing when they are
+# already there.
 set -euo pipefail
 need=()
 for pkg in libudev-dev pkg-config socat nftables iproute2 tmux strace octave octave-instrument-control; do
@@ -46,5 +48,11 @@ if command -v python3 >/dev/null; then
     if ! python3 -c 'import zenoh' 2>/dev/null; then
         echo "installing: python eclipse-zenoh"
         pip_install eclipse-zenoh==1.10.2
+    fi
+    # Cyclone DDS's Python binding: an independent DDS acting as a ROS 2
+    # node in mech-ros2's end-to-end tests.
+    if ! python3 -c 'import cyclonedds.domain' 2>/dev/null; then
+        echo "installing: python cyclonedds"
+        pip_install cyclonedds==11.0.1
     fi
 fi
