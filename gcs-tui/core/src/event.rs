@@ -119,6 +119,10 @@ impl RobotLinks {
     }
 }
 
+/// Distinct sources an [`Event::Refused`] counts; a flood from more is
+/// reported as coming from at least this many.
+pub const REFUSED_SOURCES_COUNTED: usize = 4096;
+
 /// Something the router did or saw. Subscribers receive them in order, each
 /// wrapped in a [`Stamped`]. Recordings store them as JSON objects tagged
 /// with [`Event::name`] (a test keeps the two the same).
@@ -225,7 +229,8 @@ pub enum Event {
     Refused {
         /// Messages refused.
         count: u64,
-        /// Distinct sources among them (counted up to 4,096).
+        /// Distinct sources among them (counted up to
+        /// [`REFUSED_SOURCES_COUNTED`]).
         sources: u64,
         /// How many for each reason: `bad-packet`, `shed` (not read: the
         /// router was behind and the source kept failing), or a rejection

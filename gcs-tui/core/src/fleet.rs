@@ -528,7 +528,7 @@ fn refused_text(
         .collect();
     let sources = match sources {
         1 => "1 source".to_string(),
-        n if n as usize >= crate::router::SOURCES_COUNTED => {
+        n if n as usize >= crate::event::REFUSED_SOURCES_COUNTED => {
             format!("{} or more sources", thousands(n))
         }
         n => format!("{} sources", thousands(n)),

@@ -44,7 +44,7 @@ pub use publisher::{Publisher, Publishers};
 pub use tables::Delivery;
 pub use tables::tap::OperatorRecord;
 pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
-pub(crate) use tables::{Peer, SOURCES_COUNTED, Treatment};
+pub(crate) use tables::{Peer, Treatment};
 
 use crate::auth::Keyring;
 use crate::counters::DropReason;

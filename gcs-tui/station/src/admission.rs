@@ -32,8 +32,6 @@ use mech_core::sync::lock;
 use tokio::sync::Notify;
 use tokio::time::Instant;
 
-use crate::server::Via;
-
 /// Time a client has to say Hello (and answer the challenge).
 pub(crate) const HANDSHAKE: Duration = Duration::from_secs(10);
 
@@ -54,21 +52,13 @@ pub(crate) const LOGGED_PER_SECOND: u32 = 5;
 
 /// How a client came in, as far as places go.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Door {
+pub(crate) enum Door {
     /// The embedded TUI: always let in.
     Local,
+    /// The control socket.
     Unix,
+    /// TCP, from this address.
     Tcp(IpAddr),
-}
-
-impl Door {
-    fn of(via: &Via) -> Door {
-        match via {
-            Via::Local => Door::Local,
-            Via::Unix { .. } => Door::Unix,
-            Via::Tcp { peer } => Door::Tcp(peer.ip()),
-        }
-    }
 }
 
 /// The station's places.
@@ -113,10 +103,9 @@ pub(crate) struct Seat {
 }
 
 impl Admission {
-    /// A place for a client attaching through `via`, made by closing the
+    /// A place for a client attaching through `door`, made by closing the
     /// one attaching longest when they are taken.
-    pub(crate) fn attaching(self: &Arc<Self>, via: &Via) -> Attaching {
-        let door = Door::of(via);
+    pub(crate) fn attaching(self: &Arc<Self>, door: Door) -> Attaching {
         let evicted = Arc::new(Notify::new());
         let mut s = lock(&self.state);
         s.next += 1;
@@ -293,42 +282,36 @@ impl RefusalLog {
 mod tests {
     use super::*;
 
-    fn tcp(ip: [u8; 4], port: u16) -> Via {
-        Via::Tcp {
-            peer: (ip, port).into(),
-        }
+    fn tcp(ip: [u8; 4]) -> Door {
+        Door::Tcp(ip.into())
     }
 
-    fn unix() -> Via {
-        Via::Unix { user: "ana".into() }
+    fn unix() -> Door {
+        Door::Unix
     }
 
     #[tokio::test]
     async fn a_new_client_takes_the_place_of_the_one_attaching_longest() {
         let a = Arc::new(Admission::default());
         // An address's share: its fifth closes its first.
-        let first = a.attaching(&tcp([10, 0, 0, 1], 1));
-        let _more: Vec<_> = (2..=4)
-            .map(|p| a.attaching(&tcp([10, 0, 0, 1], p)))
-            .collect();
-        let _fifth = a.attaching(&tcp([10, 0, 0, 1], 5));
+        let first = a.attaching(tcp([10, 0, 0, 1]));
+        let _more: Vec<_> = (2..=4).map(|_| a.attaching(tcp([10, 0, 0, 1]))).collect();
+        let _fifth = a.attaching(tcp([10, 0, 0, 1]));
         tokio::time::timeout(Duration::from_secs(1), first.evicted())
             .await
             .expect("evicted");
         // TCP's places: 16 from four addresses; the 17th closes the oldest.
         let a = Arc::new(Admission::default());
         let held: Vec<_> = (0..16u8)
-            .map(|i| a.attaching(&tcp([10, 0, 0, i / 4], u16::from(i))))
+            .map(|i| a.attaching(tcp([10, 0, 0, i / 4])))
             .collect();
-        let _newcomer = a.attaching(&tcp([10, 0, 0, 9], 1));
+        let _newcomer = a.attaching(tcp([10, 0, 0, 9]));
         tokio::time::timeout(Duration::from_secs(1), held[0].evicted())
             .await
             .expect("evicted");
         // The control socket's places are its own.
-        let local = a.attaching(&unix());
-        let _many: Vec<_> = (0..20u8)
-            .map(|i| a.attaching(&tcp([10, 0, 1, i], 1)))
-            .collect();
+        let local = a.attaching(unix());
+        let _many: Vec<_> = (0..20u8).map(|i| a.attaching(tcp([10, 0, 1, i]))).collect();
         assert!(
             tokio::time::timeout(Duration::from_millis(50), local.evicted())
                 .await
@@ -344,23 +327,23 @@ mod tests {
         for i in 0..TCP_SESSIONS {
             let ip = [10, 0, (i / TCP_SESSIONS_PER_ADDRESS) as u8, 1];
             if i == TCP_SESSIONS_PER_ADDRESS {
-                let e = a.attaching(&tcp([10, 0, 0, 1], 1)).seat().unwrap_err();
+                let e = a.attaching(tcp([10, 0, 0, 1])).seat().unwrap_err();
                 assert!(e.contains("from 10.0.0.1"), "{e}");
             }
-            seats.push(a.attaching(&tcp(ip, i as u16)).seat().expect("seated"));
+            seats.push(a.attaching(tcp(ip)).seat().expect("seated"));
         }
-        let e = a.attaching(&tcp([10, 9, 9, 9], 1)).seat().unwrap_err();
+        let e = a.attaching(tcp([10, 9, 9, 9])).seat().unwrap_err();
         assert!(e.contains("over TCP"), "{e}");
         let local: Vec<_> = (0..UNIX_SESSIONS)
-            .map(|_| a.attaching(&unix()).seat().expect("seated"))
+            .map(|_| a.attaching(unix()).seat().expect("seated"))
             .collect();
-        assert!(a.attaching(&unix()).seat().is_err());
+        assert!(a.attaching(unix()).seat().is_err());
         drop(local);
         drop(seats.pop());
-        a.attaching(&tcp([10, 9, 9, 9], 1))
+        a.attaching(tcp([10, 9, 9, 9]))
             .seat()
             .expect("a place freed");
-        a.attaching(&Via::Local).seat().expect("in process: always");
+        a.attaching(Door::Local).seat().expect("in process: always");
     }
 
     #[test]

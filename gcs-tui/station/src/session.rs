@@ -20,7 +20,7 @@ use serde_json::Value;
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
 
-use crate::admission::{Attaching, HANDSHAKE, Seat};
+use crate::admission::{Attaching, Door, HANDSHAKE, Seat};
 use crate::feed::{LOG_HISTORY, LogCursor};
 use crate::operator::{check_operator, login_name};
 use crate::server::{Station, Via};
@@ -57,7 +57,12 @@ impl Station {
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
     {
-        let place = self.inner.admission.attaching(&via);
+        let door = match &via {
+            Via::Local => Door::Local,
+            Via::Unix { .. } => Door::Unix,
+            Via::Tcp { peer } => Door::Tcp(peer.ip()),
+        };
+        let place = self.inner.admission.attaching(door);
         let mut sessions = lock(&self.inner.sessions);
         // Reap the finished ones so the set holds only live sessions.
         while sessions.try_join_next().is_some() {}

@@ -52,7 +52,6 @@ use tracing::warn;
 use super::config::RouterConfig;
 use tap::{MessageTap, Tap, TapSlot};
 
-pub(crate) use refusals::SOURCES_COUNTED;
 pub(crate) use sources::Treatment;
 
 use crate::auth::{Identity, Keyring};

@@ -21,14 +21,10 @@ use tracing::warn;
 
 use super::Peer;
 use crate::counters::RejectReason;
-use crate::event::Event;
+use crate::event::{Event, REFUSED_SOURCES_COUNTED as SOURCES_COUNTED};
 
 /// The shortest time between two reports.
 pub(super) const REPORT_EVERY: Duration = Duration::from_secs(1);
-
-/// Distinct sources counted per report; a flood from more is reported as
-/// coming from at least this many.
-pub(crate) const SOURCES_COUNTED: usize = 4096;
 
 /// Why a message was refused, as reported.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
