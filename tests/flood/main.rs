@@ -515,7 +515,11 @@ fn main() {
     println!(
         "flood: {} datagrams from {sources} sources{}; forged commands delivered: {}",
         tally.flood_sent.load(Ordering::Relaxed),
-        if hog { ", a spinning thread per core" } else { "" },
+        if hog {
+            ", a spinning thread per core"
+        } else {
+            ""
+        },
         tally.forged_received.load(Ordering::Relaxed),
     );
     println!(
