@@ -117,11 +117,15 @@ impl Executor {
     /// Runs one statement. Errors point at the statement or the argument at
     /// fault.
     /// Each command and its outcome goes into the recording, if one is
-    /// being made.
+    /// being made: the summary, then each detail line (`status`'s robots),
+    /// one per line, so a replay prints what the run printed.
     pub async fn execute(&mut self, stmt: &Statement) -> Result<Outcome, LangError> {
         let result = stmt.command.apply(&mut self.ctx, stmt.span).await;
         let summary = match &result {
-            Ok(o) => o.summary.clone(),
+            Ok(o) => std::iter::once(o.summary.as_str())
+                .chain(o.details.iter().map(String::as_str))
+                .collect::<Vec<_>>()
+                .join("\n"),
             Err(e) => e.to_string(),
         };
         self.ctx.gcs.router().record_operator(OperatorRecord {
