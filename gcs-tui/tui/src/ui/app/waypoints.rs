@@ -81,6 +81,11 @@ impl App {
             robots: robots.clone(),
             waypoints: self.waypoints.list.clone(),
         });
+        let views: Vec<_> = robots
+            .iter()
+            .filter_map(|r| self.robot(r).cloned())
+            .collect();
+        self.history.mission_sent(&views, &self.waypoints.list);
         self.offer_mission_route(&robots);
     }
 
