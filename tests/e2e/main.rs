@@ -5,6 +5,7 @@ mod cli;
 mod cluster_script;
 mod fleet_scale;
 mod octave;
+mod plots;
 mod python;
 mod radio;
 mod record;
