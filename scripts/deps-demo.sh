@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the demo needs to build on a fresh Debian/Ubuntu machine:
 # libudev-dev and pkg-config (gamepads through gilrs, serial ports through
-# serialport). Nothing else: the tests' tools are scripts/deps-test.sh's.
+# serialport). Nothing else: the tests' tools are scripts/deps.sh's.
 # Does nothing when they are already there.
 set -euo pipefail
 need=()
