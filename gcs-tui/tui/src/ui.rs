@@ -9,7 +9,8 @@
 //!   [`view`] (what the station reports, as the screen shows it; shared
 //!   with the station, which sends it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
 //!   [`labels`] (where the map's text goes so nothing overlaps),
-//!   [`columns`] (the fleet table's columns, sorting and filter);
+//!   [`columns`] (the fleet table's columns, sorting and filter),
+//!   [`series`] (what the plots and trends draw);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
 //!   [`status`], [`cards`], [`table`] (the fleet table, with a trend of
 //!   its sort column), [`detail`] (one robot, with [`plots`] of its last
@@ -35,6 +36,7 @@ pub mod map;
 pub mod plots;
 pub mod render;
 pub mod routes;
+pub mod series;
 pub mod status;
 pub mod table;
 pub mod terminal;

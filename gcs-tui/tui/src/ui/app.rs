@@ -57,7 +57,7 @@ mod waypoints;
 pub use cards::CardsState;
 pub use events::{EventLog, LogLevel, LogLine};
 pub use fleet::FleetState;
-pub use history::{HISTORY_SECONDS, History, RobotHistory, SAMPLE_PERIOD, Sample, Series};
+pub use history::{HISTORY_SECONDS, History, RobotHistory, SAMPLE_PERIOD, Sample};
 pub use manual::ManualControl;
 pub use map::MapState;
 pub use prompt::{Prompt, PromptError, PromptLine, parse_waypoint};

@@ -8,7 +8,7 @@ use std::cmp::Ordering;
 use mech_core::names::natural_cmp;
 use mech_proto::{FailsafeState, MissionProgress};
 
-use super::app::Series;
+use super::series::Series;
 use super::view::{RobotView, failsafe_str, health_str, link_label, mode_str};
 
 /// Cells before the first column: the selection mark and a space.

@@ -12,7 +12,8 @@ use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Axis, Block, Chart, Dataset, GraphType, Paragraph, Widget};
 
-use super::app::{HISTORY_SECONDS, History, RobotHistory, Series};
+use super::app::{HISTORY_SECONDS, History, RobotHistory};
+use super::series::Series;
 use super::theme::Theme;
 
 /// The least height of a chart, borders included: a line of plot between

@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use mech_proto::{VelocitySource, Waypoint};
 
+use crate::ui::series::Series;
 use crate::ui::view::RobotView;
 
 /// How far back the plots reach, s.
@@ -49,35 +50,19 @@ pub struct Sample {
     pub xte: f32,
 }
 
-/// What a plot or a trend can draw.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Series {
-    /// The speed the robot reports.
-    Speed,
-    /// The speed its positions show: distance over the last second.
-    GroundSpeed,
-    Heading,
-    Battery,
-    Loss,
-    Rtt,
-    Rx,
-    Tx,
-    CrossTrack,
-}
-
-impl Series {
-    fn of(self, s: &Sample) -> f32 {
-        match self {
-            Series::Speed => s.speed,
-            Series::GroundSpeed => f32::NAN,
-            Series::Heading => s.heading_deg,
-            Series::Battery => s.battery,
-            Series::Loss => s.loss,
-            Series::Rtt => s.rtt,
-            Series::Rx => s.rx,
-            Series::Tx => s.tx,
-            Series::CrossTrack => s.xte,
-        }
+/// The value of `series` in sample `s` (the ground speed is not a
+/// sample's: [`RobotHistory::points`] works it out from positions).
+fn value(series: Series, s: &Sample) -> f32 {
+    match series {
+        Series::Speed => s.speed,
+        Series::GroundSpeed => f32::NAN,
+        Series::Heading => s.heading_deg,
+        Series::Battery => s.battery,
+        Series::Loss => s.loss,
+        Series::Rtt => s.rtt,
+        Series::Rx => s.rx,
+        Series::Tx => s.tx,
+        Series::CrossTrack => s.xte,
     }
 }
 
@@ -100,7 +85,7 @@ impl RobotHistory {
         self.samples
             .iter()
             .filter_map(|s| {
-                let v = series.of(s);
+                let v = value(series, s);
                 v.is_finite().then_some((s.t - now, f64::from(v)))
             })
             .collect()
