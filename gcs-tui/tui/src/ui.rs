@@ -48,10 +48,11 @@ pub use crate::view;
 pub use app::{
     Action, App, CardsState, EventLog, FleetState, Focus, Help, History, LogLevel, LogLine,
     ManualControl, MapState, Prompt, PromptError, PromptLine, Request, RobotsView, RoutesState,
-    Screen, Select, Series, Session, TableState, WaypointsState,
+    Screen, Select, Session, TableState, WaypointsState,
 };
 pub use columns::Column;
 pub use link::StationLink;
+pub use series::Series;
 pub use terminal::{RunOptions, run};
 pub use view::{
     ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
