@@ -341,17 +341,16 @@ fn network_calls_of_replay(file: &str, dir: &Path) -> Option<String> {
     Some(calls.trim().to_string())
 }
 
-/// The middle of an MCAP file's data section (the schemas, channels and
-/// chunks; the summary after it repeats the schemas): the footer, the
-/// record before the closing 8-byte magic, holds where the summary starts
-/// (opcode, length, summary start, summary offset start, CRC: 29 bytes),
-/// and the data end record before the summary is 13 bytes long.
-fn data_section_middle(bytes: &[u8]) -> usize {
+/// Where an MCAP file's data section ends (its 13-byte data end record
+/// begins): the footer, the record before the closing 8-byte magic, holds
+/// where the summary starts (opcode, length, summary start, summary offset
+/// start, CRC: 29 bytes). The summary after the data repeats every schema,
+/// so a cut at half the file may well leave the data whole.
+fn data_section_end(bytes: &[u8]) -> usize {
     let footer = bytes.len() - 8 - 29;
     assert_eq!(bytes[footer], 0x02, "an MCAP footer");
     let start: [u8; 8] = bytes[footer + 9..footer + 17].try_into().expect("8 bytes");
-    let summary_start = u64::from_le_bytes(start) as usize;
-    (summary_start - 13) / 2
+    u64::from_le_bytes(start) as usize - 13
 }
 
 #[test]
@@ -374,7 +373,8 @@ fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
     assert_eq!(out.status.code(), Some(0));
     let bytes = std::fs::read(&file).expect("the recording");
     let cut = dir.join("cut.mcap");
-    std::fs::write(&cut, &bytes[..data_section_middle(&bytes)]).expect("cut written");
+    // Cut into the data's last record: everything before it replays.
+    std::fs::write(&cut, &bytes[..data_section_end(&bytes) - 1]).expect("cut written");
     let out = mech_gcs(
         &["replay", cut.to_str().expect("utf-8"), "--script"],
         "",
