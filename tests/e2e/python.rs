@@ -508,7 +508,7 @@ fn headless_serve_attach_route_and_drive_and_a_station_gone_is_not_driven_blind(
     let report = String::from_utf8_lossy(&out.stdout);
     assert!(report.contains("\"arrived\": true"), "{report}");
 
-    let mut driving = go(0.4, 0.3)
+    let driving = go(0.4, 0.3)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
