@@ -6,6 +6,7 @@ mod cluster_script;
 mod fleet_scale;
 mod hostile;
 mod octave;
+mod plots;
 mod python;
 mod radio;
 mod record;
