@@ -263,7 +263,9 @@ pub enum Event {
     /// new intervention (one event per change, not per telemetry).
     Safety {
         robot: String,
-        #[serde(with = "safety_state_name")]
+        /// Recorded as `safety_state` (a link event's `state` is another
+        /// thing).
+        #[serde(with = "safety_state_name", rename = "safety_state")]
         state: SafetyState,
         #[serde(with = "intervention_name")]
         intervention: Intervention,
