@@ -112,13 +112,14 @@ impl Shared {
         (r, ticket)
     }
 
-    /// Decides `n` messages under one hold of the tables lock, in order:
-    /// `message(i)` is the i-th with its source, and `sent(i, fx)` takes
-    /// what its decision left to send. Each message's events are queued
-    /// after its decision, so the recording has each message followed by
-    /// its events.
+    /// Decides `n` messages, received at `now`, under one hold of the
+    /// tables lock, in order: `message(i)` is the i-th with its source, and
+    /// `sent(i, fx)` takes what its decision left to send. Each message's
+    /// events are queued after its decision, so the recording has each
+    /// message followed by its events.
     fn decide_each<'b>(
         &self,
+        now: std::time::Instant,
         n: usize,
         message: impl Fn(usize) -> (&'b [u8], Peer),
         fx: &mut Effects,
@@ -127,7 +128,7 @@ impl Shared {
         if self.stopped() {
             return None;
         }
-        let now = Instant::now();
+        let now = Instant::from_std(now);
         let mut ticket = None;
         let mut tables = lock(&self.tables);
         for i in 0..n {
