@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use nix::sys::socket::MsgFlags;
 use tracing::debug;
 
-use super::batch::{RecvBatch, SendBatch};
+use super::batch::{BATCH, RecvBatch, SendBatch};
 use crate::router::tables::{Effects, Peer};
 use crate::router::{RouterError, Shared};
 
@@ -101,8 +101,10 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
         last_arrived = arrived;
         decided.clear();
         let message = |i| batch_message(&received, i);
+        // A full batch: more datagrams wait in the socket.
+        let behind = n == BATCH;
         let take = |i, fx: &mut Effects| decided.take(i, fx);
-        let ticket = shared.decide_each(arrived, n, message, &mut fx, take);
+        let ticket = shared.decide_each(arrived, n, message, behind, &mut fx, take);
         shared.events.deliver(ticket);
         send_decided(&shared, fd, &mut sender, &received, &mut decided);
         polling_until = poll.next().map(|budget| arrived + budget);
