@@ -15,8 +15,10 @@ use crate::{MAX_FLEET_PARTS, MAX_NAME_LEN, MAX_TEXT_LEN, MAX_WAYPOINTS};
 
 /// Registration, robot -> router. Sent at start-up and again whenever the
 /// agent has not heard a [`Welcome`] (the router treats a repeat from a new
-/// address as the same robot moving, not a new robot).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// address as the same robot moving, not a new robot). The default says
+/// nothing (no name, no platform, no capabilities): what a station holds
+/// for a robot whose registration it has not heard.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Hello {
     /// Unique robot name, e.g. `robot_1`; also the envelope sender.
     pub name: String,
@@ -186,8 +188,9 @@ pub struct MissionProgress {
 }
 
 /// Robot state, robot -> router -> subscribers, at the agent's telemetry rate
-/// (default 20 Hz).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// (default 20 Hz). The default is a robot not heard from yet: idle, at the
+/// origin, nothing reported.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Telemetry {
     pub pose: Pose,
     pub velocity: Velocity,
@@ -704,7 +707,9 @@ impl Welcome {
 }
 
 impl Telemetry {
-    fn validate(&self) -> Result<(), Error> {
+    /// The checks a received telemetry passes (finite, in range, a valid
+    /// channel name), for telemetry that arrives another way (a bridge).
+    pub fn validate(&self) -> Result<(), Error> {
         pose(&self.pose)?;
         finite(self.velocity.vx, "velocity vx")?;
         finite(self.velocity.vy, "velocity vy")?;

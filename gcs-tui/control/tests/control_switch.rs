@@ -159,7 +159,7 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     while gcs
         .snapshot()
         .robot("robot_1")
-        .and_then(|r| r.mission)
+        .and_then(|r| r.telemetry.mission)
         .is_none_or(|m| m.next != 2)
     {
         assert!(
@@ -266,7 +266,7 @@ async fn offboard_resumes_from_progress_reported_before_the_robot_was_routed_els
     exec.execute_line("route robot_1 joy/0").await.unwrap();
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert_eq!(
-        gcs.with_fleet(|f| f.robot("robot_1").unwrap().mission),
+        gcs.with_fleet(|f| f.robot("robot_1").unwrap().telemetry.mission),
         None
     );
 

@@ -115,13 +115,22 @@ async fn a_recording_holds_what_the_router_saw_and_replays_it() {
     let fleet = replay.fleet_at(replay.end());
     let r = fleet.robot("robot_1").unwrap();
     assert_eq!(
-        (r.pose.x, r.route.requested.as_deref()),
+        (r.telemetry.pose.x, r.route.requested.as_deref()),
         (9.0, Some("joy/0"))
     );
     assert!(fleet.estop.engaged);
     // Half way through, robot_1 was half way along.
     let mid = telemetry_at(&replayed, "robot_1", 4);
-    assert_eq!(replay.fleet_at(mid).robot("robot_1").unwrap().pose.x, 4.0);
+    assert_eq!(
+        replay
+            .fleet_at(mid)
+            .robot("robot_1")
+            .unwrap()
+            .telemetry
+            .pose
+            .x,
+        4.0
+    );
     decisions_say_why(&replay, received);
 }
 
@@ -408,7 +417,10 @@ async fn a_recording_begun_mid_run_starts_from_the_fleet_as_it_stood() {
     r.follow_route().await;
     r.send_telemetry(telemetry(1.5, 0.5, "joy/0", None)).await;
     let seen = eventually(Duration::from_secs(3), || {
-        gcs.with_fleet(|f| f.robot("robot_1").is_some_and(|r| r.pose.x == 1.5))
+        gcs.with_fleet(|f| {
+            f.robot("robot_1")
+                .is_some_and(|r| r.telemetry.pose.x == 1.5)
+        })
     });
     assert!(seen.await);
     gcs.update_fleet(|f| f.set_cluster("c1", vec!["robot_1".into()]));
@@ -421,7 +433,11 @@ async fn a_recording_begun_mid_run_starts_from_the_fleet_as_it_stood() {
     let start = replay.fleet_at(replay.start());
     let robot = start.robot("robot_1").unwrap();
     assert_eq!(robot.route.acknowledged.as_deref(), Some("joy/0"));
-    assert_eq!((robot.pose.x, robot.pose.y), (1.5, 0.5));
+    assert_eq!((robot.telemetry.pose.x, robot.telemetry.pose.y), (1.5, 0.5));
+    assert_eq!(
+        robot.registration.hello.agent_version, "test",
+        "the registration as the robot sent it"
+    );
     assert_eq!(start.clusters["c1"].members, ["robot_1"]);
     let events: Vec<Stamped> = replay.events().collect();
     assert!(
@@ -434,7 +450,7 @@ async fn a_recording_begun_mid_run_starts_from_the_fleet_as_it_stood() {
     // A cursor moves forward and back.
     let mut c = replay.cursor();
     c.advance_to(replay.end());
-    assert_eq!(c.fleet().robot("robot_1").unwrap().pose.x, 2.5);
+    assert_eq!(c.fleet().robot("robot_1").unwrap().telemetry.pose.x, 2.5);
     c.seek(replay.start());
-    assert_eq!(c.fleet().robot("robot_1").unwrap().pose.x, 1.5);
+    assert_eq!(c.fleet().robot("robot_1").unwrap().telemetry.pose.x, 1.5);
 }

@@ -65,9 +65,9 @@ async fn registration_routes_to_none_and_tracks_the_robot() {
     assert_eq!(w.route.robot, "robot_1");
     let fleet = gcs.snapshot();
     let r = fleet.robot("robot_1").unwrap();
-    assert_eq!(r.addr, mech_core::LinkAddr::Udp(robot.addr()));
+    assert_eq!(r.registration.addr, mech_core::LinkAddr::Udp(robot.addr()));
     assert_eq!(r.link, LinkState::Connected);
-    assert_eq!(r.platform, "diff-drive");
+    assert_eq!(r.registration.hello.platform, "diff-drive");
     assert_eq!(r.route.requested, None);
     assert!(!r.route.is_pending());
 
@@ -148,7 +148,7 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
     let fleet = gcs.snapshot();
     assert_eq!(fleet.robots.len(), 1, "same robot, not a duplicate");
     assert_eq!(
-        fleet.robot("robot_1").unwrap().addr,
+        fleet.robot("robot_1").unwrap().registration.addr,
         mech_core::LinkAddr::Udp(second.addr())
     );
     let mut pad = Peer::new("gamepad", gcs.router().udp_addr()).await;
@@ -497,7 +497,7 @@ async fn a_slow_subscriber_loses_only_its_own_events() {
         N as u64
     );
     assert_eq!(
-        gcs.snapshot().robot("robot_1").unwrap().pose.x,
+        gcs.snapshot().robot("robot_1").unwrap().telemetry.pose.x,
         (N - 1) as f64,
         "the fleet model never drops"
     );

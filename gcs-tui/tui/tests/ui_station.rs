@@ -554,15 +554,16 @@ fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
 #[test]
 fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
     let mut fleet = mech_core::Fleet::new(Default::default());
-    let info = mech_core::fleet::RemoteInfo {
-        id: 4,
+    let info = mech_proto::Hello {
+        name: "robot_9".into(),
         platform: "kiwi".into(),
         capabilities: vec![],
         motors: 3,
         max_speed: 1.0,
         max_yaw_rate: 1.0,
+        agent_version: String::new(),
     };
-    fleet.remote_info("site-b", "robot_9", &info);
+    fleet.remote_info("site-b", "robot_9", 4, &info);
     fleet.remote_link("site-b", "robot_9", LinkState::Connected);
     let snap = mech_station::snapshot(&fleet, vec![]);
     assert_eq!(snap.robots[0].remote.as_deref(), Some("site-b"));

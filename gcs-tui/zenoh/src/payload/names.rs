@@ -96,6 +96,38 @@ names! {
     }
 }
 
+/// A channel name, `null` for none (the protocol writes none as empty).
+pub mod channel {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(c: &str, s: S) -> Result<S::Ok, S::Error> {
+        match c {
+            "" => s.serialize_none(),
+            c => s.serialize_some(c),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<String, D::Error> {
+        Ok(Option::<String>::deserialize(d)?.unwrap_or_default())
+    }
+}
+
+/// Command kinds a robot obeys, by name; a name this version does not
+/// know is left out (a later version may add kinds).
+pub mod capabilities {
+    use mech_proto::CommandKind;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(kinds: &[CommandKind], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(kinds.iter().map(|k| k.as_str()))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<CommandKind>, D::Error> {
+        let names = Vec::<String>::deserialize(d)?;
+        Ok(names.iter().filter_map(|n| CommandKind::parse(n)).collect())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use mech_proto::{Computation, ControlMode, FailsafeState, Health, VelocitySource};

@@ -111,7 +111,7 @@ impl Expectation {
                     worst = worst.max(d);
                     (d > *tolerance).then(|| format!(
                         "{name} is {d:.3} m from ({x}, {y}), more than {tolerance} m (at {:.3}, {:.3})",
-                        r.pose.x, r.pose.y
+                        r.telemetry.pose.x, r.telemetry.pose.y
                     ))
                 })?;
                 Ok(format!("within {worst:.3} m"))
@@ -139,10 +139,10 @@ impl Expectation {
             }
             Expectation::Failsafe(target, state) => {
                 each(f, target, |name, r| {
-                    (r.failsafe != *state).then(|| {
+                    (r.telemetry.failsafe != *state).then(|| {
                         format!(
                             "{name} failsafe is {}, expected {}",
-                            failsafe_name(r.failsafe),
+                            failsafe_name(r.telemetry.failsafe),
                             failsafe_name(*state)
                         )
                     })

@@ -105,23 +105,23 @@ fn status_line(r: &Robot) -> String {
     format!(
         "{} #{} {} {} at ({:.2}, {:.2}) heading {:.2} speed {:.2} mode {:?} route {}{} failsafe {}",
         r.name,
-        r.id,
-        r.platform,
+        r.registration.id,
+        r.registration.hello.platform,
         r.link.as_str(),
-        r.pose.x,
-        r.pose.y,
-        r.pose.heading,
+        r.telemetry.pose.x,
+        r.telemetry.pose.y,
+        r.telemetry.pose.heading,
         r.speed(),
-        r.mode,
+        r.telemetry.mode,
         channel_name(&r.route.requested),
         if r.route.is_pending() {
             " (pending)"
         } else {
             ""
         },
-        failsafe_name(r.failsafe),
-    ) + &if r.stale > 0 {
-        format!(" ignored-stale {}", r.stale)
+        failsafe_name(r.telemetry.failsafe),
+    ) + &if r.telemetry.stale > 0 {
+        format!(" ignored-stale {}", r.telemetry.stale)
     } else {
         String::new()
     } + &link_quality(&r.quality)
