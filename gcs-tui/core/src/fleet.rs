@@ -46,23 +46,14 @@ pub struct EStopState {
     pub pending: BTreeSet<String>,
 }
 
-/// Severity of an event-log line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Severity {
-    Debug,
-    Info,
-    Warn,
-    Error,
-}
-
-impl Severity {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Severity::Debug => "debug",
-            Severity::Info => "info",
-            Severity::Warn => "warn",
-            Severity::Error => "error",
-        }
+mech_proto::named_enum! {
+    /// Severity of an event-log line.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+    pub enum Severity: "severity" {
+        Debug => "debug",
+        Info => "info",
+        Warn => "warn",
+        Error => "error",
     }
 }
 

@@ -129,18 +129,18 @@ struct TelemetryJson {
     velocity: Velocity,
     /// `measured` (wheel encoders) or `commanded` (what the outputs should
     /// give); `commanded` when absent.
-    #[serde(default, with = "names::velocity_source")]
+    #[serde(default, with = "mech_proto::names::by_name")]
     velocity_source: VelocitySource,
-    #[serde(with = "names::mode")]
+    #[serde(with = "mech_proto::names::by_name")]
     mode: ControlMode,
     /// The channel the robot obeys; `null` = none.
     #[serde(default, with = "names::channel")]
     channel: String,
-    #[serde(with = "names::computation")]
+    #[serde(with = "mech_proto::names::by_name")]
     computation: Computation,
-    #[serde(with = "names::failsafe")]
+    #[serde(with = "mech_proto::names::by_name")]
     failsafe: FailsafeState,
-    #[serde(with = "names::health")]
+    #[serde(with = "mech_proto::names::by_name")]
     health: Health,
     /// Fraction in [0, 1].
     battery: Option<f64>,
@@ -242,7 +242,6 @@ impl InfoMsg {
 pub struct LinkMsg {
     #[serde(flatten)]
     pub origin: Origin,
-    #[serde(with = "names::link")]
     pub state: LinkState,
 }
 

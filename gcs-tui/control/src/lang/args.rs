@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use mech_proto::{FailsafeState, Waypoint};
+use mech_proto::Waypoint;
 
 use super::lexer::Word;
 use super::{LangError, Span};
@@ -225,29 +225,6 @@ pub fn point(s: &str) -> Option<Waypoint> {
         z,
         time: time.map(|t| t.as_secs_f64()),
     })
-}
-
-/// Failsafe state names, as the language and the UI write them.
-pub fn failsafe(s: &str) -> Option<FailsafeState> {
-    Some(match s {
-        "ok" => FailsafeState::Ok,
-        "channel-silent" => FailsafeState::ChannelSilent,
-        "router-lost" => FailsafeState::RouterLost,
-        "estopped" => FailsafeState::EStopped,
-        "fault" => FailsafeState::Fault,
-        _ => return None,
-    })
-}
-
-/// The name [`failsafe`] parses.
-pub fn failsafe_name(s: FailsafeState) -> &'static str {
-    match s {
-        FailsafeState::Ok => "ok",
-        FailsafeState::ChannelSilent => "channel-silent",
-        FailsafeState::RouterLost => "router-lost",
-        FailsafeState::EStopped => "estopped",
-        FailsafeState::Fault => "fault",
-    }
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use mech_core::fleet::{Fleet, Robot};
 use mech_proto::FailsafeState;
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe, failsafe_name};
+use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -68,7 +68,7 @@ impl Expectation {
             "failsafe" => {
                 let target = a.target()?;
                 let w = a.next("failsafe state")?;
-                let state = failsafe(&w.text).ok_or_else(|| {
+                let state = FailsafeState::parse(&w.text).ok_or_else(|| {
                     LangError::new(w.span, format!("unknown failsafe state {:?}; use ok, channel-silent, router-lost, estopped or fault", w.text))
                 })?;
                 Expectation::Failsafe(target, state)
@@ -142,12 +142,12 @@ impl Expectation {
                     (r.telemetry.failsafe != *state).then(|| {
                         format!(
                             "{name} failsafe is {}, expected {}",
-                            failsafe_name(r.telemetry.failsafe),
-                            failsafe_name(*state)
+                            r.telemetry.failsafe.as_str(),
+                            state.as_str()
                         )
                     })
                 })?;
-                Ok(format!("failsafe {}", failsafe_name(*state)))
+                Ok(format!("failsafe {}", state.as_str()))
             }
             Expectation::DroppedAtLeast { channel, min } => dropped_at_least(f, channel, *min),
         }

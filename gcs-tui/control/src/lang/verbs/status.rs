@@ -7,7 +7,7 @@ use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe_name};
+use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -76,7 +76,7 @@ impl Status {
             summary: format!(
                 "{} robots; station {}{refused}{}{radios}{recording}",
                 details.len(),
-                router.security().as_str(),
+                router.security().label(),
                 ctx.gcs.with_fleet(stations),
             ),
             details,
@@ -119,7 +119,7 @@ fn status_line(r: &Robot) -> String {
         } else {
             ""
         },
-        failsafe_name(r.telemetry.failsafe),
+        r.telemetry.failsafe.as_str(),
     ) + &if r.telemetry.stale > 0 {
         format!(" ignored-stale {}", r.telemetry.stale)
     } else {
