@@ -9,12 +9,8 @@ use std::time::Duration;
 
 use crate::tmux::{Tmux, card_position, card_status};
 
-#[test]
-fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
-    if Command::new("tmux").arg("-V").output().is_err() {
-        println!("skipped: tmux is not installed");
-        return;
-    }
+/// `mech-gcs --demo 2` in a detached tmux session, 160x48.
+fn demo_in_tmux() -> Tmux {
     let state = std::env::temp_dir().join(format!("mech-e2e-tui-{}", std::process::id()));
     std::fs::create_dir_all(&state).expect("temp dir");
     let tmux = Tmux {
@@ -40,6 +36,16 @@ fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
         &cmd,
     ]);
     assert!(out.status.success(), "tmux new-session: {out:?}");
+    tmux
+}
+
+#[test]
+fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
+    if Command::new("tmux").arg("-V").output().is_err() {
+        println!("skipped: tmux is not installed");
+        return;
+    }
+    let tmux = demo_in_tmux();
 
     let screen = tmux.wait_for("two connected robots", Duration::from_secs(20), |s| {
         s.contains("robots 2 (2 ok")

@@ -251,7 +251,15 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         "formation from the config"
     );
 
-    // An external program publishes a cluster command on the cluster's channel.
+    an_external_cluster_command_sets_formation_and_motion(&gcs, &exec).await;
+    a_gamepad_velocity_lapses_and_the_cluster_holds(&exec).await;
+    fleet.shutdown().await;
+    gcs.shutdown().await;
+}
+
+/// An external program publishes a cluster command on the cluster's
+/// channel: its formation and velocity goal drive the cluster.
+async fn an_external_cluster_command_sets_formation_and_motion(gcs: &Gcs, exec: &Executor) {
     let mut matlab = gcs.router().publisher("matlab", "fleet/c1");
     let command = mech_proto::ClusterCommand {
         cluster: "c1".into(),
@@ -285,8 +293,10 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         }),
         "the external velocity goal drives the cluster"
     );
+}
 
-    // A gamepad velocity lapses unless refreshed: the cluster holds.
+/// A gamepad velocity lapses unless refreshed: the cluster holds.
+async fn a_gamepad_velocity_lapses_and_the_cluster_holds(exec: &Executor) {
     exec.control()
         .drive_cluster(
             "c1",
@@ -323,6 +333,4 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         (after.y - before.y).abs() < 0.1 * 0.5 + 0.02,
         "moved at most until the timeout"
     );
-    fleet.shutdown().await;
-    gcs.shutdown().await;
 }

@@ -49,21 +49,9 @@ fn telemetry_of(events: &[Stamped], robot: &str) -> Vec<f64> {
         .collect()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_recording_holds_what_the_router_saw_and_replays_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("run.mcap");
-    let gcs = gcs().await;
-    let mut sub = gcs.router().subscribe(65_536, true);
-    gcs.start_recording(RecordTarget::File(file.clone()))
-        .unwrap();
-    let mut r1 = registered(&gcs, "robot_1").await;
-    let mut r2 = registered(&gcs, "robot_2").await;
-    gcs.router()
-        .set_route("robot_1", Some("joy/0"))
-        .await
-        .unwrap();
-    r1.follow_route().await;
+/// What the recording holds: commands from a pad (one to a robot routed
+/// to none), a garbage packet, telemetry from both robots.
+async fn talk(gcs: &Gcs, r1: &mut Peer, r2: &mut Peer) {
     let mut pad = Peer::new("pad", gcs.router().udp_addr()).await;
     for i in 0..3 {
         pad.command("robot_1", "joy/0", 0.1 * f64::from(i)).await;
@@ -79,6 +67,24 @@ async fn a_recording_holds_what_the_router_saw_and_replays_it() {
         }
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_holds_what_the_router_saw_and_replays_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("run.mcap");
+    let gcs = gcs().await;
+    let mut sub = gcs.router().subscribe(65_536, true);
+    gcs.start_recording(RecordTarget::File(file.clone()))
+        .unwrap();
+    let mut r1 = registered(&gcs, "robot_1").await;
+    let mut r2 = registered(&gcs, "robot_2").await;
+    gcs.router()
+        .set_route("robot_1", Some("joy/0"))
+        .await
+        .unwrap();
+    r1.follow_route().await;
+    talk(&gcs, &mut r1, &mut r2).await;
     gcs.router().estop().await;
     let counted = |g: &Gcs| g.router().counters().received;
     let settled = eventually(Duration::from_secs(5), || {

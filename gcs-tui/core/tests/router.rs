@@ -160,6 +160,16 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
     gcs.shutdown().await;
 }
 
+/// Whether `robot_1` soon shows `channel` acknowledged, nothing pending.
+async fn acknowledged(gcs: &Gcs, channel: &str) -> bool {
+    eventually(Duration::from_secs(2), || {
+        let f = gcs.snapshot();
+        let r = f.robot("robot_1").unwrap();
+        !r.route.is_pending() && r.route.acknowledged.as_deref() == Some(channel)
+    })
+    .await
+}
+
 #[tokio::test]
 async fn a_route_switch_drops_the_old_channels_very_next_message() {
     let gcs = gcs().await;
@@ -174,14 +184,7 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
         .unwrap();
     assert!(gcs.snapshot().robot("robot_1").unwrap().route.is_pending());
     assert_eq!(robot.follow_route().await, "joy/0");
-    assert!(
-        eventually(Duration::from_secs(2), || {
-            let f = gcs.snapshot();
-            let r = f.robot("robot_1").unwrap();
-            !r.route.is_pending() && r.route.acknowledged.as_deref() == Some("joy/0")
-        })
-        .await
-    );
+    assert!(acknowledged(&gcs, "joy/0").await);
     let a = pad0.command("robot_1", "joy/0", 0.1).await;
     let got = robot
         .recv_matching(|e| matches!(e.body, Body::Command(_)))
@@ -218,17 +221,7 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
 
     // The agent is told, and the table shows pending until it acknowledges.
     assert_eq!(robot.follow_route().await, "joy/1");
-    assert!(
-        eventually(Duration::from_secs(2), || gcs
-            .snapshot()
-            .robot("robot_1")
-            .unwrap()
-            .route
-            .acknowledged
-            .as_deref()
-            == Some("joy/1"))
-        .await
-    );
+    assert!(acknowledged(&gcs, "joy/1").await);
 
     // Routed to none: nothing gets through.
     gcs.router().set_route("robot_1", None).await.unwrap();

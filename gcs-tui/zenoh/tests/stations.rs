@@ -51,9 +51,9 @@ async fn two_stations(robots: usize) -> (Station, Station) {
     (a, b)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
-    let (mut a, mut b) = two_stations(2).await;
+/// Station b shows site-a's robots as remote and read-only, and its
+/// `route all` touches only its own.
+async fn site_a_is_read_only_at_b(b: &mut Station) {
     let remote = b.robot("robot_1@site-a").unwrap();
     assert_eq!(remote.remote.as_deref(), Some("site-a"));
     assert!(!remote.registration.hello.platform.is_empty());
@@ -74,6 +74,12 @@ async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
             .unwrap()
             .contains("robot_1, robot_2 routed")
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
+    let (mut a, mut b) = two_stations(2).await;
+    site_a_is_read_only_at_b(&mut b).await;
 
     // A program on the network drives robot_1 of site-a on ext/zenoh.
     let tool = program(&a.endpoint).await;
