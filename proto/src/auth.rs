@@ -198,18 +198,6 @@ pub enum AuthError {
     Shape(&'static str),
 }
 
-impl AuthError {
-    /// A short counter key: `unsigned`, `unknown-key`, `bad-tag`, `replay`.
-    pub fn reason(&self) -> &'static str {
-        match self {
-            AuthError::Unsigned => "unsigned",
-            AuthError::UnknownKey(_) => "unknown-key",
-            AuthError::BadTag | AuthError::Shape(_) => "bad-tag",
-            AuthError::Replay => "replay",
-        }
-    }
-}
-
 /// Messages a stream may deliver out of order: a stamp older than the
 /// newest is still accepted if it is among the last this many and not a
 /// repeat (the anti-replay window of IPsec and DTLS, over stamps).

@@ -53,24 +53,12 @@ impl Expectation {
             }
             "link" => {
                 let target = a.target()?;
-                let w = a.next("link state")?;
-                let state = LinkState::parse(&w.text).ok_or_else(|| {
-                    LangError::new(
-                        w.span,
-                        format!(
-                            "unknown link state {:?}; use connected, stale or lost",
-                            w.text
-                        ),
-                    )
-                })?;
+                let state = a.named::<LinkState>()?;
                 Expectation::Link(target, state)
             }
             "failsafe" => {
                 let target = a.target()?;
-                let w = a.next("failsafe state")?;
-                let state = FailsafeState::parse(&w.text).ok_or_else(|| {
-                    LangError::new(w.span, format!("unknown failsafe state {:?}; use ok, channel-silent, router-lost, estopped or fault", w.text))
-                })?;
+                let state = a.named::<FailsafeState>()?;
                 Expectation::Failsafe(target, state)
             }
             "dropped" => {
