@@ -129,18 +129,18 @@ struct TelemetryJson {
     velocity: Velocity,
     /// `measured` (wheel encoders) or `commanded` (what the outputs should
     /// give); `commanded` when absent.
-    #[serde(default, with = "mech_proto::names::by_name")]
+    #[serde(default, with = "mech_proto::named::by_name")]
     velocity_source: VelocitySource,
-    #[serde(with = "mech_proto::names::by_name")]
+    #[serde(with = "mech_proto::named::by_name")]
     mode: ControlMode,
     /// The channel the robot obeys; `null` = none.
     #[serde(default, with = "names::channel")]
     channel: String,
-    #[serde(with = "mech_proto::names::by_name")]
+    #[serde(with = "mech_proto::named::by_name")]
     computation: Computation,
-    #[serde(with = "mech_proto::names::by_name")]
+    #[serde(with = "mech_proto::named::by_name")]
     failsafe: FailsafeState,
-    #[serde(with = "mech_proto::names::by_name")]
+    #[serde(with = "mech_proto::named::by_name")]
     health: Health,
     /// Fraction in [0, 1].
     battery: Option<f64>,

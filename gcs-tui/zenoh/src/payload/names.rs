@@ -2,7 +2,7 @@
 //! not what a reader of JSON expects: a channel of none is `null` (the wire
 //! has it empty), capabilities are names (the wire has numbers). The
 //! protocol's small enums are written by the names they are declared with
-//! (`mech_proto::names::by_name`).
+//! (`mech_proto::named::by_name`).
 
 /// A channel name, `null` for none (the protocol writes none as empty).
 pub mod channel {
