@@ -33,6 +33,37 @@ fn is_braille(c: char) -> bool {
     ('\u{2801}'..='\u{28ff}').contains(&c)
 }
 
+/// A waypoint in the middle of the demo arena (3.9 m x 2.8 m from the
+/// origin), sent to robot_1, which is routed to none; then the route the
+/// command line's history offers, run.
+fn waypoint_sent_then_routed(tmux: &Tmux) {
+    tmux.keys(&["n"]);
+    tmux.wait_for("robot_1 selected", Duration::from_secs(5), |s| {
+        s.contains("sel 1")
+    });
+    tmux.keys(&["f", "e"]);
+    tmux.literal("2.0,1.4");
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the waypoint listed", Duration::from_secs(5), |s| {
+        s.contains("⚑1")
+    });
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the mission acknowledged", Duration::from_secs(10), |s| {
+        s.contains("robot_1 acknowledged mission")
+    });
+    // Out of waypoint mode (Esc alone: Esc and a key at once would read
+    // as Alt and the key), then the offered route from the history.
+    tmux.keys(&["Escape"]);
+    tmux.wait_for("waypoint mode left", Duration::from_secs(5), |s| {
+        !s.contains("[placing]")
+    });
+    tmux.keys(&[":", "Up"]);
+    tmux.wait_for("the offered line", Duration::from_secs(5), |s| {
+        s.contains(":route robot_1 wp/gcs")
+    });
+    tmux.keys(&["Enter"]);
+}
+
 fn plots_at(w: u16, h: u16) {
     if Command::new("tmux").arg("-V").output().is_err() {
         assert!(std::env::var_os("CI").is_none(), "CI needs tmux");
@@ -59,33 +90,7 @@ fn plots_at(w: u16, h: u16) {
         s.contains("robots 2 (2 ok") || s.contains("2/2 ok")
     });
 
-    // A waypoint in the middle of the demo arena (3.9 m x 2.8 m from the
-    // origin), sent to robot_1, which is routed to none.
-    tmux.keys(&["n"]);
-    tmux.wait_for("robot_1 selected", Duration::from_secs(5), |s| {
-        s.contains("sel 1")
-    });
-    tmux.keys(&["f", "e"]);
-    tmux.literal("2.0,1.4");
-    tmux.keys(&["Enter"]);
-    tmux.wait_for("the waypoint listed", Duration::from_secs(5), |s| {
-        s.contains("⚑1")
-    });
-    tmux.keys(&["Enter"]);
-    tmux.wait_for("the mission acknowledged", Duration::from_secs(10), |s| {
-        s.contains("robot_1 acknowledged mission")
-    });
-    // Out of waypoint mode (Esc alone: Esc and a key at once would read
-    // as Alt and the key), then the offered route from the history.
-    tmux.keys(&["Escape"]);
-    tmux.wait_for("waypoint mode left", Duration::from_secs(5), |s| {
-        !s.contains("[placing]")
-    });
-    tmux.keys(&[":", "Up"]);
-    tmux.wait_for("the offered line", Duration::from_secs(5), |s| {
-        s.contains(":route robot_1 wp/gcs")
-    });
-    tmux.keys(&["Enter"]);
+    waypoint_sent_then_routed(&tmux);
 
     // The table, sorted by loss (two columns back from the name), draws
     // the last minute of loss beside it.
