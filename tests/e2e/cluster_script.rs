@@ -3,10 +3,11 @@
 //! `mech-gcs --script tests/scripts/cluster_mission.mech`, over real UDP
 //! sockets. Checks the exit code and the JSON lines the script prints.
 
-use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+use crate::station::free_port;
 
 /// Kills the agents however the test ends.
 struct Agents(Vec<Child>);
@@ -18,11 +19,6 @@ impl Drop for Agents {
             let _ = c.wait();
         }
     }
-}
-
-fn free_udp_port() -> u16 {
-    let s = UdpSocket::bind("127.0.0.1:0").expect("bind a free port");
-    s.local_addr().expect("local address").port()
 }
 
 fn agent_config(dir: &Path, name: &str, platform: &str, x: f64, y: f64, seed: u64) -> PathBuf {
@@ -93,7 +89,7 @@ fn run_script(script: &Path, router: &str, dir: &Path) -> std::process::Output {
 fn cluster_mission_script_passes_headless() {
     let dir = std::env::temp_dir().join(format!("mech-e2e-cluster-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let port = free_udp_port();
+    let port = free_port();
     let router = format!("127.0.0.1:{port}");
     let agents = start_agents(&dir, &router);
 

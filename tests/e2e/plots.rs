@@ -70,22 +70,7 @@ fn plots_at(w: u16, h: u16) {
         println!("skipped: tmux is not installed");
         return;
     }
-    let id = format!("mech-e2e-plots-{}-{w}", std::process::id());
-    let state = std::env::temp_dir().join(&id);
-    std::fs::create_dir_all(&state).expect("temp dir");
-    let tmux = Tmux {
-        socket: id,
-        session: "gcs".into(),
-        state: state.clone(),
-    };
-    let cmd = format!(
-        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
-        state.display(),
-        mech_e2e::binary("mech-gcs").display()
-    );
-    let (ws, hs) = (w.to_string(), h.to_string());
-    let out = tmux.run(&["new-session", "-d", "-s", "gcs", "-x", &ws, "-y", &hs, &cmd]);
-    assert!(out.status.success(), "tmux new-session: {out:?}");
+    let tmux = Tmux::demo(&format!("mech-e2e-plots-{}-{w}", std::process::id()), w, h);
     tmux.wait_for("two connected robots", Duration::from_secs(30), |s| {
         s.contains("robots 2 (2 ok") || s.contains("2/2 ok")
     });

@@ -9,26 +9,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// A free UDP port on loopback (the router binds it right after).
-fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
-}
-
-fn keygen(name: &str, file: &Path) {
-    let out = Command::new(mech_e2e::binary("mech-gcs"))
-        .args(["keygen", name, "--out"])
-        .arg(file)
-        .output()
-        .expect("mech-gcs keygen runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+use crate::station::{free_port, keygen};
 
 /// Runs the documented Python controller with `key` for `seconds`.
 fn python_controller(key: &Path, port: u16, seconds: f64) {

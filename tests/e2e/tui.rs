@@ -9,43 +9,13 @@ use std::time::Duration;
 
 use crate::tmux::{Tmux, card_position, card_status};
 
-/// `mech-gcs --demo 2` in a detached tmux session, 160x48.
-fn demo_in_tmux() -> Tmux {
-    let state = std::env::temp_dir().join(format!("mech-e2e-tui-{}", std::process::id()));
-    std::fs::create_dir_all(&state).expect("temp dir");
-    let tmux = Tmux {
-        socket: format!("mech-e2e-tui-{}", std::process::id()),
-        session: "gcs".into(),
-        state: state.clone(),
-    };
-    let gcs = mech_e2e::binary("mech-gcs");
-    let cmd = format!(
-        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
-        state.display(),
-        gcs.display()
-    );
-    let out = tmux.run(&[
-        "new-session",
-        "-d",
-        "-s",
-        "gcs",
-        "-x",
-        "160",
-        "-y",
-        "48",
-        &cmd,
-    ]);
-    assert!(out.status.success(), "tmux new-session: {out:?}");
-    tmux
-}
-
 #[test]
 fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
     if Command::new("tmux").arg("-V").output().is_err() {
         println!("skipped: tmux is not installed");
         return;
     }
-    let tmux = demo_in_tmux();
+    let tmux = Tmux::demo(&format!("mech-e2e-tui-{}", std::process::id()), 160, 48);
 
     let screen = tmux.wait_for("two connected robots", Duration::from_secs(20), |s| {
         s.contains("robots 2 (2 ok")
