@@ -176,8 +176,8 @@ pub fn split(bytes: &[u8]) -> Result<(&[u8], Option<Tag>), AuthError> {
     }
 }
 
-/// Why a message failed authentication. Receivers count these by
-/// [`AuthError::reason`].
+/// Why a message failed authentication. Receivers count these by reason
+/// (the station's `RejectReason`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum AuthError {
     /// No tag where one is required.
