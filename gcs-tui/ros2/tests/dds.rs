@@ -339,7 +339,7 @@ fn at_a_station_with_keys_the_bridge_is_a_controller_its_auth_section_limits() {
     assert!(
         station_log
             .lines()
-            .any(|l| l.contains("not-permitted") && l.contains("ros2goal/robot_2")),
+            .any(|l| l.contains("refused") && l.contains("ros2goal/robot_2")),
         "the router says why:\n{station_log}"
     );
 
