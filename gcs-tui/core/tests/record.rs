@@ -247,10 +247,9 @@ async fn no_telemetry_sample_of_100_robots_at_20_hz_is_missing() {
     });
     assert!(all.await, "every robot registered");
     let names: Vec<String> = socks.iter().map(|(n, _)| n.clone()).collect();
-    let sent =
-        tokio::task::spawn_blocking(move || send_telemetry(socks, 20, ROUNDS))
-            .await
-            .unwrap();
+    let sent = tokio::task::spawn_blocking(move || send_telemetry(socks, 20, ROUNDS))
+        .await
+        .unwrap();
     let total: u64 = sent.iter().sum();
     eventually(Duration::from_secs(10), || {
         gcs.recording().unwrap().messages >= gcs.router().counters().received
