@@ -176,8 +176,8 @@ pub fn split(bytes: &[u8]) -> Result<(&[u8], Option<Tag>), AuthError> {
     }
 }
 
-/// Why a message failed authentication. Receivers count these by
-/// [`AuthError::reason`].
+/// Why a message failed authentication. Receivers count these by reason
+/// (the station's `RejectReason`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum AuthError {
     /// No tag where one is required.
@@ -196,18 +196,6 @@ pub enum AuthError {
     /// The tag or the auth element is malformed.
     #[error("malformed tag: {0}")]
     Shape(&'static str),
-}
-
-impl AuthError {
-    /// A short counter key: `unsigned`, `unknown-key`, `bad-tag`, `replay`.
-    pub fn reason(&self) -> &'static str {
-        match self {
-            AuthError::Unsigned => "unsigned",
-            AuthError::UnknownKey(_) => "unknown-key",
-            AuthError::BadTag | AuthError::Shape(_) => "bad-tag",
-            AuthError::Replay => "replay",
-        }
-    }
 }
 
 /// Messages a stream may deliver out of order: a stamp older than the

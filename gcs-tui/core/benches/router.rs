@@ -764,6 +764,23 @@ fn throughput(
     commands: &mut Commands,
 ) {
     let counter = CommandCounter::start(robot);
+    bounded_window(router, controller, addr, &counter, commands);
+    match stepped_rates(router, controller, robot, addr, &counter, commands) {
+        Some(r) => println!("  sustained zero-loss rate: {:.0} msg/s", r),
+        None => println!("  sustained zero-loss rate: below the first step"),
+    }
+    counter.stop();
+}
+
+/// (b), first part: at most a window of commands in flight for 3 s; the
+/// rate forwarded and the router's CPU per command.
+fn bounded_window(
+    router: &mech_core::router::RouterHandle,
+    controller: &UdpSocket,
+    addr: SocketAddr,
+    counter: &CommandCounter,
+    commands: &mut Commands,
+) {
     const WINDOW: u64 = 1024;
     let run = Duration::from_secs(3);
     let before = router.counters();
@@ -799,7 +816,18 @@ fn throughput(
         1.0 / per,
         2.0 / per
     );
-    // Stepped offered rate: the highest rate delivered in full.
+}
+
+/// (b), second part: stepped offered rates until one loses a message or
+/// the sender cannot offer it; the highest rate delivered in full.
+fn stepped_rates(
+    router: &mech_core::router::RouterHandle,
+    controller: &UdpSocket,
+    robot: &UdpSocket,
+    addr: SocketAddr,
+    counter: &CommandCounter,
+    commands: &mut Commands,
+) -> Option<f64> {
     let mut best = None;
     for rate in [
         25e3, 50e3, 75e3, 100e3, 125e3, 150e3, 175e3, 200e3, 250e3, 300e3, 350e3, 400e3,
@@ -809,7 +837,7 @@ fn throughput(
             controller,
             addr,
             robot.local_addr().unwrap(),
-            &counter,
+            counter,
             commands,
             rate,
             Duration::from_secs(2),
@@ -831,16 +859,11 @@ fn throughput(
         }
         if achieved < 0.95 * rate {
             println!("  (the sender cannot offer more on these cores)");
-            best = Some(achieved);
-            break;
+            return Some(achieved);
         }
         best = Some(achieved);
     }
-    match best {
-        Some(r) => println!("  sustained zero-loss rate: {:.0} msg/s", r),
-        None => println!("  sustained zero-loss rate: below the first step"),
-    }
-    counter.stop();
+    best
 }
 
 /// The router's own cost per command with no receive syscall.

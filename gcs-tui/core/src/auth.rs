@@ -57,7 +57,9 @@ pub enum Security {
 }
 
 impl Security {
-    pub fn as_str(self) -> &'static str {
+    /// How `status` and the service's start-up line say it (not a name:
+    /// the attach protocol writes it in snake case).
+    pub fn label(self) -> &'static str {
         match self {
             Security::Authenticated => "authenticated",
             Security::LoopbackOnly => "unsigned (loopback only)",
@@ -66,26 +68,18 @@ impl Security {
     }
 }
 
-/// What a key may do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Role {
-    Robot,
-    Controller,
-    Operator,
-    Estop,
-}
-
-impl Role {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Role::Robot => "robot",
-            Role::Controller => "controller",
-            Role::Operator => "operator",
-            Role::Estop => "estop",
-        }
+mech_proto::named_enum! {
+    /// What a key may do.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum Role: "role" {
+        Robot => "robot",
+        Controller => "controller",
+        Operator => "operator",
+        Estop => "estop",
     }
 }
+
+mech_proto::serde_by_name!(Role);
 
 /// One `[[auth.keys]]` entry.
 #[derive(Debug, Clone, Deserialize)]
