@@ -259,7 +259,7 @@ fn safety_json(f: &mech_core::Fleet) -> Value {
     for i in mech_proto::Intervention::ALL {
         let n: u64 = f
             .local_robots()
-            .filter_map(|r| r.safety)
+            .filter_map(|r| r.telemetry.safety)
             .map(|s| u64::from(s.counts.get(i)))
             .sum();
         if i != mech_proto::Intervention::None {

@@ -11,7 +11,6 @@
 mod agent;
 
 use agent::{Peer, config, telemetry};
-use mech_core::fleet::RemoteInfo;
 use mech_core::{ArenaConfig, Event, Gcs};
 use mech_proto::{ArenaAck, Body, Envelope, InterventionCounts, SafetyReport, SafetyState};
 
@@ -82,17 +81,18 @@ async fn each_robot_gets_its_arena_and_its_neighbours_at_ten_hertz_or_more() {
     report(&mut r1, 1.0, 1.0).await;
     report(&mut r2, 2.0, 1.0).await;
     // Another station's robot, shown here through a bridge.
-    let remote = RemoteInfo {
-        id: 7,
+    let remote = mech_proto::Hello {
+        name: "robot_9".into(),
         platform: "kiwi".into(),
         capabilities: vec![],
         motors: 3,
         max_speed: 1.0,
         max_yaw_rate: 2.0,
+        agent_version: String::new(),
     };
     let elapsed = gcs.router().elapsed();
     gcs.update_fleet(|f| {
-        f.remote_info("site-b", "robot_9", &remote);
+        f.remote_info("site-b", "robot_9", 7, &remote);
         f.remote_telemetry("site-b", "robot_9", &telemetry(1.5, 2.0, "", None), elapsed);
     });
     // Twenty lists in a row to robot_1, each naming both others (robot_2

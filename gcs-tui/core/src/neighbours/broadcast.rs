@@ -51,19 +51,21 @@ pub fn gather(fleet: &Fleet, now: Duration, config: &NeighbourConfig) -> Option<
             continue;
         };
         let radius = r
+            .telemetry
             .safety
             .map(|s| s.radius)
             .filter(|v| *v > 0.0)
             .unwrap_or(config.default_radius);
-        let v = [r.velocity.vx, r.velocity.vy, r.velocity.vz];
+        let t = &r.telemetry;
+        let v = [t.velocity.vx, t.velocity.vy, t.velocity.vz];
         let mut state = RobotState {
             name: r.name.clone(),
-            id: r.id,
-            position: [r.pose.x, r.pose.y, r.pose.z],
+            id: r.registration.id,
+            position: [t.pose.x, t.pose.y, t.pose.z],
             velocity: v,
             radius,
             age: now.saturating_sub(heard),
-            cooperative: r.is_local() && r.safety.is_some_and(|s| s.state == SafetyState::On),
+            cooperative: r.is_local() && t.safety.is_some_and(|s| s.state == SafetyState::On),
         };
         if r.link == LinkState::Lost {
             // Stopped by its failsafe by now, somewhere along its way.

@@ -135,6 +135,7 @@ fn arena(t: Time, a: &ArenaShape, out: &mut Vec<Value>) {
 
 fn robot(t: Time, r: &Robot) -> Value {
     let limited = r
+        .telemetry
         .safety
         .map(|s| s.intervention)
         .filter(|i| *i != Intervention::None);
@@ -149,7 +150,7 @@ fn robot(t: Time, r: &Robot) -> Value {
         (Some(i), false) => format!("{} [{}]", r.name, i.as_str()),
         (None, false) => r.name.clone(),
     };
-    let p = r.pose;
+    let p = r.telemetry.pose;
     entity(t, format!("robot/{}", r.name), |m| {
         m.insert(
             "arrows".into(),
@@ -199,7 +200,7 @@ fn cluster(t: Time, c: &Cluster, fleet: &Fleet) -> Option<Value> {
         .members
         .iter()
         .filter_map(|m| fleet.robot(m))
-        .map(|r| r.pose)
+        .map(|r| r.telemetry.pose)
         .collect();
     if poses.is_empty() {
         return None;
@@ -266,7 +267,7 @@ mod tests {
                 known: false,
             },
         });
-        fleet.robots.get_mut("robot_1").unwrap().safety = Some(SafetyReport {
+        fleet.robots.get_mut("robot_1").unwrap().telemetry.safety = Some(SafetyReport {
             state: SafetyState::On,
             arena: 1,
             intervention: Intervention::Fence,

@@ -8,7 +8,7 @@ use mech_core::fleet::{Fleet, Robot};
 use mech_proto::{FailsafeState, SafetyState};
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe, failsafe_name, safety_state};
+use crate::lang::args::{Args, Target, safety_state};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -56,24 +56,12 @@ impl Expectation {
             }
             "link" => {
                 let target = a.target()?;
-                let w = a.next("link state")?;
-                let state = LinkState::parse(&w.text).ok_or_else(|| {
-                    LangError::new(
-                        w.span,
-                        format!(
-                            "unknown link state {:?}; use connected, stale or lost",
-                            w.text
-                        ),
-                    )
-                })?;
+                let state = a.named::<LinkState>()?;
                 Expectation::Link(target, state)
             }
             "failsafe" => {
                 let target = a.target()?;
-                let w = a.next("failsafe state")?;
-                let state = failsafe(&w.text).ok_or_else(|| {
-                    LangError::new(w.span, format!("unknown failsafe state {:?}; use ok, channel-silent, router-lost, estopped or fault", w.text))
-                })?;
+                let state = a.named::<FailsafeState>()?;
                 Expectation::Failsafe(target, state)
             }
             "safety" => {
@@ -120,7 +108,7 @@ impl Expectation {
                     worst = worst.max(d);
                     (d > *tolerance).then(|| format!(
                         "{name} is {d:.3} m from ({x}, {y}), more than {tolerance} m (at {:.3}, {:.3})",
-                        r.pose.x, r.pose.y
+                        r.telemetry.pose.x, r.telemetry.pose.y
                     ))
                 })?;
                 Ok(format!("within {worst:.3} m"))
@@ -148,15 +136,15 @@ impl Expectation {
             }
             Expectation::Failsafe(target, state) => {
                 each(f, target, |name, r| {
-                    (r.failsafe != *state).then(|| {
+                    (r.telemetry.failsafe != *state).then(|| {
                         format!(
                             "{name} failsafe is {}, expected {}",
-                            failsafe_name(r.failsafe),
-                            failsafe_name(*state)
+                            r.telemetry.failsafe.as_str(),
+                            state.as_str()
                         )
                     })
                 })?;
-                Ok(format!("failsafe {}", failsafe_name(*state)))
+                Ok(format!("failsafe {}", state.as_str()))
             }
             Expectation::Safety(target, state) => {
                 each(f, target, |name, r| safety_unmet(name, r, *state))?;
@@ -181,7 +169,7 @@ pub(super) fn parse_safety_state(a: &mut Args<'_>) -> Result<SafetyState, LangEr
 /// Why `r` (named `name`) does not report its safety layer `state`, if it
 /// does not.
 pub(super) fn safety_unmet(name: &str, r: &Robot, state: SafetyState) -> Option<String> {
-    match r.safety {
+    match r.telemetry.safety {
         Some(s) if s.state == state => None,
         Some(s) => Some(format!(
             "{name} reports safety {}, expected {}",
