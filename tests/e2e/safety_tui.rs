@@ -90,14 +90,21 @@ fn the_map_shows_the_arena_and_a_card_the_layer_stopping_a_robot_at_the_wall() {
         map_dots(&loaded)
     );
 
-    // robot_2 (a kiwi at x 2.73 facing +x) driven at the east wall, one
-    // `drive` after another as an operator holding a course would (a
-    // single command lasts until the channel goes silent), until its card
-    // has shown the layer limiting it (`fence`), the events its notice, and
-    // it got to the wall and was pushed on there. Never further than the margin: its disc
-    // (0.15 m) and the margin (0.1 m) from the wall at x 3.9, give or take
-    // the position noise on the card (σ 3 cm and outliers, through the
-    // agent's median filter): the centre held at 3.65, shown up to 3.85.
+    let furthest = drive_robot_2_at_the_wall(&tmux);
+    println!("robot_2 held at x {furthest:.2} at most");
+    tmux.keys(&["Escape", "q"]);
+}
+
+/// robot_2 (a kiwi at x 2.73 facing +x) driven at the east wall, one
+/// `drive` after another as an operator holding a course would (a
+/// single command lasts until the channel goes silent), until its card
+/// has shown the layer limiting it (`fence`), the events its notice, and
+/// it got to the wall and was pushed on there. Never further than the margin: its disc
+/// (0.15 m) and the margin (0.1 m) from the wall at x 3.9, give or take
+/// the position noise on the card (σ 3 cm and outliers, through the
+/// agent's median filter): the centre held at 3.65, shown up to 3.85.
+/// The furthest x its card showed.
+fn drive_robot_2_at_the_wall(tmux: &Tmux) -> f64 {
     for line in ["mode robot_2 twist", "route robot_2 cmd/gcs"] {
         tmux.keys(&["Escape", ":"]);
         tmux.literal(line);
@@ -126,6 +133,5 @@ fn the_map_shows_the_arena_and_a_card_the_layer_stopping_a_robot_at_the_wall() {
         );
         std::thread::sleep(Duration::from_millis(150));
     }
-    println!("robot_2 held at x {furthest:.2} at most");
-    tmux.keys(&["Escape", "q"]);
+    furthest
 }

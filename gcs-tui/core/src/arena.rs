@@ -244,6 +244,16 @@ impl ArenaConfig {
                 ));
             }
         }
+        self.validate_obstacles()?;
+        // Whatever else the protocol checks (it never sends what it would
+        // refuse).
+        Body::Arena(self.to_arena("robot", 1, true))
+            .validate()
+            .map_err(|e| ArenaMistake::new("arena", 0..0, plain(&e)))
+    }
+
+    /// The obstacle discs: how many, and each placed and sized.
+    fn validate_obstacles(&self) -> Result<(), ArenaMistake> {
         if self.obstacles.len() > MAX_OBSTACLES {
             return Err(ArenaMistake::new(
                 "arena.obstacles",
@@ -265,11 +275,7 @@ impl ArenaConfig {
                 ));
             }
         }
-        // Whatever else the protocol checks (it never sends what it would
-        // refuse).
-        Body::Arena(self.to_arena("robot", 1, true))
-            .validate()
-            .map_err(|e| ArenaMistake::new("arena", 0..0, plain(&e)))
+        Ok(())
     }
 
     /// The arena as the station holds it.

@@ -11,15 +11,13 @@
 mod config;
 mod remote;
 mod robot;
+mod safety;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{
-    FailsafeState, Health, Hello, Intervention, Notice, NoticeCode, SafetyState, Telemetry,
-    Waypoint,
-};
+use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use remote::remote_name;
@@ -253,16 +251,10 @@ impl Fleet {
                 Severity::Warn,
                 refused_text(*count, *sources, by_reason, from, detail),
             ),
-            Event::Arena { arena } => self.arena_changed(arena),
-            Event::SafetySwitched { robot, enabled, id } => {
-                self.safety_switched(robot, *enabled, *id)
-            }
-            Event::ArenaAcked { robot, id, enabled } => self.arena_acked(robot, *id, *enabled),
-            Event::Safety {
-                robot,
-                state,
-                intervention,
-            } => self.safety_reported(robot, *state, *intervention),
+            Event::Arena { .. }
+            | Event::SafetySwitched { .. }
+            | Event::ArenaAcked { .. }
+            | Event::Safety { .. } => self.safety_event(&stamped.event),
         }
     }
 
@@ -480,61 +472,6 @@ impl Fleet {
             r.link = LinkState::Lost;
         }
         self.log(Severity::Warn, format!("{robot} left: {reason}"));
-    }
-
-    fn arena_changed(&mut self, arena: &Option<ArenaShape>) {
-        self.arena.clone_from(arena);
-        let text = match arena {
-            Some(a) => format!("arena: {}", a.summary()),
-            None => "arena cleared: robots keep no fence".to_string(),
-        };
-        self.log(Severity::Info, text);
-    }
-
-    fn safety_switched(&mut self, robot: &str, enabled: bool, id: u32) {
-        if let Some(r) = self.robots.get_mut(robot) {
-            r.safety_enabled = enabled;
-        }
-        if enabled {
-            self.log(
-                Severity::Info,
-                format!("{robot}: safety on requested (arena {id})"),
-            );
-        } else {
-            self.log(
-                Severity::Warn,
-                format!("{robot}: safety OFF requested by an operator (arena {id})"),
-            );
-        }
-    }
-
-    fn arena_acked(&mut self, robot: &str, id: u32, enabled: bool) {
-        let on = if enabled { "on" } else { "OFF" };
-        self.log(
-            Severity::Info,
-            format!("{robot} acknowledged arena {id} (safety {on})"),
-        );
-    }
-
-    /// A robot's layer reports a new state or intervention. The
-    /// interventions themselves reach the log as the robot's notices (at
-    /// most one a second each); a state change is logged here.
-    fn safety_reported(&mut self, robot: &str, state: SafetyState, _intervention: Intervention) {
-        let Some(r) = self.robots.get(robot) else {
-            return;
-        };
-        let was = r.telemetry.safety.map(|s| s.state);
-        if was == Some(state) {
-            return;
-        }
-        match state {
-            SafetyState::Off => self.log(
-                Severity::Warn,
-                format!("{robot} reports safety OFF: not kept inside the arena or apart"),
-            ),
-            SafetyState::On => self.log(Severity::Info, format!("{robot} reports safety on")),
-            SafetyState::NoArena => {}
-        }
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {
