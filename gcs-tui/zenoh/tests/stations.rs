@@ -179,9 +179,11 @@ async fn a_remote_robot_is_routed_only_with_an_operator_key_its_station_lists() 
         0,
     )
     .await;
+    // Both robots: their samples come in no promised order.
     for s in [&b, &c, &unsigned] {
         s.until("robots of site-a", WAIT, |f| {
-            shown(f, "robot_2@site-a", LinkState::Connected)
+            shown(f, "robot_1@site-a", LinkState::Connected)
+                .and_then(|()| shown(f, "robot_2@site-a", LinkState::Connected))
         })
         .await;
     }

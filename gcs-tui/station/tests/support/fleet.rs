@@ -123,7 +123,14 @@ pub struct Rig {
     pub tolerance: f64,
     metrics: Metrics,
     buf: Vec<u8>,
+    /// This rig's turn: rigs of one test binary run one at a time, so the
+    /// tests' simulations do not take each other's cores (a rig's robots
+    /// and station share the machine with whatever else runs).
+    _turn: tokio::sync::MutexGuard<'static, ()>,
 }
+
+/// Whose turn it is to run a rig.
+static TURN: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// Every controller's commands are published again this often.
 const REPUBLISH: Duration = Duration::from_millis(100);
@@ -136,6 +143,7 @@ impl Rig {
     /// A station on loopback with the demo arena; its robots' layers on or
     /// (as an operator switches them) off.
     pub async fn new(layer_on: bool) -> Rig {
+        let turn = TURN.lock().await;
         let mut config = CoreConfig::default();
         config.router.udp = "127.0.0.1:0".parse().unwrap();
         config.router.tcp = None;
@@ -143,6 +151,7 @@ impl Rig {
         let gcs = Gcs::start(config).await.unwrap();
         let arena = ArenaConfig::demo().to_arena("any", 1, true);
         Rig {
+            _turn: turn,
             router: gcs.router().udp_addr(),
             controllers: gcs.router().publishers("ctl"),
             gcs,
