@@ -137,8 +137,17 @@ impl Agent {
         self
     }
 
+    /// Numbers a message that is about to be sent (once, whichever links
+    /// carry it): the robot's messages are numbered as they leave, so a
+    /// message a link skips on purpose is not a gap the router counts as
+    /// lost.
+    pub fn number(&mut self, env: &mut Envelope) {
+        self.wire.number(env);
+    }
+
     /// Encodes a message to send, signed when the robot has a key. The
-    /// header's stamp is the robot's clock reading.
+    /// header's stamp is the robot's clock reading; its number is the one
+    /// [`Agent::number`] gave it.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
         self.encode_on(env, 0, out)
     }
