@@ -58,7 +58,7 @@ use crate::fusion::FusionCounters;
 use crate::hal::{EdgeCount, PositionSample};
 use crate::platform::Platform;
 
-use actuation::Actuation;
+use actuation::{Actuation, Permit};
 use autopilot_requests::AutopilotRequests;
 use estop::EStopLatch;
 use intake::Intake;
@@ -303,10 +303,27 @@ impl Agent {
         let mission_running = self.mission_running();
         let mut step = Step::new(now, &mut self.wire, &mut self.counters, &mut outgoing);
         let drive = self.actuation.judge(state, mission_running, &mut step);
+        let permit = if drive {
+            Permit::Drive
+        } else if mission_running && !self.registration.router_lost(now) {
+            // Every link silent for the channel timeout: the mission waits,
+            // keeping its place, and goes on when the router is heard again
+            // (past the router timeout it idles, and registering again
+            // resumes it).
+            Permit::Wait
+        } else {
+            Permit::Stop
+        };
         let mission = self.missions.following(self.intake.channel());
         let outputs = self
             .actuation
-            .obey(drive, &mut self.controller, mission, &mut self.sensors, now)
+            .obey(
+                permit,
+                &mut self.controller,
+                mission,
+                &mut self.sensors,
+                now,
+            )
             .to_vec();
         if self.registration.registered() {
             self.report(now, &mut outgoing);
@@ -507,6 +524,9 @@ impl Agent {
             estopped: self.estop.engaged(),
             actuator_fault: self.sensors.faults.actuators_held(now),
             router_lost: self.registration.router_lost(now),
+            link_silent: self
+                .registration
+                .router_silent_for(self.settings.failsafe.channel_timeout, now),
             routed: self.intake.routed(),
             channel_silent: self.intake.channel_silent(now),
             // A mission on the routed channel is the robot's controller,

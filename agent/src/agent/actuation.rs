@@ -25,6 +25,19 @@ use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::platform::Platform;
 use crate::wheels::Wheels;
 
+/// What the failsafe lets the robot do this period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Permit {
+    /// Obey the controller.
+    Drive,
+    /// Outputs zero, the controller keeping its mode: an onboard mission
+    /// waiting for a link, which goes on when the router is heard again.
+    Wait,
+    /// Outputs zero and the controller idle: the next accepted command (or
+    /// a mission resumed on registering again) starts motion again.
+    Stop,
+}
+
 /// The failsafe's verdicts and the outputs of the last period.
 #[derive(Debug)]
 pub(crate) struct Actuation {
@@ -65,26 +78,29 @@ impl Actuation {
         verdict.drive
     }
 
-    /// This period's outputs: held at zero when the robot may not `drive`
-    /// (the controller idles: the next accepted command, or a mission
-    /// resumed on re-registering, starts motion again) or when its mode
-    /// steers by a position it does not have; otherwise what the
-    /// controller demands, following `mission` in waypoint mode, through
-    /// the platform and the wheel speed loops. See the module docs: every
-    /// obeyed command passes here.
+    /// This period's outputs: held at zero unless the failsafe's `permit`
+    /// is to drive (see [`Permit`] for whether the controller idles) or
+    /// when the mode steers by a position the robot does not have;
+    /// otherwise what the controller demands, following `mission` in
+    /// waypoint mode, through the platform and the wheel speed loops. See
+    /// the module docs: every obeyed command passes here.
     pub(crate) fn obey(
         &mut self,
-        drive: bool,
+        permit: Permit,
         controller: &mut Controller,
         mission: Option<&mut MissionRun>,
         sensors: &mut Sensors,
         now: Duration,
     ) -> &[f64] {
-        if !drive {
-            if !matches!(controller.mode(), Mode::Idle) {
-                controller.idle();
+        match permit {
+            Permit::Drive => {}
+            Permit::Wait => return self.hold(controller.platform(), sensors),
+            Permit::Stop => {
+                if !matches!(controller.mode(), Mode::Idle) {
+                    controller.idle();
+                }
+                return self.hold(controller.platform(), sensors);
             }
-            return self.hold(controller.platform(), sensors);
         }
         let pose = match sensors.estimate() {
             Some(estimate) => estimate.pose,
