@@ -20,7 +20,9 @@ use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Wa
 
 pub use config::FleetConfig;
 pub use remote::{RemoteInfo, remote_name};
-pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
+pub use robot::{
+    AutopilotState, MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList,
+};
 
 use crate::counters::{ChannelStatus, Counters};
 use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
@@ -191,6 +193,7 @@ impl Fleet {
             } => self.registered(hello, *id, addr, *known),
             Event::Link { robot, state } => self.link(robot, *state),
             Event::Links { robot, links } => self.links(robot, links),
+            Event::Radio { port, up, reason } => self.radio(port, *up, reason),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
             Event::LinkQuality { robot, quality } => {
                 if let Some(r) = self.robots.get_mut(robot) {
@@ -289,6 +292,19 @@ impl Fleet {
         let was = std::mem::replace(&mut r.links, links.clone());
         if was.label() != links.label() {
             self.log(Severity::Info, format!("{robot} links {}", links.label()));
+        }
+    }
+
+    /// One of the station's radios failed or came back: said once each
+    /// way (the router keeps opening a failed one again).
+    fn radio(&mut self, port: &str, up: bool, reason: &str) {
+        if up {
+            self.log(Severity::Info, format!("radio {port} reopened"));
+        } else {
+            self.log(
+                Severity::Error,
+                format!("radio {port} failed: {reason}; reopening it until it returns"),
+            );
         }
     }
 
@@ -481,6 +497,12 @@ impl Fleet {
                 r.fault = Some(notice.text.clone());
             }
         }
+        if let (Some(news), Some(r)) = (
+            mech_proto::AutopilotNews::parse(&notice.text),
+            self.robots.get_mut(from),
+        ) {
+            r.autopilot.get_or_insert_default().apply(&news);
+        }
         let severity = match notice.level {
             mech_proto::Level::Debug => Severity::Debug,
             mech_proto::Level::Info => Severity::Info,
@@ -560,6 +582,73 @@ mod tests {
             velocity_source: mech_proto::VelocitySource::Commanded,
             safety: None,
         }
+    }
+
+    #[test]
+    fn an_autopilots_state_is_kept_from_the_robots_notices() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("px4_1")));
+        assert_eq!(f.robot("px4_1").unwrap().autopilot, None);
+        let said = |ms: u64, text: &str| {
+            at(
+                ms,
+                Event::Notice {
+                    from: "px4_1".into(),
+                    notice: Notice {
+                        level: mech_proto::Level::Info,
+                        code: NoticeCode::Text,
+                        text: text.into(),
+                    },
+                },
+            )
+        };
+        f.apply(&said(
+            1,
+            "autopilot found: PX4 MAV_TYPE_QUADROTOR, system 1 component 1",
+        ));
+        f.apply(&said(2, "autopilot mode POSCTL"));
+        f.apply(&said(3, "arm sent to the autopilot"));
+        f.apply(&said(4, "autopilot armed"));
+        f.apply(&said(5, "autopilot mode OFFBOARD"));
+        let ap = f.robot("px4_1").unwrap().autopilot.clone().unwrap();
+        assert_eq!(ap.label(), "armed OFFBOARD");
+        f.apply(&said(6, "autopilot lost: no heartbeat for 2.0 s"));
+        let label = |f: &Fleet| f.robot("px4_1").unwrap().autopilot.clone().unwrap().label();
+        assert_eq!(label(&f), "autopilot lost");
+        f.apply(&said(7, "autopilot heard again"));
+        f.apply(&said(8, "autopilot disarmed"));
+        assert_eq!(label(&f), "disarmed OFFBOARD");
+        assert!(
+            f.log.iter().any(|l| l.text == "px4_1: autopilot armed"),
+            "and every notice is logged"
+        );
+    }
+
+    #[test]
+    fn a_robot_not_heard_has_its_telemetry_aged() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        f.apply(&at(
+            1_000,
+            Event::Telemetry {
+                robot: "robot_1".into(),
+                telemetry: telemetry(1.0, None),
+            },
+        ));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(r.stale_for(Duration::from_secs(5)), None, "heard: live");
+        f.apply(&at(
+            2_000,
+            Event::Link {
+                robot: "robot_1".into(),
+                state: LinkState::Lost,
+            },
+        ));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(
+            r.stale_for(Duration::from_millis(4_200)),
+            Some(Duration::from_millis(3_200))
+        );
     }
 
     #[test]
@@ -835,6 +924,7 @@ mod tests {
             radio: Some("/dev/ttyUSB0".into()),
             active: "radio",
             radio_budget_hz: Some(14.0),
+            down: Vec::new(),
         };
         f.apply(&at(
             1,

@@ -225,7 +225,10 @@ pub const EVENT_NAMES: &[&str] = &[
     "listening",
     "registered",
     "link",
+    "links",
+    "radio",
     "telemetry",
+    "link_quality",
     "route_changed",
     "route_acked",
     "mission_sent",
@@ -331,7 +334,7 @@ mod tests {
     #[test]
     fn every_event_name_is_listed_and_topics_name_their_robot() {
         let names: Vec<&str> = EVENT_NAMES.to_vec();
-        assert!(names.contains(&"estop_complete") && names.len() == 18);
+        assert!(names.contains(&"estop_complete") && names.len() == 21);
         assert_eq!(
             telemetry_robot(&telemetry_topic("robot_1")),
             Some("robot_1")
