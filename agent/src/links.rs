@@ -58,6 +58,15 @@ impl LinkChoice {
         }
     }
 
+    /// `link`'s port failed: it is not live until the router is heard on
+    /// it again, so what is sent next (the notice reporting the outage
+    /// first) goes on another link without waiting for the link timeout.
+    pub fn down(&mut self, link: usize) {
+        if let Some(h) = self.heard.get_mut(link) {
+            *h = None;
+        }
+    }
+
     /// Whether the router was heard on `link` within the link timeout.
     pub fn live(&self, link: usize, now: Duration) -> bool {
         self.heard
@@ -119,6 +128,25 @@ mod tests {
 
     fn ms(v: u64) -> Duration {
         Duration::from_millis(v)
+    }
+
+    #[test]
+    fn a_link_reported_down_is_left_at_once() {
+        let mut c = LinkChoice::new(vec![None, None], ms(600), ms(250));
+        c.heard(1, ms(10));
+        assert_eq!(c.targets(ms(20)), 1..2, "only the radio heard");
+        c.down(1);
+        assert_eq!(
+            c.targets(ms(30)),
+            0..2,
+            "its outage is told on every link, not on the radio alone"
+        );
+        c.heard(0, ms(40));
+        c.heard(1, ms(40));
+        c.down(0);
+        assert_eq!(c.targets(ms(50)), 1..2, "Wi-Fi down: the radio");
+        c.down(7);
+        assert_eq!(c.targets(ms(50)), 1..2, "no such link: nothing changes");
     }
 
     #[test]

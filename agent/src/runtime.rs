@@ -179,9 +179,10 @@ pub enum Ticker {
 enum Incoming {
     /// A message, and the link it came on (0 for a single link).
     Bytes(Vec<u8>, usize),
-    /// A link's port failed (`Warn`) or returned (`Info`): the station is
-    /// told in a notice, on whichever link carries it.
-    News(mech_proto::Level, String),
+    /// A link's port failed (`Warn`) or returned (`Info`), and which link
+    /// (0 for a single link): the station is told in a notice, on whichever
+    /// link carries it.
+    News(mech_proto::Level, String, usize),
     Ignored,
     Closed,
 }
@@ -225,8 +226,8 @@ impl Io {
             },
             Io::Frames { incoming, .. } => match incoming.recv().await {
                 Some(FramesIn::Frame(bytes)) => Incoming::Bytes(bytes, 0),
-                Some(FramesIn::Down(text)) => Incoming::News(mech_proto::Level::Warn, text),
-                Some(FramesIn::Up(text)) => Incoming::News(mech_proto::Level::Info, text),
+                Some(FramesIn::Down(text)) => Incoming::News(mech_proto::Level::Warn, text, 0),
+                Some(FramesIn::Up(text)) => Incoming::News(mech_proto::Level::Info, text, 0),
                 None => Incoming::Closed,
             },
             Io::Failover { .. } => Incoming::Closed,
@@ -286,7 +287,7 @@ async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
         drop(waits);
         match got {
             Incoming::Bytes(b, _) => return Incoming::Bytes(b, i),
-            news @ Incoming::News(..) => return news,
+            Incoming::News(level, text, _) => return Incoming::News(level, text, i),
             Incoming::Ignored => return Incoming::Ignored,
             Incoming::Closed => {
                 tracing::warn!(link = i, "a link closed; carrying on with the others");
@@ -358,7 +359,15 @@ pub async fn drive<V: Vehicle>(
                         }
                         vehicle.handle_bytes(&b, now)
                     }
-                    Incoming::News(level, text) => {
+                    Incoming::News(level, text, link) => {
+                        // A link whose port failed is not heard from the
+                        // router any more: the notice saying so (and all
+                        // that follows) goes on the others at once.
+                        if let Io::Failover { choice, .. } = &mut io
+                            && level == mech_proto::Level::Warn
+                        {
+                            choice.down(link);
+                        }
                         let code = mech_proto::NoticeCode::Text;
                         vec![vehicle.agent_mut().notice(level, code, &text, now)]
                     }
