@@ -363,10 +363,12 @@ pub async fn drive<V: Vehicle>(
                         // A link whose port failed is not heard from the
                         // router any more: the notice saying so (and all
                         // that follows) goes on the others at once.
-                        if let Io::Failover { choice, .. } = &mut io
-                            && level == mech_proto::Level::Warn
-                        {
-                            choice.down(link);
+                        if let Io::Failover { choice, .. } = &mut io {
+                            if level == mech_proto::Level::Warn {
+                                choice.down(link);
+                            } else {
+                                choice.up(link);
+                            }
                         }
                         let code = mech_proto::NoticeCode::Text;
                         vec![vehicle.agent_mut().notice(level, code, &text, now)]
@@ -411,9 +413,10 @@ async fn probe<V: Vehicle>(vehicle: &mut V, io: &mut Io, now: Duration, buf: &mu
 
 /// Numbers, encodes (and signs) one message and sends it to the router:
 /// on the one link, or with several on the link in use (every link when
-/// none is), each copy signed for its link. Telemetry goes only on links
-/// whose rate cap allows it now; a message no link carries is not
-/// numbered, so the router never counts it as lost.
+/// none is), each copy signed for its link, never on a link whose port is
+/// down. Telemetry goes only on links whose rate cap allows it now; a
+/// message no link carries is not numbered, so the router never counts it
+/// as lost.
 async fn send<V: Vehicle>(
     vehicle: &mut V,
     io: &mut Io,
@@ -431,8 +434,9 @@ async fn send<V: Vehicle>(
         return;
     };
     let telemetry = matches!(env.body, mech_proto::Body::Telemetry(_));
-    let on: Vec<usize> = choice
-        .targets(now)
+    let usable: Vec<usize> = choice.targets(now).filter(|&i| choice.usable(i)).collect();
+    let on: Vec<usize> = usable
+        .into_iter()
         .filter(|&i| !telemetry || choice.telemetry_allowed(i, now))
         .collect();
     if on.is_empty() {
