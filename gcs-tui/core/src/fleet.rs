@@ -625,6 +625,38 @@ mod tests {
     }
 
     #[test]
+    fn a_station_radio_failing_and_reopened_is_logged_once_each_way() {
+        let mut f = Fleet::new(FleetConfig::default());
+        let radio = |ms: u64, up: bool, reason: &str| {
+            at(
+                ms,
+                Event::Radio {
+                    port: "/dev/ttyUSB0".into(),
+                    up,
+                    reason: reason.into(),
+                },
+            )
+        };
+        f.apply(&radio(1, false, "Broken pipe"));
+        f.apply(&radio(2, true, ""));
+        let lines: Vec<(Severity, &str)> = f
+            .log
+            .iter()
+            .map(|l| (l.severity, l.text.as_str()))
+            .collect();
+        assert_eq!(
+            lines,
+            [
+                (
+                    Severity::Error,
+                    "radio /dev/ttyUSB0 failed: Broken pipe; reopening it until it returns"
+                ),
+                (Severity::Info, "radio /dev/ttyUSB0 reopened"),
+            ]
+        );
+    }
+
+    #[test]
     fn a_robot_not_heard_has_its_telemetry_aged() {
         let mut f = Fleet::new(FleetConfig::default());
         f.apply(&at(0, registered("robot_1")));
