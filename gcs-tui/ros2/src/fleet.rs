@@ -210,6 +210,7 @@ pub(crate) mod tests {
             mission: None,
             stale: 0,
             velocity_source: VelocitySource::Commanded,
+            safety: None,
         }
     }
 
