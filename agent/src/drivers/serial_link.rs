@@ -149,6 +149,12 @@ where
         while !in_tx.is_closed() {
             let error = match open() {
                 Ok((reader, writer)) => {
+                    // The port takes messages before it is said to be back,
+                    // so one sent on hearing so is written, not dropped.
+                    *lock(&reader_side) = WriteSide {
+                        link: Some(SerialLink::new(writer)),
+                        failed: None,
+                    };
                     if schedule.opened(origin.elapsed()) {
                         tracing::info!(port = %name, "serial link reopened");
                         let text = format!("serial link {name} reopened");
@@ -156,10 +162,6 @@ where
                             break;
                         }
                     }
-                    *lock(&reader_side) = WriteSide {
-                        link: Some(SerialLink::new(writer)),
-                        failed: None,
-                    };
                     let ended = read_frames(SerialLink::new(reader), &in_tx, &reader_side);
                     lock(&reader_side).link = None;
                     match ended {
@@ -416,8 +418,14 @@ mod tests {
                 .collect::<Vec<_>>()
         };
         assert_eq!(written(1), [vec![0x91, 0x01]]);
-        // The writer thread writes it: wait until it has.
+        // The writer thread writes it: wait until it has (a deadline only
+        // so a failure says so instead of hanging).
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
         while written(2).is_empty() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "a message sent once the port was said to be back was never written"
+            );
             std::thread::yield_now();
         }
         assert_eq!(
