@@ -300,12 +300,12 @@ fn strict(title: &str, description: &str, properties: Value) -> Value {
 /// events).
 fn event_field(name: &str) -> Value {
     match name {
-        "robot" | "publisher" | "from" | "reason" | "error" | "detail" | "udp" => string(),
+        "robot" | "publisher" | "from" | "reason" | "error" | "detail" | "udp" | "port" => string(),
         "tcp" | "channel" => nullable("string"),
         "id" | "epoch" | "count" | "sources" => integer(),
         "by_reason" => json!({"description": "messages refused for each reason",
             "type": "object", "additionalProperties": integer()}),
-        "known" | "looped" | "accepted" | "engage" => boolean(),
+        "known" | "looped" | "accepted" | "engage" | "up" => boolean(),
         "state" => json!({"type": "string", "enum": ["connected", "stale", "lost"]}),
         "hello" => strict(
             "mech.Hello",
@@ -325,7 +325,9 @@ fn event_field(name: &str) -> Value {
             "the robot's live links and the one commands go out on",
             json!({"udp": boolean(), "radio": nullable("string"),
                    "active": {"type": "string", "enum": ["udp", "radio", ""]},
-                   "radio_budget_hz": nullable("number")}),
+                   "radio_budget_hz": nullable("number"),
+                   "down": {"description": "links heard once but silent now: wifi, radio",
+                            "type": "array", "items": string()}}),
         ),
         "telemetry" => telemetry(),
         "quality" => link_quality(),
