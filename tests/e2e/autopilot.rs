@@ -7,10 +7,14 @@
 //! mapped back into MECH's frame, and the zero-velocity hold when the
 //! controller goes quiet and on e-stop.
 
+use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::thread::JoinHandle;
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use mech_proto::Telemetry;
 use serde_json::Value;
 
 use crate::station::{Station, free_port, observe_telemetry, root};
@@ -28,38 +32,59 @@ fn drive_for_three_seconds() -> String {
     "drive drone 0.5 0 0.1 0.2\nsleep 200ms\n".repeat(15)
 }
 
-#[test]
-fn the_agent_flies_a_fake_px4_over_mavlink() {
-    let mavlink_port = free_port();
-    let script = format!(
-        "wait connected drone 20s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
-         autopilot drone arm\nautopilot drone offboard\nsleep 1s\n\
-         route drone cmd/gcs\nwait route drone cmd/gcs 5s\nmode drone twist\nlog driving\n\
-         {}log holding\nsleep 1500ms\nexpect failsafe drone channel-silent\nstatus drone\n\
-         estop\nwait estop 5s\nautopilot drone arm\nsleep 1s\nlog done\n",
-        drive_for_three_seconds()
-    );
-    let mut station = Station::start(&script, &[]);
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("drone.toml");
+/// What one flight left: the station's output, the fake autopilot's
+/// events, the telemetry the router forwarded, and when each phase of the
+/// script began (wall-clock seconds, as the fake stamps its events).
+struct Flight {
+    lines: Vec<String>,
+    events: Vec<Value>,
+    telemetry: HashMap<String, Vec<Telemetry>>,
+    /// One second after the script logged `before-arming`.
+    arm_window_ends: f64,
+    driving: f64,
+    holding: f64,
+    /// The station's output and the agent's log, for failure messages.
+    context: String,
+}
+
+impl Flight {
+    /// The fake autopilot's events of `kind`.
+    fn of(&self, kind: &str) -> Vec<&Value> {
+        self.events.iter().filter(|e| e["event"] == kind).collect()
+    }
+}
+
+/// A number of an event (NaN when absent).
+fn num(v: &Value, k: &str) -> f64 {
+    v[k].as_f64().unwrap_or(f64::NAN)
+}
+
+/// A `mech-agent` flying the autopilot on `mavlink_port`, registered with
+/// the router at `router`.
+fn start_agent(dir: &Path, router: &str, mavlink_port: u16) -> Child {
+    let config = dir.join("drone.toml");
     std::fs::write(
         &config,
         format!(
             "name = \"drone\"\ncontrol_rate_hz = 20.0\n\
              [platform]\nkind = \"quadcopter\"\nmax_speed = 1.0\nmax_climb = 0.5\nmax_yaw_rate = 1.0\n\
              [autopilot]\nlink = \"udpin:127.0.0.1:{mavlink_port}\"\n\
-             [link]\nkind = \"udp\"\nrouter = \"{}\"\n",
-            station.router()
+             [link]\nkind = \"udp\"\nrouter = \"{router}\"\n"
         ),
     )
     .unwrap();
-    let mut agent = Command::new(mech_e2e::binary("mech-agent"))
+    Command::new(mech_e2e::binary("mech-agent"))
         .arg("--config")
         .arg(&config)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("mech-agent starts");
+        .expect("mech-agent starts")
+}
+
+/// The fake PX4 on `mavlink_port`, and a thread collecting the events it
+/// prints until it exits.
+fn start_autopilot(mavlink_port: u16) -> (Child, JoinHandle<Vec<Value>>) {
     let mut autopilot = Command::new("python3")
         .arg(root().join("tests/e2e/fake_autopilot.py"))
         .args([&mavlink_port.to_string(), "40"])
@@ -67,16 +92,38 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("python3 runs the fake autopilot (scripts/deps.sh installs pymavlink)");
-    let events = {
-        let out = autopilot.stdout.take().unwrap();
-        std::thread::spawn(move || {
-            BufReader::new(out)
-                .lines()
-                .map_while(Result::ok)
-                .filter_map(|l| serde_json::from_str::<Value>(&l).ok())
-                .collect::<Vec<Value>>()
-        })
-    };
+    let out = autopilot.stdout.take().unwrap();
+    let events = std::thread::spawn(move || {
+        BufReader::new(out)
+            .lines()
+            .map_while(Result::ok)
+            .filter_map(|l| serde_json::from_str::<Value>(&l).ok())
+            .collect::<Vec<Value>>()
+    });
+    (autopilot, events)
+}
+
+/// The operator's script: wait, arm and switch to OFFBOARD, drive, go
+/// quiet, e-stop, try to arm again.
+fn script() -> String {
+    format!(
+        "wait connected drone 20s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
+         autopilot drone arm\nautopilot drone offboard\nsleep 1s\n\
+         route drone cmd/gcs\nwait route drone cmd/gcs 5s\nmode drone twist\nlog driving\n\
+         {}log holding\nsleep 1500ms\nexpect failsafe drone channel-silent\nstatus drone\n\
+         estop\nwait estop 5s\nautopilot drone arm\nsleep 1s\nlog done\n",
+        drive_for_three_seconds()
+    )
+}
+
+/// Runs the script against a real agent and the fake PX4; the script must
+/// pass.
+fn fly() -> Flight {
+    let mavlink_port = free_port();
+    let mut station = Station::start(&script(), &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let mut agent = start_agent(dir.path(), &station.router(), mavlink_port);
+    let (mut autopilot, events) = start_autopilot(mavlink_port);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let observer = {
         let (router, stop) = (station.router(), stop.clone());
@@ -101,12 +148,32 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         .unwrap_or_default();
     let context = format!("{lines:#?}\nagent: {agent_log}");
     assert!(ok, "the script failed: {context}");
-    let of = |kind: &str| -> Vec<&Value> { events.iter().filter(|e| e["event"] == kind).collect() };
-    let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    Flight {
+        lines,
+        events,
+        telemetry,
+        arm_window_ends,
+        driving,
+        holding,
+        context,
+    }
+}
 
+#[test]
+fn the_agent_flies_a_fake_px4_over_mavlink() {
+    let flight = fly();
+    heartbeats_both_ways(&flight);
+    nothing_before_the_operator_asked(&flight);
+    setpoints_while_driving(&flight);
+    zero_velocity_hold(&flight);
+    telemetry_in_mechs_frame(&flight);
+}
+
+fn heartbeats_both_ways(f: &Flight) {
+    let context = &f.context;
     // Heartbeats both ways, MAVLink 2: the agent is an onboard controller
     // (type 18, autopilot "invalid" 8), and it found the PX4.
-    let heartbeats = of("heartbeat");
+    let heartbeats = f.of("heartbeat");
     assert!(
         heartbeats.len() >= 5,
         "{} heartbeats: {context}",
@@ -117,22 +184,25 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         && h["component"] == 191
         && h["mavlink2"] == true));
     assert!(
-        lines.iter().any(|l| l.contains("autopilot found: PX4")),
+        f.lines.iter().any(|l| l.contains("autopilot found: PX4")),
         "{context}"
     );
+}
 
+fn nothing_before_the_operator_asked(f: &Flight) {
+    let context = &f.context;
     // Nothing armed or switched before the operator asked: setpoints were
     // streaming (zero: the drone was routed to none) but no command came.
-    let commands = of("command");
+    let commands = f.of("command");
     let first_command = commands.first().map_or(f64::INFINITY, |c| num(c, "t"));
     assert!(
-        first_command > arm_window_ends,
+        first_command > f.arm_window_ends,
         "a command came before the operator's: {commands:?}"
     );
-    let setpoints = of("setpoint");
+    let setpoints = f.of("setpoint");
     let early: Vec<&&Value> = setpoints
         .iter()
-        .filter(|s| num(s, "t") < arm_window_ends)
+        .filter(|s| num(s, "t") < f.arm_window_ends)
         .collect();
     assert!(
         early.len() > 20,
@@ -168,20 +238,23 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         "e-stopped: arm refused",
     ] {
         assert!(
-            lines.iter().any(|l| l.contains(accepted)),
+            f.lines.iter().any(|l| l.contains(accepted)),
             "no {accepted:?}: {context}"
         );
     }
+}
 
+fn setpoints_while_driving(f: &Flight) {
     // While driving: LOCAL_NED (1), velocity + yaw rate only (0x05c7), to
     // system 1 component 1. The drone starts facing east, so forward is
     // +east (NED y) at first and swings north as it turns left; climbing is
     // -z; a left turn is a negative NED yaw rate.
     // (A command delayed past the failsafe timeout on a loaded machine
     // would make a zero setpoint here: those are counted, not checked.)
-    let window: Vec<&Value> = of("setpoint")
+    let window: Vec<&Value> = f
+        .of("setpoint")
         .into_iter()
-        .filter(|s| (driving + 0.3..holding).contains(&num(s, "t")))
+        .filter(|s| (f.driving + 0.3..f.holding).contains(&num(s, "t")))
         .collect();
     let flying: Vec<&Value> = window
         .iter()
@@ -219,21 +292,26 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         num(last, "vx") > num(first, "vx") + 0.1,
         "turning left, towards north: {last}"
     );
+}
 
+fn zero_velocity_hold(f: &Flight) {
     // The controller went quiet: zero-velocity hold, still streamed.
-    let held: Vec<&Value> = of("setpoint")
+    let held: Vec<&Value> = f
+        .of("setpoint")
         .into_iter()
-        .filter(|s| num(s, "t") > holding + 0.8)
+        .filter(|s| num(s, "t") > f.holding + 0.8)
         .collect();
     assert!(held.len() > 10, "the hold is streamed: {}", held.len());
     assert!(held.iter().all(|s| num(s, "vx") == 0.0
         && num(s, "vy") == 0.0
         && num(s, "vz") == 0.0
         && num(s, "yaw_rate") == 0.0));
+}
 
+fn telemetry_in_mechs_frame(f: &Flight) {
     // Telemetry back in MECH's frame: the fake's state at the end (NED)
     // against the last telemetry (ENU), battery 87 %.
-    let drone = &telemetry["drone"];
+    let drone = &f.telemetry["drone"];
     let start = &drone[0];
     assert!(
         (start.pose.x - 2.0).abs() < 0.01 && (start.pose.y - 1.0).abs() < 0.01,
@@ -246,7 +324,7 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         start.pose
     );
     assert_eq!(drone.last().unwrap().battery, Some(0.87));
-    let state = of("state");
+    let state = f.of("state");
     let end = state.last().unwrap();
     let t = drone.last().unwrap();
     assert!(

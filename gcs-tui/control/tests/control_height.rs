@@ -61,7 +61,7 @@ async fn points_without_z_keep_a_quadcopters_height_and_points_with_z_change_it(
     run(&mut exec, "wait connected quad_1 10s").await;
     // The station knows its height before the points are set.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
-    while gcs.with_fleet(|f| f.robot("quad_1").unwrap().pose.z) < 3.0 {
+    while gcs.with_fleet(|f| f.robot("quad_1").unwrap().telemetry.pose.z) < 3.0 {
         assert!(tokio::time::Instant::now() < deadline, "no height heard");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
@@ -81,7 +81,10 @@ async fn points_without_z_keep_a_quadcopters_height_and_points_with_z_change_it(
     loop {
         let (z, done) = gcs.with_fleet(|f| {
             let r = f.robot("quad_1").unwrap();
-            (r.pose.z, r.mission.is_some_and(|m| m.next == m.total))
+            (
+                r.telemetry.pose.z,
+                r.telemetry.mission.is_some_and(|m| m.next == m.total),
+            )
         });
         lowest = lowest.min(z);
         if done {
@@ -93,7 +96,7 @@ async fn points_without_z_keep_a_quadcopters_height_and_points_with_z_change_it(
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    let end = gcs.with_fleet(|f| f.robot("quad_1").unwrap().pose);
+    let end = gcs.with_fleet(|f| f.robot("quad_1").unwrap().telemetry.pose);
     println!("flew the z-less points at {lowest:.3} m at the lowest, ended at {end:?}");
     assert!(lowest > 2.95, "it came down to {lowest:.3} m");
     assert!((end.x - 1.0).hypot(end.y - 3.0) < 0.2, "{end:?}");
@@ -102,7 +105,7 @@ async fn points_without_z_keep_a_quadcopters_height_and_points_with_z_change_it(
     run(&mut exec, "waypoint quad_1 1.0,2.5,1.5").await;
     run(&mut exec, "send quad_1").await;
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    while (gcs.with_fleet(|f| f.robot("quad_1").unwrap().pose.z) - 1.5).abs() > 0.15 {
+    while (gcs.with_fleet(|f| f.robot("quad_1").unwrap().telemetry.pose.z) - 1.5).abs() > 0.15 {
         assert!(
             tokio::time::Instant::now() < deadline,
             "never went down to 1.5 m"

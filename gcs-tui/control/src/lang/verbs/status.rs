@@ -10,7 +10,7 @@ use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe_name};
+use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -71,7 +71,7 @@ impl Status {
             summary: format!(
                 "{} robots; station {}{refused}{}{radios}{recording}",
                 details.len(),
-                router.security().as_str(),
+                router.security().label(),
                 ctx.gcs.with_fleet(stations),
             ),
             details,
@@ -126,31 +126,31 @@ fn status_line(r: &Robot, now: std::time::Duration) -> String {
         None => String::new(),
     };
     // The height of a robot off the ground (a flying one).
-    let z = if r.pose.z.abs() >= AIRBORNE {
-        format!(" z {:.2}", r.pose.z)
+    let z = if r.telemetry.pose.z.abs() >= AIRBORNE {
+        format!(" z {:.2}", r.telemetry.pose.z)
     } else {
         String::new()
     };
     format!(
         "{} #{} {} {}{stale} at ({:.2}, {:.2}){z} heading {:.2} speed {:.2} mode {:?} route {}{} failsafe {}",
         r.name,
-        r.id,
-        r.platform,
+        r.registration.id,
+        r.registration.hello.platform,
         r.link.as_str(),
-        r.pose.x,
-        r.pose.y,
-        r.pose.heading,
+        r.telemetry.pose.x,
+        r.telemetry.pose.y,
+        r.telemetry.pose.heading,
         r.speed(),
-        r.mode,
+        r.telemetry.mode,
         channel_name(&r.route.requested),
         if r.route.is_pending() {
             " (pending)"
         } else {
             ""
         },
-        failsafe_name(r.failsafe),
-    ) + &if r.stale > 0 {
-        format!(" ignored-stale {}", r.stale)
+        r.telemetry.failsafe.as_str(),
+    ) + &if r.telemetry.stale > 0 {
+        format!(" ignored-stale {}", r.telemetry.stale)
     } else {
         String::new()
     } + &autopilot(r)

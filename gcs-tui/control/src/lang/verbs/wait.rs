@@ -154,7 +154,7 @@ fn not_arrived(r: &Robot) -> Option<String> {
     if r.arrived() {
         return None;
     }
-    Some(match (&r.waypoints.sent, &r.mission) {
+    Some(match (&r.waypoints.sent, &r.telemetry.mission) {
         (None, _) => format!("{} has no mission", r.name),
         (Some(s), _) if s.delivery != MissionDelivery::Acked => {
             format!("{} mission {} is {:?}", r.name, s.id, s.delivery)

@@ -78,7 +78,7 @@ impl SetWaypoints {
             let mut kept = Vec::new();
             for r in &robots {
                 if let Some(robot) = f.robot_mut(r) {
-                    let z = robot.pose.z;
+                    let z = robot.telemetry.pose.z;
                     robot.waypoints.draft = self.at_height(z);
                     robot.waypoints.looped = self.looped;
                     if heightless && z.abs() >= AIRBORNE {
