@@ -335,8 +335,14 @@ mod tests {
         tx.into_inner()
     }
 
-    #[test]
-    fn a_port_that_fails_is_reopened_and_each_outage_reported_once() {
+    /// The openings of a fake port, in order, and where each open one's
+    /// writes go: missing twice at start; then a port that delivers a
+    /// frame and breaks; missing once; then one whose second write fails;
+    /// then one that works.
+    fn openings() -> (
+        std::collections::VecDeque<std::io::Result<OpenedPort>>,
+        Vec<Arc<Mutex<Vec<u8>>>>,
+    ) {
         let gone = || Err(std::io::Error::from(std::io::ErrorKind::NotFound));
         let writes: Vec<Arc<Mutex<Vec<u8>>>> = (0..3).map(|_| Arc::default()).collect();
         let port = |reads: Vec<std::io::Result<Vec<u8>>>, i: usize, works: usize| {
@@ -350,10 +356,7 @@ mod tests {
             ))
         };
         let broken = || Err(std::io::Error::from(std::io::ErrorKind::BrokenPipe));
-        // Missing twice at start; then a port that delivers a frame and
-        // breaks; missing once; then one whose second write fails; then one
-        // that works.
-        let mut openings: std::collections::VecDeque<std::io::Result<OpenedPort>> = [
+        let openings = [
             gone(),
             gone(),
             port(vec![Ok(frame(1)), broken()], 0, 9),
@@ -363,6 +366,13 @@ mod tests {
         ]
         .into_iter()
         .collect();
+        (openings, writes)
+    }
+
+    #[test]
+    fn a_port_that_fails_is_reopened_and_each_outage_reported_once() {
+        let gone = || Err(std::io::Error::from(std::io::ErrorKind::NotFound));
+        let (mut openings, writes) = openings();
         let Io::Frames {
             mut incoming,
             outgoing,

@@ -16,7 +16,7 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
+use mech_proto::{FailsafeState, Health, Hello, Notice, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use remote::remote_name;
@@ -299,14 +299,14 @@ impl Fleet {
     /// One of the station's radios failed or came back: said once each
     /// way (the router keeps opening a failed one again).
     fn radio(&mut self, port: &str, up: bool, reason: &str) {
-        if up {
-            self.log(Severity::Info, format!("radio {port} reopened"));
-        } else {
-            self.log(
+        let (severity, text) = match up {
+            true => (Severity::Info, format!("radio {port} reopened")),
+            false => (
                 Severity::Error,
                 format!("radio {port} failed: {reason}; reopening it until it returns"),
-            );
-        }
+            ),
+        };
+        self.log(severity, text);
     }
 
     fn link(&mut self, robot: &str, state: LinkState) {
@@ -480,16 +480,8 @@ impl Fleet {
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {
-        if notice.code == NoticeCode::DriverFault {
-            if let Some(r) = self.robots.get_mut(from) {
-                r.fault = Some(notice.text.clone());
-            }
-        }
-        if let (Some(news), Some(r)) = (
-            mech_proto::AutopilotNews::parse(&notice.text),
-            self.robots.get_mut(from),
-        ) {
-            r.autopilot.get_or_insert_default().apply(&news);
+        if let Some(r) = self.robots.get_mut(from) {
+            r.heard_notice(notice);
         }
         let severity = match notice.level {
             mech_proto::Level::Debug => Severity::Debug,
@@ -557,7 +549,8 @@ fn thousands(n: u64) -> String {
 mod tests {
     use super::*;
     use mech_proto::{
-        Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+        Computation, ControlMode, FailsafeState, Health, MissionProgress, NoticeCode, Pose,
+        Velocity,
     };
 
     fn at(ms: u64, event: Event) -> Stamped {

@@ -6,7 +6,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use mech_proto::{AutopilotNews, CommandKind, Hello, Telemetry, Waypoint};
+use mech_proto::{AutopilotNews, CommandKind, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 use serde::{Deserialize, Serialize};
 
 use crate::counters::{LinkQuality, Traffic};
@@ -201,6 +201,17 @@ impl Robot {
             estop_ack: None,
             remote: None,
             autopilot: None,
+        }
+    }
+
+    /// What a notice from the robot tells about it: a driver fault's text
+    /// (kept while telemetry reports the fault), its autopilot's state.
+    pub(super) fn heard_notice(&mut self, notice: &Notice) {
+        if notice.code == NoticeCode::DriverFault {
+            self.fault = Some(notice.text.clone());
+        }
+        if let Some(news) = AutopilotNews::parse(&notice.text) {
+            self.autopilot.get_or_insert_default().apply(&news);
         }
     }
 
