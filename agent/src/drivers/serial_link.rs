@@ -335,14 +335,14 @@ mod tests {
         tx.into_inner()
     }
 
+    /// What each opening of a fake port gives.
+    type Openings = std::collections::VecDeque<std::io::Result<OpenedPort>>;
+
     /// The openings of a fake port, in order, and where each open one's
     /// writes go: missing twice at start; then a port that delivers a
     /// frame and breaks; missing once; then one whose second write fails;
     /// then one that works.
-    fn openings() -> (
-        std::collections::VecDeque<std::io::Result<OpenedPort>>,
-        Vec<Arc<Mutex<Vec<u8>>>>,
-    ) {
+    fn openings() -> (Openings, Vec<Arc<Mutex<Vec<u8>>>>) {
         let gone = || Err(std::io::Error::from(std::io::ErrorKind::NotFound));
         let writes: Vec<Arc<Mutex<Vec<u8>>>> = (0..3).map(|_| Arc::default()).collect();
         let port = |reads: Vec<std::io::Result<Vec<u8>>>, i: usize, works: usize| {
