@@ -17,7 +17,7 @@ use tokio::sync::watch;
 
 use crate::view::{
     ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView, RouteView,
-    Security, TRAIL_SECONDS,
+    SafetyView, Security, TRAIL_SECONDS,
 };
 use crate::wire::{FromStation, LogLevel, to_line};
 
@@ -238,6 +238,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             remote: r.remote.clone(),
             stale_for: r.stale_for(fleet.now).map(|age| age.as_secs_f64()),
             autopilot: r.autopilot.clone(),
+            safety: safety_view(r),
         })
         .collect();
     FleetSnapshot {
@@ -247,6 +248,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
         security: Security::default(),
         rejected: 0,
         replay: None,
+        arena: fleet.arena.clone(),
         clusters: Some(
             fleet
                 .clusters
@@ -258,6 +260,27 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
                 })
                 .collect(),
         ),
+    }
+}
+
+/// A robot's safety layer as its card shows it: `None` for a robot that
+/// reports none and is not switched off.
+fn safety_view(r: &Robot) -> Option<SafetyView> {
+    let alarm = r.safety_alarm();
+    match r.telemetry.safety {
+        Some(s) => Some(SafetyView {
+            state: s.state,
+            intervention: s.intervention,
+            interventions: s.counts.total(),
+            alarm,
+        }),
+        None if alarm => Some(SafetyView {
+            state: mech_proto::SafetyState::NoArena,
+            intervention: mech_proto::Intervention::None,
+            interventions: 0,
+            alarm,
+        }),
+        None => None,
     }
 }
 

@@ -1,10 +1,12 @@
-//! Robot cards: one four-line card per robot with identity (and, for a
-//! robot flown by an autopilot, whether it is armed and its flight mode),
-//! pose, speed (measured or commanded), heading, mode, route, computation,
-//! link, failsafe and its fault text, battery, mission and the link's
-//! quality (rates each way, loss, round trip). A robot the router no
-//! longer hears has its telemetry's lines greyed, and its card says how
-//! old they are: what it last said, not what it does.
+//! Robot cards: one four-line card per robot with identity (the alarm
+//! `SAFETY OFF` when its fleet safety layer is off, and for a robot flown
+//! by an autopilot whether it is armed and its flight mode), pose, speed
+//! (measured or commanded), heading, mode, route, computation, link,
+//! failsafe, what the safety layer limits (`fence`, `separation`...), the
+//! fault text, battery, mission and the link's quality (rates each way,
+//! loss, round trip). A robot the router no longer hears has its
+//! telemetry's lines greyed, and its card says how old they are: what it
+//! last said, not what it does.
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -15,10 +17,10 @@ use super::app::{App, Focus};
 use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
 use super::view::{
-    AutopilotState, LinkQuality, LinkState, RobotView, failsafe_str, health_str, link_label,
-    mode_str, velocity_source_str,
+    AutopilotState, LinkQuality, LinkState, RobotView, failsafe_str, health_str, intervention_str,
+    link_label, mode_str, velocity_source_str,
 };
-use mech_proto::{Computation, FailsafeState, Health};
+use mech_proto::{Computation, FailsafeState, Health, Intervention};
 
 /// The cards panel.
 #[derive(Debug)]
@@ -140,7 +142,9 @@ fn autopilot_span<'a>(a: &AutopilotState, t: &Theme) -> Span<'a> {
     Span::styled(format!(" {}", a.label()), style)
 }
 
-/// The card's first line: `●robot_1 #1 ok diff-drive` (`▶` selected).
+/// The card's first line: `●robot_1 #1 Connected diff-drive` (`▶`
+/// selected), with `SAFETY OFF` after the id while the robot's layer is
+/// off (before anything the card may cut).
 fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> Line<'a> {
     let colour = ratatui::style::Style::new().fg(t.robot(i));
     let name_style = if selected {
@@ -156,6 +160,16 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
         match r.remote {
             Some(_) => Span::styled(" remote ", t.dim()),
             None => Span::raw(format!(" #{} ", r.id)),
+        },
+        if r.safety.is_some_and(|s| s.alarm) {
+            Span::styled("SAFETY OFF", t.alarm())
+        } else {
+            Span::raw("")
+        },
+        if r.safety.is_some_and(|s| s.alarm) {
+            Span::raw(" ")
+        } else {
+            Span::raw("")
         },
         Span::styled(link_label(r.link), link_style(r.link, t)),
     ];
@@ -192,8 +206,8 @@ fn pose_line<'a>(r: &RobotView) -> Line<'a> {
 }
 
 /// The card's third line: mode, route (✓ acknowledged, … pending),
-/// failsafe, a fault or the health, mission, battery, where the loop runs
-/// and the links.
+/// failsafe, what the safety layer limits, a fault or the health, mission,
+/// battery, where the loop runs and the links.
 fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
     let route = if r.route.channel.is_empty() {
         "none".to_string()
@@ -211,6 +225,12 @@ fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
         Span::raw(format!(" {} {} ", mode_str(r.mode), route)),
         Span::styled(failsafe_str(r.failsafe), fs_style),
     ];
+    if let Some(s) = r.safety.filter(|s| s.intervention != Intervention::None) {
+        spans.push(Span::styled(
+            format!(" {}", intervention_str(s.intervention)),
+            t.warn(),
+        ));
+    }
     if let Some(fault) = &r.fault {
         spans.push(Span::styled(format!(" {fault}"), t.alarm()));
     } else if r.health != Health::Ok {

@@ -1,13 +1,16 @@
 //! `status [TARGET]`: one line per robot (link, pose, speed, mode, route,
-//! failsafe, and the link's rates, loss and round trip), for every robot in
-//! natural name order when no target is given, after a summary that says
-//! whether the station authenticates, what it refused and how its radios
-//! are. A robot the router no longer hears has its telemetry's part of the
-//! line marked stale, with its age: it is what the robot last said, not
-//! what it does now.
+//! failsafe, its fleet safety layer (on, off: an alarm, or no arena), what
+//! it limits now and how often it did, and the link's rates, loss and
+//! round trip), for every robot in natural name order when no target is
+//! given, after a summary that says whether the station authenticates,
+//! what it refused, its arena, which robots have their safety off and how
+//! its radios are. A robot the router no longer hears has its telemetry's
+//! part of the line marked stale, with its age: it is what the robot last
+//! said, not what it does now.
 
 use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
+use mech_proto::{Intervention, SafetyState};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target};
@@ -69,14 +72,34 @@ impl Status {
         let radios: String = router.radios().iter().map(radio).collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}{}{radios}{recording}",
+                "{} robots; station {}{refused}{}{}{radios}{recording}",
                 details.len(),
                 router.security().label(),
                 ctx.gcs.with_fleet(stations),
+                ctx.gcs.with_fleet(arena),
             ),
             details,
         })
     }
+}
+
+/// The arena, and the robots whose safety layer is off (an alarm):
+/// `; arena 4 vertices, ...; SAFETY OFF robot_2`.
+fn arena(f: &Fleet) -> String {
+    let mut s = match &f.arena {
+        Some(a) => format!("; arena {}", a.summary()),
+        None => "; no arena".to_string(),
+    };
+    let mut off: Vec<&str> = f
+        .local_robots()
+        .filter(|r| r.safety_alarm())
+        .map(|r| r.name.as_str())
+        .collect();
+    off.sort_by(|a, b| mech_core::names::natural_cmp(a, b));
+    if !off.is_empty() {
+        s += &format!("; SAFETY OFF {}", off.join(", "));
+    }
+    s
 }
 
 /// Other stations seen through a bridge, with their state and how many of
@@ -153,7 +176,8 @@ fn status_line(r: &Robot, now: std::time::Duration) -> String {
         format!(" ignored-stale {}", r.telemetry.stale)
     } else {
         String::new()
-    } + &autopilot(r)
+    } + &safety(r)
+        + &autopilot(r)
         + &link_quality(&r.quality)
         + &links(r)
         + &lost_mission(r)
@@ -167,6 +191,36 @@ fn autopilot(r: &Robot) -> String {
         Some(a) => format!(" autopilot {}", a.label()),
         None => String::new(),
     }
+}
+
+/// ` safety on limiting fence interventions fence 2 separation 1`, or
+/// ` safety OFF (alarm)`; nothing for a robot that reports no layer.
+fn safety(r: &Robot) -> String {
+    let Some(report) = r.telemetry.safety else {
+        return if r.safety_enabled {
+            String::new()
+        } else {
+            " safety OFF requested (alarm)".to_string()
+        };
+    };
+    let mut s = match (report.state, r.safety_enabled) {
+        (SafetyState::Off, _) => " safety OFF (alarm)".to_string(),
+        (_, false) => " safety OFF requested (alarm)".to_string(),
+        (SafetyState::On, true) => " safety on".to_string(),
+        (SafetyState::NoArena, true) => " safety no-arena".to_string(),
+    };
+    if report.intervention != Intervention::None {
+        s += &format!(" limiting {}", report.intervention.as_str());
+    }
+    let counts: Vec<String> = Intervention::ALL
+        .iter()
+        .filter(|i| report.counts.get(**i) > 0)
+        .map(|i| format!("{} {}", i.as_str(), report.counts.get(*i)))
+        .collect();
+    if !counts.is_empty() {
+        s += &format!(" interventions {}", counts.join(" "));
+    }
+    s
 }
 
 /// Another station's robot, shown here read-only.
