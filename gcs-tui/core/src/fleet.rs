@@ -193,11 +193,7 @@ impl Fleet {
             Event::Links { robot, links } => self.links(robot, links),
             Event::Radio { port, up, reason } => self.radio(port, *up, reason),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
-            Event::LinkQuality { robot, quality } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.quality = *quality;
-                }
-            }
+            Event::LinkQuality { robot, quality } => self.link_quality(robot, quality),
             Event::RouteChanged {
                 robot,
                 channel,
@@ -304,19 +300,6 @@ impl Fleet {
         if was.label() != links.label() {
             self.log(Severity::Info, format!("{robot} links {}", links.label()));
         }
-    }
-
-    /// One of the station's radios failed or came back: said once each
-    /// way (the router keeps opening a failed one again).
-    fn radio(&mut self, port: &str, up: bool, reason: &str) {
-        let (severity, text) = match up {
-            true => (Severity::Info, format!("radio {port} reopened")),
-            false => (
-                Severity::Error,
-                format!("radio {port} failed: {reason}; reopening it until it returns"),
-            ),
-        };
-        self.log(severity, text);
     }
 
     fn link(&mut self, robot: &str, state: LinkState) {
@@ -500,6 +483,29 @@ impl Fleet {
             mech_proto::Level::Error => Severity::Error,
         };
         self.log(severity, format!("{from}: {}", notice.text));
+    }
+}
+
+/// A robot's link quality and the station's radios, as the router reports
+/// them.
+impl Fleet {
+    fn link_quality(&mut self, robot: &str, quality: &crate::counters::LinkQuality) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.quality = *quality;
+        }
+    }
+
+    /// One of the station's radios failed or came back: said once each
+    /// way (the router keeps opening a failed one again).
+    fn radio(&mut self, port: &str, up: bool, reason: &str) {
+        let (severity, text) = match up {
+            true => (Severity::Info, format!("radio {port} reopened")),
+            false => (
+                Severity::Error,
+                format!("radio {port} failed: {reason}; reopening it until it returns"),
+            ),
+        };
+        self.log(severity, text);
     }
 }
 
