@@ -62,7 +62,7 @@ use crate::fusion::FusionCounters;
 use crate::hal::{EdgeCount, PositionSample};
 use crate::platform::Platform;
 
-use actuation::Actuation;
+use actuation::{Actuation, Permit};
 use autopilot_requests::AutopilotRequests;
 use estop::EStopLatch;
 use intake::Intake;
@@ -144,8 +144,17 @@ impl Agent {
         self
     }
 
+    /// Numbers a message that is about to be sent (once, whichever links
+    /// carry it): the robot's messages are numbered as they leave, so a
+    /// message a link skips on purpose is not a gap the router counts as
+    /// lost.
+    pub fn number(&mut self, env: &mut Envelope) {
+        self.wire.number(env);
+    }
+
     /// Encodes a message to send, signed when the robot has a key. The
-    /// header's stamp is the robot's clock reading.
+    /// header's stamp is the robot's clock reading; its number is the one
+    /// [`Agent::number`] gave it.
     pub fn encode(&mut self, env: &Envelope, out: &mut Vec<u8>) -> Result<(), mech_proto::Error> {
         self.encode_on(env, 0, out)
     }
@@ -303,11 +312,22 @@ impl Agent {
         let mission_running = self.mission_running();
         let mut step = Step::new(now, &mut self.wire, &mut self.counters, &mut outgoing);
         let drive = self.actuation.judge(state, mission_running, &mut step);
+        let permit = if drive {
+            Permit::Drive
+        } else if mission_running && !self.registration.router_lost(now) {
+            // Every link silent for the channel timeout: the mission waits,
+            // keeping its place, and goes on when the router is heard again
+            // (past the router timeout it idles, and registering again
+            // resumes it).
+            Permit::Wait
+        } else {
+            Permit::Stop
+        };
         let mission = self.missions.following(self.intake.channel());
         let outputs = self
             .actuation
             .obey(
-                drive,
+                permit,
                 &mut self.controller,
                 mission,
                 &mut self.sensors,
@@ -521,6 +541,9 @@ impl Agent {
             estopped: self.estop.engaged(),
             actuator_fault: self.sensors.faults.actuators_held(now),
             router_lost: self.registration.router_lost(now),
+            link_silent: self
+                .registration
+                .router_silent_for(self.settings.failsafe.channel_timeout, now),
             routed: self.intake.routed(),
             channel_silent: self.intake.channel_silent(now),
             // A mission on the routed channel is the robot's controller,

@@ -510,6 +510,21 @@ impl RobotConfig {
         self.autopilot.as_ref().map(|a| a.get_ref())
     }
 
+    /// Replaces the `[autopilot]` section's MAVLink link (`mech-agent
+    /// --autopilot LINK`: a second simulator on another port, a flight
+    /// controller on another UART), checked as the file's would be. `Err`
+    /// says why not: a bad link, or no `[autopilot]` section to change.
+    pub fn set_autopilot_link(&mut self, link: &str) -> Result<(), String> {
+        let Some(section) = self.autopilot.as_mut() else {
+            return Err("this robot's config has no [autopilot] section".to_string());
+        };
+        let mut changed = section.get_ref().clone();
+        changed.link = link.to_string();
+        changed.validate()?;
+        *section.get_mut() = changed;
+        Ok(())
+    }
+
     fn validate_rates(&self) -> Result<(), Problem> {
         for (rate, what) in [
             (&self.control_rate_hz, "control_rate_hz"),

@@ -3,8 +3,13 @@
 //! Actuators are zeroed when the routed channel has been silent for
 //! `channel_timeout` (a running onboard mission is exempt: the mission is the
 //! controller), when nothing has been heard from the router for
-//! `router_timeout` (a mission continues only if configured to), while an
-//! e-stop is latched, and while an actuator fault holds them.
+//! `router_timeout`, while an e-stop is latched, and while an actuator fault
+//! holds them. An onboard mission is the one controller the station cannot
+//! stop once every link is gone, so for it the router's silence counts from
+//! `channel_timeout`, not `router_timeout`: it stops within the same time a
+//! silent controller's robot does, and goes on when the router is heard
+//! again. It continues through a link loss only if configured to
+//! (`mission_continues_on_link_loss`).
 //!
 //! Each fact is owned by the part of the agent core that learns it (router
 //! liveness by registration, channel silence by command intake, each a
@@ -28,7 +33,9 @@ pub struct FailsafeConfig {
     /// router heartbeats).
     pub router_timeout: Duration,
     /// Whether an onboard waypoint mission keeps running when the router is
-    /// lost (default: stop).
+    /// silent (default: it stops once the router has been silent for
+    /// `channel_timeout`, as a robot whose controller went quiet does, since
+    /// nobody can stop it while every link is down).
     pub mission_continues_on_link_loss: bool,
 }
 
@@ -95,8 +102,13 @@ impl Watchdog {
 
     /// Nothing heard yet, or nothing for longer than the timeout.
     pub fn silent(&self, now: Duration) -> bool {
-        self.last
-            .is_none_or(|t| now.saturating_sub(t) > self.timeout)
+        self.silent_for(self.timeout, now)
+    }
+
+    /// Nothing heard yet, or nothing for longer than `timeout` (another
+    /// limit than the watchdog's own).
+    pub fn silent_for(&self, timeout: Duration, now: Duration) -> bool {
+        self.last.is_none_or(|t| now.saturating_sub(t) > timeout)
     }
 }
 
@@ -110,6 +122,9 @@ pub struct Conditions {
     pub actuator_fault: bool,
     /// Nothing heard from the router for `router_timeout`, or it said Bye.
     pub router_lost: bool,
+    /// Nothing heard from the router for `channel_timeout` (every link
+    /// silent that long): enough to stop an onboard mission.
+    pub link_silent: bool,
     /// The robot has a route (its channel is not empty).
     pub routed: bool,
     /// Nothing accepted on the routed channel for `channel_timeout`.
@@ -121,13 +136,14 @@ pub struct Conditions {
 
 impl Conditions {
     /// The failsafe state: an e-stop first, then an actuator fault, then
-    /// router loss, then channel silence.
+    /// router loss (for a robot a mission controls, the router silent for
+    /// the channel timeout), then channel silence.
     pub fn state(&self) -> FailsafeState {
         if self.estopped {
             FailsafeState::EStopped
         } else if self.actuator_fault {
             FailsafeState::Fault
-        } else if self.router_lost {
+        } else if self.router_lost || (self.mission_controls && self.link_silent) {
             FailsafeState::RouterLost
         } else if self.routed && !self.mission_controls && self.channel_silent {
             FailsafeState::ChannelSilent
@@ -225,6 +241,7 @@ mod tests {
                 estopped: self.estopped,
                 actuator_fault: false,
                 router_lost: self.router.silent(now),
+                link_silent: self.router.silent_for(self.channel.timeout(), now),
                 routed,
                 channel_silent: self.channel.silent(now),
                 mission_controls: mission_running,
@@ -236,7 +253,8 @@ mod tests {
     #[test]
     fn channel_silence_trips_after_the_timeout_only() {
         let mut f = Watch::new();
-        f.router.heard(MS(0));
+        // The router is heard meanwhile: only the channel is silent.
+        f.router.heard(MS(400));
         f.channel.heard(MS(0));
         assert_eq!(f.state(MS(500), true, false), FailsafeState::Ok);
         assert_eq!(f.state(MS(501), true, false), FailsafeState::ChannelSilent);
@@ -311,5 +329,30 @@ mod tests {
         assert!(silent.tripped() && !silent.drive);
         assert_eq!(silent.previous, FailsafeState::Ok);
         assert!(!f.judge(FailsafeState::RouterLost, false).tripped());
+    }
+
+    #[test]
+    fn a_mission_counts_the_routers_silence_from_the_channel_timeout() {
+        let mut f = Watch::new();
+        f.router.heard(MS(0));
+        f.channel.heard(MS(0));
+        assert_eq!(f.state(MS(500), true, true), FailsafeState::Ok);
+        assert_eq!(
+            f.state(MS(501), true, true),
+            FailsafeState::RouterLost,
+            "a mission stops once every link has been silent 0.5 s"
+        );
+        assert_eq!(
+            f.state(MS(501), true, false),
+            FailsafeState::ChannelSilent,
+            "any other robot: its channel's silence, as before"
+        );
+        assert_eq!(f.state(MS(1001), true, false), FailsafeState::RouterLost);
+        f.router.heard(MS(600));
+        assert_eq!(
+            f.state(MS(700), true, true),
+            FailsafeState::Ok,
+            "heard again"
+        );
     }
 }

@@ -218,13 +218,13 @@ async fn open_one(
     }
 }
 
+/// A serial link: its threads open the port, and open it again whenever
+/// it fails, so a radio unplugged at start or later is taken up when it
+/// returns (the robot runs on its other links meanwhile).
 #[cfg(feature = "serial")]
 fn open_serial(port: &str, baud: u32) -> Result<Io, LaunchError> {
     tracing::info!(port, baud, "serial link");
-    crate::drivers::serial_link::open(port, baud).map_err(|e| LaunchError::Serial {
-        port: port.to_string(),
-        message: e.to_string(),
-    })
+    Ok(crate::drivers::serial_link::open(port, baud))
 }
 
 #[cfg(not(feature = "serial"))]

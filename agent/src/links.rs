@@ -25,6 +25,10 @@ pub struct LinkChoice {
     last_telemetry: Vec<Option<Duration>>,
     /// The link in use at the last [`LinkChoice::targets`], to log changes.
     in_use: Option<usize>,
+    /// Links whose port is down (reported by their threads, until they say
+    /// it is open again): nothing is sent on them, not even a probe, since
+    /// it would only be dropped, a numbered message the router counts lost.
+    port_down: Vec<bool>,
 }
 
 impl LinkChoice {
@@ -39,6 +43,7 @@ impl LinkChoice {
             telemetry_gap: gaps,
             last_telemetry: vec![None; n],
             in_use: None,
+            port_down: vec![false; n],
         }
     }
 
@@ -56,6 +61,31 @@ impl LinkChoice {
         if let Some(h) = self.heard.get_mut(link) {
             *h = Some(now);
         }
+    }
+
+    /// `link`'s port failed: it is not live until the router is heard on
+    /// it again, so what is sent next (the notice reporting the outage
+    /// first) goes on another link without waiting for the link timeout,
+    /// and nothing goes on it until [`LinkChoice::up`].
+    pub fn down(&mut self, link: usize) {
+        if let Some(h) = self.heard.get_mut(link) {
+            *h = None;
+        }
+        if let Some(d) = self.port_down.get_mut(link) {
+            *d = true;
+        }
+    }
+
+    /// `link`'s port is open again: messages may go on it.
+    pub fn up(&mut self, link: usize) {
+        if let Some(d) = self.port_down.get_mut(link) {
+            *d = false;
+        }
+    }
+
+    /// Whether a message may go on `link`: its port is not known down.
+    pub fn usable(&self, link: usize) -> bool {
+        !self.port_down.get(link).copied().unwrap_or(false)
     }
 
     /// Whether the router was heard on `link` within the link timeout.
@@ -102,14 +132,16 @@ impl LinkChoice {
     }
 
     /// The links due a probe heartbeat now: every `probe_period`, each
-    /// link but the one in use.
+    /// link but the one in use and those whose port is down.
     pub fn probes_due(&mut self, now: Duration) -> Vec<usize> {
         if self.len() < 2 || now < self.next_probe {
             return Vec::new();
         }
         self.next_probe = now + self.probe_period;
         let preferred = self.preferred(now);
-        (0..self.len()).filter(|i| Some(*i) != preferred).collect()
+        (0..self.len())
+            .filter(|i| Some(*i) != preferred && self.usable(*i))
+            .collect()
     }
 }
 
@@ -119,6 +151,44 @@ mod tests {
 
     fn ms(v: u64) -> Duration {
         Duration::from_millis(v)
+    }
+
+    #[test]
+    fn a_link_reported_down_is_left_at_once() {
+        let mut c = LinkChoice::new(vec![None, None], ms(600), ms(250));
+        c.heard(1, ms(10));
+        assert_eq!(c.targets(ms(20)), 1..2, "only the radio heard");
+        c.down(1);
+        assert_eq!(
+            c.targets(ms(30)),
+            0..2,
+            "its outage is told on every link, not on the radio alone"
+        );
+        c.heard(0, ms(40));
+        c.heard(1, ms(40));
+        c.down(0);
+        assert_eq!(c.targets(ms(50)), 1..2, "Wi-Fi down: the radio");
+        c.down(7);
+        assert_eq!(c.targets(ms(50)), 1..2, "no such link: nothing changes");
+    }
+
+    #[test]
+    fn a_link_whose_port_is_down_gets_no_probe_until_it_is_up() {
+        let mut c = LinkChoice::new(vec![None, None], ms(600), ms(250));
+        c.heard(0, ms(0));
+        c.heard(1, ms(0));
+        assert_eq!(c.probes_due(ms(10)), vec![1], "the radio not in use");
+        c.down(1);
+        assert!(!c.usable(1) && c.usable(0));
+        assert_eq!(
+            c.probes_due(ms(300)),
+            Vec::<usize>::new(),
+            "a probe on a radio that is down would only be lost"
+        );
+        c.up(1);
+        assert!(c.usable(1));
+        c.heard(0, ms(500));
+        assert_eq!(c.probes_due(ms(600)), vec![1]);
     }
 
     #[test]

@@ -27,6 +27,10 @@ struct Cli {
     /// Robot name, overriding the config.
     #[arg(long)]
     name: Option<String>,
+    /// MAVLink link to the autopilot, overriding `[autopilot] link`
+    /// (`udpin:0.0.0.0:14541` for a second simulator, `serial:/dev/ttyACM0:921600`).
+    #[arg(long, value_name = "LINK")]
+    autopilot: Option<String>,
     /// Only check the config and exit.
     #[arg(long)]
     check: bool,
@@ -64,6 +68,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     if let Some(name) = cli.name {
         mech_agent::config::check_name(&name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
         config.name = toml::Spanned::new(0..0, name);
+    }
+    if let Some(link) = &cli.autopilot {
+        config
+            .set_autopilot_link(link)
+            .map_err(|e| anyhow::anyhow!("--autopilot {link}: {e}"))?;
     }
     let router = cli
         .router

@@ -25,6 +25,10 @@ pub trait Vehicle: Send {
     fn tick(&mut self, now: Duration) -> Vec<Envelope>;
     /// Zeroes the actuators and returns the `Bye` to send.
     fn stop(&mut self, now: Duration) -> Envelope;
+    /// Numbers a message about to be sent (once, on however many links).
+    fn number(&mut self, env: &mut Envelope) {
+        self.agent_mut().number(env);
+    }
     /// Handles one received datagram.
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {
         self.agent_mut().handle_bytes(bytes, now)
@@ -135,9 +139,9 @@ pub enum Io {
         router: SocketAddr,
     },
     /// Messages framed and deframed elsewhere (a serial link's threads),
-    /// as encoded bytes.
+    /// as encoded bytes, with news of the port failing and returning.
     Frames {
-        incoming: mpsc::Receiver<Vec<u8>>,
+        incoming: mpsc::Receiver<FramesIn>,
         outgoing: std::sync::mpsc::Sender<Vec<u8>>,
     },
     /// Several links (each `Udp` or `Frames`), in order of preference,
@@ -148,6 +152,18 @@ pub enum Io {
         /// Links whose receiving side has ended.
         closed: Vec<bool>,
     },
+}
+
+/// What a framed link's threads hand the loop.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FramesIn {
+    /// A received message's bytes.
+    Frame(Vec<u8>),
+    /// The port failed, or could not be opened: the sentence reporting the
+    /// outage (once per outage; the threads keep reopening it).
+    Down(String),
+    /// The port was opened again after an outage: the sentence saying so.
+    Up(String),
 }
 
 /// What paces the control periods.
@@ -163,6 +179,10 @@ pub enum Ticker {
 enum Incoming {
     /// A message, and the link it came on (0 for a single link).
     Bytes(Vec<u8>, usize),
+    /// A link's port failed (`Warn`) or returned (`Info`), and which link
+    /// (0 for a single link): the station is told in a notice, on whichever
+    /// link carries it.
+    News(mech_proto::Level, String, usize),
     Ignored,
     Closed,
 }
@@ -205,7 +225,9 @@ impl Io {
                 }
             },
             Io::Frames { incoming, .. } => match incoming.recv().await {
-                Some(bytes) => Incoming::Bytes(bytes, 0),
+                Some(FramesIn::Frame(bytes)) => Incoming::Bytes(bytes, 0),
+                Some(FramesIn::Down(text)) => Incoming::News(mech_proto::Level::Warn, text, 0),
+                Some(FramesIn::Up(text)) => Incoming::News(mech_proto::Level::Info, text, 0),
                 None => Incoming::Closed,
             },
             Io::Failover { .. } => Incoming::Closed,
@@ -265,6 +287,7 @@ async fn recv_any(links: &mut [Io], closed: &mut [bool]) -> Incoming {
         drop(waits);
         match got {
             Incoming::Bytes(b, _) => return Incoming::Bytes(b, i),
+            Incoming::News(level, text, _) => return Incoming::News(level, text, i),
             Incoming::Ignored => return Incoming::Ignored,
             Incoming::Closed => {
                 tracing::warn!(link = i, "a link closed; carrying on with the others");
@@ -336,19 +359,33 @@ pub async fn drive<V: Vehicle>(
                         }
                         vehicle.handle_bytes(&b, now)
                     }
+                    Incoming::News(level, text, link) => {
+                        // A link whose port failed is not heard from the
+                        // router any more: the notice saying so (and all
+                        // that follows) goes on the others at once.
+                        if let Io::Failover { choice, .. } = &mut io {
+                            if level == mech_proto::Level::Warn {
+                                choice.down(link);
+                            } else {
+                                choice.up(link);
+                            }
+                        }
+                        let code = mech_proto::NoticeCode::Text;
+                        vec![vehicle.agent_mut().notice(level, code, &text, now)]
+                    }
                     Incoming::Ignored => continue,
                     Incoming::Closed => break,
                 }
             }
         };
         let now = origin.elapsed();
-        for env in &out {
+        for env in out {
             send(&mut vehicle, &mut io, env, now, &mut buf).await;
         }
     }
     let now = origin.elapsed();
     let bye = vehicle.stop(now);
-    send(&mut vehicle, &mut io, &bye, now, &mut buf).await;
+    send(&mut vehicle, &mut io, bye, now, &mut buf).await;
     vehicle.counters()
 }
 
@@ -365,7 +402,8 @@ async fn probe<V: Vehicle>(vehicle: &mut V, io: &mut Io, now: Duration, buf: &mu
         return;
     };
     for i in choice.probes_due(now) {
-        let hb = vehicle.heartbeat(now);
+        let mut hb = vehicle.heartbeat(now);
+        vehicle.number(&mut hb);
         buf.clear();
         if vehicle.encode(&hb, i as u8, buf).is_ok() {
             links[i].send(buf).await;
@@ -373,31 +411,41 @@ async fn probe<V: Vehicle>(vehicle: &mut V, io: &mut Io, now: Duration, buf: &mu
     }
 }
 
-/// Encodes (and signs) one message and sends it to the router: on the one
-/// link, or with several on the link in use (every link when none is),
-/// each copy signed for its link.
+/// Numbers, encodes (and signs) one message and sends it to the router:
+/// on the one link, or with several on the link in use (every link when
+/// none is), each copy signed for its link, never on a link whose port is
+/// down. Telemetry goes only on links whose rate cap allows it now; a
+/// message no link carries is not numbered, so the router never counts it
+/// as lost.
 async fn send<V: Vehicle>(
     vehicle: &mut V,
     io: &mut Io,
-    env: &Envelope,
+    mut env: Envelope,
     now: Duration,
     buf: &mut Vec<u8>,
 ) {
     let Io::Failover { links, choice, .. } = io else {
+        vehicle.number(&mut env);
         buf.clear();
-        match vehicle.encode(env, 0, buf) {
+        match vehicle.encode(&env, 0, buf) {
             Ok(()) => io.send(buf).await,
             Err(e) => tracing::warn!(error = %e, "cannot encode"),
         }
         return;
     };
     let telemetry = matches!(env.body, mech_proto::Body::Telemetry(_));
-    for i in choice.targets(now) {
-        if telemetry && !choice.telemetry_allowed(i, now) {
-            continue;
-        }
+    let usable: Vec<usize> = choice.targets(now).filter(|&i| choice.usable(i)).collect();
+    let on: Vec<usize> = usable
+        .into_iter()
+        .filter(|&i| !telemetry || choice.telemetry_allowed(i, now))
+        .collect();
+    if on.is_empty() {
+        return;
+    }
+    vehicle.number(&mut env);
+    for i in on {
         buf.clear();
-        match vehicle.encode(env, i as u8, buf) {
+        match vehicle.encode(&env, i as u8, buf) {
             Ok(()) => links[i].send(buf).await,
             Err(e) => tracing::warn!(error = %e, "cannot encode"),
         }
@@ -582,5 +630,56 @@ mod tests {
         let bye = v.stop(ms(80));
         assert!(matches!(bye.body, Body::Bye(_)));
         assert_eq!(written.lock().unwrap().last().unwrap(), &vec![0.0, 0.0]);
+    }
+
+    /// A telemetry sample a link's rate cap skips takes no number, so the
+    /// router sees no gap: over a radio capped at 5 Hz, twenty samples a
+    /// second go out as five, numbered one after another.
+    #[tokio::test]
+    async fn telemetry_a_capped_link_skips_is_not_numbered() {
+        let router = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        router
+            .set_read_timeout(Some(Duration::from_secs(5)))
+            .unwrap();
+        let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let ms = Duration::from_millis;
+        let mut io = Io::Failover {
+            links: vec![Io::Udp {
+                socket,
+                router: router.local_addr().unwrap(),
+            }],
+            choice: LinkChoice::new(vec![Some(ms(200))], ms(600), ms(250)),
+            closed: vec![false],
+        };
+        let agent = Agent::new(
+            AgentSettings::new("r1"),
+            PlatformSpec::diff_drive().build(),
+            0,
+        );
+        let mut v = HardwareVehicle {
+            agent,
+            actuators: Box::new(Bench::default()),
+            positions: None,
+            encoders: None,
+        };
+        let mut buf = Vec::new();
+        for i in 0..=20u64 {
+            let body = Body::Telemetry(v.agent.telemetry(ms(50 * i)));
+            let env = Envelope::new(Header::default(), body);
+            send(&mut v, &mut io, env, ms(50 * i), &mut buf).await;
+        }
+        let bye = v.stop(ms(1_100));
+        send(&mut v, &mut io, bye, ms(1_100), &mut buf).await;
+        let mut seqs = Vec::new();
+        let mut datagram = [0u8; 2048];
+        loop {
+            let n = router.recv(&mut datagram).unwrap();
+            let env = mech_proto::decode(&datagram[..n]).unwrap();
+            seqs.push(env.header.seq);
+            if matches!(env.body, Body::Bye(_)) {
+                break;
+            }
+        }
+        assert_eq!(seqs, [1, 2, 3, 4, 5, 6, 7], "5 Hz of 20: no gaps");
     }
 }

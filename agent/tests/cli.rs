@@ -53,3 +53,30 @@ fn bad_config_exits_2_with_file_line_and_expectation() {
     let out = agent().output().unwrap();
     assert_eq!(out.status.code(), Some(2), "no config and no --sim");
 }
+
+#[test]
+fn the_autopilot_link_is_changed_from_the_command_line_and_checked() {
+    let px4 = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../config/agents/px4-quadcopter.toml");
+    let run = |config: &std::path::Path, link: &str| {
+        agent()
+            .arg("--config")
+            .arg(config)
+            .args(["--autopilot", link, "--check"])
+            .output()
+            .unwrap()
+    };
+    assert!(run(&px4, "udpin:0.0.0.0:14541").status.success());
+    let out = run(&px4, "com3");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--autopilot com3") && err.contains("udpin:"),
+        "{err}"
+    );
+    let kiwi =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/agents/sim-kiwi.toml");
+    let out = run(&kiwi, "udpin:0.0.0.0:14541");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no [autopilot] section"));
+}

@@ -5,7 +5,10 @@
 //!
 //! Decoders are push-based (feed them whatever `read` returned) and never
 //! allocate more than one maximum-size frame; [`SerialRead`] says what a
-//! serial port's `read` returned means for its reader.
+//! serial port's `read` returned means for its reader, and [`Reopen`] when
+//! a port that failed is opened again.
+
+use std::time::Duration;
 
 use crate::MAX_MESSAGE_LEN;
 use crate::envelope::{Envelope, decode, encode_into};
@@ -229,6 +232,87 @@ impl SerialRead {
     }
 }
 
+/// When a serial port that failed (a radio unplugged, its pseudo-terminal
+/// gone) is opened again, and which failures are news. The station's
+/// radios and the agent's serial links follow the same schedule: a try
+/// [`Reopen::FIRST`] after the failure, then twice as long each time up to
+/// [`Reopen::LONGEST`], so a device that comes back is in use again within
+/// about half a second while a missing one costs two `open` calls a
+/// second. An outage is reported once, when it begins, and its end once,
+/// when the port opens. Time is given, never read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Reopen {
+    /// The wait before the next try.
+    next: Duration,
+    /// When the port last opened, while it is open.
+    open_since: Option<Duration>,
+    /// Whether an outage has been reported and not yet ended.
+    down: bool,
+}
+
+/// What to do after a failure ([`Reopen::failed`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Retry {
+    /// How long to wait before opening the port again.
+    pub after: Duration,
+    /// Whether this failure begins an outage: report it (later failures of
+    /// the same outage are not news).
+    pub report: bool,
+}
+
+impl Default for Reopen {
+    fn default() -> Self {
+        Reopen::new()
+    }
+}
+
+impl Reopen {
+    /// The first wait after a failure.
+    pub const FIRST: Duration = Duration::from_millis(50);
+    /// The longest wait between two tries.
+    pub const LONGEST: Duration = Duration::from_millis(500);
+
+    pub fn new() -> Reopen {
+        Reopen {
+            next: Reopen::FIRST,
+            open_since: None,
+            down: false,
+        }
+    }
+
+    /// The port opened at `now`; returns whether this ends an outage
+    /// (report it).
+    pub fn opened(&mut self, now: Duration) -> bool {
+        self.open_since = Some(now);
+        std::mem::replace(&mut self.down, false)
+    }
+
+    /// Opening the port, or using it, failed at `now`. A port that had
+    /// worked for [`Reopen::LONGEST`] starts the schedule afresh; one that
+    /// fails again at once (a device that opens and drops) keeps backing
+    /// off.
+    pub fn failed(&mut self, now: Duration) -> Retry {
+        if self
+            .open_since
+            .take()
+            .is_some_and(|t| now.saturating_sub(t) >= Reopen::LONGEST)
+        {
+            self.next = Reopen::FIRST;
+        }
+        let after = self.next;
+        self.next = (self.next * 2).min(Reopen::LONGEST);
+        Retry {
+            after,
+            report: !std::mem::replace(&mut self.down, true),
+        }
+    }
+
+    /// Whether the port is in an outage (failed, not opened since).
+    pub fn is_down(&self) -> bool {
+        self.down
+    }
+}
+
 /// Undoes COBS and checks the CRC of one frame (without its delimiter).
 fn decode_serial_frame(encoded: &[u8]) -> Result<Vec<u8>, Error> {
     let raw = cobs_decode(encoded)?;
@@ -299,8 +383,9 @@ pub fn cobs_decode(encoded: &[u8]) -> Result<Vec<u8>, Error> {
 #[cfg(test)]
 mod tests {
     use std::io::{Error, ErrorKind};
+    use std::time::Duration;
 
-    use super::SerialRead;
+    use super::{Reopen, Retry, SerialRead};
 
     #[test]
     fn a_serial_read_is_bytes_idle_or_the_end_of_the_port() {
@@ -325,5 +410,30 @@ mod tests {
                 "{read:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_failed_port_is_tried_again_sooner_then_later_and_reported_once() {
+        let ms = Duration::from_millis;
+        let mut r = Reopen::new();
+        assert!(!r.opened(ms(0)), "the first open ends no outage");
+        let waits: Vec<Retry> = (1..=6).map(|i| r.failed(ms(100 * i))).collect();
+        let after: Vec<u64> = waits.iter().map(|w| w.after.as_millis() as u64).collect();
+        assert_eq!(
+            after,
+            [50, 100, 200, 400, 500, 500],
+            "doubling to the longest"
+        );
+        let reported: Vec<bool> = waits.iter().map(|w| w.report).collect();
+        assert_eq!(reported, [true, false, false, false, false, false]);
+        assert!(r.is_down());
+        assert!(r.opened(ms(2_000)), "the device is back: news");
+        assert!(!r.is_down());
+        // It fails at once again: the schedule goes on backing off.
+        let again = r.failed(ms(2_010));
+        assert_eq!((again.after, again.report), (ms(500), true));
+        // It then works for longer than the longest wait: afresh.
+        r.opened(ms(3_000));
+        assert_eq!(r.failed(ms(3_600)).after, Reopen::FIRST);
     }
 }

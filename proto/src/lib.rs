@@ -16,6 +16,7 @@
 //! The byte-level format is specified in `docs/protocol.md`.
 
 pub mod auth;
+mod autopilot;
 mod body;
 mod command;
 mod envelope;
@@ -27,6 +28,7 @@ mod safety;
 mod tagged;
 mod units;
 
+pub use autopilot::AutopilotNews;
 pub use body::Body;
 pub use body::{
     AutopilotAction, AutopilotRequest, Bye, Channel as ChannelInfo, Channels, ChannelsRequest,

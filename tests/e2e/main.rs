@@ -3,6 +3,7 @@
 mod autopilot;
 mod cli;
 mod cluster_script;
+mod examples;
 mod fleet_scale;
 mod hostile;
 mod octave;

@@ -5,6 +5,7 @@
 //! silent the station commands it over the radio, fast enough that its
 //! failsafe never trips, and back over UDP when UDP returns.
 
+use std::path::Path;
 use std::time::Duration;
 
 use mech_e2e::harness::agent::{self, Agent};
@@ -162,4 +163,149 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
         assert_eq!(c["failsafe_trips"], 1, "{name}: {c}\n{logs}");
         assert!(c["commands"].as_u64().unwrap_or(0) > 100, "{name}: {c}");
     }
+}
+
+/// What the station's log files (`$XDG_STATE_HOME/mech/mech-gcs.log.*`)
+/// hold so far.
+fn station_log_files(state: &std::path::Path) -> String {
+    std::fs::read_dir(state.join("mech"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("mech-gcs.log"))
+        .filter_map(|e| std::fs::read_to_string(e.path()).ok())
+        .collect()
+}
+
+/// The radio unplugged at both ends (both `socat` pairs killed with
+/// SIGKILL, their device names gone) and plugged back (new pairs under the
+/// same names): the station and the agent each report the outage once,
+/// the station shows the radio and the robot's radio link as down
+/// meanwhile, and the robot is back on both links within 2 s of the
+/// devices returning, with no process restarted.
+#[test]
+fn a_radio_unplugged_and_plugged_back_is_reopened_at_both_ends() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut air = PtyPair::new(dir.path(), "station");
+    let mut rb = PtyPair::new(dir.path(), "rb");
+    let hub = RadioHub::start(&air.b, &[&rb.b], 0.0, 1);
+    let (gcs, mut b) = station_and_robot(dir.path(), &air.a, &rb.a);
+    gcs.wait(Duration::from_secs(20), on_both_links)
+        .unwrap_or_else(|| panic!("rb never on both links: {:#?}", gcs.tail()));
+
+    // Unplugged at both ends.
+    let out = unix_us();
+    drop(hub);
+    air.unplug();
+    rb.unplug();
+    the_outage_is_shown(&gcs, dir.path(), out);
+
+    // Plugged back in.
+    let air = PtyPair::new(dir.path(), "station");
+    let rb_back = PtyPair::new(dir.path(), "rb");
+    let _hub = RadioHub::start(&air.b, &[&rb_back.b], 0.0, 2);
+    let back = unix_us();
+    let again = gcs
+        .wait(Duration::from_secs(20), |l| {
+            on_both_links(l) && l.at_us > back
+        })
+        .unwrap_or_else(|| panic!("rb never back on both links: {:#?}", gcs.tail()));
+    let took_ms = (again.at_us - back) / 1000;
+    println!("rb back on Wi-Fi and radio {took_ms} ms after the radio returned");
+    assert!(took_ms < 2_000, "{took_ms} ms: {:#?}", gcs.tail());
+    // The station's end may reopen before the robot's returns.
+    assert!(
+        gcs.wait(Duration::from_secs(20), radio_event(true, out))
+            .is_some(),
+        "the station said its radio reopened: {:#?}",
+        gcs.tail()
+    );
+    let lines = gcs.lines();
+    let failures = lines.iter().filter(|l| radio_event(false, 0)(l)).count();
+    assert_eq!(failures, 1, "one outage, reported once");
+
+    b.stop();
+    let log = b.log();
+    let said = |what: &str| log.lines().filter(|l| l.contains(what)).count();
+    assert_eq!(said("serial link failed"), 1, "once per outage:\n{log}");
+    assert_eq!(said("serial link reopened"), 1, "{log}");
+    assert_eq!(said("write error"), 0, "{log}");
+}
+
+/// A station with its radio on `station_port`, and robot `rb` on Wi-Fi and
+/// on a radio at `robot_port`, once it is connected.
+fn station_and_robot(dir: &Path, station_port: &Path, robot_port: &Path) -> (Station, Agent) {
+    let port = station::free_port();
+    let radio = format!(
+        "[[router.serial]]\nport = \"{}\"\nbaud = 115200\n",
+        station_port.display()
+    );
+    let config = station::config(dir, port, &radio);
+    let gcs = Station::start(
+        &config,
+        "wait connected rb 20s\nlog connected\nsleep 120s\n",
+        dir,
+    );
+    let links = format!(
+        "[[links]]\nkind = \"udp\"\nrouter = \"127.0.0.1:{port}\"\n[[links]]\n\
+         kind = \"serial\"\nport = \"{}\"\nbaud = 115200\ntelemetry_rate_hz = 10",
+        robot_port.display()
+    );
+    let b = Agent::start("rb", &agent::config(dir, "rb", 1.0, &links, FAILSAFE), None);
+    gcs.wait_log("connected", Duration::from_secs(40));
+    (gcs, b)
+}
+
+/// The station says rb is heard on both links.
+fn on_both_links(l: &Line) -> bool {
+    l.is_event("links") && l.robot() == "rb" && l.json["udp"] == true && l.json["radio"].is_string()
+}
+
+/// A `radio` event saying the radio is `up` (or not), after `after` (µs).
+fn radio_event(up: bool, after: u64) -> impl Fn(&Line) -> bool {
+    move |l: &Line| l.is_event("radio") && l.json["up"] == up && l.at_us > after
+}
+
+/// After the radio was unplugged at `out` (µs): the station reports its
+/// radio failed, shows rb's radio link down with Wi-Fi live, and has rb's
+/// own outage notice (sent over Wi-Fi) in its log file.
+fn the_outage_is_shown(gcs: &Station, dir: &Path, out: u64) {
+    let failed = gcs
+        .wait(Duration::from_secs(20), radio_event(false, out))
+        .unwrap_or_else(|| panic!("no radio failure reported: {:#?}", gcs.tail()));
+    assert!(
+        failed.json["port"]
+            .as_str()
+            .is_some_and(|p| p.ends_with("station-a")),
+        "{}",
+        failed.json
+    );
+    let radio_down = gcs.wait(Duration::from_secs(20), |l| {
+        l.is_event("links")
+            && l.robot() == "rb"
+            && l.at_us > out
+            && l.json["udp"] == true
+            && l.json["radio"].is_null()
+            && l.json["down"]
+                .as_array()
+                .is_some_and(|d| d.contains(&"radio".into()))
+    });
+    assert!(
+        radio_down.is_some(),
+        "rb's radio link shown as down, Wi-Fi live: {:#?}",
+        gcs.tail()
+    );
+    mech_e2e::harness::poll(Duration::from_secs(20), || {
+        station_log_files(dir)
+            .lines()
+            .any(|l| l.contains("notice: serial link") && l.contains("down"))
+            .then_some(())
+    })
+    .unwrap_or_else(|| {
+        panic!(
+            "rb's outage notice not in the station's log file:\n{}\n{:#?}",
+            station_log_files(dir),
+            gcs.tail()
+        )
+    });
 }

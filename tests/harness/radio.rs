@@ -24,7 +24,7 @@ pub struct PtyPair {
     /// The two ends: `a` for the station or robot, `b` for the hub.
     pub a: PathBuf,
     pub b: PathBuf,
-    _socat: Killed,
+    socat: Killed,
 }
 
 impl PtyPair {
@@ -44,11 +44,17 @@ impl PtyPair {
             (a.exists() && b.exists()).then_some(())
         })
         .expect("socat made the pseudo-terminal pair");
-        PtyPair {
-            a,
-            b,
-            _socat: socat,
-        }
+        PtyPair { a, b, socat }
+    }
+
+    /// Unplugs the pair: kills `socat` (SIGKILL, so nothing is flushed or
+    /// closed in order) and removes both names, as a USB radio's device
+    /// node goes when it is pulled out. A new [`PtyPair::new`] with the
+    /// same directory and name plugs it back in.
+    pub fn unplug(&mut self) {
+        self.socat.kill();
+        let _ = std::fs::remove_file(&self.a);
+        let _ = std::fs::remove_file(&self.b);
     }
 }
 

@@ -29,6 +29,19 @@ use crate::platform::Platform;
 use crate::safety::Vec2;
 use crate::wheels::Wheels;
 
+/// What the failsafe lets the robot do this period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Permit {
+    /// Obey the controller.
+    Drive,
+    /// Outputs zero, the controller keeping its mode: an onboard mission
+    /// waiting for a link, which goes on when the router is heard again.
+    Wait,
+    /// Outputs zero and the controller idle: the next accepted command (or
+    /// a mission resumed on registering again) starts motion again.
+    Stop,
+}
+
 /// The failsafe's verdicts and the outputs of the last period.
 #[derive(Debug)]
 pub(crate) struct Actuation {
@@ -69,29 +82,35 @@ impl Actuation {
         verdict.drive
     }
 
-    /// This period's outputs: held at zero when the robot may not `drive`
-    /// (the controller idles: the next accepted command, or a mission
-    /// resumed on re-registering, starts motion again) or when its mode
-    /// steers by a position it does not have; otherwise what the
-    /// controller demands, following `mission` in waypoint mode, through
-    /// the platform, limited by the fleet safety layer, and through the
-    /// wheel speed loops. See the module docs: every obeyed command passes
-    /// here.
+    /// This period's outputs: held at zero unless the failsafe's `permit`
+    /// is to drive (see [`Permit`] for whether the controller idles) or
+    /// when the mode steers by a position the robot does not have;
+    /// otherwise what the controller demands, following `mission` in
+    /// waypoint mode, through the platform, limited by the fleet safety
+    /// layer, and through the wheel speed loops. See the module docs:
+    /// every obeyed command passes here.
     pub(crate) fn obey(
         &mut self,
-        drive: bool,
+        permit: Permit,
         controller: &mut Controller,
         mission: Option<&mut MissionRun>,
         sensors: &mut Sensors,
         safety: &mut Safety,
         step: &mut Step,
     ) -> &[f64] {
-        if !drive {
-            if !matches!(controller.mode(), Mode::Idle) {
-                controller.idle();
+        match permit {
+            Permit::Drive => {}
+            Permit::Wait => {
+                safety.idle();
+                return self.hold(controller.platform(), sensors);
             }
-            safety.idle();
-            return self.hold(controller.platform(), sensors);
+            Permit::Stop => {
+                if !matches!(controller.mode(), Mode::Idle) {
+                    controller.idle();
+                }
+                safety.idle();
+                return self.hold(controller.platform(), sensors);
+            }
         }
         let estimate = sensors.estimate().map(|e| e.pose);
         let pose = match estimate {

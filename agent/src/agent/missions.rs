@@ -238,6 +238,91 @@ mod tests {
         }
     }
 
+    /// The radio example's failsafe: a 2 s router timeout for a radio's
+    /// bursts, and the 0.5 s channel timeout.
+    fn mission_robot(continues: bool) -> Agent {
+        let mut settings = AgentSettings::new("r1");
+        settings.failsafe.router_timeout = ms(2000);
+        settings.failsafe.mission_continues_on_link_loss = continues;
+        let mut a = Agent::new(settings, PlatformSpec::diff_drive().build(), 0);
+        a.observe_position(PositionSample {
+            pose: Pose::default(),
+            stamp: ms(0),
+            quality: 1.0,
+            has_heading: true,
+        });
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: "wp/gcs".into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        a.handle(msg("", w), ms(0));
+        a.handle(msg("wp/gcs", Body::Mission(mission_to(1, 50.0))), ms(0));
+        a
+    }
+
+    /// The first period from `from` (in steps of [`PERIOD`], until
+    /// `until`) whose outputs are zero.
+    fn first_still(a: &mut Agent, from: u64, until: u64) -> Option<Duration> {
+        (from..until)
+            .step_by(PERIOD.as_millis() as usize)
+            .map(ms)
+            .find(|&t| !moving(&a.tick(t).outputs))
+    }
+
+    #[test]
+    fn a_mission_stops_within_the_channel_timeout_of_every_link_going_silent() {
+        let mut a = mission_robot(false);
+        router_heartbeat(&mut a, ms(100));
+        assert!(moving(&a.tick(ms(120)).outputs), "flying its mission");
+        // Nothing from the router after 100 ms: stopped within the channel
+        // timeout and one period, not after the 2 s router timeout.
+        let stopped = first_still(&mut a, 140, 2_000).expect("it stops");
+        assert!(stopped <= ms(100 + 500) + PERIOD, "stopped at {stopped:?}");
+        assert_eq!(a.failsafe_state(stopped), FailsafeState::RouterLost);
+        assert!(!moving(&a.tick(ms(900)).outputs), "and stays stopped");
+        // The link returns before the router timeout: the mission goes on
+        // where it was, without being sent again.
+        router_heartbeat(&mut a, ms(1_000));
+        assert!(moving(&a.tick(ms(1_020)).outputs), "resumed");
+        assert_eq!(a.mission("wp/gcs").map(|m| m.next), Some(0));
+        // A longer outage: stopped as fast, registered again once the router
+        // answers, and the mission resumed.
+        let stopped = first_still(&mut a, 1_040, 4_000).expect("it stops");
+        assert!(
+            stopped <= ms(1_000 + 500) + PERIOD,
+            "stopped at {stopped:?}"
+        );
+        let start = stopped.as_millis() as u64 + 20;
+        let moved = (start..3_100)
+            .step_by(20)
+            .any(|t| moving(&a.tick(ms(t)).outputs));
+        assert!(!moved, "still through the router timeout");
+        assert!(!a.registered(), "the router timeout passed");
+        let w = Body::Welcome(Welcome {
+            robot_id: 1,
+            route: Route {
+                robot: "r1".into(),
+                channel: "wp/gcs".into(),
+                epoch: 1,
+            },
+            router_version: "t".into(),
+        });
+        a.handle(msg("", w), ms(4_000));
+        assert!(moving(&a.tick(ms(4_020)).outputs), "resumed on registering");
+    }
+
+    #[test]
+    fn a_mission_configured_to_continue_flies_on_without_links() {
+        let mut a = mission_robot(true);
+        router_heartbeat(&mut a, ms(100));
+        assert_eq!(first_still(&mut a, 120, 5_000), None, "never stopped");
+    }
+
     #[test]
     fn a_mission_without_a_channel_is_refused_by_an_unrouted_robot() {
         let mut a = routed("");

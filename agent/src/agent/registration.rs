@@ -52,6 +52,12 @@ impl Registration {
         self.router.silent(now)
     }
 
+    /// Nothing heard from the router for longer than `timeout` (shorter
+    /// than its router timeout: the silence that stops an onboard mission).
+    pub(crate) fn router_silent_for(&self, timeout: Duration, now: Duration) -> bool {
+        self.router.silent_for(timeout, now)
+    }
+
     /// A message arrived (from the router, as every message does).
     pub(crate) fn router_heard(&mut self, now: Duration) {
         self.router.heard(now);

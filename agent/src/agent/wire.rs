@@ -1,5 +1,6 @@
 //! What the robot sends and receives as bytes: the sequence numbers and
-//! stamps of its messages, signing them when it has a key, and the checks
+//! stamps of its messages (numbered as they are sent, so a message a link
+//! skips leaves no gap), signing them when it has a key, and the checks
 //! received bytes pass before any other part of the core sees them
 //! (addressed to this robot, decodable, signed by the router for it).
 
@@ -16,6 +17,7 @@ pub(crate) struct Wire {
     /// The sender of everything this robot sends, and the destination it
     /// accepts.
     name: String,
+    /// The number of the last message sent.
     seq: u32,
     /// Unix time (µs) at agent time zero, for message stamps.
     stamp_origin_us: u64,
@@ -67,12 +69,12 @@ impl Wire {
         self.stamp_origin_us + now.as_micros() as u64
     }
 
-    /// A message from this robot, numbered and stamped.
+    /// A message from this robot, stamped; it is numbered when sent
+    /// ([`Wire::number`]).
     pub(crate) fn envelope(&mut self, destination: &str, body: Body, now: Duration) -> Envelope {
-        self.seq = self.seq.wrapping_add(1);
         Envelope::new(
             Header {
-                seq: self.seq,
+                seq: 0,
                 stamp_us: self.stamp_us(now),
                 sender: self.name.clone(),
                 destination: destination.to_string(),
@@ -97,6 +99,17 @@ impl Wire {
             text: truncate(text),
         });
         self.envelope(destination, body, now)
+    }
+
+    /// Numbers a message that is about to be sent: +1 for each message
+    /// that goes out, on one link or several (the copies share the
+    /// number), and none for one that is not sent at all (a telemetry
+    /// sample over a radio's rate cap). The router reads a gap in the
+    /// numbers as messages lost on the way (`docs/protocol.md`, *Link
+    /// quality*), so only a message that left may take a number.
+    pub(crate) fn number(&mut self, env: &mut Envelope) {
+        self.seq = self.seq.wrapping_add(1);
+        env.header.seq = self.seq;
     }
 
     /// Encodes a message to send on link number `link`, signed when the

@@ -23,7 +23,7 @@ use mavlink::dialects::common::{
     MavResult, MavSeverity, MavState, MavType, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use mech_proto::{AutopilotAction, Level, Pose, Telemetry, Twist, Velocity};
+use mech_proto::{AutopilotAction, AutopilotNews, Level, Pose, Telemetry, Twist, Velocity};
 
 use super::config::{AutopilotConfig, Flavour};
 use super::frames::{Ned, pose_from_ned, twist_to_ned, velocity_from_ned};
@@ -238,19 +238,20 @@ impl Session {
                     ),
                 };
                 self.target = Some(t);
-                out.push(Report::info(format!(
-                    "autopilot found: {} {:?}, system {} component {}",
+                let which = format!(
+                    "{} {:?}, system {} component {}",
                     flavour_name(flavour),
                     hb.mavtype,
                     t.system,
                     t.component
-                )));
+                );
+                out.push(Report::info(AutopilotNews::Found(which).text()));
                 t
             }
         };
         if self.lost {
             self.lost = false;
-            out.push(Report::info("autopilot heard again".to_string()));
+            out.push(Report::info(AutopilotNews::HeardAgain.text()));
         }
         self.last_heartbeat = Some(now);
         let armed = hb
@@ -258,17 +259,28 @@ impl Session {
             .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
         if self.armed != Some(armed) {
             if self.armed.is_some() || armed {
-                out.push(Report::info(format!(
-                    "autopilot {}",
-                    if armed { "armed" } else { "disarmed" }
-                )));
+                out.push(Report::info(AutopilotNews::Armed(armed).text()));
             }
             self.armed = Some(armed);
         }
         let mode = mode_name(target, hb.custom_mode);
         if self.mode.as_deref() != Some(mode.as_str()) {
-            out.push(Report::info(format!("autopilot mode {mode}")));
+            out.push(Report::info(AutopilotNews::Mode(mode.clone()).text()));
             self.mode = Some(mode);
+        }
+        out
+    }
+
+    /// Whether the vehicle is armed and its flight mode, as reports, once
+    /// the autopilot has said: what a station that did not hear the
+    /// changes (it started later, or the robot registered again) is told.
+    pub fn state_reports(&self) -> Vec<Report> {
+        let mut out = Vec::new();
+        if let Some(armed) = self.armed {
+            out.push(Report::info(AutopilotNews::Armed(armed).text()));
+        }
+        if let Some(mode) = &self.mode {
+            out.push(Report::info(AutopilotNews::Mode(mode.clone()).text()));
         }
         out
     }
@@ -277,12 +289,10 @@ impl Session {
     pub fn check_link(&mut self, now: Duration) -> Option<Report> {
         if self.last_heartbeat.is_some() && !self.connected(now) && !self.lost {
             self.lost = true;
+            let why = format!("no heartbeat for {:.1} s", self.timeout.as_secs_f64());
             return Some(Report {
                 level: Level::Error,
-                text: format!(
-                    "autopilot lost: no heartbeat for {:.1} s",
-                    self.timeout.as_secs_f64()
-                ),
+                text: AutopilotNews::Lost(why).text(),
             });
         }
         None
@@ -416,13 +426,21 @@ impl Session {
                 if target.rover {
                     return Err("a ground vehicle does not take off".to_string());
                 }
-                // ArduPilot: metres above home; PX4: AMSL (NaN: its default
-                // takeoff altitude, MIS_TAKEOFF_ALT).
-                let alt = match target.flavour {
-                    Flavour::Px4 => self
-                        .vehicle
-                        .home_amsl
-                        .map_or(nan, |h| (h + altitude) as f32),
+                // ArduPilot: metres above home; PX4: above mean sea level,
+                // from home's altitude. Without it PX4 would be sent NaN
+                // (its own MIS_TAKEOFF_ALT), ignoring the operator's
+                // altitude unseen: refused instead, saying why.
+                let alt = match (target.flavour, self.vehicle.home_amsl) {
+                    (Flavour::Px4, Some(home)) => (home + altitude) as f32,
+                    (Flavour::Px4, None) => {
+                        return Err(format!(
+                            "PX4 takes off to an altitude above sea level and its home \
+                             altitude is not known yet (no GLOBAL_POSITION_INT heard: no \
+                             global position fix?), so {altitude} m above home cannot be \
+                             given; wait for a position fix, or take off from PX4's own \
+                             controls"
+                        ));
+                    }
                     _ => altitude as f32,
                 };
                 let (lat, lon) = match target.flavour {
@@ -546,8 +564,8 @@ fn mode_name(target: Target, custom_mode: u32) -> String {
 mod tests {
     use super::*;
     use mavlink::dialects::common::{
-        ATTITUDE_DATA, COMMAND_ACK_DATA, LOCAL_POSITION_NED_DATA, MavSysStatusSensor,
-        SYS_STATUS_DATA,
+        ATTITUDE_DATA, COMMAND_ACK_DATA, GLOBAL_POSITION_INT_DATA, LOCAL_POSITION_NED_DATA,
+        MavSysStatusSensor, SYS_STATUS_DATA,
     };
 
     fn config() -> AutopilotConfig {
@@ -806,5 +824,41 @@ mod tests {
             (takeoff.command, takeoff.param7),
             (MavCmd::MAV_CMD_NAV_TAKEOFF, 2.5)
         );
+    }
+
+    #[test]
+    fn a_px4_takeoff_without_home_altitude_is_refused_saying_why() {
+        let mut s = Session::new(&config());
+        s.receive(&from(1, 1), &px4(false, px4::POSCTL, 0), S);
+        let why = s.request(AutopilotAction::Takeoff, 2.0).unwrap_err();
+        assert!(why.contains("GLOBAL_POSITION_INT"), "{why}");
+        assert!(why.contains("2 m above home"), "{why}");
+        // Home at 488 m above sea level (and the vehicle 1.5 m above it).
+        let global = MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+            time_boot_ms: 1,
+            lat: 473_977_420,
+            lon: 85_455_940,
+            alt: 489_500,
+            relative_alt: 1_500,
+            vx: 0,
+            vy: 0,
+            vz: 0,
+            hdg: 0,
+        });
+        s.receive(&from(1, 1), &global, S);
+        let MavMessage::COMMAND_LONG(c) = s.request(AutopilotAction::Takeoff, 2.0).unwrap() else {
+            panic!("a command");
+        };
+        assert_eq!(c.command, MavCmd::MAV_CMD_NAV_TAKEOFF);
+        assert!((c.param7 - 490.0).abs() < 1e-3, "home + 2 m: {}", c.param7);
+    }
+
+    #[test]
+    fn the_state_is_said_again_on_request_once_known() {
+        let mut s = Session::new(&config());
+        assert!(s.state_reports().is_empty(), "nothing heard yet");
+        s.receive(&from(1, 1), &px4(true, px4::OFFBOARD, 0), S);
+        let texts: Vec<String> = s.state_reports().into_iter().map(|r| r.text).collect();
+        assert_eq!(texts, ["autopilot armed", "autopilot mode OFFBOARD"]);
     }
 }

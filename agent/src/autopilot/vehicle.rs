@@ -38,6 +38,11 @@ pub struct AutopilotVehicle<L> {
     pub session: Session,
     pub link: L,
     next_heartbeat: Duration,
+    /// Whether the agent was registered at the last period: on each
+    /// registration the station is told again whether the vehicle is armed
+    /// and its mode (it may have started after they changed, or missed
+    /// those notices).
+    registered: bool,
 }
 
 impl<L: MavlinkPort> AutopilotVehicle<L> {
@@ -47,6 +52,7 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
             session,
             link,
             next_heartbeat: Duration::ZERO,
+            registered: false,
         }
     }
 
@@ -156,6 +162,13 @@ impl<L: MavlinkPort> Vehicle for AutopilotVehicle<L> {
         self.take_in(now, &mut out);
         self.carry_out_requests(now, &mut out);
         let tick = self.agent.tick(now);
+        let registered = self.agent.registered();
+        if registered && !std::mem::replace(&mut self.registered, registered) {
+            for r in self.session.state_reports() {
+                self.report(r, now, &mut out);
+            }
+        }
+        self.registered = registered;
         let twist = self.agent.platform().motion(&tick.outputs);
         let header = self.session.header();
         if let Some(setpoint) = self.session.setpoint(&twist, now) {
@@ -316,6 +329,55 @@ mod tests {
     }
 
     const MS: Duration = Duration::from_millis(1);
+
+    #[test]
+    fn each_registration_tells_the_station_whether_armed_and_the_mode() {
+        let notices = |out: &[Envelope]| -> Vec<String> {
+            out.iter()
+                .filter_map(|e| match &e.body {
+                    Body::Notice(n) => Some(n.text.clone()),
+                    _ => None,
+                })
+                .collect()
+        };
+        let mut v = vehicle();
+        px4(&mut v, true);
+        // Heard before registering: said, but to a router that may not
+        // know the robot yet.
+        let before = notices(&v.tick(Duration::ZERO));
+        assert!(
+            before.contains(&"autopilot armed".to_string()),
+            "{before:?}"
+        );
+        let welcome = || {
+            let route = Route {
+                robot: "drone".into(),
+                channel: String::new(),
+                epoch: 1,
+            };
+            Body::Welcome(Welcome {
+                robot_id: 1,
+                route,
+                router_version: "t".into(),
+            })
+        };
+        v.handle(msg("", welcome()), 10 * MS);
+        let said = notices(&v.tick(20 * MS));
+        assert_eq!(said, ["autopilot armed", "autopilot mode OFFBOARD"]);
+        assert!(
+            notices(&v.tick(40 * MS)).is_empty(),
+            "once per registration"
+        );
+        // The router is lost and found again: said again.
+        v.tick(3_000 * MS);
+        assert!(!v.agent.registered());
+        v.handle(msg("", welcome()), 3_010 * MS);
+        let again = notices(&v.tick(3_020 * MS));
+        assert!(
+            again.contains(&"autopilot mode OFFBOARD".to_string()),
+            "{again:?}"
+        );
+    }
 
     #[test]
     fn a_routed_twist_flies_and_every_failsafe_holds() {

@@ -75,8 +75,9 @@ pub fn event_json(s: &Stamped) -> Value {
         Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
         Event::Links { robot, links } => json!({
             "robot": robot, "udp": links.udp, "radio": links.radio, "active": links.active,
-            "radio_budget_hz": links.radio_budget_hz,
+            "radio_budget_hz": links.radio_budget_hz, "down": links.down,
         }),
+        Event::Radio { port, up, reason } => json!({"port": port, "up": up, "reason": reason}),
         Event::Telemetry {
             robot,
             telemetry: t,

@@ -67,6 +67,10 @@ pub struct RobotLinks {
     /// Telemetry messages per second this robot may send over its radio:
     /// its share of the radio's bandwidth (`None` without a radio).
     pub radio_budget_hz: Option<f64>,
+    /// The links the robot was heard on once but not within the link
+    /// timeout: `"wifi"`, `"radio"` (a radio unplugged at either end, Wi-Fi
+    /// out of range). Absent from a recording that predates it: none.
+    pub down: Vec<String>,
 }
 
 /// [`RobotLinks`] as a recording holds it (the active link's name owned).
@@ -76,6 +80,8 @@ struct RecordedLinks {
     radio: Option<String>,
     active: String,
     radio_budget_hz: Option<f64>,
+    #[serde(default)]
+    down: Vec<String>,
 }
 
 impl<'de> Deserialize<'de> for RobotLinks {
@@ -90,21 +96,29 @@ impl<'de> Deserialize<'de> for RobotLinks {
                 .find(|l| *l == r.active)
                 .unwrap_or(""),
             radio_budget_hz: r.radio_budget_hz,
+            down: r.down,
         })
     }
 }
 
 impl RobotLinks {
-    /// How a card or a status line names the live links: `wifi+radio`,
-    /// `radio`, `wifi`, or `none`; the active one is starred when both live.
+    /// How a card or a status line names the links: the live ones
+    /// (`wifi+radio`, `radio`, `wifi`, or `none`; the active one starred
+    /// when both live), then each link that went silent (`wifi, radio
+    /// down`, `radio, wifi down`, `wifi down, radio down`).
     pub fn label(&self) -> String {
-        match (self.udp, self.radio.is_some()) {
-            (true, true) if self.active == "radio" => "wifi+radio*".into(),
-            (true, true) => "wifi*+radio".into(),
-            (true, false) => "wifi".into(),
-            (false, true) => "radio".into(),
-            (false, false) => "none".into(),
+        let live = match (self.udp, self.radio.is_some()) {
+            (true, true) if self.active == "radio" => "wifi+radio*",
+            (true, true) => "wifi*+radio",
+            (true, false) => "wifi",
+            (false, true) => "radio",
+            (false, false) => "none",
+        };
+        let mut parts: Vec<String> = self.down.iter().map(|l| format!("{l} down")).collect();
+        if live != "none" || parts.is_empty() {
+            parts.insert(0, live.to_string());
         }
+        parts.join(", ")
     }
 }
 
@@ -135,6 +149,14 @@ pub enum Event {
     },
     /// A robot's live links changed (or its radio budget did).
     Links { robot: String, links: RobotLinks },
+    /// One of the station's radios failed (`up` false, `reason` says why;
+    /// the router keeps opening it again) or was opened again (`up` true).
+    /// Each outage is reported once when it begins and once when it ends.
+    Radio {
+        port: String,
+        up: bool,
+        reason: String,
+    },
     /// A robot's link state changed.
     Link { robot: String, state: LinkState },
     /// A robot sent telemetry.
@@ -312,6 +334,7 @@ impl Event {
             Event::Registered { .. } => "registered",
             Event::Link { .. } => "link",
             Event::Links { .. } => "links",
+            Event::Radio { .. } => "radio",
             Event::Telemetry { .. } => "telemetry",
             Event::LinkQuality { .. } => "link_quality",
             Event::RouteChanged { .. } => "route_changed",

@@ -17,12 +17,13 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
+use mech_proto::{FailsafeState, Health, Hello, Notice, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
 pub use remote::remote_name;
 pub use robot::{
-    MissionDelivery, PathPoint, Registration, Robot, RouteState, SentMission, WaypointList,
+    AutopilotState, MissionDelivery, PathPoint, Registration, Robot, RouteState, SentMission,
+    WaypointList,
 };
 
 use crate::arena::ArenaShape;
@@ -190,12 +191,9 @@ impl Fleet {
             } => self.registered(hello, *id, addr, *known),
             Event::Link { robot, state } => self.link(robot, *state),
             Event::Links { robot, links } => self.links(robot, links),
+            Event::Radio { port, up, reason } => self.radio(port, *up, reason),
             Event::Telemetry { robot, telemetry } => self.telemetry(robot, telemetry, at),
-            Event::LinkQuality { robot, quality } => {
-                if let Some(r) = self.robots.get_mut(robot) {
-                    r.quality = *quality;
-                }
-            }
+            Event::LinkQuality { robot, quality } => self.link_quality(robot, quality),
             Event::RouteChanged {
                 robot,
                 channel,
@@ -475,10 +473,8 @@ impl Fleet {
     }
 
     fn notice(&mut self, from: &str, notice: &Notice) {
-        if notice.code == NoticeCode::DriverFault {
-            if let Some(r) = self.robots.get_mut(from) {
-                r.fault = Some(notice.text.clone());
-            }
+        if let Some(r) = self.robots.get_mut(from) {
+            r.heard_notice(notice);
         }
         let severity = match notice.level {
             mech_proto::Level::Debug => Severity::Debug,
@@ -487,6 +483,29 @@ impl Fleet {
             mech_proto::Level::Error => Severity::Error,
         };
         self.log(severity, format!("{from}: {}", notice.text));
+    }
+}
+
+/// A robot's link quality and the station's radios, as the router reports
+/// them.
+impl Fleet {
+    fn link_quality(&mut self, robot: &str, quality: &crate::counters::LinkQuality) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.quality = *quality;
+        }
+    }
+
+    /// One of the station's radios failed or came back: said once each
+    /// way (the router keeps opening a failed one again).
+    fn radio(&mut self, port: &str, up: bool, reason: &str) {
+        let (severity, text) = match up {
+            true => (Severity::Info, format!("radio {port} reopened")),
+            false => (
+                Severity::Error,
+                format!("radio {port} failed: {reason}; reopening it until it returns"),
+            ),
+        };
+        self.log(severity, text);
     }
 }
 
@@ -546,7 +565,8 @@ fn thousands(n: u64) -> String {
 mod tests {
     use super::*;
     use mech_proto::{
-        Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
+        Computation, ControlMode, FailsafeState, Health, MissionProgress, NoticeCode, Pose,
+        Velocity,
     };
 
     fn at(ms: u64, event: Event) -> Stamped {
@@ -600,6 +620,105 @@ mod tests {
             velocity_source: mech_proto::VelocitySource::Commanded,
             safety: None,
         }
+    }
+
+    #[test]
+    fn an_autopilots_state_is_kept_from_the_robots_notices() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("px4_1")));
+        assert_eq!(f.robot("px4_1").unwrap().autopilot, None);
+        let said = |ms: u64, text: &str| {
+            at(
+                ms,
+                Event::Notice {
+                    from: "px4_1".into(),
+                    notice: Notice {
+                        level: mech_proto::Level::Info,
+                        code: NoticeCode::Text,
+                        text: text.into(),
+                    },
+                },
+            )
+        };
+        f.apply(&said(
+            1,
+            "autopilot found: PX4 MAV_TYPE_QUADROTOR, system 1 component 1",
+        ));
+        f.apply(&said(2, "autopilot mode POSCTL"));
+        f.apply(&said(3, "arm sent to the autopilot"));
+        f.apply(&said(4, "autopilot armed"));
+        f.apply(&said(5, "autopilot mode OFFBOARD"));
+        let ap = f.robot("px4_1").unwrap().autopilot.clone().unwrap();
+        assert_eq!(ap.label(), "armed OFFBOARD");
+        f.apply(&said(6, "autopilot lost: no heartbeat for 2.0 s"));
+        let label = |f: &Fleet| f.robot("px4_1").unwrap().autopilot.clone().unwrap().label();
+        assert_eq!(label(&f), "autopilot lost");
+        f.apply(&said(7, "autopilot heard again"));
+        f.apply(&said(8, "autopilot disarmed"));
+        assert_eq!(label(&f), "disarmed OFFBOARD");
+        assert!(
+            f.log.iter().any(|l| l.text == "px4_1: autopilot armed"),
+            "and every notice is logged"
+        );
+    }
+
+    #[test]
+    fn a_station_radio_failing_and_reopened_is_logged_once_each_way() {
+        let mut f = Fleet::new(FleetConfig::default());
+        let radio = |ms: u64, up: bool, reason: &str| {
+            at(
+                ms,
+                Event::Radio {
+                    port: "/dev/ttyUSB0".into(),
+                    up,
+                    reason: reason.into(),
+                },
+            )
+        };
+        f.apply(&radio(1, false, "Broken pipe"));
+        f.apply(&radio(2, true, ""));
+        let lines: Vec<(Severity, &str)> = f
+            .log
+            .iter()
+            .map(|l| (l.severity, l.text.as_str()))
+            .collect();
+        assert_eq!(
+            lines,
+            [
+                (
+                    Severity::Error,
+                    "radio /dev/ttyUSB0 failed: Broken pipe; reopening it until it returns"
+                ),
+                (Severity::Info, "radio /dev/ttyUSB0 reopened"),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_robot_not_heard_has_its_telemetry_aged() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        f.apply(&at(
+            1_000,
+            Event::Telemetry {
+                robot: "robot_1".into(),
+                telemetry: telemetry(1.0, None),
+            },
+        ));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(r.stale_for(Duration::from_secs(5)), None, "heard: live");
+        f.apply(&at(
+            2_000,
+            Event::Link {
+                robot: "robot_1".into(),
+                state: LinkState::Lost,
+            },
+        ));
+        let r = f.robot("robot_1").unwrap();
+        assert_eq!(
+            r.stale_for(Duration::from_millis(4_200)),
+            Some(Duration::from_millis(3_200))
+        );
     }
 
     #[test]
@@ -878,6 +997,7 @@ mod tests {
             radio: Some("/dev/ttyUSB0".into()),
             active: "radio",
             radio_budget_hz: Some(14.0),
+            down: Vec::new(),
         };
         f.apply(&at(
             1,

@@ -208,6 +208,12 @@ impl Shared {
         self.net.flush_now(bytes, &mut fx.out);
     }
 
+    /// Radio `port` failed (`error`: why; reported once per outage) or was
+    /// opened again (`None`), from its reader thread.
+    fn radio_changed(&self, port: u16, error: Option<String>) {
+        self.decide_now(Peer::Local, |t, cx| t.radio_changed(port, error, cx));
+    }
+
     /// Counts a frame from `from` that failed its checksum or framing.
     fn count_bad(&self, from: Peer, error: String) {
         self.decide_now(from, |t, cx| t.count_bad(error, cx));

@@ -236,6 +236,8 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             trail: recent_path(r),
             quality: r.quality,
             remote: r.remote.clone(),
+            stale_for: r.stale_for(fleet.now).map(|age| age.as_secs_f64()),
+            autopilot: r.autopilot.clone(),
             safety: safety_view(r),
         })
         .collect();

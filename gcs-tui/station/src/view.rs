@@ -23,6 +23,8 @@ pub use mech_core::LinkQuality;
 /// type: the UI copies it, never derives it).
 pub use mech_core::LinkState;
 pub use mech_core::auth::Security;
+/// A robot's autopilot as its notices told the station (the core's type).
+pub use mech_core::fleet::AutopilotState;
 
 /// How long a robot's path stays on the map.
 pub const TRAIL_SECONDS: f64 = 10.0;
@@ -83,6 +85,17 @@ pub struct RobotView {
     /// protocol from a station that predates it.
     #[serde(default)]
     pub remote: Option<String>,
+    /// While the router no longer hears the robot (link stale or lost):
+    /// seconds since its last telemetry, so pose, speed, mode and failsafe
+    /// are shown as what it last said, not as live. `None` while it is
+    /// heard (and from a station that predates it).
+    #[serde(default)]
+    pub stale_for: Option<f64>,
+    /// The robot's autopilot (armed, flight mode, whether it answers) for a
+    /// robot flown by one; `None` for any other (and from a station that
+    /// predates it).
+    #[serde(default)]
+    pub autopilot: Option<AutopilotState>,
     /// Its fleet safety layer, when it reports one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyView>,
@@ -140,6 +153,8 @@ impl RobotView {
             trail: Vec::new(),
             quality: LinkQuality::default(),
             remote: None,
+            stale_for: None,
+            autopilot: None,
             safety: None,
         }
     }

@@ -23,6 +23,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use mech_agent::AgentSettings;
+use mech_agent::links::LinkChoice;
 use mech_agent::platform::PlatformSpec;
 use mech_agent::runtime::{self, Io, Ticker};
 use mech_agent::sim::{Arena, SimAgent, SimFleet, SimFleetOptions};
@@ -177,5 +178,67 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     }
     let _ = stop.send(true);
     fleet.shutdown().await;
+    gcs.shutdown().await;
+}
+
+/// A robot whose only link caps its telemetry at 5 Hz (as a radio's
+/// `telemetry_rate_hz` does) while it samples at 20 Hz: the samples the
+/// link skips on purpose are not lost, so its loss reads 0 %, not 75 %.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_robot_whose_link_caps_its_telemetry_reads_no_loss() {
+    let mut config = CoreConfig::default();
+    config.router.udp = SocketAddr::from(([127, 0, 0, 1], 0));
+    config.router.tcp = None;
+    let gcs = Gcs::start(config).await.unwrap();
+    let router = gcs.router().udp_addr();
+    let (stop, stopped) = watch::channel(false);
+    let sim = SimAgent::new(
+        AgentSettings::new("radio_1"),
+        &PlatformSpec::diff_drive(),
+        Arena::default().start_pose(0, 1),
+        None,
+        mech_proto::unix_micros(),
+    );
+    let link = Io::Udp {
+        socket: UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+        router,
+    };
+    let ms = Duration::from_millis;
+    let io = Io::Failover {
+        links: vec![link],
+        choice: LinkChoice::new(vec![Some(ms(200))], ms(600), ms(250)),
+        closed: vec![false],
+    };
+    let origin = tokio::time::Instant::now();
+    tokio::spawn(runtime::drive(
+        sim,
+        io,
+        Ticker::Own(ms(50)),
+        origin,
+        stopped,
+    ));
+
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    let q = loop {
+        if let Some(q) = quality(&gcs, "radio_1").filter(|q| q.window >= Duration::from_secs(5)) {
+            break q;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "radio_1's link measured over 5 s: {:?}",
+            quality(&gcs, "radio_1")
+        );
+        tokio::time::sleep(ms(100)).await;
+    };
+    println!(
+        "radio_1 capped at 5 Hz: loss {}, rx {:.1}/s",
+        q.loss_text(),
+        q.rx_hz
+    );
+    assert_eq!(q.loss, Some(0.0), "{q:?}");
+    assert_eq!(q.lost, 0, "{q:?}");
+    // Telemetry at the cap and a heartbeat a second.
+    assert!(q.rx_hz > 4.0 && q.rx_hz < 7.0, "{q:?}");
+    let _ = stop.send(true);
     gcs.shutdown().await;
 }

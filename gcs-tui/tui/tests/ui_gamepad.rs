@@ -163,3 +163,35 @@ fn keyboard_teleop_publishes_on_key0_and_stops() {
     let p = publishes(&app.take_requests());
     assert_eq!(p.last().map(|x| &x.2), Some(&Command::Stop(Stop {})));
 }
+
+#[test]
+fn keyboard_teleop_climbs_with_r_and_descends_with_f() {
+    let mut app = fixture::app(4, 80, 24);
+    app.update(Action::Route {
+        robot: "robot_4".into(),
+        channel: "key/0".into(),
+    });
+    app.update(Action::ToggleKeyTeleop);
+    app.take_requests();
+    let mut vz = Vec::new();
+    for key in ['r', 'f'] {
+        let event = crossterm::event::KeyEvent::new(
+            crossterm::event::KeyCode::Char(key),
+            crossterm::event::KeyModifiers::NONE,
+        );
+        for a in mech_gcs::ui::keys::on_key(&app, &event) {
+            app.update(a);
+        }
+        for (_, _, c) in publishes(&app.take_requests()) {
+            if let Command::Twist(t) = c {
+                vz.push(t.vz);
+            }
+        }
+    }
+    assert_eq!(vz.len(), 2, "{vz:?}");
+    assert!(vz[0] > 0.0 && vz[1] < 0.0, "up, then down: {vz:?}");
+    assert!(
+        !app.waypoints.placing,
+        "f is descend while teleop is on, not waypoint mode"
+    );
+}

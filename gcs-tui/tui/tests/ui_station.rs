@@ -550,6 +550,7 @@ fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
             radio: Some("/dev/ttyUSB0".into()),
             active: "radio",
             radio_budget_hz: Some(14.0),
+            down: Vec::new(),
         },
     }));
     let mut app = App::new("127.0.0.1:7400", Instant::now());

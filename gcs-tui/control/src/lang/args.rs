@@ -177,16 +177,24 @@ impl<'a> Args<'a> {
 
     /// `x,y`, `x,y,z`, each optionally followed by `@T` (arrival time).
     pub fn point(&mut self) -> Result<(Waypoint, Span), LangError> {
+        self.point_z().map(|(p, _, span)| (p, span))
+    }
+
+    /// Like [`Args::point`], and whether the point gave its height (`x,y,z`):
+    /// one without it reads as `z = 0`.
+    pub fn point_z(&mut self) -> Result<(Waypoint, bool, Span), LangError> {
         let w = self.next("point x,y")?;
-        point(&w.text).map(|p| (p, w.span)).ok_or_else(|| {
-            LangError::new(
-                w.span,
-                format!(
-                    "expected a point like 1.0,2.0 or 1,2@15s, found {:?}",
-                    w.text
-                ),
-            )
-        })
+        point_z(&w.text)
+            .map(|(p, z)| (p, z, w.span))
+            .ok_or_else(|| {
+                LangError::new(
+                    w.span,
+                    format!(
+                        "expected a point like 1.0,2.0 or 1,2@15s, found {:?}",
+                        w.text
+                    ),
+                )
+            })
     }
 }
 
@@ -216,6 +224,11 @@ pub fn duration(s: &str) -> Option<Duration> {
 
 /// `x,y[,z][@T]`.
 pub fn point(s: &str) -> Option<Waypoint> {
+    point_z(s).map(|(p, _)| p)
+}
+
+/// `x,y[,z][@T]`, and whether `z` was given.
+pub fn point_z(s: &str) -> Option<(Waypoint, bool)> {
     let (coords, time) = match s.split_once('@') {
         Some((c, t)) => (
             c,
@@ -228,16 +241,17 @@ pub fn point(s: &str) -> Option<Waypoint> {
     };
     let parts: Vec<f64> = coords.split(',').map(number).collect::<Option<_>>()?;
     let (x, y, z) = match parts.as_slice() {
-        [x, y] => (*x, *y, 0.0),
-        [x, y, z] => (*x, *y, *z),
+        [x, y] => (*x, *y, None),
+        [x, y, z] => (*x, *y, Some(*z)),
         _ => return None,
     };
-    Some(Waypoint {
+    let waypoint = Waypoint {
         x,
         y,
-        z,
+        z: z.unwrap_or(0.0),
         time: time.map(|t| t.as_secs_f64()),
-    })
+    };
+    Some((waypoint, z.is_some()))
 }
 
 /// A safety layer's state as the language writes it: `on`, `off`,

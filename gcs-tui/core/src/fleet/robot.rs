@@ -1,11 +1,13 @@
 //! One robot as the station knows it: its registration and its last
-//! telemetry as the robot sent them, its link, route, waypoints, mission
-//! and recent trail.
+//! telemetry as the robot sent them (and how old that is), its link, its
+//! autopilot's state from its notices, route, waypoints, mission and
+//! recent trail.
 
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use mech_proto::{CommandKind, Hello, Telemetry, Waypoint};
+use mech_proto::{AutopilotNews, CommandKind, Hello, Notice, NoticeCode, Telemetry, Waypoint};
+use serde::{Deserialize, Serialize};
 
 use crate::counters::{LinkQuality, Traffic};
 use crate::event::{LinkAddr, LinkState, RobotLinks};
@@ -64,6 +66,49 @@ pub struct WaypointList {
     pub draft: Vec<Waypoint>,
     pub looped: bool,
     pub sent: Option<SentMission>,
+}
+
+/// A robot's autopilot (PX4, ArduPilot) as the robot's notices told the
+/// station (`mech_proto::AutopilotNews`): armed or not, its flight mode,
+/// whether it answers. The robot says each change, and says both again
+/// whenever it registers, so a station that started later knows them too.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AutopilotState {
+    /// `None` until the robot has said.
+    pub armed: Option<bool>,
+    /// The firmware's name for the mode (`OFFBOARD`, `GUIDED`, `POSCTL`).
+    pub mode: Option<String>,
+    /// Its heartbeat stopped, and has not been heard again.
+    pub lost: bool,
+}
+
+impl AutopilotState {
+    /// Takes in one fact from a notice.
+    pub fn apply(&mut self, news: &AutopilotNews) {
+        match news {
+            AutopilotNews::Found(_) | AutopilotNews::HeardAgain => self.lost = false,
+            AutopilotNews::Armed(armed) => self.armed = Some(*armed),
+            AutopilotNews::Mode(mode) => self.mode = Some(mode.clone()),
+            AutopilotNews::Lost(_) => self.lost = true,
+        }
+    }
+
+    /// As a card and a status line show it: `armed OFFBOARD`, `disarmed
+    /// POSCTL`, `autopilot lost`.
+    pub fn label(&self) -> String {
+        if self.lost {
+            return "autopilot lost".into();
+        }
+        let armed = match self.armed {
+            Some(true) => "armed",
+            Some(false) => "disarmed",
+            None => "arming unknown",
+        };
+        match &self.mode {
+            Some(mode) => format!("{armed} {mode}"),
+            None => armed.to_string(),
+        }
+    }
 }
 
 /// One point of a robot's recent trail.
@@ -131,6 +176,9 @@ pub struct Robot {
     /// shown here read-only through a bridge (`mech-zenoh`); `None` for
     /// this station's own robots. Only that station routes it.
     pub remote: Option<String>,
+    /// The robot's autopilot, once it has reported one; `None` for a robot
+    /// that drives its own motors.
+    pub autopilot: Option<AutopilotState>,
 }
 
 impl Robot {
@@ -157,7 +205,30 @@ impl Robot {
             estop_ack: None,
             safety_enabled: true,
             remote: None,
+            autopilot: None,
         }
+    }
+
+    /// What a notice from the robot tells about it: a driver fault's text
+    /// (kept while telemetry reports the fault), its autopilot's state.
+    pub(super) fn heard_notice(&mut self, notice: &Notice) {
+        if notice.code == NoticeCode::DriverFault {
+            self.fault = Some(notice.text.clone());
+        }
+        if let Some(news) = AutopilotNews::parse(&notice.text) {
+            self.autopilot.get_or_insert_default().apply(&news);
+        }
+    }
+
+    /// How old its last telemetry is at router time `now`, while the router
+    /// no longer hears the robot (link stale or lost): everything telemetry
+    /// said (pose, speed, mode, failsafe) is then as it was that long ago,
+    /// not as it is. `None` while it is heard, or before any telemetry.
+    pub fn stale_for(&self, now: Duration) -> Option<Duration> {
+        if self.link == LinkState::Connected {
+            return None;
+        }
+        self.last_telemetry.map(|t| now.saturating_sub(t))
     }
 
     /// The channel the robot reports obeying (telemetry); `None` = none.

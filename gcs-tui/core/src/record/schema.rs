@@ -220,6 +220,7 @@ const EVENT_FIELDS: &[(&str, &[&str])] = &[
     ("registered", &["hello", "id", "addr", "known"]),
     ("links", &["robot", "links"]),
     ("link", &["robot", "state"]),
+    ("radio", &["port", "up", "reason"]),
     ("telemetry", &["robot", "telemetry"]),
     ("link_quality", &["robot", "quality"]),
     ("route_changed", &["robot", "channel", "epoch"]),
@@ -255,6 +256,7 @@ pub const EVENT_NAMES: &[&str] = &[
     "registered",
     "links",
     "link",
+    "radio",
     "telemetry",
     "link_quality",
     "route_changed",
@@ -306,12 +308,12 @@ fn strict(title: &str, description: &str, properties: Value) -> Value {
 /// events).
 fn event_field(name: &str) -> Value {
     match name {
-        "robot" | "publisher" | "from" | "reason" | "error" | "detail" | "udp" => string(),
+        "robot" | "publisher" | "from" | "reason" | "error" | "detail" | "udp" | "port" => string(),
         "tcp" | "channel" => nullable("string"),
         "id" | "epoch" | "count" | "sources" => integer(),
         "by_reason" => json!({"description": "messages refused for each reason",
             "type": "object", "additionalProperties": integer()}),
-        "known" | "looped" | "accepted" | "engage" | "enabled" => boolean(),
+        "known" | "looped" | "accepted" | "engage" | "enabled" | "up" => boolean(),
         "safety_state" => json!({"description": "the robot's safety layer",
             "type": "string", "enum": ["no-arena", "on", "off"]}),
         "intervention" => json!({"description": "what the safety layer limits now",
@@ -337,7 +339,9 @@ fn event_field(name: &str) -> Value {
             "the robot's live links and the one commands go out on",
             json!({"udp": boolean(), "radio": nullable("string"),
                    "active": {"type": "string", "enum": ["udp", "radio", ""]},
-                   "radio_budget_hz": nullable("number")}),
+                   "radio_budget_hz": nullable("number"),
+                   "down": {"description": "links heard once but silent now: wifi, radio",
+                            "type": "array", "items": string()}}),
         ),
         "telemetry" => telemetry(),
         "quality" => link_quality(),
@@ -559,7 +563,7 @@ mod tests {
     #[test]
     fn every_event_name_is_listed_and_topics_name_their_robot() {
         let names: Vec<&str> = EVENT_NAMES.to_vec();
-        assert!(names.contains(&"estop_complete") && names.len() == 25);
+        assert!(names.contains(&"estop_complete") && names.len() == 26);
         let described: Vec<&str> = EVENT_FIELDS.iter().map(|(n, _)| *n).collect();
         assert_eq!(described, names, "every event has its fields described");
         assert_eq!(
@@ -682,11 +686,17 @@ mod tests {
                     radio: Some("/dev/ttyUSB0".into()),
                     active: "udp",
                     radio_budget_hz: Some(14.0),
+                    down: vec!["radio".into()],
                 },
             },
             Event::Link {
                 robot: robot(),
                 state: LinkState::Stale,
+            },
+            Event::Radio {
+                port: "/dev/ttyUSB0".into(),
+                up: false,
+                reason: "Broken pipe".into(),
             },
             Event::Telemetry {
                 robot: robot(),

@@ -102,6 +102,13 @@ impl Net {
         counters.fanout_dropped += self.fanout_dropped.load(Ordering::Relaxed);
     }
 
+    /// How radio `port` (its place in `router.serial`) is named: its device.
+    pub(super) fn radio_name(&self, port: u16) -> String {
+        self.serial
+            .get(usize::from(port))
+            .map_or_else(|| format!("#{port}"), |s| s.port.clone())
+    }
+
     /// Every serial radio: what it sent and what waits.
     pub(super) fn radios(&self) -> Vec<RadioStatus> {
         self.serial
@@ -213,10 +220,11 @@ pub(super) struct Tasks {
 }
 
 impl Tasks {
-    /// Starts every task on the bound endpoints and opened radios: a
-    /// thread per UDP socket (polling for up to `poll`), a reader and a
-    /// writer thread per radio, the timers every `tick`, the TCP acceptor
-    /// (its peers within `tcp`, fitted to the descriptor limit).
+    /// Starts every task on the bound endpoints and the radios: a thread
+    /// per UDP socket (polling for up to `poll`), a reader (which opens
+    /// the port, and opens it again whenever it fails) and a writer thread
+    /// per radio, the timers every `tick`, the TCP acceptor (its peers
+    /// within `tcp`, fitted to the descriptor limit).
     pub(super) fn start(
         shared: &Arc<Shared>,
         bound: Bound,
@@ -264,7 +272,8 @@ impl Tasks {
             q.close();
         }
         for thread in self.radio_threads {
-            // Readers notice the stop within their port's read timeout.
+            // Readers notice the stop within their port's read timeout, or
+            // their wait before opening a failed port again.
             if tokio::task::spawn_blocking(move || thread.join())
                 .await
                 .is_err()

@@ -15,7 +15,8 @@ use super::mapping::Limits;
 /// The keyboard teleop channel.
 pub const KEY_CHANNEL: &str = "key/0";
 
-/// A driving key (arrows / WASD, Q/E strafe).
+/// A driving key (arrows / WASD, Q/E strafe, R/F climb and descend: a
+/// flying robot's vertical speed, which a ground robot ignores).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum DriveKey {
     Forward,
@@ -24,17 +25,24 @@ pub enum DriveKey {
     TurnRight,
     StrafeLeft,
     StrafeRight,
+    Climb,
+    Descend,
 }
+
+/// How many driving keys there are.
+const KEYS: usize = 8;
 
 impl DriveKey {
     /// Every driving key.
-    pub const ALL: [DriveKey; 6] = [
+    pub const ALL: [DriveKey; KEYS] = [
         DriveKey::Forward,
         DriveKey::Back,
         DriveKey::TurnLeft,
         DriveKey::TurnRight,
         DriveKey::StrafeLeft,
         DriveKey::StrafeRight,
+        DriveKey::Climb,
+        DriveKey::Descend,
     ];
 
     fn index(self) -> usize {
@@ -49,7 +57,7 @@ pub struct KeyTeleop {
     /// How long one press (or auto-repeat) keeps a direction held.
     pub hold: Duration,
     period: Duration,
-    held_until: [Option<Instant>; 6],
+    held_until: [Option<Instant>; KEYS],
     last_sent: Option<Instant>,
     /// A command has been published since the last stop.
     moving: bool,
@@ -73,7 +81,7 @@ impl KeyTeleop {
             limits,
             hold: Duration::from_millis(550),
             period: Duration::from_nanos((1e9 / hz).round() as u64),
-            held_until: [None; 6],
+            held_until: [None; KEYS],
             last_sent: None,
             moving: false,
             last: None,
@@ -91,6 +99,8 @@ impl KeyTeleop {
             DriveKey::TurnRight => DriveKey::TurnLeft,
             DriveKey::StrafeLeft => DriveKey::StrafeRight,
             DriveKey::StrafeRight => DriveKey::StrafeLeft,
+            DriveKey::Climb => DriveKey::Descend,
+            DriveKey::Descend => DriveKey::Climb,
         };
         self.held_until[opposite.index()] = None;
         Some(self.send(now))
@@ -104,7 +114,7 @@ impl KeyTeleop {
 
     /// Stop now (space bar): forget every held direction, publish `Stop`.
     pub fn stop(&mut self, now: Instant) -> Command {
-        self.held_until = [None; 6];
+        self.held_until = [None; KEYS];
         self.moving = false;
         self.last_sent = Some(now);
         let c = Command::Stop(Stop {});
@@ -147,7 +157,8 @@ impl KeyTeleop {
             vx: (self.held(DriveKey::Forward) - self.held(DriveKey::Back)) * self.limits.max_speed,
             vy: (self.held(DriveKey::StrafeLeft) - self.held(DriveKey::StrafeRight))
                 * self.limits.max_speed,
-            vz: 0.0,
+            // The platform's own climb limit caps it on the robot.
+            vz: (self.held(DriveKey::Climb) - self.held(DriveKey::Descend)) * self.limits.max_speed,
             wz: (self.held(DriveKey::TurnLeft) - self.held(DriveKey::TurnRight))
                 * self.limits.max_yaw_rate,
         };
@@ -220,6 +231,31 @@ mod tests {
     #[test]
     fn all_keys_are_distinct_slots() {
         let idx: std::collections::HashSet<_> = DriveKey::ALL.iter().map(|k| k.index()).collect();
-        assert_eq!(idx.len(), 6);
+        assert_eq!(idx.len(), KEYS);
+        assert!(idx.iter().all(|i| *i < KEYS));
+    }
+
+    #[test]
+    fn climb_and_descend_set_the_vertical_speed_and_cancel_each_other() {
+        let mut k = KeyTeleop::default();
+        let now = Instant::now();
+        let Some(Command::Twist(up)) = k.press(DriveKey::Climb, now) else {
+            panic!("twist expected");
+        };
+        assert_eq!(up.vz, Limits::default().max_speed);
+        assert_eq!((up.vx, up.vy, up.wz), (0.0, 0.0, 0.0));
+        let later = now + Duration::from_millis(10);
+        let Some(Command::Twist(t)) = k.press(DriveKey::Forward, later) else {
+            panic!("twist expected");
+        };
+        assert!(t.vx > 0.0 && t.vz > 0.0, "climbing while flying forward");
+        let Some(Command::Twist(down)) = k.press(DriveKey::Descend, later) else {
+            panic!("twist expected");
+        };
+        assert_eq!(
+            down.vz,
+            -Limits::default().max_speed,
+            "descend replaced climb"
+        );
     }
 }

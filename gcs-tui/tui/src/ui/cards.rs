@@ -1,9 +1,12 @@
-//! Robot cards: one four-line card per robot with identity (and the alarm
-//! `SAFETY OFF` when its fleet safety layer is off), pose, speed (measured
-//! or commanded), heading, mode, route, computation, link, failsafe, what
-//! the safety layer limits (`fence`, `separation`...), the fault text,
-//! battery, mission and the link's quality (rates each way, loss, round
-//! trip).
+//! Robot cards: one four-line card per robot with identity (the alarm
+//! `SAFETY OFF` when its fleet safety layer is off, and for a robot flown
+//! by an autopilot whether it is armed and its flight mode), pose, speed
+//! (measured or commanded), heading, mode, route, computation, link,
+//! failsafe, what the safety layer limits (`fence`, `separation`...), the
+//! fault text, battery, mission and the link's quality (rates each way,
+//! loss, round trip). A robot the router no longer hears has its
+//! telemetry's lines greyed, and its card says how old they are: what it
+//! last said, not what it does.
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -14,8 +17,8 @@ use super::app::{App, Focus};
 use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
 use super::view::{
-    LinkQuality, LinkState, RobotView, failsafe_str, health_str, intervention_str, link_label,
-    mode_str, velocity_source_str,
+    AutopilotState, LinkQuality, LinkState, RobotView, failsafe_str, health_str, intervention_str,
+    link_label, mode_str, velocity_source_str,
 };
 use mech_proto::{Computation, FailsafeState, Health, Intervention};
 
@@ -104,9 +107,39 @@ fn quality_line<'a>(q: &LinkQuality, t: &Theme) -> Line<'a> {
 /// (its colour).
 pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut Vec<Line<'a>>) {
     out.push(identity_line(r, i, selected, t));
-    out.push(pose_line(r));
-    out.push(state_line(r, t));
+    let (pose, state) = (pose_line(r), state_line(r, t));
+    if r.stale_for.is_some() {
+        out.push(greyed(pose, t));
+        out.push(greyed(state, t));
+    } else {
+        out.push(pose);
+        out.push(state);
+    }
     out.push(quality_line(&r.quality, t));
+}
+
+/// A line of what telemetry said, greyed: the robot is not heard, so it
+/// is history, not the robot's state now.
+fn greyed<'a>(line: Line<'a>, t: &Theme) -> Line<'a> {
+    Line::from(
+        line.spans
+            .into_iter()
+            .map(|s| Span::styled(s.content, t.dim()))
+            .collect::<Vec<_>>(),
+    )
+}
+
+/// An autopilot's state as a card shows it: armed in the warning colour
+/// (its propellers may spin), disarmed dim, lost as an alarm.
+fn autopilot_span<'a>(a: &AutopilotState, t: &Theme) -> Span<'a> {
+    let style = if a.lost {
+        t.alarm()
+    } else if a.armed == Some(true) {
+        t.warn()
+    } else {
+        t.dim()
+    };
+    Span::styled(format!(" {}", a.label()), style)
 }
 
 /// The card's first line: `●robot_1 #1 Connected diff-drive` (`▶`
@@ -120,7 +153,7 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
         colour.patch(t.title())
     };
     let marker = if selected { "▶" } else { "●" };
-    Line::from(vec![
+    let mut spans = vec![
         Span::styled(marker, colour),
         Span::styled(r.name.as_str(), name_style),
         // Another station's robot: its id is that station's router's.
@@ -139,8 +172,18 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
             Span::raw("")
         },
         Span::styled(link_label(r.link), link_style(r.link, t)),
-        Span::raw(format!(" {}", r.platform)),
-    ])
+    ];
+    if let Some(age) = r.stale_for {
+        spans.push(Span::styled(
+            format!(" {age:.0}s ago"),
+            link_style(r.link, t),
+        ));
+    }
+    spans.push(Span::raw(format!(" {}", r.platform)));
+    if let Some(a) = &r.autopilot {
+        spans.push(autopilot_span(a, t));
+    }
+    Line::from(spans)
 }
 
 /// The card's second line: ` x  1.00 y  2.00   90° 0.20m/s meas`.
@@ -275,5 +318,56 @@ mod tests {
         );
         assert!(lines[6].contains("z 1.20"), "{lines:#?}");
         assert!(lines[6].contains("0.00m/s cmd"), "{lines:#?}");
+    }
+
+    /// The style of the cell at column `x` of line `y`.
+    fn style_at(robots: Vec<RobotView>, x: u16, y: u16) -> ratatui::style::Style {
+        let mut app = App::new("127.0.0.1:7700", std::time::Instant::now());
+        app.update(Action::Fleet(FleetSnapshot {
+            robots,
+            ..FleetSnapshot::default()
+        }));
+        let area = Rect::new(0, 0, 50, 10);
+        let mut buf = Buffer::empty(area);
+        CardsPanel {
+            app: &app,
+            theme: Theme::new(false),
+        }
+        .render(area, &mut buf);
+        buf[(x, y)].style()
+    }
+
+    #[test]
+    fn a_robot_not_heard_has_its_last_state_greyed_with_its_age() {
+        let mut lost = RobotView::at("a_rover", 1, "diff-drive", 1.0, 2.0, 0.0);
+        lost.velocity.vx = 0.1;
+        lost.link = LinkState::Lost;
+        lost.stale_for = Some(3.2);
+        let lines = cards(vec![lost.clone()]);
+        assert!(lines[1].contains("Lost 3s ago diff-drive"), "{lines:#?}");
+        assert!(lines[2].contains("0.10m/s"), "the last speed, {lines:#?}");
+        let dim = Theme::new(false).dim();
+        assert_eq!(style_at(vec![lost.clone()], 4, 2).fg, dim.fg, "greyed");
+        assert_eq!(style_at(vec![lost.clone()], 4, 3).fg, dim.fg, "greyed");
+        let mut heard = lost;
+        heard.link = LinkState::Connected;
+        heard.stale_for = None;
+        assert!(!cards(vec![heard.clone()])[1].contains("ago"));
+        assert_ne!(style_at(vec![heard], 4, 2).fg, dim.fg, "live");
+    }
+
+    #[test]
+    fn an_autopilots_arming_and_mode_are_on_the_card() {
+        let mut drone = RobotView::at("px4_1", 1, "quadcopter", 0.0, 0.0, 0.0);
+        drone.autopilot = Some(AutopilotState {
+            armed: Some(true),
+            mode: Some("OFFBOARD".into()),
+            lost: false,
+        });
+        let lines = cards(vec![drone]);
+        assert!(
+            lines[1].contains("Connected quadcopter armed OFFBOARD"),
+            "{lines:#?}"
+        );
     }
 }

@@ -70,8 +70,9 @@ fn help_key(code: KeyCode) -> Action {
     }
 }
 
-/// Keyboard teleop, when on: arrows/WASD drive, Q/E strafe, Space stops,
-/// `t` or Esc turns it off.
+/// Keyboard teleop, when on: arrows/WASD drive, Q/E strafe, R/F (or
+/// PageUp/PageDown) climb and descend, Space stops, `t` or Esc turns it
+/// off.
 fn teleop_key(app: &App, code: KeyCode) -> Option<Action> {
     if !app.manual.keys_on {
         return None;
@@ -83,6 +84,8 @@ fn teleop_key(app: &App, code: KeyCode) -> Option<Action> {
         KeyCode::Right | KeyCode::Char('d') => DriveKey::TurnRight,
         KeyCode::Char('q') => DriveKey::StrafeLeft,
         KeyCode::Char('e') => DriveKey::StrafeRight,
+        KeyCode::Char('r') | KeyCode::PageUp => DriveKey::Climb,
+        KeyCode::Char('f') | KeyCode::PageDown => DriveKey::Descend,
         KeyCode::Char(' ') => return Some(Action::DriveStop),
         KeyCode::Char('t') | KeyCode::Esc => return Some(Action::ToggleKeyTeleop),
         _ => return None,

@@ -3,7 +3,10 @@
 //! it limits now and how often it did, and the link's rates, loss and
 //! round trip), for every robot in natural name order when no target is
 //! given, after a summary that says whether the station authenticates,
-//! what it refused, its arena and which robots have their safety off.
+//! what it refused, its arena, which robots have their safety off and how
+//! its radios are. A robot the router no longer hears has its telemetry's
+//! part of the line marked stale, with its age: it is what the robot last
+//! said, not what it does now.
 
 use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
@@ -40,14 +43,15 @@ impl Status {
                 names
             }),
         };
+        let router = ctx.gcs.router();
+        let now = router.elapsed();
         let details = ctx.gcs.with_fleet(|f| {
             robots
                 .iter()
                 .filter_map(|r| f.robot(r))
-                .map(status_line)
+                .map(|r| status_line(r, now))
                 .collect::<Vec<_>>()
         });
-        let router = ctx.gcs.router();
         let rejected = router.rejections();
         let refused = if rejected.total() == 0 {
             String::new()
@@ -65,16 +69,7 @@ impl Status {
             .recording()
             .map(|r| format!("; {}", super::record::describe(&r)))
             .unwrap_or_default();
-        let radios: String = router
-            .radios()
-            .iter()
-            .map(|r| {
-                format!(
-                    "; radio {} {} frames {} replaced {} waiting",
-                    r.port, r.frames, r.replaced, r.waiting
-                )
-            })
-            .collect();
+        let radios: String = router.radios().iter().map(radio).collect();
         Ok(Outcome {
             summary: format!(
                 "{} robots; station {}{refused}{}{}{radios}{recording}",
@@ -124,9 +119,43 @@ fn stations(f: &Fleet) -> String {
     format!("; stations {}", each.join(", "))
 }
 
-fn status_line(r: &Robot) -> String {
+/// A station radio: `; radio /dev/ttyUSB0 1200 frames 3 replaced 0
+/// waiting`, or while it is down `; radio /dev/ttyUSB0 DOWN 4.2 s (No
+/// such file or directory; reopening) 35 dropped`.
+fn radio(r: &mech_core::RadioStatus) -> String {
+    match &r.down {
+        Some((since, why)) => format!(
+            "; radio {} DOWN {:.1} s ({why}; reopening) {} dropped",
+            r.port,
+            since.as_secs_f64(),
+            r.lost_down
+        ),
+        None => format!(
+            "; radio {} {} frames {} replaced {} waiting",
+            r.port, r.frames, r.replaced, r.waiting
+        ),
+    }
+}
+
+/// Height (m) from which a robot's `z` is shown.
+const AIRBORNE: f64 = 0.05;
+
+/// One robot at router time `now`.
+fn status_line(r: &Robot, now: std::time::Duration) -> String {
+    // What telemetry said is marked stale, with its age, once the robot is
+    // no longer heard: it stopped itself long ago, whatever it last said.
+    let stale = match r.stale_for(now) {
+        Some(age) => format!(", stale {:.1} s:", age.as_secs_f64()),
+        None => String::new(),
+    };
+    // The height of a robot off the ground (a flying one).
+    let z = if r.telemetry.pose.z.abs() >= AIRBORNE {
+        format!(" z {:.2}", r.telemetry.pose.z)
+    } else {
+        String::new()
+    };
     format!(
-        "{} #{} {} {} at ({:.2}, {:.2}) heading {:.2} speed {:.2} mode {:?} route {}{} failsafe {}",
+        "{} #{} {} {}{stale} at ({:.2}, {:.2}){z} heading {:.2} speed {:.2} mode {:?} route {}{} failsafe {}",
         r.name,
         r.registration.id,
         r.registration.hello.platform,
@@ -148,10 +177,20 @@ fn status_line(r: &Robot) -> String {
     } else {
         String::new()
     } + &safety(r)
+        + &autopilot(r)
         + &link_quality(&r.quality)
         + &links(r)
         + &lost_mission(r)
         + &remote(r)
+}
+
+/// A robot flown by an autopilot: ` autopilot armed OFFBOARD`.
+fn autopilot(r: &Robot) -> String {
+    match &r.autopilot {
+        Some(a) if a.lost => format!(" {}", a.label()),
+        Some(a) => format!(" autopilot {}", a.label()),
+        None => String::new(),
+    }
 }
 
 /// ` safety on limiting fence interventions fence 2 separation 1`, or
@@ -217,10 +256,132 @@ fn lost_mission(r: &Robot) -> String {
     }
 }
 
-/// The live links when the robot has a radio (`links wifi*+radio radio-budget 12 Hz`).
+/// The links when the robot has a radio (`links wifi*+radio radio-budget
+/// 12 Hz`, `links wifi, radio down radio-budget 12 Hz`).
 fn links(r: &Robot) -> String {
     match r.links.radio_budget_hz {
         Some(hz) => format!(" links {} radio-budget {hz} Hz", r.links.label()),
         None => String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_core::event::{Event, LinkAddr, LinkState, Stamped};
+    use mech_core::fleet::FleetConfig;
+    use mech_proto::{
+        Computation, ControlMode, FailsafeState, Health, Hello, Pose, Telemetry, Velocity,
+    };
+    use std::time::Duration;
+
+    fn at(ms: u64, event: Event) -> Stamped {
+        Stamped {
+            at: Duration::from_millis(ms),
+            event,
+        }
+    }
+
+    /// A robot that drove at 0.1 m/s in twist mode, failsafe ok, and was
+    /// then lost.
+    fn lost_robot() -> Fleet {
+        let mut f = Fleet::new(FleetConfig::default());
+        let hello = Hello {
+            name: "robot_1".into(),
+            platform: "diff-drive".into(),
+            capabilities: vec![],
+            motors: 2,
+            max_speed: 1.0,
+            max_yaw_rate: 2.0,
+            agent_version: "t".into(),
+        };
+        f.apply(&at(
+            0,
+            Event::Registered {
+                hello,
+                id: 1,
+                addr: LinkAddr::Udp("127.0.0.1:9000".parse().unwrap()),
+                known: false,
+            },
+        ));
+        let telemetry = Telemetry {
+            pose: Pose::default(),
+            velocity: Velocity {
+                vx: 0.1,
+                ..Velocity::default()
+            },
+            mode: ControlMode::Twist,
+            channel: "ext/t".into(),
+            computation: Computation::Onboard,
+            failsafe: FailsafeState::Ok,
+            health: Health::Ok,
+            battery: None,
+            position_quality: 1.0,
+            actuators: vec![],
+            mission: None,
+            stale: 0,
+            velocity_source: mech_proto::VelocitySource::Commanded,
+            safety: None,
+        };
+        f.apply(&at(
+            1_000,
+            Event::Telemetry {
+                robot: "robot_1".into(),
+                telemetry,
+            },
+        ));
+        f
+    }
+
+    #[test]
+    fn a_robot_not_heard_shows_its_last_state_as_stale_with_its_age() {
+        let mut f = lost_robot();
+        let live = status_line(f.robot("robot_1").unwrap(), Duration::from_millis(1_100));
+        assert!(
+            live.starts_with("robot_1 #1 diff-drive connected at (0.00, 0.00)"),
+            "{live}"
+        );
+        assert!(!live.contains("stale"), "{live}");
+        f.apply(&at(
+            2_000,
+            Event::Link {
+                robot: "robot_1".into(),
+                state: LinkState::Lost,
+            },
+        ));
+        let lost = status_line(f.robot("robot_1").unwrap(), Duration::from_millis(4_200));
+        assert!(
+            lost.starts_with("robot_1 #1 diff-drive lost, stale 3.2 s: at (0.00, 0.00)"),
+            "{lost}"
+        );
+        assert!(
+            lost.contains("speed 0.10 mode Twist"),
+            "as last said: {lost}"
+        );
+    }
+
+    #[test]
+    fn a_radio_that_is_down_says_so_and_for_how_long() {
+        let mut r = mech_core::RadioStatus {
+            port: "/dev/ttyUSB0".into(),
+            baud: 57_600,
+            frames: 1_200,
+            bytes: 90_000,
+            replaced: 3,
+            dropped: 0,
+            waiting: 0,
+            down: None,
+            lost_down: 0,
+        };
+        assert_eq!(
+            radio(&r),
+            "; radio /dev/ttyUSB0 1200 frames 3 replaced 0 waiting"
+        );
+        r.down = Some((Duration::from_millis(4_230), "broken pipe".into()));
+        r.lost_down = 35;
+        assert_eq!(
+            radio(&r),
+            "; radio /dev/ttyUSB0 DOWN 4.2 s (broken pipe; reopening) 35 dropped"
+        );
     }
 }

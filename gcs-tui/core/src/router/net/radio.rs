@@ -12,6 +12,13 @@
 //! writer paces itself at the radio's rate, so the queue forms here, where
 //! an e-stop can jump it, and not in the radio's own first-in-first-out
 //! buffer.
+//!
+//! A radio that fails (unplugged, its pseudo-terminal gone) is opened again
+//! by its reader thread on the schedule of [`Reopen`], also when it cannot
+//! be opened at start: the outage is reported once when it begins and once
+//! when it ends (an `Event::Radio`, a log line), and while it lasts the
+//! queue is emptied and what would go on it dropped and counted, so no
+//! command older than the outage is sent when the radio returns.
 
 use std::collections::{HashMap, VecDeque};
 use std::io::{Read, Write};
@@ -19,7 +26,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use mech_proto::framing::{SerialDecoder, SerialRead, write_serial_message};
+use mech_proto::framing::{Reopen, SerialDecoder, SerialRead, write_serial_message};
 
 use crate::router::tables::Peer;
 use crate::router::{RouterError, SerialEndpoint, Shared};
@@ -65,6 +72,8 @@ struct Pending {
     order: [VecDeque<Key>; 3],
     waiting: HashMap<Key, Vec<u8>>,
     closed: bool,
+    /// The port is down: nothing is queued.
+    down: bool,
 }
 
 /// Counters of one radio's sending side.
@@ -76,15 +85,40 @@ pub(crate) struct RadioCounters {
     pub(crate) replaced: AtomicU64,
     /// Messages dropped because the queue was full.
     pub(crate) dropped: AtomicU64,
+    /// Messages dropped because the port was down.
+    pub(crate) lost_down: AtomicU64,
 }
 
 /// The outgoing queue of one radio, shared by whoever decides (UDP
-/// workers, TCP peers, timers, readers) and the port's writer thread.
+/// workers, TCP peers, timers, readers) and the port's threads, with the
+/// port's writing side and its state.
 #[derive(Debug, Default)]
 pub(crate) struct RadioQueue {
     pending: Mutex<Pending>,
     ready: Condvar,
     pub(crate) counters: RadioCounters,
+    /// The port's writing side while it is open; the reader thread puts it
+    /// here on each opening and takes it away when the port fails.
+    port: Mutex<PortSide>,
+    /// Since when the port has been down, and why (for `status`).
+    outage: Mutex<Option<(Instant, String)>>,
+}
+
+/// The writing side of an open port, and why writing it failed (for the
+/// reader thread, which owns the opening, to notice).
+#[derive(Default)]
+struct PortSide {
+    writer: Option<Box<dyn Write + Send>>,
+    failed: Option<String>,
+}
+
+impl std::fmt::Debug for PortSide {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PortSide")
+            .field("open", &self.writer.is_some())
+            .field("failed", &self.failed)
+            .finish()
+    }
 }
 
 impl RadioQueue {
@@ -102,6 +136,10 @@ impl RadioQueue {
         );
         let mut p = lock(&self.pending);
         if p.closed {
+            return;
+        }
+        if p.down {
+            self.counters.lost_down.fetch_add(1, Ordering::Relaxed);
             return;
         }
         if let Some(slot) = p.waiting.get_mut(&key) {
@@ -146,7 +184,63 @@ impl RadioQueue {
             replaced: count(&self.counters.replaced),
             dropped: count(&self.counters.dropped),
             waiting: self.len(),
+            down: lock(&self.outage)
+                .as_ref()
+                .map(|(since, error)| (since.elapsed(), error.clone())),
+            lost_down: count(&self.counters.lost_down),
         }
+    }
+
+    /// The port is down since `since` (`error` says why): the queue is
+    /// emptied, its messages counted as lost, and nothing more is queued
+    /// until [`RadioQueue::up`].
+    fn down(&self, since: Instant, error: &str) {
+        let mut p = lock(&self.pending);
+        p.down = true;
+        let n = p.waiting.len() as u64;
+        p.waiting.clear();
+        p.order.iter_mut().for_each(VecDeque::clear);
+        drop(p);
+        self.counters.lost_down.fetch_add(n, Ordering::Relaxed);
+        let mut outage = lock(&self.outage);
+        if outage.is_none() {
+            *outage = Some((since, error.to_string()));
+        }
+    }
+
+    /// The port is open with `writer`: messages are queued again.
+    fn up(&self, writer: Box<dyn Write + Send>) {
+        *lock(&self.port) = PortSide {
+            writer: Some(writer),
+            failed: None,
+        };
+        lock(&self.pending).down = false;
+        *lock(&self.outage) = None;
+    }
+
+    /// Writes one frame on the open port; a failure (other than a write
+    /// timeout) ends this opening of the port, for the reader to notice.
+    /// Returns whether the frame went out.
+    fn write(&self, frame: &[u8]) -> bool {
+        let mut side = lock(&self.port);
+        let Some(port) = side.writer.as_mut() else {
+            self.counters.lost_down.fetch_add(1, Ordering::Relaxed);
+            return false;
+        };
+        match port.write_all(frame).and_then(|()| port.flush()) {
+            Ok(()) => true,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => false,
+            Err(e) => {
+                side.writer = None;
+                side.failed = Some(e.to_string());
+                false
+            }
+        }
+    }
+
+    /// Why writing failed since the port last opened, once.
+    fn write_failed(&self) -> Option<String> {
+        lock(&self.port).failed.take()
     }
 
     /// Messages waiting.
@@ -231,38 +325,47 @@ pub struct RadioStatus {
     pub dropped: u64,
     /// Messages waiting to be sent.
     pub waiting: usize,
+    /// While the port is down (it failed, or could not be opened): for how
+    /// long, and why. The router keeps opening it again.
+    pub down: Option<(Duration, String)>,
+    /// Messages dropped because the port was down.
+    pub lost_down: u64,
 }
 
-/// A radio's port, opened: the reader's and the writer's handles, and
-/// where it is configured.
-pub(in crate::router) type RadioPort =
-    (Box<dyn Read + Send>, Box<dyn Write + Send>, SerialEndpoint);
+/// A radio's port, opened: the reader's and the writer's handles.
+pub(crate) type OpenedPort = (Box<dyn Read + Send>, Box<dyn Write + Send>);
 
-/// Opens every configured radio (before anything starts, so a missing
-/// device is a clear error at startup).
+/// Opens a radio's port, each time the reader thread asks (at start, and
+/// after every failure).
+pub(in crate::router) type Opener = Box<dyn FnMut() -> std::io::Result<OpenedPort> + Send>;
+
+/// A radio to run: how to open its port, and where it is configured.
+pub(in crate::router) type RadioPort = (Opener, SerialEndpoint);
+
+/// How each configured radio is opened (with serialport, feature
+/// `serial`). Nothing is opened yet: a device missing at start is an
+/// outage the reader reports and outlasts, as one unplugged later is.
 #[cfg(feature = "serial")]
 pub(in crate::router) fn open_radios(
     serial: &[SerialEndpoint],
 ) -> Result<Vec<RadioPort>, RouterError> {
-    serial
+    Ok(serial
         .iter()
         .map(|s| {
-            let err = |e: serialport::Error| RouterError::Serial {
-                port: s.port.clone(),
-                message: e.to_string(),
-            };
-            let port = serialport::new(&s.port, s.baud)
-                .timeout(Duration::from_millis(50))
-                .open()
-                .map_err(err)?;
-            let writer = port.try_clone().map_err(err)?;
-            Ok((
-                Box::new(port) as Box<dyn Read + Send>,
-                Box::new(writer) as _,
-                s.clone(),
-            ))
+            let (path, baud) = (s.port.clone(), s.baud);
+            let open: Opener = Box::new(move || {
+                let port = serialport::new(&path, baud)
+                    .timeout(Duration::from_millis(50))
+                    .open()?;
+                let writer = port.try_clone()?;
+                Ok((
+                    Box::new(port) as Box<dyn Read + Send>,
+                    Box::new(writer) as _,
+                ))
+            });
+            (open, s.clone())
         })
-        .collect()
+        .collect())
 }
 
 #[cfg(not(feature = "serial"))]
@@ -284,44 +387,40 @@ pub(super) fn start(
     ports: Vec<RadioPort>,
 ) -> Result<Vec<std::thread::JoinHandle<()>>, RouterError> {
     let mut threads = Vec::new();
-    for (i, (read, write, s)) in ports.into_iter().enumerate() {
+    for (i, (open, s)) in ports.into_iter().enumerate() {
         let spawn_err = |source| RouterError::Serial {
             port: s.port.clone(),
             message: format!("cannot start its thread: {source}"),
         };
-        let (sh, name) = (shared.clone(), s.port.clone());
+        let sh = shared.clone();
         let index = i as u16;
         threads.push(
             std::thread::Builder::new()
                 .name(format!("mech-radio-rx-{i}"))
-                .spawn(move || reader(sh, index, read, name))
+                .spawn(move || reader(sh, index, open))
                 .map_err(spawn_err)?,
         );
-        let (q, name, baud) = (shared.net.radios[i].clone(), s.port.clone(), s.baud);
+        let (q, baud) = (shared.net.radios[i].clone(), s.baud);
         threads.push(
             std::thread::Builder::new()
                 .name(format!("mech-radio-tx-{i}"))
-                .spawn(move || writer(q, write, baud, name))
+                .spawn(move || writer(q, baud))
                 .map_err(spawn_err)?,
         );
-        tracing::info!(port = %s.port, baud = s.baud, "radio open");
     }
     Ok(threads)
 }
 
-/// Sends the queue's messages as serial frames until the queue closes or
-/// the port fails.
-fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, name: String) {
+/// Sends the queue's messages as serial frames, on the port while it is
+/// open, until the queue closes.
+fn writer(queue: Arc<RadioQueue>, baud: u32) {
     let mut pacer = Pacer::new(baud);
     let mut frame = Vec::with_capacity(512);
     while let Some(bytes) = queue.pop() {
         frame.clear();
         write_serial_message(&bytes, &mut frame);
-        if let Err(e) = port.write_all(&frame).and_then(|()| port.flush()) {
-            tracing::warn!(port = %name, error = %e, "radio write failed");
-            if e.kind() != std::io::ErrorKind::TimedOut {
-                return;
-            }
+        if !queue.write(&frame) {
+            continue;
         }
         queue.counters.frames.fetch_add(1, Ordering::Relaxed);
         queue
@@ -332,22 +431,71 @@ fn writer(queue: Arc<RadioQueue>, mut port: impl Write, baud: u32, name: String)
     }
 }
 
-/// Reads frames from the radio until the router stops or the port fails;
-/// each good message is decided like a datagram, each bad frame counted.
-/// `port` must return from `read` periodically (a port timeout) so the
-/// thread sees the router stop.
-fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
+/// Owns radio `index`'s port until the router stops: opens it, reads
+/// frames (each good message decided like a datagram, each bad frame
+/// counted) until it fails, then opens it again on the schedule of
+/// [`Reopen`], reporting each outage once when it begins and once when it
+/// ends. The port must return from `read` periodically (its read timeout)
+/// so the thread sees the router stop and a failed write.
+fn reader(shared: Arc<Shared>, index: u16, mut open: Opener) {
+    let Some(queue) = shared.net.radios.get(usize::from(index)).cloned() else {
+        return;
+    };
+    let name = shared.net.radio_name(index);
+    let origin = Instant::now();
+    let mut schedule = Reopen::new();
+    let mut first = true;
+    while !shared.stopped() {
+        let error = match open() {
+            Ok((port, writer)) => {
+                queue.up(writer);
+                if schedule.opened(origin.elapsed()) {
+                    tracing::info!(port = %name, "radio reopened");
+                    shared.radio_changed(index, None);
+                } else if first {
+                    tracing::info!(port = %name, "radio open");
+                }
+                let ended = read_frames(&shared, &queue, index, port);
+                queue.down(Instant::now(), ended.as_deref().unwrap_or("stopped"));
+                match ended {
+                    Some(e) => e,
+                    None => return,
+                }
+            }
+            Err(e) => {
+                queue.down(Instant::now(), &e.to_string());
+                e.to_string()
+            }
+        };
+        first = false;
+        let retry = schedule.failed(origin.elapsed());
+        if retry.report {
+            tracing::warn!(port = %name, error = %error, "radio failed; reopening it until it returns");
+            shared.radio_changed(index, Some(error));
+        }
+        std::thread::sleep(retry.after);
+    }
+}
+
+/// Reads frames from one opening of a radio's port until it fails (its
+/// error, or the writer's) or the router stops (`None`).
+fn read_frames(
+    shared: &Shared,
+    queue: &RadioQueue,
+    index: u16,
+    mut port: Box<dyn Read + Send>,
+) -> Option<String> {
     let mut decoder = SerialDecoder::new();
     let mut buf = [0u8; 1024];
     let from = Peer::Serial(index);
     while !shared.stopped() {
+        if let Some(e) = queue.write_failed() {
+            return Some(e);
+        }
         let n = match SerialRead::of(port.read(&mut buf)) {
             SerialRead::Bytes(n) => n,
             SerialRead::Idle => continue,
-            SerialRead::Failed(e) => {
-                tracing::warn!(port = %name, error = %e, "radio read failed");
-                return;
-            }
+            SerialRead::Failed(e) => return Some(e.to_string()),
         };
         decoder.push(&buf[..n]);
         while let Some(frame) = decoder.next_bytes() {
@@ -357,6 +505,7 @@ fn reader(shared: Arc<Shared>, index: u16, mut port: impl Read, name: String) {
             }
         }
     }
+    None
 }
 
 #[cfg(test)]
@@ -448,8 +597,9 @@ mod tests {
             }
         }
         let started = Instant::now();
-        let (qw, sink) = (q.clone(), Sink(out.clone()));
-        let t = std::thread::spawn(move || writer(qw, sink, 9600, "test".into()));
+        q.up(Box::new(Sink(out.clone())));
+        let qw = q.clone();
+        let t = std::thread::spawn(move || writer(qw, 9600));
         while q.len() > 0 {
             std::thread::sleep(Duration::from_millis(5));
         }
@@ -470,5 +620,50 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, 20);
+    }
+
+    #[test]
+    fn while_the_port_is_down_nothing_waits_and_a_failed_write_ends_the_opening() {
+        struct Broken;
+        impl Write for Broken {
+            fn write(&mut self, _: &[u8]) -> std::io::Result<usize> {
+                Err(std::io::ErrorKind::BrokenPipe.into())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let q = RadioQueue::default();
+        q.up(Box::new(Broken));
+        q.push(&msg("r1", "joy/0", twist(0.1)));
+        q.push(&msg("r2", "joy/0", twist(0.1)));
+        assert!(!q.write(b"frame"), "the write failed");
+        assert!(q.write_failed().is_some_and(|e| e.contains("broken pipe")));
+        assert_eq!(q.write_failed(), None, "told once");
+        q.down(Instant::now(), "broken pipe");
+        assert_eq!(q.len(), 0, "a command older than the outage is never sent");
+        q.push(&msg("r1", "joy/0", twist(0.2)));
+        assert_eq!(q.len(), 0);
+        let status = q.status(&SerialEndpoint {
+            port: "/dev/radio".into(),
+            baud: 57_600,
+        });
+        assert_eq!(status.lost_down, 3, "two emptied, one refused");
+        assert_eq!(
+            status.down.map(|(_, why)| why).as_deref(),
+            Some("broken pipe")
+        );
+        q.up(Box::new(Vec::new()));
+        q.push(&msg("r1", "joy/0", twist(0.3)));
+        assert_eq!(q.len(), 1, "queued again once open");
+        assert!(q.write(b"frame"));
+        assert!(
+            q.status(&SerialEndpoint {
+                port: "/dev/radio".into(),
+                baud: 57_600,
+            })
+            .down
+            .is_none()
+        );
     }
 }

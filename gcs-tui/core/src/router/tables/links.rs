@@ -21,13 +21,21 @@ const TELEMETRY_SHARE: f64 = 0.5;
 /// (a signed telemetry message, its checksum and COBS framing).
 const DEFAULT_TELEMETRY_FRAME: f64 = 200.0;
 
+/// Weight of each newly measured telemetry frame in the running mean of
+/// their sizes (after the first, which is taken as it is).
+const FRAME_WEIGHT: f64 = 0.1;
+
 /// Where one robot was heard, and when.
 #[derive(Debug, Clone)]
 pub(super) struct Links {
     udp: Option<(SocketAddr, Instant)>,
     radio: Option<(u16, Instant)>,
-    /// Mean size of the robot's telemetry frames on the radio, bytes.
+    /// Mean size of the robot's telemetry frames on the radio, bytes:
+    /// [`DEFAULT_TELEMETRY_FRAME`] until the first is measured, which then
+    /// replaces it (so the budget shown does not drift from a guess to the
+    /// truth over the following minute).
     radio_frame: f64,
+    frame_measured: bool,
     /// What the last [`Event::Links`] said.
     reported: RobotLinks,
 }
@@ -38,6 +46,7 @@ impl Links {
             udp: None,
             radio: None,
             radio_frame: DEFAULT_TELEMETRY_FRAME,
+            frame_measured: false,
             reported: RobotLinks::default(),
         };
         links.heard(from, now);
@@ -94,7 +103,11 @@ impl Links {
     pub(super) fn radio_telemetry(&mut self, message_len: usize) {
         // The message, its CRC, COBS overhead and two delimiters.
         let frame = (message_len + 4 + message_len / 254 + 3) as f64;
-        self.radio_frame += (frame - self.radio_frame) * 0.1;
+        if std::mem::replace(&mut self.frame_measured, true) {
+            self.radio_frame += (frame - self.radio_frame) * FRAME_WEIGHT;
+        } else {
+            self.radio_frame = frame;
+        }
     }
 }
 
@@ -141,10 +154,28 @@ impl Tables {
         })
     }
 
+    /// Radio `port` failed (`error`) or was opened again (`None`): the
+    /// operator is told (the robots on it fall silent on the radio, and
+    /// their links say so, on their own).
+    pub(crate) fn radio_changed(&mut self, port: u16, error: Option<String>, cx: &mut Ctx<'_>) {
+        cx.event(Event::Radio {
+            port: self.radio_name(port),
+            up: error.is_none(),
+            reason: error.unwrap_or_default(),
+        });
+    }
+
     /// What a robot's links look like at `now`, as [`Event::Links`] says.
     fn links_report(&self, l: &Links, now: Instant) -> RobotLinks {
         let timeout = self.config.link_timeout;
         let live = |at: Instant| now.saturating_duration_since(at) < timeout;
+        let mut down = Vec::new();
+        if l.udp.is_some_and(|(_, t)| !live(t)) {
+            down.push("wifi".to_string());
+        }
+        if l.radio.is_some_and(|(_, t)| !live(t)) {
+            down.push("radio".to_string());
+        }
         RobotLinks {
             udp: l.udp.is_some_and(|(_, t)| live(t)),
             radio: l
@@ -157,6 +188,7 @@ impl Tables {
                 _ => "",
             },
             radio_budget_hz: l.radio().and_then(|p| self.radio_budget(p, l.radio_frame)),
+            down,
         }
     }
 
@@ -217,5 +249,17 @@ mod tests {
         assert_eq!(l.all().count(), 2);
         let moved = l.heard(Peer::Udp("10.0.0.3:5000".parse().unwrap()), ms(5_020));
         assert_eq!(moved, Some(wifi));
+    }
+
+    #[test]
+    fn the_first_telemetry_frame_measured_replaces_the_guess() {
+        let mut l = Links::new(Peer::Serial(0), Instant::now());
+        assert_eq!(l.radio_frame, DEFAULT_TELEMETRY_FRAME);
+        // A 150-byte message: 150 + CRC 4 + COBS 1 + two delimiters.
+        l.radio_telemetry(150);
+        assert_eq!(l.radio_frame, 157.0, "at once, not 10 % of the way");
+        l.radio_telemetry(250);
+        // 250 + 4 + 0 + 3 = 257 bytes, a tenth of the way from 157.
+        assert!((l.radio_frame - 167.0).abs() < 1e-9, "{}", l.radio_frame);
     }
 }

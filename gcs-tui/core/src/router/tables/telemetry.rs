@@ -1,14 +1,15 @@
 //! Telemetry and the other traffic for the station itself: telemetry fans
 //! out to external subscribers and becomes an event (and, when the robot's
 //! safety layer changed, a safety event, `super::safety`); subscriptions lapse
-//! unless renewed; position fixes go to their robot; notices.
+//! unless renewed; position fixes go to their robot; notices, which also
+//! go to the station's log (its file), at their own level.
 //!
 //! [`Subscribers`] holds the external telemetry subscribers (a tool over
 //! UDP or TCP), each until its subscription lapses.
 
 use std::collections::HashMap;
 
-use mech_proto::{Notice, PositionFix, Subscribe, Telemetry};
+use mech_proto::{Level, Notice, PositionFix, Subscribe, Telemetry};
 use tokio::time::Instant;
 
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
@@ -120,12 +121,22 @@ impl Tables {
         }
     }
 
+    /// A notice (a robot's "autopilot found", a refusal, a fault): an event
+    /// for the operator's log, and a line in the station's log file, where
+    /// whoever reads the file afterwards finds what the robots said.
     pub(super) fn on_notice(
         &mut self,
         m: Incoming<'_>,
         notice: Notice,
         cx: &mut Ctx<'_>,
     ) -> Delivery {
+        let (from, text, code) = (&m.header.sender, &notice.text, notice.code);
+        match notice.level {
+            Level::Debug => tracing::debug!(%from, ?code, "notice: {text}"),
+            Level::Info => tracing::info!(%from, ?code, "notice: {text}"),
+            Level::Warn => tracing::warn!(%from, ?code, "notice: {text}"),
+            Level::Error => tracing::error!(%from, ?code, "notice: {text}"),
+        }
         cx.event(Event::Notice {
             from: m.header.sender.clone(),
             notice,
