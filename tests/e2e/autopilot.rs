@@ -9,7 +9,7 @@
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use serde_json::Value;
 
@@ -32,7 +32,7 @@ fn drive_for_three_seconds() -> String {
 fn the_agent_flies_a_fake_px4_over_mavlink() {
     let mavlink_port = free_port();
     let script = format!(
-        "wait connected drone 20s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
+        "wait connected drone 60s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
          autopilot drone arm\nautopilot drone offboard\nsleep 1s\n\
          route drone cmd/gcs\nwait route drone cmd/gcs 5s\nmode drone twist\nlog driving\n\
          {}log holding\nsleep 1500ms\nexpect failsafe drone channel-silent\nstatus drone\n\
@@ -53,6 +53,36 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         ),
     )
     .unwrap();
+    // The fake autopilot runs before the agent starts: Python importing
+    // pymavlink takes seconds on a loaded machine, and the script's time
+    // before arming must see the setpoints stream. The agent registers
+    // first and finds the autopilot at its next heartbeat (1 Hz), so the
+    // station hears that too.
+    let mut autopilot = Command::new("python3")
+        .arg(root().join("tests/e2e/fake_autopilot.py"))
+        .args([&mavlink_port.to_string(), "120"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 runs the fake autopilot (scripts/deps.sh installs pymavlink)");
+    let (heard, running) = std::sync::mpsc::channel();
+    let events = {
+        let out = autopilot.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            let mut events = Vec::new();
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if let Ok(event) = serde_json::from_str::<Value>(&line) {
+                    let _ = heard.send(());
+                    events.push(event);
+                }
+            }
+            events
+        })
+    };
+    assert!(
+        running.recv_timeout(Duration::from_secs(60)).is_ok(),
+        "the fake autopilot runs (it reports its state at once)"
+    );
     let mut agent = Command::new(mech_e2e::binary("mech-agent"))
         .arg("--config")
         .arg(&config)
@@ -60,30 +90,15 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("mech-agent starts");
-    let mut autopilot = Command::new("python3")
-        .arg(root().join("tests/e2e/fake_autopilot.py"))
-        .args([&mavlink_port.to_string(), "40"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("python3 runs the fake autopilot (scripts/deps.sh installs pymavlink)");
-    let events = {
-        let out = autopilot.stdout.take().unwrap();
-        std::thread::spawn(move || {
-            BufReader::new(out)
-                .lines()
-                .map_while(Result::ok)
-                .filter_map(|l| serde_json::from_str::<Value>(&l).ok())
-                .collect::<Vec<Value>>()
-        })
-    };
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let observer = {
         let (router, stop) = (station.router(), stop.clone());
         std::thread::spawn(move || observe_telemetry(router, stop))
     };
     station.until("\"summary\":\"before-arming\"");
-    let arm_window_ends = now() + 1.0;
+    // The script arms 1.5 s after it prints this line, so reading the line
+    // may be that late before a command counts as early.
+    let before_arming = now();
     station.until("\"summary\":\"driving\"");
     let driving = now();
     station.until("\"summary\":\"holding\"");
@@ -126,13 +141,13 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
     let commands = of("command");
     let first_command = commands.first().map_or(f64::INFINITY, |c| num(c, "t"));
     assert!(
-        first_command > arm_window_ends,
+        first_command > before_arming,
         "a command came before the operator's: {commands:?}"
     );
     let setpoints = of("setpoint");
     let early: Vec<&&Value> = setpoints
         .iter()
-        .filter(|s| num(s, "t") < arm_window_ends)
+        .filter(|s| num(s, "t") < first_command)
         .collect();
     assert!(
         early.len() > 20,
@@ -234,7 +249,12 @@ fn the_agent_flies_a_fake_px4_over_mavlink() {
     // Telemetry back in MECH's frame: the fake's state at the end (NED)
     // against the last telemetry (ENU), battery 87 %.
     let drone = &telemetry["drone"];
-    let start = &drone[0];
+    // The first pose the autopilot reported (the agent registers, and
+    // sends telemetry without a position, before it hears the autopilot).
+    let start = drone
+        .iter()
+        .find(|t| t.position_quality > 0.0)
+        .expect("telemetry with the autopilot's position");
     assert!(
         (start.pose.x - 2.0).abs() < 0.01 && (start.pose.y - 1.0).abs() < 0.01,
         "1 m north, 2 m east is (2, 1): {:?}",
