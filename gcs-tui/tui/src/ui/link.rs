@@ -9,8 +9,8 @@ use mech_proto::Waypoint;
 use tokio::sync::mpsc;
 
 use super::app::{Action, App, LogLevel, PromptError, Request, WAYPOINT_CHANNEL};
-use mech_station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation};
 use mech_control::lang::quote;
+use mech_station::wire::{FromStation, LineResult, LogLevel as WireLevel, ToStation};
 
 /// Byte offset of character `chars` in `s` (its end when shorter).
 fn char_to_byte(s: &str, chars: usize) -> usize {
