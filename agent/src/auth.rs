@@ -9,9 +9,22 @@
 //! nonce, so it cannot be a replay; it gives the offset from the robot's
 //! clock to station time and starts the router's stream. From then on every
 //! router message must be newer than the last one accepted.
+//!
+//! The agent asks again while no answer comes (every `hello_retry`), and an
+//! answer may come after the next request has gone out (a slow link): an
+//! answer to any of its last [`ASKED`] requests is taken. The stamps of its
+//! requests rise for as long as the agent runs (and are station time once
+//! it has synced before), which is what lets the router tell its newest
+//! request from copies of earlier ones.
+
+use std::collections::VecDeque;
 
 use mech_proto::Body;
 use mech_proto::auth::{AuthError, Key, Stamper, Stream, split};
+
+/// Time requests whose answer is still taken: the last 16, four seconds of
+/// requests at the agent's default `hello_retry` of 0.25 s.
+pub const ASKED: usize = 16;
 
 /// Signing and checking for one robot.
 #[derive(Debug)]
@@ -22,8 +35,8 @@ pub struct RobotAuth {
     stamper: Stamper,
     /// The router's stream, once a `Time` answer started it.
     router_stream: Option<Stream>,
-    /// Nonce of the time request waiting for an answer.
-    asked: Option<u64>,
+    /// Nonces of the time requests waiting for an answer, newest last.
+    asked: VecDeque<u64>,
     /// Messages refused, by reason.
     pub rejected: RobotRejections,
 }
@@ -66,7 +79,7 @@ impl RobotAuth {
             router: router.to_string(),
             stamper: Stamper::default(),
             router_stream: None,
-            asked: None,
+            asked: VecDeque::with_capacity(ASKED),
             rejected: RobotRejections::default(),
         }
     }
@@ -77,10 +90,14 @@ impl RobotAuth {
         self.router_stream.is_some()
     }
 
-    /// A new time request: its nonce is random and remembered.
+    /// A new time request: its nonce is random and remembered (with the
+    /// last [`ASKED`] before it).
     pub fn time_request(&mut self) -> mech_proto::TimeRequest {
         let nonce = rand::random::<u64>();
-        self.asked = Some(nonce);
+        if self.asked.len() >= ASKED {
+            self.asked.pop_front();
+        }
+        self.asked.push_back(nonce);
         mech_proto::TimeRequest { nonce }
     }
 
@@ -88,7 +105,7 @@ impl RobotAuth {
     /// its traffic): ask the time again before trusting it.
     pub fn forget_router(&mut self) {
         self.router_stream = None;
-        self.asked = None;
+        self.asked.clear();
     }
 
     /// Signs an encoded message (nil `auth` element) with station time
@@ -117,8 +134,8 @@ impl RobotAuth {
             return Checked::Reject;
         }
         if let Body::Time(t) = body {
-            if sender == self.router && self.asked == Some(t.nonce) {
-                self.asked = None;
+            if sender == self.router && !self.synced() && self.asked.contains(&t.nonce) {
+                self.asked.clear();
                 self.stamper.sync(t.station_us, local_us);
                 self.router_stream = Some(Stream::starting_at(tag.stamp_us));
                 return Checked::Synced;
@@ -221,5 +238,35 @@ mod tests {
                 not_router: 1
             }
         );
+    }
+
+    /// On a link slower than the agent's retry period, the answer to a
+    /// request comes after the next request went out: it is taken. One to
+    /// a request older than the last [`ASKED`] is not.
+    #[test]
+    fn an_answer_to_an_earlier_request_syncs_a_robot_on_a_slow_link() {
+        let key = Key::new(&[4; 32]);
+        let mut auth = RobotAuth::new(key.clone(), "router");
+        let first = auth.time_request();
+        for _ in 1..ASKED {
+            auth.time_request();
+        }
+        let answer = |nonce, stamp| {
+            let t = Body::Time(Time {
+                nonce,
+                station_us: 1_700_000_000_000_000,
+            });
+            router_msg(&key, t, stamp)
+        };
+        let (b, body) = answer(first.nonce, 1_700_000_000_000_000);
+        assert_eq!(auth.check(&b, "router", &body, 100), Checked::Synced);
+        let mut auth = RobotAuth::new(key.clone(), "router");
+        let first = auth.time_request();
+        for _ in 0..ASKED {
+            auth.time_request();
+        }
+        let (b, body) = answer(first.nonce, 1_700_000_000_000_000);
+        assert_eq!(auth.check(&b, "router", &body, 100), Checked::Reject);
+        assert!(!auth.synced());
     }
 }

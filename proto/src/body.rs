@@ -9,9 +9,10 @@ use serde_repr::{Deserialize_repr, Serialize_repr};
 
 use crate::command::{Command, CommandKind, finite};
 use crate::error::Error;
+use crate::names::{name, nonempty_name};
 use crate::safety::{Arena, ArenaAck, Neighbours, SafetyReport};
 use crate::tagged::tagged_enum;
-use crate::{MAX_FLEET_PARTS, MAX_NAME_LEN, MAX_TEXT_LEN, MAX_WAYPOINTS};
+use crate::{MAX_FLEET_PARTS, MAX_TEXT_LEN, MAX_WAYPOINTS};
 
 /// Registration, robot -> router. Sent at start-up and again whenever the
 /// agent has not heard a [`Welcome`] (the router treats a repeat from a new
@@ -585,28 +586,6 @@ tagged_enum! {
         ArenaAck(ArenaAck) = 24,
         Neighbours(Neighbours) = 25,
     }
-}
-
-pub(crate) fn name(v: &str, what: &str) -> Result<(), Error> {
-    if v.len() > MAX_NAME_LEN {
-        return Err(Error::invalid(format!(
-            "{what} is {} bytes long, at most {MAX_NAME_LEN} allowed",
-            v.len()
-        )));
-    }
-    if v.chars().any(|c| c.is_control() || c.is_whitespace()) {
-        return Err(Error::invalid(format!(
-            "{what} {v:?} contains whitespace or control characters"
-        )));
-    }
-    Ok(())
-}
-
-pub(crate) fn nonempty_name(v: &str, what: &str) -> Result<(), Error> {
-    if v.is_empty() {
-        return Err(Error::invalid(format!("{what} is empty")));
-    }
-    name(v, what)
 }
 
 fn text(v: &str, what: &str) -> Result<(), Error> {

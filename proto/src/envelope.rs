@@ -10,9 +10,10 @@ use std::fmt;
 use serde::{Deserialize, Serialize};
 use serde_bytes::ByteBuf;
 
-use crate::body::{self, Body};
+use crate::body::Body;
 use crate::command::Command;
 use crate::error::Error;
+use crate::names;
 use crate::tagged::expect_end;
 use crate::{MAX_AUTH_LEN, MAX_MESSAGE_LEN, PROTOCOL_VERSION};
 
@@ -64,9 +65,9 @@ impl Envelope {
 
     /// Checks the header names and the body (see [`Body::validate`]).
     pub fn validate(&self) -> Result<(), Error> {
-        body::name(&self.header.sender, "sender")?;
-        body::name(&self.header.destination, "destination")?;
-        body::name(&self.header.channel, "channel")?;
+        names::name(&self.header.sender, "sender")?;
+        names::name(&self.header.destination, "destination")?;
+        names::name(&self.header.channel, "channel")?;
         check_auth(self.auth.as_ref())?;
         self.body.validate()
     }
@@ -248,9 +249,9 @@ pub fn check_command(bytes: &[u8], head: &Peek<'_>) -> Result<Command, Error> {
             head.kind
         )));
     }
-    body::name(head.sender, "sender")?;
-    body::name(head.destination, "destination")?;
-    body::name(head.channel, "channel")?;
+    names::name(head.sender, "sender")?;
+    names::name(head.destination, "destination")?;
+    names::name(head.channel, "channel")?;
     let mut rest = bytes
         .get(head.body_offset..)
         .ok_or_else(|| Error::Malformed("header outside the message".into()))?;

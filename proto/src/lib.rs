@@ -21,6 +21,7 @@ mod command;
 mod envelope;
 mod error;
 pub mod framing;
+mod names;
 mod safety;
 mod tagged;
 mod units;

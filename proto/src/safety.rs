@@ -381,7 +381,7 @@ fn segments_touch(a: Point, b: Point, c: Point, d: Point) -> bool {
 
 impl Arena {
     pub(crate) fn validate(&self) -> Result<(), Error> {
-        crate::body::nonempty_name(&self.robot, "robot name")?;
+        crate::names::nonempty_name(&self.robot, "robot name")?;
         nonnegative(self.margin, "arena margin")?;
         if !self.boundary.is_empty() {
             check_polygon(&self.boundary, MAX_BOUNDARY_VERTICES, "arena boundary")?;
@@ -416,7 +416,7 @@ impl Arena {
 
 impl Neighbours {
     pub(crate) fn validate(&self) -> Result<(), Error> {
-        crate::body::nonempty_name(&self.robot, "robot name")?;
+        crate::names::nonempty_name(&self.robot, "robot name")?;
         if self.robots.len() > MAX_NEIGHBOURS {
             return Err(Error::invalid(format!(
                 "{} neighbours, at most {MAX_NEIGHBOURS} allowed",

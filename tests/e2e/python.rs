@@ -367,3 +367,172 @@ fn a_python_client_sends_a_mission_and_discovers_the_channel() {
     let (lines, ok) = station.finish();
     assert!(ok, "robot_1 did not reach the last waypoint: {lines:#?}");
 }
+
+/// A `mech-gcs serve --demo N` for the headless recipe, stopped on drop.
+struct Served {
+    child: std::process::Child,
+    socket: std::path::PathBuf,
+    router: String,
+    dir: tempfile::TempDir,
+}
+
+impl Served {
+    fn start(robots: usize) -> Served {
+        use std::io::BufRead;
+        let dir = tempfile::tempdir().unwrap();
+        let socket = dir.path().join("gcs.sock");
+        let mut child = std::process::Command::new(mech_e2e::binary("mech-gcs"))
+            .args(["serve", "--demo", &robots.to_string()])
+            .args(["--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0", "--socket"])
+            .arg(&socket)
+            .env("XDG_STATE_HOME", dir.path())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("mech-gcs serve starts");
+        let out = child.stdout.take().expect("stdout piped");
+        let mut lines = std::io::BufReader::new(out).lines();
+        let ready = lines
+            .next()
+            .and_then(Result::ok)
+            .expect("mech-gcs serve prints a ready line");
+        std::thread::spawn(move || for _ in lines {});
+        let router = ready
+            .split("router on ")
+            .nth(1)
+            .and_then(|rest| rest.split_whitespace().next())
+            .unwrap_or_else(|| panic!("no router address in {ready:?}"))
+            .to_string();
+        Served {
+            child,
+            socket,
+            router,
+            dir,
+        }
+    }
+
+    /// `mech-gcs --attach SOCKET --script -` with `script`: its output.
+    fn attach_script(&self, script: &str) -> std::process::Output {
+        use std::io::Write;
+        let mut child = std::process::Command::new(mech_e2e::binary("mech-gcs"))
+            .arg("--attach")
+            .arg(&self.socket)
+            .args(["--script", "-"])
+            .env("XDG_STATE_HOME", self.dir.path())
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("mech-gcs --attach --script starts");
+        child
+            .stdin
+            .take()
+            .expect("stdin")
+            .write_all(script.as_bytes())
+            .expect("script written");
+        child.wait_with_output().expect("the script ends")
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Telemetry of `robot` from `router` (unauthenticated) until it is more
+/// than `metres` from where it was first heard; panics after `timeout`.
+fn wait_until_moving(router: &str, robot: &str, metres: f64, timeout: std::time::Duration) {
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket
+        .set_read_timeout(Some(std::time::Duration::from_millis(100)))
+        .unwrap();
+    let subscribe = mech_proto::encode(&Envelope::new(
+        header("watcher", "router", ""),
+        Body::Subscribe(Subscribe { telemetry: true }),
+    ))
+    .unwrap();
+    socket.send_to(&subscribe, router).unwrap();
+    let start = std::time::Instant::now();
+    let mut first: Option<(f64, f64)> = None;
+    let mut buf = vec![0; 65_536];
+    while start.elapsed() < timeout {
+        let Ok(n) = socket.recv(&mut buf) else {
+            continue;
+        };
+        if let Ok(Envelope {
+            header,
+            body: Body::Telemetry(t),
+            ..
+        }) = mech_proto::decode(&buf[..n])
+        {
+            if header.sender != robot {
+                continue;
+            }
+            let (x0, y0) = *first.get_or_insert((t.pose.x, t.pose.y));
+            if (t.pose.x - x0).hypot(t.pose.y - y0) > metres {
+                return;
+            }
+        }
+    }
+    panic!("{robot} did not move {metres} m within {timeout:?}");
+}
+
+/// The headless recipe of `docs/external-controllers.md`: `mech-gcs serve
+/// --demo 1` stays up, a script attached to it routes robot_1 to the
+/// client's channel and leaves (the route stays), go_to_goal.py drives it
+/// there. Then, while go_to_goal.py drives it again, the station is killed
+/// under it: the client stops with the reason (exit 3) instead of driving
+/// blind until its timeout (exit 1).
+#[test]
+fn headless_serve_attach_route_and_drive_and_a_station_gone_is_not_driven_blind() {
+    let mut served = Served::start(1);
+    let router = served.router.clone();
+    let routed = served.attach_script(
+        "wait connected robot_1 10s\nroute robot_1 ext/python\nwait route robot_1 ext/python 5s\n",
+    );
+    assert!(
+        routed.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&routed.stdout),
+        String::from_utf8_lossy(&routed.stderr)
+    );
+    let go = |x: f64, y: f64| {
+        let mut c = python();
+        c.arg(root().join("clients/python/examples/go_to_goal.py"))
+            .args(["robot_1", &x.to_string(), &y.to_string()])
+            .args(["--router", &router, "--timeout", "45"]);
+        c
+    };
+    let out = run_ok(go(2.0, 2.2), "go_to_goal.py after the attached script left");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert!(report.contains("\"arrived\": true"), "{report}");
+
+    let driving = go(0.4, 0.3)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("go_to_goal.py starts");
+    wait_until_moving(
+        &served.router,
+        "robot_1",
+        0.1,
+        std::time::Duration::from_secs(30),
+    );
+    served.child.kill().expect("the station killed");
+    served.child.wait().ok();
+    let out = driving.wait_with_output().expect("go_to_goal.py ends");
+    let report = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{report}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        report.contains("\"arrived\": false")
+            && (report.contains("port unreachable") || report.contains("s old")),
+        "{report}"
+    );
+}

@@ -1,7 +1,9 @@
 //! Recording and replay end to end: `mech-gcs --script --record` with
 //! simulated agents, the file read by Python's `mcap` package (an
-//! independent reader), then `mech-gcs replay --script`, which must print
-//! what the run printed without sending anything anywhere.
+//! independent reader) and every message of every channel validated by
+//! Python's `jsonschema` against the schema the file embeds, then
+//! `mech-gcs replay --script`, which must print the lines the run printed,
+//! in the same order, without sending anything anywhere.
 
 use std::net::UdpSocket;
 use std::path::Path;
@@ -22,7 +24,9 @@ mode robot_2 twist
 drive robot_2 0.2 0 0
 mode robot_1 twist
 drive robot_1 0.2 0 0
+status
 record
+sleep 1500ms
 estop
 wait estop 3s
 release
@@ -109,7 +113,65 @@ fn a_recorded_script_reads_in_python_and_replays_as_it_ran() {
         Some(read) => check_python_view(&read),
         None => println!("skipped the Python reader: python3 -m pip install mcap"),
     }
+    every_message_matches_its_schema(&file);
     replay_prints_the_run(&file, &run, &dir);
+}
+
+/// Every message of every JSON channel validates against the JSON Schema
+/// the file embeds for it (Python's `jsonschema`, `scripts/deps.sh`
+/// installs it; missing only outside CI), link quality and the mech.*
+/// channels included.
+fn every_message_matches_its_schema(file: &Path) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/validate_recording.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(file)
+        .output()
+        .expect("python3 runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if stderr.contains("No module named") && std::env::var_os("CI").is_none() {
+        println!("skipped the schema validation: {stderr} (bash scripts/deps.sh)");
+        return;
+    }
+    assert!(out.status.success(), "validator: {stderr}");
+    let read: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(read["errors"], serde_json::json!([]), "{read:#}");
+    let validated = &read["validated"];
+    for topic in [
+        "/mech/events",
+        "/mech/snapshot",
+        "/mech/decisions",
+        "/mech/operator",
+        "/mech/log",
+        "/mech/scene",
+        "/mech/clusters",
+        "/robots/robot_1/telemetry",
+        "/robots/robot_1/pose",
+    ] {
+        assert!(
+            validated[topic].as_u64().unwrap_or(0) > 0,
+            "{topic}: {read}"
+        );
+    }
+    assert_eq!(
+        read["unchecked"]
+            .as_object()
+            .map(|m| m.keys().collect::<Vec<_>>()),
+        Some(vec![&"/mech/raw".to_string()]),
+        "only the raw copy has no schema: {read}"
+    );
+    for event in [
+        "registered",
+        "link_quality",
+        "route_acked",
+        "mission_sent",
+        "estop",
+    ] {
+        assert!(
+            read["events"][event].as_u64().unwrap_or(0) > 0,
+            "{event}: {read}"
+        );
+    }
 }
 
 /// Schemas Foxglove and Lichtblick draw, JSON everywhere but the raw copy,
@@ -151,12 +213,18 @@ fn check_python_view(read: &Value) {
     assert!(pose["timestamp"]["sec"].as_u64().unwrap_or(0) > 1_600_000_000);
     let scene = &topics["/mech/scene"]["first"];
     assert!(scene["entities"].as_array().is_some(), "{scene}");
-    assert_eq!(topics["/mech/operator"]["count"], 17);
+    // 19 commands and the script's end.
+    assert_eq!(topics["/mech/operator"]["count"], 20);
 }
 
-/// `replay --script` prints the run's events in the same order and the same
-/// commands with the same outcomes; no datagram reaches the robots' or the
-/// router's recorded addresses while it runs.
+/// `replay --script` prints the lines the run printed, in the same order:
+/// the router's binding, every event and every command's result with its
+/// details (`status`), up to the script's end (not the goodbyes of the
+/// robots as the station stops after it). Only two things may differ
+/// (`docs/recording.md`): a result's `t` (the run stamps it when it prints
+/// it, the recording when it records it: microseconds apart) and the
+/// summary (the replay's says what it read). No datagram reaches the
+/// robots' or the router's recorded addresses while it runs.
 fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
     let listeners = recorded_addresses(run);
     let file = file.to_str().expect("utf-8 path");
@@ -167,27 +235,54 @@ fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
         String::from_utf8_lossy(&out.stderr)
     );
     let replayed = json_lines(&out);
-    let events = |lines: &[Value]| -> Vec<Value> {
-        of_type(lines, "event")
-            .into_iter()
-            .filter(|e| e["event"] != "listening")
-            .cloned()
-            .collect()
-    };
-    let (ran, again) = (events(run), events(&replayed));
-    assert!(ran.len() > 10 && again.len() >= ran.len(), "{ran:#?}");
-    // The run printed until its summary; the recording goes on to the
-    // router's shutdown (the robots' goodbyes).
-    assert_eq!(again[..ran.len()], ran[..]);
-    let commands = |lines: &[Value]| -> Vec<(Value, Value, Value)> {
-        of_type(lines, "result")
-            .into_iter()
-            .map(|r| (r["line"].clone(), r["command"].clone(), r["ok"].clone()))
-            .collect()
-    };
-    assert_eq!(commands(&replayed), commands(run));
-    let summary = replayed.last().expect("a summary");
+    let (ran_summary, ran) = run.split_last().expect("the run's lines");
+    let (summary, again) = replayed.split_last().expect("the replay's lines");
+    assert_eq!(ran_summary["type"], "summary");
+    assert_eq!(summary["type"], "summary");
     assert_eq!(summary["ok"], true, "{summary}");
+    assert!(ran.len() > 20, "{ran:#?}");
+    let without_result_t = |lines: &[Value]| -> Vec<Value> {
+        lines
+            .iter()
+            .map(|l| {
+                let mut l = l.clone();
+                if l["type"] == "result" {
+                    if let Some(m) = l.as_object_mut() {
+                        m.remove("t");
+                    }
+                }
+                l
+            })
+            .collect()
+    };
+    let (a, b) = (without_result_t(ran), without_result_t(again));
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert_eq!(x, y, "line {i} differs (run, replay)");
+    }
+    assert_eq!(
+        a.len(),
+        b.len(),
+        "the replay printed {} lines, the run {}",
+        b.len(),
+        a.len()
+    );
+    for (x, y) in ran.iter().zip(again) {
+        if x["type"] == "result" {
+            let (t0, t1) = (
+                x["t"].as_f64().unwrap_or(-1.0),
+                y["t"].as_f64().unwrap_or(1e9),
+            );
+            assert!((t0 - t1).abs() < 0.05, "result times {t0} {t1}: {x}");
+        }
+    }
+    let status = ran
+        .iter()
+        .find(|l| l["command"] == "status")
+        .expect("status ran");
+    assert!(
+        status["details"].as_array().is_some_and(|d| d.len() == 2),
+        "{status}"
+    );
     for (what, sock) in &listeners {
         let mut buf = [0u8; 2048];
         assert!(
@@ -246,6 +341,18 @@ fn network_calls_of_replay(file: &str, dir: &Path) -> Option<String> {
     Some(calls.trim().to_string())
 }
 
+/// Where an MCAP file's data section ends (its 13-byte data end record
+/// begins): the footer, the record before the closing 8-byte magic, holds
+/// where the summary starts (opcode, length, summary start, summary offset
+/// start, CRC: 29 bytes). The summary after the data repeats every schema,
+/// so a cut at half the file may well leave the data whole.
+fn data_section_end(bytes: &[u8]) -> usize {
+    let footer = bytes.len() - 8 - 29;
+    assert_eq!(bytes[footer], 0x02, "an MCAP footer");
+    let start: [u8; 8] = bytes[footer + 9..footer + 17].try_into().expect("8 bytes");
+    u64::from_le_bytes(start) as usize - 13
+}
+
 #[test]
 fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
     let scratch = scratch("record-damaged");
@@ -266,7 +373,8 @@ fn a_damaged_recording_replays_what_it_can_and_says_what_is_wrong() {
     assert_eq!(out.status.code(), Some(0));
     let bytes = std::fs::read(&file).expect("the recording");
     let cut = dir.join("cut.mcap");
-    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("cut written");
+    // Cut into the data's last record: everything before it replays.
+    std::fs::write(&cut, &bytes[..data_section_end(&bytes) - 1]).expect("cut written");
     let out = mech_gcs(
         &["replay", cut.to_str().expect("utf-8"), "--script"],
         "",

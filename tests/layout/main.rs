@@ -24,6 +24,7 @@ const CRATES: &[&str] = &[
     "gcs-tui/station/src",
     "gcs-tui/tui/src",
     "gcs-tui/zenoh/src",
+    "gcs-tui/ros2/src",
 ];
 
 fn workspace() -> PathBuf {
@@ -429,6 +430,7 @@ fn the_default_build_leaves_zenoh_out() {
         .expect("the workspace lists its default members")..];
     let defaults = &defaults[..defaults.find(']').unwrap()];
     assert!(!defaults.contains("zenoh"), "{defaults}");
+    assert!(!defaults.contains("ros2"), "{defaults}");
     for krate in [
         "mech-gcs",
         "mech-station",
@@ -461,6 +463,12 @@ fn the_default_build_leaves_zenoh_out() {
                 .lines()
                 .any(|l| l.starts_with("zenoh ") || l.starts_with("mech-zenoh ")),
             "{krate} depends on zenoh"
+        );
+        assert!(
+            !tree.lines().any(|l| l.starts_with("rustdds ")
+                || l.starts_with("ros2-client ")
+                || l.starts_with("mech-ros2 ")),
+            "{krate} depends on DDS"
         );
     }
 }

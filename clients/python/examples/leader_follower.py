@@ -9,7 +9,9 @@ from this one program on one channel, closed on their telemetry at 20 Hz.
 Against `mech-gcs --demo`, route both robots to the channel first:
 `:route robot_1 ext/python` and `:route robot_2 ext/python`. Stops both
 robots at the end and prints one JSON line: the follower's tracking error
-(distance from its slot) over the second half of the run.
+(distance from its slot) over the second half of the run. Steers on fresh
+telemetry only: while either robot's is stale both are held (said on
+stderr); after 3 s of it, or with the station gone, it stops and exits 3.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import sys
 import time
 from typing import List
 
-from mech_client import Client, MechError, read_key
+from mech_client import Client, MechError, RouterUnreachable, StaleTelemetry, read_key
 
 RATE_HZ = 20.0
 LEADER_SPEED = 0.15  # m/s
@@ -30,6 +32,7 @@ MAX_SPEED = 0.45  # follower, m/s
 MAX_YAW_RATE = 1.5  # follower, rad/s
 K_POSITION = 1.2
 K_HEADING = 3.0
+GIVE_UP_STALE = 3.0  # s of stale telemetry before giving up
 
 
 def wrap(angle: float) -> float:
@@ -79,21 +82,38 @@ def main() -> int:
             print(f"leader_follower: {e}", file=sys.stderr)
             return 1
         start = time.monotonic()
-        while time.monotonic() - start < args.seconds:
-            period_end = time.monotonic() + 1.0 / RATE_HZ
-            lead, fol = mech.telemetry[args.leader], mech.telemetry[args.follower]
-            for t, robot in ((lead, args.leader), (fol, args.follower)):
-                if t.channel != args.channel:
-                    print(f"route {robot} to {args.channel} (:route {robot} {args.channel})", file=sys.stderr)
-            tx, ty = slot(lead.pose.x, lead.pose.y, lead.pose.heading, args.offset)
-            vx, wz = follow(fol.pose.x, fol.pose.y, fol.pose.heading, tx, ty, LEADER_SPEED)
-            mech.twist(args.leader, args.channel, vx=LEADER_SPEED, wz=LEADER_YAW_RATE)
-            mech.twist(args.follower, args.channel, vx=vx, wz=wz)
-            if time.monotonic() - start > args.seconds / 2:
-                errors.append(math.hypot(tx - fol.pose.x, ty - fol.pose.y))
-            mech.poll(max(0.0, period_end - time.monotonic()))
-        for robot in (args.leader, args.follower):
-            mech.stop(robot, args.channel)
+        stale_since = None
+        try:
+            while time.monotonic() - start < args.seconds:
+                mech.poll(1.0 / RATE_HZ)
+                try:
+                    lead = mech.fresh_telemetry(args.leader)
+                    fol = mech.fresh_telemetry(args.follower)
+                except StaleTelemetry as e:
+                    for robot in (args.leader, args.follower):
+                        mech.stop(robot, args.channel)
+                    if stale_since is None:
+                        stale_since = time.monotonic()
+                        print(f"leader_follower: {e}; holding both", file=sys.stderr)
+                    if time.monotonic() - stale_since > GIVE_UP_STALE:
+                        print(json.dumps({"error": str(e)}))
+                        return 3
+                    continue
+                stale_since = None
+                for t, robot in ((lead, args.leader), (fol, args.follower)):
+                    if t.channel != args.channel:
+                        print(f"route {robot} to {args.channel} (:route {robot} {args.channel})", file=sys.stderr)
+                tx, ty = slot(lead.pose.x, lead.pose.y, lead.pose.heading, args.offset)
+                vx, wz = follow(fol.pose.x, fol.pose.y, fol.pose.heading, tx, ty, LEADER_SPEED)
+                mech.twist(args.leader, args.channel, vx=LEADER_SPEED, wz=LEADER_YAW_RATE)
+                mech.twist(args.follower, args.channel, vx=vx, wz=wz)
+                if time.monotonic() - start > args.seconds / 2:
+                    errors.append(math.hypot(tx - fol.pose.x, ty - fol.pose.y))
+            for robot in (args.leader, args.follower):
+                mech.stop(robot, args.channel)
+        except RouterUnreachable as e:
+            print(json.dumps({"error": str(e)}))
+            return 3
     summary = {
         "leader": args.leader,
         "follower": args.follower,

@@ -8,14 +8,17 @@ the station's time when the local clock may be off::
 
     with Client("ext_python") as mech:          # the demo: 127.0.0.1:7400
         mech.subscribe()
-        pose = mech.wait_telemetry("robot_1").pose
-        mech.twist("robot_1", "ext/python", vx=0.2, wz=0.3)
+        mech.wait_telemetry("robot_1")
+        while True:
+            mech.poll(0.05)                         # 20 Hz
+            pose = mech.fresh_telemetry("robot_1").pose   # StaleTelemetry if old
+            mech.twist("robot_1", "ext/python", vx=0.2, wz=0.3)
 
 The wire format is docs/protocol.md; ``mech_client.protocol`` encodes it
 byte for byte as the reference implementation does.
 """
 
-from .client import Client, MechError, parse_address
+from .client import STALE_AFTER, Client, MechError, RouterUnreachable, StaleTelemetry, parse_address
 from .protocol import (
     AutopilotAction,
     Channel,
@@ -57,6 +60,9 @@ __all__ = [
     "Notice",
     "Pose",
     "ProtocolError",
+    "RouterUnreachable",
+    "STALE_AFTER",
+    "StaleTelemetry",
     "Telemetry",
     "Velocity",
     "Waypoint",

@@ -4,12 +4,18 @@ and take the station's time.
 
 The client is synchronous and single-threaded: call :meth:`Client.poll`
 (or any method that waits) often enough to take in telemetry and renew the
-subscription. A control loop at 10-50 Hz that calls ``poll(0)`` once per
-period is the intended use.
+subscription. A control loop at 10-50 Hz that calls ``poll(period)`` once
+per iteration (it returns when the period is over) is the intended use.
+
+It never drives blind in silence: a router that is not there (ICMP port
+unreachable) raises :class:`RouterUnreachable` from the next call, and
+:meth:`Client.fresh_telemetry` raises :class:`StaleTelemetry` when a
+robot's latest telemetry is older than a controller should steer by.
 """
 
 from __future__ import annotations
 
+import math
 import random
 import socket
 import time
@@ -25,8 +31,31 @@ RENEW_EVERY = 2.0
 it has not heard from for 5 s)."""
 
 
+STALE_AFTER = 0.5
+"""Seconds after which :meth:`Client.fresh_telemetry` calls a robot's
+telemetry stale: the agents' failsafe timeout, and the router's (robots
+send at 20 Hz)."""
+
+
 class MechError(RuntimeError):
-    """A request the router or a robot did not answer in time."""
+    """A request the router or a robot did not answer in time, or a link a
+    controller cannot steer over."""
+
+
+class RouterUnreachable(MechError):
+    """Nothing listens at the router's address: the station is down (the
+    kernel's ICMP port unreachable). Commands sent now reach no robot."""
+
+
+class StaleTelemetry(MechError):
+    """A robot's latest telemetry is too old to steer by (the robot, its
+    link or the station went quiet, or the subscription lapsed)."""
+
+    def __init__(self, robot: str, age: float) -> None:
+        what = "no telemetry yet" if math.isinf(age) else f"telemetry {age:.2f} s old"
+        super().__init__(f"{robot}: {what}; not steering on it")
+        self.robot = robot
+        self.age = age
 
 
 def parse_address(address: str) -> Tuple[str, int]:
@@ -69,6 +98,9 @@ class Client:
         self.router = (socket.gethostbyname(host), port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1" if self.router[0].startswith("127.") else "", 0))
+        # Connected: the kernel then reports the router's ICMP errors (port
+        # unreachable: the station is down) on this socket's next call.
+        self.sock.connect(self.router)
         self._seq = 0
         self._offset_us = 0
         self._last_stamp = 0
@@ -83,6 +115,8 @@ class Client:
         """Notices sent to us (sender, notice), oldest first, at most 100."""
         self.refused = 0
         """Messages dropped as undecodable, unsigned, forged or replayed."""
+        self.unreachable = 0
+        """Times the router's address answered "port unreachable"."""
         self._replies: List[p.Message] = []
         if sync_clock:
             self.sync_time()
@@ -97,7 +131,7 @@ class Client:
         if self._subscribed_at is not None:
             try:
                 self._send(p.Kind.SUBSCRIBE, [False], p.ROUTER)
-            except OSError:
+            except (OSError, RouterUnreachable):
                 pass
         self.sock.close()
 
@@ -173,29 +207,61 @@ class Client:
         self._subscribed_at = None
         self._send(p.Kind.SUBSCRIBE, [False], p.ROUTER)
 
-    def poll(self, timeout: float = 0.0) -> List[p.Message]:
-        """Takes in every message waiting (waiting up to ``timeout`` seconds
-        for the first), updates :attr:`telemetry`, renews the subscription
-        when due, and returns the messages."""
+    def poll(self, period: float = 0.0) -> List[p.Message]:
+        """Takes in what arrives for ``period`` seconds and returns then
+        (``poll(0)``: what is waiting now), so a loop that calls it once per
+        iteration runs at ``1 / period`` at most. Updates :attr:`telemetry`,
+        renews the subscription when due, and returns the messages. Raises
+        :class:`RouterUnreachable` when the station is not there."""
+        return self._take(period, first=False)
+
+    def _take(self, timeout: float, first: bool) -> List[p.Message]:
+        """Takes in messages until ``timeout`` has passed (``first``: until
+        the first one too, whichever comes first), then what is waiting."""
         self._renew()
         got: List[p.Message] = []
         deadline = time.monotonic() + timeout
         while True:
-            left = deadline - time.monotonic()
-            self.sock.settimeout(max(left, 0.0) if not got else 0.0)
+            left = max(deadline - time.monotonic(), 0.0)
+            self.sock.settimeout(0.0 if (first and got) else left)
             try:
                 data, source = self.sock.recvfrom(p.MAX_MESSAGE_LEN + 1)
             except (BlockingIOError, socket.timeout):
-                break
-            except OSError:
-                # ICMP port unreachable while the router is down.
-                break
+                if left <= 0.0 or (first and got):
+                    break
+                continue
+            except ConnectionRefusedError:
+                self._unreachable()
             if not self._from_router(source):
                 continue
             message = self._accept(data)
             if message is not None:
                 got.append(message)
         return got
+
+    def _unreachable(self) -> None:
+        self.unreachable += 1
+        raise RouterUnreachable(
+            f"nothing listens at the router {self.router[0]}:{self.router[1]} "
+            "(port unreachable): is the station running?"
+        )
+
+    def telemetry_age(self, robot: str) -> float:
+        """Seconds since the robot's latest telemetry arrived (infinite
+        before the first)."""
+        at = self.telemetry_at.get(robot)
+        return math.inf if at is None else time.monotonic() - at
+
+    def fresh_telemetry(self, robot: str, max_age: float = STALE_AFTER) -> p.Telemetry:
+        """The robot's latest telemetry, if it arrived within ``max_age``
+        seconds; else raises :class:`StaleTelemetry` (a controller that
+        steers on it would drive blind). Subscribes if not yet subscribed."""
+        if self._subscribed_at is None:
+            self.subscribe()
+        age = self.telemetry_age(robot)
+        if age > max_age:
+            raise StaleTelemetry(robot, age)
+        return self.telemetry[robot]
 
     def wait_telemetry(self, robot: str, timeout: float = 5.0, newer_than: Optional[float] = None) -> p.Telemetry:
         """The robot's telemetry, waiting up to ``timeout`` s for it (for one
@@ -210,8 +276,8 @@ class Client:
                 return self.telemetry[robot]
             left = deadline - time.monotonic()
             if left <= 0:
-                raise MechError(f"no telemetry from {robot} within {timeout} s")
-            self.poll(min(left, 0.1))
+                raise StaleTelemetry(robot, self.telemetry_age(robot))
+            self._take(min(left, 0.1), first=True)
 
     # --------------------------------------------------------- discovery
 
@@ -291,7 +357,10 @@ class Client:
         data = p.encode(message)
         if self.key is not None:
             data = self.key.seal(data[:-1], stamp)
-        self.sock.sendto(data, self.router)
+        try:
+            self.sock.send(data)
+        except ConnectionRefusedError:
+            self._unreachable()
 
     def _renew(self) -> None:
         at = self._subscribed_at
@@ -338,4 +407,4 @@ class Client:
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
-            self.poll(min(left, 0.05))
+            self._take(min(left, 0.05), first=True)

@@ -141,6 +141,14 @@ pub fn event_json(s: &Stamped) -> Value {
             reason,
             detail,
         } => json!({"from": from, "reason": reason.as_str(), "detail": detail}),
+        Event::Refused {
+            count,
+            sources,
+            by_reason,
+            from,
+            detail,
+        } => json!({"count": count, "sources": sources, "by_reason": by_reason,
+                    "from": from, "detail": detail}),
     };
     if let Value::Object(m) = &mut v {
         m.insert("type".into(), json!("event"));
@@ -224,6 +232,35 @@ fn recording_json(r: &mech_core::RecordingStatus) -> Value {
     })
 }
 
+/// Marks the script's end in the recording, if one is being made: a
+/// `script` record with line 0 and no text, so `replay --script` stops
+/// where the run printed its summary (what the recording holds after it,
+/// the robots' goodbyes as the station stops, the run never printed).
+fn record_end(gcs: &Gcs, ok: bool, commands: usize, error: Option<&str>) {
+    let summary = match error {
+        None => format!("script passed: {commands} commands"),
+        Some(e) => format!("script failed after {commands} commands: {e}"),
+    };
+    gcs.router()
+        .record_operator(mech_core::router::OperatorRecord {
+            at: std::time::Duration::ZERO,
+            source: SCRIPT_SOURCE.into(),
+            line: 0,
+            text: String::new(),
+            ok,
+            summary,
+        });
+}
+
+/// The recorded source of a script's commands (and of its end).
+pub const SCRIPT_SOURCE: &str = "script";
+
+/// Whether a recorded operator command is a script's end
+/// ([`record_end`]): no command has an empty text.
+pub fn is_script_end(o: &mech_core::router::OperatorRecord) -> bool {
+    o.source == SCRIPT_SOURCE && o.line == 0 && o.text.is_empty()
+}
+
 /// Runs `source` against `gcs` with `executor`, writing JSON lines to `sink`.
 pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -> ScriptOutcome {
     let statements = match parse_script(source) {
@@ -272,6 +309,7 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         ScriptOutcome::Failed { error, commands } => (false, *commands, Some(error.to_string())),
         ScriptOutcome::Invalid(e) => (false, 0, Some(e.to_string())),
     };
+    record_end(gcs, ok, ran, error.as_deref());
     let (robots, remote) = gcs.with_fleet(|f| {
         let connected = |r: &&mech_core::fleet::Robot| r.link == LinkState::Connected;
         let remote = f

@@ -165,7 +165,19 @@ async fn send_delivers_the_waypoint_list_as_a_mission() {
     exec.execute_line("waypoint robot_1 1,2 3,2@15s loop")
         .await
         .unwrap();
-    exec.execute_line("send robot_1").await.unwrap();
+    let sent = exec.execute_line("send robot_1").await.unwrap();
+    // Routed to none: told it runs the mission only once routed, and how.
+    assert_eq!(
+        sent.details,
+        [
+            "robot_1 is routed to none: it runs the mission once routed to wp/gcs \
+          (route robot_1 wp/gcs)"
+        ],
+        "{sent:?}"
+    );
+    exec.execute_line("route robot_1 wp/gcs").await.unwrap();
+    let again = exec.execute_line("send robot_1").await.unwrap();
+    assert!(again.details.is_empty(), "routed: no hint {again:?}");
     let env = robot
         .recv_matching(|e| matches!(e.body, Body::Mission(_)))
         .await;

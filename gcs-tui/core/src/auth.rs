@@ -405,6 +405,13 @@ impl Keyring {
         self.by_id.get(&key_id)
     }
 
+    /// Whether `stamp_us` is within the freshness window of the station's
+    /// clock `now_us`: a stamp from a peer whose clock agrees with the
+    /// station's, so its freshness can be judged.
+    pub fn near_clock(&self, stamp_us: u64, now_us: u64) -> bool {
+        stamp_us.abs_diff(now_us) <= self.freshness.window_us
+    }
+
     /// Checks a message's tag over `region` and that `sender` is the key's
     /// name; with `fresh`, also that its stamp is new on its stream (and
     /// records it). `now_us` is the station's clock.
@@ -430,6 +437,28 @@ impl Keyring {
     /// A tag of a listed key, made by a peer (not the router), that checks
     /// over `region`, from the key's own name.
     fn check_tag(&self, region: &[u8], tag: Option<Tag>, sender: &str) -> Result<Tag, Rejection> {
+        let (tag, identity) = self.screened(tag, sender)?;
+        if !identity.key.verify(region, &tag) {
+            return Err(Rejection {
+                reason: RejectReason::BadTag,
+                detail: format!(
+                    "tag of {sender:?} does not check with key {:08x}",
+                    tag.key_id
+                ),
+            });
+        }
+        Ok(tag)
+    }
+
+    /// The checks that cost no MAC, for a message from `sender` whose tag
+    /// (if any) is `tag`: it is signed, with a listed key, by a peer (not
+    /// the router), and the key is the sender's. A forgery that fails
+    /// them is refused before its body is read.
+    pub fn screen(&self, tag: Option<Tag>, sender: &str) -> Result<(), Rejection> {
+        self.screened(tag, sender).map(|_| ())
+    }
+
+    fn screened(&self, tag: Option<Tag>, sender: &str) -> Result<(Tag, &Identity), Rejection> {
         let reject = |e: AuthError, detail: String| Rejection {
             reason: reason_of(e),
             detail,
@@ -452,27 +481,18 @@ impl Keyring {
                 format!("{sender:?} sent a message the router signed (reflected)"),
             ));
         }
-        if !identity.key.verify(region, &tag) {
-            return Err(reject(
-                AuthError::BadTag,
-                format!(
-                    "tag of {sender:?} does not check with key {:08x}",
-                    tag.key_id
-                ),
-            ));
-        }
         if identity.name != sender {
             return Err(Rejection {
                 reason: RejectReason::NotPermitted,
                 detail: format!(
-                    "{:?} signed with the key of {} {:?}",
+                    "{:?} sent a message tagged with the key of {} {:?}",
                     sender,
                     identity.role.as_str(),
                     identity.name
                 ),
             });
         }
-        Ok(tag)
+        Ok((tag, identity))
     }
 
     /// The tag's stamp is newer than its stream's last (recorded), or

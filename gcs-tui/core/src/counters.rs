@@ -35,6 +35,10 @@ pub enum DropReason {
     Stopped,
     /// Refused by the authenticated control plane (see [`Rejections`]).
     Rejected,
+    /// Not read at all: the router was behind and the datagram's source
+    /// address had been refused many times in the last second (and is not
+    /// a peer it knows).
+    Shed,
 }
 
 impl DropReason {
@@ -46,6 +50,7 @@ impl DropReason {
             DropReason::BadPacket => "bad-packet",
             DropReason::Stopped => "router-stopped",
             DropReason::Rejected => "rejected",
+            DropReason::Shed => "shed",
         }
     }
 }
@@ -59,6 +64,7 @@ pub struct Drops {
     pub bad_packet: u64,
     pub stopped: u64,
     pub rejected: u64,
+    pub shed: u64,
 }
 
 impl Drops {
@@ -69,6 +75,7 @@ impl Drops {
             + self.bad_packet
             + self.stopped
             + self.rejected
+            + self.shed
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -79,6 +86,7 @@ impl Drops {
             DropReason::BadPacket => self.bad_packet += 1,
             DropReason::Stopped => self.stopped += 1,
             DropReason::Rejected => self.rejected += 1,
+            DropReason::Shed => self.shed += 1,
         }
     }
 
@@ -91,6 +99,7 @@ impl Drops {
             DropReason::BadPacket => self.bad_packet,
             DropReason::Stopped => self.stopped,
             DropReason::Rejected => self.rejected,
+            DropReason::Shed => self.shed,
         }
     }
 }
@@ -171,7 +180,9 @@ pub struct Traffic {
 
 /// How well the link to one robot works, as the router measures it over
 /// its last few seconds (`docs/protocol.md`, *Link quality*): the 2017
-/// thesis's "usable packets" figure, live.
+/// thesis's "usable packets" figure, live. In JSON (recordings, the live
+/// view, the attach protocol) `rtt` and `window` are seconds as numbers, so
+/// a plot can draw them.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct LinkQuality {
@@ -186,8 +197,10 @@ pub struct LinkQuality {
     pub loss: Option<f64>,
     /// Mean round-trip time of the robot's heartbeat echoes in the window;
     /// `None` without one (an agent that does not echo, or all echoes lost).
+    #[serde(with = "seconds::optional")]
     pub rtt: Option<Duration>,
     /// The time these figures cover (up to the last five seconds).
+    #[serde(with = "seconds")]
     pub window: Duration,
     /// Since the robot registered: messages received from it.
     pub received: u64,
@@ -195,6 +208,55 @@ pub struct LinkQuality {
     pub sent: u64,
     /// Since the robot registered: its messages lost on the way.
     pub lost: u64,
+}
+
+/// A [`Duration`] in JSON as seconds (a number). Reads the number, or the
+/// `{"secs", "nanos"}` object that serde's own form of a `Duration` is (so
+/// recordings made before link quality was written in seconds still
+/// replay).
+mod seconds {
+    use std::time::Duration;
+
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Form {
+        Seconds(f64),
+        Serde { secs: u64, nanos: u32 },
+    }
+
+    impl Form {
+        fn duration(self) -> Duration {
+            match self {
+                Form::Seconds(s) => Duration::try_from_secs_f64(s).unwrap_or_default(),
+                Form::Serde { secs, nanos } => Duration::new(secs, nanos),
+            }
+        }
+    }
+
+    pub fn serialize<S: Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(d.as_secs_f64())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
+        Form::deserialize(d).map(Form::duration)
+    }
+
+    pub mod optional {
+        use super::*;
+
+        pub fn serialize<S: Serializer>(d: &Option<Duration>, s: S) -> Result<S::Ok, S::Error> {
+            match d {
+                Some(d) => s.serialize_f64(d.as_secs_f64()),
+                None => s.serialize_none(),
+            }
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Duration>, D::Error> {
+            Ok(Option::<Form>::deserialize(d)?.map(Form::duration))
+        }
+    }
 }
 
 impl LinkQuality {
@@ -245,4 +307,28 @@ pub struct Counters {
     pub fanout_dropped: u64,
     /// Messages refused by the authenticated control plane, by reason.
     pub rejected: Rejections,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_quality_times_are_seconds_in_json_and_old_recordings_still_read() {
+        let q = LinkQuality {
+            rx_hz: 20.0,
+            rtt: Some(Duration::from_micros(420)),
+            window: Duration::from_secs(5),
+            ..LinkQuality::default()
+        };
+        let v = serde_json::to_value(q).unwrap();
+        assert_eq!(v["rtt"], serde_json::json!(0.00042));
+        assert_eq!(v["window"], serde_json::json!(5.0));
+        assert_eq!(serde_json::from_value::<LinkQuality>(v).unwrap(), q);
+        let unmeasured = serde_json::to_value(LinkQuality::default()).unwrap();
+        assert!(unmeasured["rtt"].is_null(), "{unmeasured}");
+        let old = serde_json::json!({"rx_hz": 20.0, "rtt": {"secs": 0, "nanos": 420_000},
+                                     "window": {"secs": 5, "nanos": 0}});
+        assert_eq!(serde_json::from_value::<LinkQuality>(old).unwrap(), q);
+    }
 }

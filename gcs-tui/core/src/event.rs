@@ -5,6 +5,7 @@
 //! module depends on nothing else in the station, so producers and consumers
 //! never depend on each other.
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -118,6 +119,10 @@ impl RobotLinks {
     }
 }
 
+/// Distinct sources an [`Event::Refused`] counts; a flood from more is
+/// reported as coming from at least this many.
+pub const REFUSED_SOURCES_COUNTED: usize = 4096;
+
 /// Something the router did or saw. Subscribers receive them in order, each
 /// wrapped in a [`Stamped`]. Recordings store them as JSON objects tagged
 /// with [`Event::name`] (a test keeps the two the same).
@@ -206,13 +211,34 @@ pub enum Event {
     Bye { robot: String, reason: String },
     /// A notice from a robot or controller.
     Notice { from: String, notice: Notice },
-    /// A datagram or frame that could not be used.
+    /// A datagram or frame that could not be used: the first refused
+    /// message after a second in which none was reported. Those that follow
+    /// within the second are reported together in [`Event::Refused`].
     BadPacket { from: String, error: String },
-    /// A message the authenticated control plane refused (reported at most
-    /// once per source per second; every one is counted).
+    /// A message the authenticated control plane refused: the first refused
+    /// message after a second in which none was reported, as
+    /// [`Event::BadPacket`]. Every one is counted.
     Rejected {
         from: String,
         reason: RejectReason,
+        detail: String,
+    },
+    /// The messages refused since the last report, reported at most once a
+    /// second while refusals go on: a flood reaches the event log and the
+    /// operators as one summary a second, never as a line per datagram.
+    Refused {
+        /// Messages refused.
+        count: u64,
+        /// Distinct sources among them (counted up to
+        /// [`REFUSED_SOURCES_COUNTED`]).
+        sources: u64,
+        /// How many for each reason: `bad-packet`, `shed` (not read: the
+        /// router was behind and the source kept failing), or a rejection
+        /// reason (`unsigned`, `unknown-key`, `bad-tag`, `replay`,
+        /// `not-permitted`).
+        by_reason: BTreeMap<String, u64>,
+        /// One of them: where it came from, and why it was refused.
+        from: String,
         detail: String,
     },
 }
@@ -241,6 +267,7 @@ impl Event {
             Event::Notice { .. } => "notice",
             Event::BadPacket { .. } => "bad_packet",
             Event::Rejected { .. } => "rejected",
+            Event::Refused { .. } => "refused",
         }
     }
 }

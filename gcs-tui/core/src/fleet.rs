@@ -242,6 +242,16 @@ impl Fleet {
                 Severity::Warn,
                 format!("rejected from {from} ({}): {detail}", reason.as_str()),
             ),
+            Event::Refused {
+                count,
+                sources,
+                by_reason,
+                from,
+                detail,
+            } => self.log(
+                Severity::Warn,
+                refused_text(*count, *sources, by_reason, from, detail),
+            ),
         }
     }
 
@@ -500,6 +510,47 @@ impl EventSink for std::sync::Mutex<Fleet> {
 
 fn show(channel: &Option<String>) -> &str {
     channel.as_deref().unwrap_or("none")
+}
+
+/// The event-log line of a refusal summary: `refused 19,980 messages in
+/// the last second from 16 sources (4,000 bad-packet, 15,980 bad-tag),
+/// e.g. from udp:10.0.0.9:4000: ...`.
+fn refused_text(
+    count: u64,
+    sources: u64,
+    by_reason: &std::collections::BTreeMap<String, u64>,
+    from: &str,
+    detail: &str,
+) -> String {
+    let reasons: Vec<String> = by_reason
+        .iter()
+        .map(|(r, n)| format!("{} {r}", thousands(*n)))
+        .collect();
+    let sources = match sources {
+        1 => "1 source".to_string(),
+        n if n as usize >= crate::event::REFUSED_SOURCES_COUNTED => {
+            format!("{} or more sources", thousands(n))
+        }
+        n => format!("{} sources", thousands(n)),
+    };
+    format!(
+        "refused {} messages in the last second from {sources} ({}), e.g. from {from}: {detail}",
+        thousands(count),
+        reasons.join(", ")
+    )
+}
+
+/// `19980` as `19,980`.
+fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
 }
 
 #[cfg(test)]

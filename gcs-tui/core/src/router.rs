@@ -42,9 +42,9 @@ pub use handle::RouterHandle;
 pub use net::RadioStatus;
 pub use publisher::{Publisher, Publishers};
 pub use tables::Delivery;
-pub(crate) use tables::Peer;
 pub use tables::tap::OperatorRecord;
 pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
+pub(crate) use tables::{Peer, Treatment};
 
 use crate::auth::Keyring;
 use crate::counters::DropReason;
@@ -112,15 +112,19 @@ impl Shared {
         (r, ticket)
     }
 
-    /// Decides `n` messages under one hold of the tables lock, in order:
-    /// `message(i)` is the i-th with its source, and `sent(i, fx)` takes
-    /// what its decision left to send. Each message's events are queued
-    /// after its decision, so the recording has each message followed by
-    /// its events.
+    /// Decides a batch of `n` received datagrams under one hold of the
+    /// tables lock: `message(i)` is the i-th with its source, and
+    /// `sent(i, fx)` takes what its decision left to send. Known peers'
+    /// datagrams are decided first, then the others, each sender's in the
+    /// order they arrived; with `behind` (more were waiting than the batch
+    /// took), those from addresses that keep failing are shed unread (see
+    /// `tables::sources`). Each message's events are queued after its
+    /// decision, so the recording has each message followed by its events.
     fn decide_each<'b>(
         &self,
         n: usize,
         message: impl Fn(usize) -> (&'b [u8], Peer),
+        behind: bool,
         fx: &mut Effects,
         mut sent: impl FnMut(usize, &mut Effects),
     ) -> Ticket {
@@ -130,9 +134,15 @@ impl Shared {
         let now = Instant::now();
         let mut ticket = None;
         let mut tables = lock(&self.tables);
-        for i in 0..n {
+        tables.order_batch(n, |i| message(i).1, behind, now);
+        for k in 0..n {
+            let (i, treatment) = tables.batch_item(k);
             let (bytes, from) = message(i);
-            tables.handle(bytes, &mut Ctx::new(now, from, fx));
+            let cx = &mut Ctx::new(now, from, fx);
+            match treatment {
+                Treatment::Decide => tables.handle(bytes, cx),
+                Treatment::Shed => tables.shed(bytes, cx),
+            };
             ticket = self.events.push(tables.tap(), &mut fx.events).or(ticket);
             sent(i, fx);
         }
@@ -252,6 +262,11 @@ impl Router {
         let bound = net::bind(&config).await?;
         let ports = net::open_radios(&config.serial)?;
         let (poll, tick) = (config.udp_poll, config.tick);
+        let tcp_limits = net::TcpLimits {
+            max_peers: config.tcp_max_peers,
+            per_address: config.tcp_peers_per_address,
+            idle: config.tcp_idle,
+        };
         let (udp, tcp) = (bound.udp_addr, bound.tcp_addr);
         let shared = Arc::new(Shared {
             net: Net::new(&bound, config.serial.clone(), config.subscriber_queue),
@@ -263,7 +278,7 @@ impl Router {
         });
         tracing::info!(%udp, ?tcp, "router started");
         shared.events.emit(vec![Event::Listening { udp, tcp }]);
-        let tasks = Tasks::start(&shared, bound, ports, poll, tick)?;
+        let tasks = Tasks::start(&shared, bound, ports, poll, tick, tcp_limits)?;
         Ok(Router {
             handle: RouterHandle::new(shared),
             tasks,
@@ -395,6 +410,67 @@ mod tests {
         // not), stale, lost: each applied, none under the lock.
         assert!(probe.applied.load(Ordering::Relaxed) >= 6);
         assert_eq!(probe.under_lock.load(Ordering::Relaxed), 0);
+    }
+
+    /// Under a flood, a batch's datagrams from peers the router knows are
+    /// decided before the strangers' that came before them, and while the
+    /// worker is behind, datagrams from an address that keeps failing are
+    /// shed unread.
+    #[tokio::test]
+    async fn known_peers_are_served_first_and_a_failing_flood_is_shed_while_behind() {
+        let config = RouterConfig {
+            udp: "127.0.0.1:0".parse().unwrap(),
+            tcp: None,
+            ..RouterConfig::default()
+        };
+        let sink = Arc::new(EStopsApplied::default());
+        let router = Router::start(config, None, sink).await.unwrap();
+        let (handle, shared) = (router.handle(), router.handle.shared());
+        let robot = Peer::Udp("127.0.0.1:9000".parse().unwrap());
+        let ctl = Peer::Udp("127.0.0.1:9100".parse().unwrap());
+        let flooder = Peer::Udp("10.9.9.9:4000".parse().unwrap());
+        let mut fx = Effects::default();
+        let one = |bytes: &[u8], from: Peer, fx: &mut Effects| {
+            shared.decide_each(1, |_| (bytes, from), false, fx, |_, fx| fx.out.clear());
+        };
+        one(&hello("robot_1"), robot, &mut fx);
+        handle.set_route("robot_1", Some("joy/0")).await.unwrap();
+        let header = Header {
+            sender: "ctl".into(),
+            destination: "robot_1".into(),
+            channel: "joy/0".into(),
+            ..Header::default()
+        };
+        let twist = Body::Command(mech_proto::Command::Twist(mech_proto::Twist::default()));
+        let command = mech_proto::encode(&Envelope::new(header, twist)).unwrap();
+        one(&command, ctl, &mut fx);
+        let garbage = [0x99u8, 0x01];
+        for _ in 0..64 {
+            one(&garbage, flooder, &mut fx);
+        }
+        // 31 of the flood, then the controller's command.
+        let batch: Vec<(&[u8], Peer)> = (0..31)
+            .map(|_| (&garbage[..], flooder))
+            .chain([(&command[..], ctl)])
+            .collect();
+        let mut order = Vec::new();
+        let mut forwarded_to = Vec::new();
+        shared.decide_each(
+            batch.len(),
+            |i| batch[i],
+            true,
+            &mut fx,
+            |i, fx| {
+                order.push(i);
+                forwarded_to.append(&mut fx.out.raw);
+                fx.out.clear();
+            },
+        );
+        assert_eq!(order[0], 31, "the known controller first");
+        assert_eq!(forwarded_to, [robot]);
+        let c = handle.counters();
+        assert_eq!((c.dropped.shed, c.dropped.bad_packet), (31, 64));
+        router.shutdown().await;
     }
 
     /// Records the id of every e-stop event applied.

@@ -383,7 +383,7 @@ async fn flipping_any_byte_of_a_signed_command_gets_it_refused() {
     assert!(
         eventually(Duration::from_secs(3), || {
             let c = s.gcs.router().counters();
-            c.rejected.total() + c.dropped.bad_packet >= n
+            c.rejected.total() + c.dropped.bad_packet + c.dropped.shed >= n
         })
         .await
     );
@@ -500,8 +500,8 @@ async fn a_station_beyond_loopback_without_keys_refuses_to_start() {
 }
 
 /// 10,000 forged or replayed messages from an attacker, interleaved with a
-/// real controller's commands: every forgery is refused (counted), none is
-/// forwarded, and the robot gets exactly the real commands.
+/// real controller's commands: every forgery is refused or shed (counted),
+/// none is forwarded, and the robot gets exactly the real commands.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ten_thousand_forged_or_replayed_messages_are_all_refused() {
     use rand::rngs::SmallRng;
@@ -547,13 +547,14 @@ async fn ten_thousand_forged_or_replayed_messages_are_all_refused() {
         forged += 1;
         if forged % 200 == 0 {
             // Pace the flood so the kernel's buffers do not drop any of it:
-            // every datagram must reach the router's judgement.
+            // every datagram must reach the router (judged, or shed unread
+            // while it is behind: counted either way).
             tokio::time::sleep(Duration::from_millis(2)).await;
         }
     }
     let refused = || {
         let c = s.gcs.router().counters();
-        c.rejected.total() + c.dropped.bad_packet
+        c.rejected.total() + c.dropped.bad_packet + c.dropped.shed
     };
     assert!(
         eventually(Duration::from_secs(10), || refused() >= forged).await,
@@ -575,6 +576,63 @@ async fn ten_thousand_forged_or_replayed_messages_are_all_refused() {
         .recv_matching(|e| matches!(e.body, Body::Command(_)))
         .await;
     assert_eq!(last.body, Body::Command(twist(0.222)));
+}
+
+/// Garbage and forgeries from 3,000 source ports: every one is counted,
+/// and they reach the event log and the router's events (what operators
+/// see) as a few counted summaries, never a line per datagram or per
+/// source.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flood_from_3000_source_ports_reaches_operators_as_a_few_summaries() {
+    let s = station().await;
+    let mut events = s.gcs.router().subscribe(100_000, false);
+    let to = s.gcs.router().udp_addr();
+    let mut forger = Peer::signed("matlab", to, Key::new(&[3; 32])).await;
+    let forged = forger.encode("robot_1", "ext/matlab", 1, Body::Command(twist(0.9)));
+    let mut sent = 0u64;
+    for i in 0..3_000u32 {
+        let sock = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        sock.send_to(&[0x99, 0x01, 0x02], to).await.unwrap();
+        sock.send_to(&forged, to).await.unwrap();
+        sent += 2;
+        if i % 100 == 0 {
+            // Paced so the kernel's buffers keep every datagram.
+            tokio::time::sleep(Duration::from_millis(2)).await;
+        }
+    }
+    let refused = || {
+        let c = s.gcs.router().counters();
+        c.rejected.total() + c.dropped.bad_packet + c.dropped.shed
+    };
+    assert!(
+        eventually(Duration::from_secs(10), || refused() >= sent).await,
+        "refused {} of {sent}",
+        refused()
+    );
+    // Every refusal is in exactly one report: a single one, or a summary
+    // with its count.
+    let mut reports = 0u64;
+    let mut reported = 0u64;
+    while reported < sent {
+        let e = tokio::time::timeout(Duration::from_secs(5), events.recv())
+            .await
+            .expect("the summary of the rest comes within a second or so")
+            .expect("router running");
+        if matches!(e.event.name(), "bad_packet" | "rejected" | "refused") {
+            reports += 1;
+            let v = serde_json::to_value(&e.event).unwrap();
+            reported += v["count"].as_u64().unwrap_or(1);
+        }
+    }
+    assert_eq!(reported, sent);
+    assert!(reports <= 10, "{reports} reports for {sent} refusals");
+    let warnings = s.gcs.with_fleet(|f| {
+        f.log
+            .iter()
+            .filter(|e| e.severity == mech_core::fleet::Severity::Warn)
+            .count()
+    });
+    assert!(warnings <= 10, "{warnings} event-log lines");
 }
 
 #[tokio::test]

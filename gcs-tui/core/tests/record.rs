@@ -270,6 +270,25 @@ async fn recording_over(dir: &Path, secs: u64) -> (std::path::PathBuf, Vec<Stamp
     (file, events)
 }
 
+/// Where the last chunk of an MCAP file begins and how long it is, from
+/// the chunk indexes of its summary: a cut inside it leaves every chunk
+/// before it whole (the summary repeats every schema, so a cut at half the
+/// file may leave the data whole, and the first chunk, holding the
+/// schemas, may be most of the data).
+fn last_chunk(bytes: &[u8]) -> (usize, usize) {
+    let summary = mcap::Summary::read(bytes).unwrap().expect("a summary");
+    let last = summary
+        .chunk_indexes
+        .iter()
+        .max_by_key(|c| c.chunk_start_offset)
+        .expect("chunks");
+    assert!(summary.chunk_indexes.len() > 1, "several chunks");
+    (
+        usize::try_from(last.chunk_start_offset).unwrap(),
+        usize::try_from(last.chunk_length).unwrap(),
+    )
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_damaged_file_replays_up_to_the_damage_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
@@ -278,7 +297,8 @@ async fn a_damaged_file_replays_up_to_the_damage_and_says_so() {
     let cut = dir.path().join("cut.mcap");
     // Inside the data (the summary at the end of a short file is large:
     // it repeats every schema).
-    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let (chunk, length) = last_chunk(&bytes);
+    std::fs::write(&cut, &bytes[..chunk + length / 2]).unwrap();
     let replay = Replay::open(&cut).unwrap();
     let damage = replay.damage().unwrap();
     assert!(damage.contains("truncated or corrupt"), "{damage}");
@@ -292,7 +312,7 @@ async fn a_damaged_file_replays_up_to_the_damage_and_says_so() {
     assert_eq!(events[..], all[..events.len()], "a prefix of the whole");
 
     let mut corrupt = bytes.clone();
-    let mid = corrupt.len() / 3;
+    let mid = chunk + length / 3;
     for b in &mut corrupt[mid..mid + 64] {
         *b ^= 0x5a;
     }

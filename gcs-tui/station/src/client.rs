@@ -82,6 +82,11 @@ pub enum AttachError {
         addr: String,
         source: std::io::Error,
     },
+    #[error(
+        "will not attach through {path}: {why}; whoever may write there could have put their \
+         own socket in the station's place"
+    )]
+    UnsafeSocket { path: PathBuf, why: String },
     #[error("the station asks for an operator key: give one with --key FILE")]
     NeedKey,
     #[error("the station refused: {0}")]
@@ -140,6 +145,7 @@ pub async fn attach(addr: &Address, opts: AttachOptions) -> Result<Attached, Att
     };
     match addr {
         Address::Unix(path) => {
+            check_socket(path)?;
             let s = tokio::net::UnixStream::connect(path)
                 .await
                 .map_err(connect_err)?;
@@ -153,6 +159,25 @@ pub async fn attach(addr: &Address, opts: AttachOptions) -> Result<Attached, Att
             attach_stream(s, opts).await
         }
     }
+}
+
+/// Checks a control socket's directory before attaching through it: it
+/// must be writable by nobody but its owner, and the default socket's
+/// (`$XDG_RUNTIME_DIR/mech`, `/tmp/mech-UID`) must be this user's own, as
+/// the station that made it was. A missing directory is left for the
+/// connection to report.
+fn check_socket(path: &std::path::Path) -> Result<(), AttachError> {
+    let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) else {
+        return Ok(());
+    };
+    if std::fs::symlink_metadata(dir).is_err() {
+        return Ok(());
+    }
+    let owner = (path == crate::default_socket()).then(|| nix::unistd::geteuid().as_raw());
+    crate::listen::check_socket_dir(dir, owner).map_err(|why| AttachError::UnsafeSocket {
+        path: dir.to_owned(),
+        why,
+    })
 }
 
 /// Attaches over an open stream (a socket, or the embedded station's

@@ -233,6 +233,35 @@ mod tests {
     }
 
     #[test]
+    fn router_tcp_limits_are_read_and_the_shipped_file_says_the_defaults() {
+        let cfg = ConfigFile::parse(
+            "[router]\ntcp_max_peers = 8\ntcp_peers_per_address = 2\ntcp_idle = 0.5\n",
+        )
+        .unwrap();
+        let r = &cfg.router;
+        assert_eq!(
+            (r.tcp_max_peers, r.tcp_peers_per_address, r.tcp_idle),
+            (8, 2, Duration::from_millis(500))
+        );
+        let limits = |c: &ConfigFile| {
+            let r = &c.router;
+            (r.tcp_max_peers, r.tcp_peers_per_address, r.tcp_idle)
+        };
+        let shipped = ConfigFile::parse(include_str!("../../../config/gcs.toml")).unwrap();
+        assert_eq!(limits(&shipped), limits(&ConfigFile::parse("").unwrap()));
+        for bad in [
+            "tcp_max_peers = 0",
+            "tcp_peers_per_address = 0",
+            "tcp_idle = 0",
+        ] {
+            assert!(
+                ConfigFile::parse(&format!("[router]\n{bad}\n")).is_err(),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
     fn gcs_channels_must_be_names() {
         let err = |text: &str| ConfigFile::parse(text).unwrap_err().to_string();
         assert!(err("[fleet]\nmission_channel = \"\"\n").contains("fleet.mission_channel"));

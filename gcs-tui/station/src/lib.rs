@@ -11,9 +11,10 @@
 //!   [`view`], the fleet as they carry it;
 //! - [`Station`] (`server`): what clients attach to, and its `[station]`
 //!   section; one session per client (`session`), each with its own
-//!   command-language executor, all sharing the controllers; the snapshot
-//!   and log feed (`feed`); the control socket and TCP listeners
-//!   (`listen`); operators' names ([`operator`]);
+//!   command-language executor, all sharing the controllers; the places
+//!   for clients attaching and attached (`admission`); the snapshot and
+//!   log feed (`feed`); the control socket and TCP listeners (`listen`);
+//!   operators' names ([`operator`]);
 //! - [`client`]: attaching (Unix socket, TCP with an operator key, or in
 //!   process) and running a script on an attached station;
 //! - [`launch`]: a station started from its configuration, in this
@@ -30,6 +31,7 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::field_reassign_with_default))]
 
+mod admission;
 pub mod cli;
 pub mod client;
 pub mod config;

@@ -18,15 +18,12 @@ use serde::Deserialize;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 
+use crate::admission::Admission;
 use crate::feed::Feed;
 use crate::view::ArenaBounds;
 
 /// How long a stopping station waits for its sessions to say goodbye.
 const CLOSE_WAIT: Duration = Duration::from_secs(2);
-
-/// Sessions at once; more are refused (a runaway client cannot exhaust
-/// the station).
-pub(crate) const MAX_SESSIONS: usize = 64;
 
 /// `[station]`: where a served station listens for clients.
 #[derive(Debug, Clone, Deserialize)]
@@ -129,6 +126,8 @@ pub(crate) struct Inner {
     pub control: ControlHub,
     pub spawner: Option<SharedSpawner>,
     pub feed: Feed,
+    /// The places for clients attaching and attached.
+    pub admission: Arc<Admission>,
     pub arena: Mutex<Option<ArenaBounds>>,
     /// Where `record start` without a file records.
     pub record_dir: Mutex<Option<std::path::PathBuf>>,
@@ -154,18 +153,21 @@ impl Station {
             gcs.update_fleet(|f| f.log(Severity::Error, e.to_string()));
         }
         let feed = Feed::start(gcs.clone(), control.clone(), config.snapshot_rate);
+        let admission = Arc::new(Admission::default());
+        let refusals = tokio::spawn(log_held_refusals(gcs.clone(), admission.clone()));
         Station {
             inner: Arc::new(Inner {
                 gcs,
                 control,
                 spawner: spawner.map(SharedSpawner::new),
                 feed,
+                admission,
                 arena: Mutex::new(None),
                 record_dir: Mutex::new(None),
                 remote_routes: Mutex::new(None),
                 closing: watch::channel(false).0,
                 sessions: Mutex::new(JoinSet::new()),
-                listeners: Mutex::new(Vec::new()),
+                listeners: Mutex::new(vec![refusals]),
             }),
         }
     }
@@ -195,7 +197,8 @@ impl Station {
         &self.inner.control
     }
 
-    /// Starts a task serving a listener; it stops with the station.
+    /// Starts a task serving a listener (or another task that lives as
+    /// long as the station); it stops with the station.
     pub(crate) fn add_listener(&self, task: tokio::task::JoinHandle<()>) {
         lock(&self.inner.listeners).push(task);
     }
@@ -222,6 +225,22 @@ impl Station {
             s.shutdown_all().await;
         }
         self.inner.gcs.shutdown().await;
+    }
+}
+
+/// Once a second, the refused attaches that were not logged one by one
+/// (see `crate::admission`), as one event-log line.
+async fn log_held_refusals(gcs: Gcs, admission: Arc<Admission>) {
+    let mut every = tokio::time::interval(Duration::from_secs(1));
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    loop {
+        every.tick().await;
+        let n = admission.held_refusals();
+        if n > 0 {
+            let text = format!("attach refused {n} more times (not logged one by one)");
+            tracing::warn!("{text}");
+            gcs.update_fleet(|f| f.log(Severity::Warn, text));
+        }
     }
 }
 

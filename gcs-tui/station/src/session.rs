@@ -20,17 +20,15 @@ use serde_json::Value;
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
 
+use crate::admission::{Attaching, Door, HANDSHAKE, Seat};
 use crate::feed::{LOG_HISTORY, LogCursor};
 use crate::operator::{check_operator, login_name};
-use crate::server::{MAX_SESSIONS, Station, Via};
+use crate::server::{Station, Via};
 use crate::wire::{
     FromStation, LineResult, MAX_CLIENT_LINE, PROTOCOL, ReadError, Streams, ToStation, Welcome,
     challenge_region, hex, read_message, to_line, unhex,
 };
 use mech_core::auth::Role;
-
-/// Time a client has to say Hello (and answer the challenge).
-const HANDSHAKE: Duration = Duration::from_secs(10);
 
 /// Time a write may take before the client counts as gone (it stopped
 /// reading).
@@ -59,45 +57,67 @@ impl Station {
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
     {
+        let door = match &via {
+            Via::Local => Door::Local,
+            Via::Unix { .. } => Door::Unix,
+            Via::Tcp { peer } => Door::Tcp(peer.ip()),
+        };
+        let place = self.inner.admission.attaching(door);
         let mut sessions = lock(&self.inner.sessions);
         // Reap the finished ones so the set holds only live sessions.
         while sessions.try_join_next().is_some() {}
-        let full = sessions.len() >= MAX_SESSIONS;
         let station = self.clone();
-        sessions.spawn(run(station, stream, via, full));
+        sessions.spawn(run(station, stream, via, place));
     }
 }
 
-/// Serves one client (see the module docs). `full`: the station already
-/// serves as many clients as it will, so this one is told and closed.
-async fn run<S>(station: Station, stream: S, via: Via, full: bool)
+/// Serves one client (see the module docs), from a place among the
+/// clients attaching (`crate::admission`).
+async fn run<S>(station: Station, stream: S, via: Via, place: Attaching)
 where
     S: AsyncRead + AsyncWrite + Send + 'static,
 {
     let (rd, mut wr) = tokio::io::split(stream);
     let mut rd = BufReader::new(rd);
-    if full {
-        bye(&mut wr, "the station serves as many clients as it can").await;
+    let attempt = tokio::select! {
+        r = tokio::time::timeout(HANDSHAKE, handshake(&station, &mut rd, &mut wr, &via)) => {
+            match r {
+                Ok(Ok(h)) => Ok(h),
+                Ok(Err(reason)) => Err((reason, true)),
+                Err(_) => Err(("no hello within 10 s".to_string(), false)),
+            }
+        }
+        () = place.evicted() => Err((
+            "too many clients are attaching at once; this one waited longest".to_string(),
+            false,
+        )),
+    };
+    let (hello, _seat) = match attempt.and_then(|h| seated(place, h)) {
+        Ok(attached) => attached,
+        Err((reason, pause)) => {
+            refuse_attach(&station, &via, &mut wr, &reason, pause).await;
+            return;
+        }
+    };
+    let welcome = to_line(&FromStation::Welcome(hello.welcome.clone()));
+    if send(&mut wr, &welcome).await.is_err() {
         return;
     }
-    let hello =
-        match tokio::time::timeout(HANDSHAKE, handshake(&station, &mut rd, &mut wr, &via)).await {
-            Ok(Ok(h)) => h,
-            Ok(Err(reason)) => {
-                refuse_attach(&station, &via, &mut wr, &reason).await;
-                return;
-            }
-            Err(_) => {
-                refuse_attach(&station, &via, &mut wr, "no hello within 10 s").await;
-                return;
-            }
-        };
     let operator = hello.operator.clone();
     station.log(Severity::Info, format!("{operator} attached ({via})"));
     tracing::info!(%operator, %via, "operator attached");
     let reason = serve(&station, rd, wr, hello).await;
     station.log(Severity::Info, format!("{operator} detached: {reason}"));
     tracing::info!(%operator, %reason, "operator detached");
+}
+
+/// A session place for a client whose handshake succeeded, or why there
+/// is none (no pause: it did nothing wrong).
+fn seated(place: Attaching, hello: Attached) -> Result<(Attached, Seat), (String, bool)> {
+    place
+        .seat()
+        .map(|seat| (hello, seat))
+        .map_err(|r| (r, false))
 }
 
 /// Who attached and what they want.
@@ -107,7 +127,8 @@ struct Attached {
     welcome: Welcome,
 }
 
-/// Reads the Hello (and over TCP checks the operator key), then welcomes.
+/// Reads the Hello (and over TCP checks the operator key); the welcome is
+/// sent once the client has a place.
 async fn handshake<R, W>(
     station: &Station,
     rd: &mut BufReader<R>,
@@ -140,9 +161,6 @@ where
     };
     check_operator(&operator)?;
     let welcome = welcome(station, &operator, via);
-    write(wr, &to_line(&FromStation::Welcome(welcome.clone())))
-        .await
-        .map_err(|e| e.to_string())?;
     Ok(Attached {
         operator,
         stream,
@@ -220,17 +238,25 @@ fn welcome(station: &Station, operator: &str, via: &Via) -> Welcome {
     }
 }
 
-/// Logs and answers a failed attach; a wrong key costs the client a
-/// second, so guessing is slow.
+/// Logs (a few a second; the rest counted, see `crate::admission`) and
+/// answers a failed attach; with `pause`, a failed handshake over TCP
+/// (a wrong key) costs the client a second, so guessing is slow.
 async fn refuse_attach<W: AsyncWrite + Unpin>(
     station: &Station,
     via: &Via,
     wr: &mut W,
     reason: &str,
+    pause: bool,
 ) {
-    station.log(Severity::Warn, format!("attach refused ({via}): {reason}"));
-    tracing::warn!(%via, %reason, "attach refused");
-    if matches!(via, Via::Tcp { .. }) {
+    if station
+        .inner
+        .admission
+        .log_refusal(tokio::time::Instant::now())
+    {
+        station.log(Severity::Warn, format!("attach refused ({via}): {reason}"));
+        tracing::warn!(%via, %reason, "attach refused");
+    }
+    if pause && matches!(via, Via::Tcp { .. }) {
         tokio::time::sleep(Duration::from_secs(1)).await;
     }
     bye(wr, reason).await;

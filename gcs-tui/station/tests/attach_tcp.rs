@@ -12,7 +12,7 @@ use mech_station::wire::{
 };
 use mech_station::{ListenError, Station, StationConfig, bind_tcp};
 use tempfile::TempDir;
-use tokio::io::{AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 
 struct Keyed {
     station: Station,
@@ -293,5 +293,47 @@ async fn the_documented_python_client_attaches_with_its_key() {
     assert!(out.status.success(), "{text}");
     assert!(text.contains("attached as ana"), "{text}");
     assert!(text.contains("status: 0 robots"), "{text}");
+    k.station.shutdown().await;
+}
+
+/// Idle connections to the attach port (64, from 16 addresses, never
+/// saying hello) keep nobody out: an operator still attaches on the
+/// control socket, and one with a key over TCP.
+#[tokio::test]
+async fn idle_connections_to_the_attach_port_keep_no_operator_out() {
+    let k = Keyed::start().await;
+    let path = k.dir.path().join("gcs.sock");
+    k.station
+        .listen_unix(mech_station::bind_unix(&path, 0o600).expect("control socket"));
+    let mut idle = Vec::new();
+    for i in 0..64u8 {
+        let s = tokio::net::TcpSocket::new_v4().expect("socket");
+        s.bind(SocketAddr::from(([127, 0, 0, 10 + i / 4], 0)))
+            .expect("bind");
+        idle.push(s.connect(k.addr).await.expect("connects"));
+    }
+    // Each new one took the place of the one attaching longest: the first
+    // 48 are told so.
+    for (i, c) in idle.iter_mut().take(48).enumerate() {
+        let mut line = String::new();
+        let mut rd = BufReader::new(c);
+        let _ = tokio::time::timeout(Duration::from_secs(5), rd.read_line(&mut line)).await;
+        assert!(line.contains("waited longest"), "{i}: {line:?}");
+    }
+    let local = tokio::time::timeout(
+        Duration::from_secs(5),
+        attach(&Address::Unix(path), AttachOptions::default()),
+    )
+    .await
+    .expect("answered");
+    assert!(local.is_ok(), "{local:?}");
+    let who = tokio::time::timeout(
+        Duration::from_secs(5),
+        k.attach_as(Some(k.key("ana")), None),
+    )
+    .await
+    .expect("answered");
+    assert_eq!(who.expect("attached over TCP"), "ana joy/ana");
+    drop(idle);
     k.station.shutdown().await;
 }

@@ -9,10 +9,12 @@
 //!   [`view`] (what the station reports, as the screen shows it; shared
 //!   with the station, which sends it), [`layout`] (where each panel goes), [`viewport`] (map geometry),
 //!   [`labels`] (where the map's text goes so nothing overlaps),
-//!   [`columns`] (the fleet table's columns, sorting and filter);
+//!   [`columns`] (the fleet table's columns, sorting and filter),
+//!   [`series`] (what the plots and trends draw);
 //! - drawing: [`render`] (the whole screen) over one widget per panel:
-//!   [`status`], [`cards`], [`table`] (the fleet table), [`detail`] (one
-//!   robot), [`map`], [`waypoints`], [`routes`], [`events`] and [`help`],
+//!   [`status`], [`cards`], [`table`] (the fleet table, with a trend of
+//!   its sort column), [`detail`] (one robot, with [`plots`] of its last
+//!   minute), [`map`], [`waypoints`], [`routes`], [`events`] and [`help`],
 //!   styled by [`theme`];
 //! - input and I/O: [`keys`] (terminal events into actions), [`terminal`]
 //!   (the terminal and its event loop) and [`link`] (requests carried to
@@ -31,8 +33,10 @@ pub mod labels;
 pub mod layout;
 pub mod link;
 pub mod map;
+pub mod plots;
 pub mod render;
 pub mod routes;
+pub mod series;
 pub mod status;
 pub mod table;
 pub mod terminal;
@@ -42,12 +46,13 @@ pub mod waypoints;
 
 pub use crate::view;
 pub use app::{
-    Action, App, CardsState, EventLog, FleetState, Focus, Help, LogLevel, LogLine, ManualControl,
-    MapState, Prompt, PromptError, PromptLine, Request, RobotsView, RoutesState, Screen, Select,
-    Session, TableState, WaypointsState,
+    Action, App, CardsState, EventLog, FleetState, Focus, Help, History, LogLevel, LogLine,
+    ManualControl, MapState, Prompt, PromptError, PromptLine, Request, RobotsView, RoutesState,
+    Screen, Select, Session, TableState, WaypointsState,
 };
 pub use columns::Column;
 pub use link::StationLink;
+pub use series::Series;
 pub use terminal::{RunOptions, run};
 pub use view::{
     ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,

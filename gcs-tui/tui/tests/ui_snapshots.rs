@@ -195,7 +195,8 @@ fn fleet_table_filtered_120x36() {
     insta::assert_snapshot!(screen(&app, 120, 36));
 }
 
-/// One robot in detail: its card, link and counters, and its events.
+/// One robot in detail at 120x36: its card and its charts (one sample: the
+/// fixture has no past); the link's counters and its events need 30 rows.
 #[test]
 fn robot_detail_120x36() {
     let mut app = fixture::app(6, 120, 36);
@@ -213,5 +214,49 @@ fn robot_detail_120x36() {
 fn fleet_table_80x24() {
     let mut app = fixture::app(30, 80, 24);
     app.update(Action::ToggleTable);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+/// A robot's last minute in charts, and the fleet table's trend of the
+/// column it is sorted by: robot_1 was sent three waypoints from this TUI
+/// (its cross-track error is measured against them), then a minute of
+/// the fixture fleet played in.
+fn with_a_minute(w: u16, h: u16) -> mech_gcs::ui::App {
+    let mut app = fixture::app(6, w, h);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    for (x, y) in [(1.0, 0.4), (1.4, 1.0), (0.0, 1.5)] {
+        app.update(Action::AddWaypoint(Waypoint {
+            x,
+            y,
+            z: 0.0,
+            time: None,
+        }));
+    }
+    app.update(Action::SendWaypoints);
+    app.take_requests();
+    fixture::minute(&mut app, 6);
+    app.update(Action::ToggleTable);
+    app
+}
+
+#[test]
+fn robot_detail_plots_80x24() {
+    let mut app = with_a_minute(80, 24);
+    app.update(Action::ToggleDetail);
+    insta::assert_snapshot!(screen(&app, 80, 24));
+}
+
+#[test]
+fn robot_detail_plots_200x50() {
+    let mut app = with_a_minute(200, 50);
+    app.update(Action::ToggleDetail);
+    insta::assert_snapshot!(screen(&app, 200, 50));
+}
+
+#[test]
+fn fleet_table_trend_of_the_sort_column_80x24() {
+    let mut app = with_a_minute(80, 24);
+    app.update(Action::SortBy(mech_gcs::ui::Column::Loss));
+    app.update(Action::SortReverse);
     insta::assert_snapshot!(screen(&app, 80, 24));
 }

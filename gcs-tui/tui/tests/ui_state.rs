@@ -626,3 +626,49 @@ fn the_map_fits_the_first_robots_that_reported_a_position() {
         (x, y)
     );
 }
+
+#[test]
+fn waypoints_for_a_robot_not_routed_to_them_say_so_and_offer_the_route() {
+    let mut app = fixture::app(4, 160, 48);
+    // robot_1 is routed to wp/gcs, robot_2 to joy/0 (the fixture).
+    app.update(Action::Select(Select::Only("robot_2".into())));
+    app.update(Action::AddWaypoint(Waypoint {
+        x: 1.0,
+        y: 1.0,
+        z: 0.0,
+        time: None,
+    }));
+    app.update(Action::SendWaypoints);
+    let log: Vec<String> = app.events.iter().map(|l| l.text.clone()).collect();
+    assert!(
+        log.iter().any(|l| l.contains(
+            "robot_2 is routed to joy/0: it follows these waypoints only once routed to wp/gcs"
+        )),
+        "{log:#?}"
+    );
+    assert!(
+        app.prompt.open.is_none(),
+        "the keyboard stays the operator's"
+    );
+    app.update(Action::OpenCommandLine);
+    app.update(Action::HistoryPrev);
+    assert_eq!(
+        app.prompt.open,
+        Some(Prompt::Command("route robot_2 wp/gcs".into()))
+    );
+
+    // Routed to the mission's channel: no hint, nothing offered.
+    app.update(Action::PromptCancel);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    let before = app.events.iter().count();
+    let history = app.prompt.history.clone();
+    app.update(Action::SendWaypoints);
+    let added: Vec<String> = app
+        .events
+        .iter()
+        .skip(before)
+        .map(|l| l.text.clone())
+        .collect();
+    assert!(added.iter().all(|l| !l.contains("routed to")), "{added:#?}");
+    assert_eq!(app.prompt.history, history);
+}

@@ -18,7 +18,7 @@ use mech_core::fleet::Severity;
 use mech_core::sync::lock;
 use mech_proto::auth::Stamper;
 use tokio::runtime::Handle;
-use tracing::{info, warn};
+use tracing::{debug, info, warn};
 use zenoh::Session;
 use zenoh::bytes::Encoding;
 use zenoh::query::{Query, Queryable};
@@ -59,9 +59,23 @@ pub(crate) async fn declare(
     session
         .declare_queryable(keys::route_request_key(station, "*"))
         .callback(move |query| {
+            if !is_route_request(query.key_expr().as_str()) {
+                debug!(key = %query.key_expr(), "a query that names no one robot's route request: not answered");
+                return;
+            }
             runtime.spawn(deciding.clone().answer(query));
         })
         .await
+}
+
+/// Whether a query's key expression names one robot's route request
+/// (`mech/<station>/<robot>/route/request`, no wildcard). A query that only
+/// intersects the queryable, as a `get` on `mech/site-a/**` reading the
+/// robots' state does, asks for no route and is left to the state
+/// queryable: answering it with a refusal would count and log a refusal
+/// nobody asked for.
+fn is_route_request(key: &str) -> bool {
+    matches!(keys::parse(key), Ok(Key::RouteRequest { .. }))
 }
 
 impl Deciding {
@@ -272,5 +286,25 @@ impl RemoteRoutes for RouteRequester {
         let (station, robot) = (station.to_string(), robot.to_string());
         let channel = channel.map(str::to_string);
         Box::pin(async move { self.ask(&station, &robot, channel.as_deref()).await })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_route_request;
+
+    #[test]
+    fn only_a_key_naming_one_robot_is_a_route_request() {
+        assert!(is_route_request("mech/site-a/robot_1/route/request"));
+        for selector in [
+            "mech/site-a/**",
+            "mech/**",
+            "mech/site-a/*/route/request",
+            "mech/site-a/robot_1/**",
+            "mech/site-a/$*/route/request",
+            "mech/site-a/robot_1/route",
+        ] {
+            assert!(!is_route_request(selector), "{selector}");
+        }
     }
 }

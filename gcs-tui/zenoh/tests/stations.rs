@@ -4,7 +4,8 @@
 //! while it is routed to the command's channel; a remote robot is routed
 //! only where its station's `[auth]` lists the asking operator's key; a
 //! station or robot that leaves shows lost; bad names and payloads are
-//! refused and counted.
+//! refused and counted; a `get` on a whole station reads its state without
+//! reaching the route-request queryable's refusals.
 
 #![allow(clippy::unwrap_used)]
 
@@ -311,6 +312,55 @@ async fn bad_names_and_payloads_are_refused_and_counted() {
     )
     .await;
     assert_eq!(a.bridge.stats().commands_forwarded, 0);
+    tool.close().await.unwrap();
+    a.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_get_on_the_whole_station_reads_state_and_asks_for_no_route() {
+    let a = station(core(), zenoh("site-a", &[]), 1).await;
+    a.until("robot_1 reporting", WAIT, |f| {
+        shown(f, "robot_1", LinkState::Connected)
+    })
+    .await;
+    let tool = program(&a.endpoint).await;
+    // The docs' own selector: every state of every robot of site-a. It
+    // intersects the route-request queryable's key too.
+    let mut keys = Vec::new();
+    let mut errors = Vec::new();
+    for _ in 0..3 {
+        let replies = tool
+            .get("mech/site-a/**")
+            .timeout(Duration::from_secs(5))
+            .await
+            .unwrap();
+        while let Ok(reply) = replies.recv_async().await {
+            match reply.result() {
+                Ok(sample) => keys.push(sample.key_expr().to_string()),
+                Err(e) => errors.push(e.payload().try_to_string().unwrap_or_default().to_string()),
+            }
+        }
+        if keys.iter().any(|k| k == "mech/site-a/robot_1/telemetry") {
+            break;
+        }
+    }
+    assert!(
+        keys.iter().any(|k| k == "mech/site-a/robot_1/telemetry"),
+        "the state is answered: {keys:?}"
+    );
+    assert!(errors.is_empty(), "{errors:?}");
+    assert!(
+        keys.iter()
+            .all(|k| !k.ends_with("/route/request") && !k.contains('*')),
+        "nothing answered as a route request: {keys:?}"
+    );
+    let stats = a.bridge.stats();
+    assert_eq!(stats.route_requests_refused, 0, "{stats:?}");
+    assert_eq!(stats.route_requests_done, 0, "{stats:?}");
+    let logged = a
+        .gcs
+        .with_fleet(|f| f.log.iter().any(|l| l.text.contains("not a route request")));
+    assert!(!logged, "no refusal in the event log");
     tool.close().await.unwrap();
     a.stop().await;
 }

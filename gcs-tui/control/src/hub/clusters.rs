@@ -311,6 +311,15 @@ impl ControlHub {
         })
     }
 
+    /// A cluster's waypoint draft and whether it loops (what `mission
+    /// save` keeps); `None` for a cluster without one.
+    pub fn cluster_draft(&self, cluster: &str) -> Option<(Vec<ClusterWaypoint>, bool)> {
+        lock(&self.shared.clusters)
+            .get(cluster)
+            .filter(|e| e.has_draft())
+            .map(|e| (e.draft.clone(), e.draft_looped))
+    }
+
     /// Whether `cluster` has cluster waypoints waiting to be sent.
     pub fn has_cluster_draft(&self, cluster: &str) -> bool {
         lock(&self.shared.clusters)

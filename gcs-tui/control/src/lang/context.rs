@@ -99,6 +99,8 @@ pub(super) struct Context {
     pub(super) remote_routes: Option<Arc<dyn RemoteRoutes>>,
     /// Where `record start` without a file records (rotating files).
     pub(super) record_dir: Option<std::path::PathBuf>,
+    /// Where `mission save` and `mission load` may read and write.
+    pub(super) files: crate::mission_file::access::FileAccess,
 }
 
 impl Context {
@@ -111,6 +113,7 @@ impl Context {
             spawner: None,
             remote_routes: None,
             record_dir: None,
+            files: crate::mission_file::access::FileAccess::Station,
         }
     }
 

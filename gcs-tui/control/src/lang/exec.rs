@@ -8,6 +8,7 @@ use super::context::Context;
 use super::parse::{Statement, parse_line};
 use super::{LangError, Outcome};
 use crate::hub::ControlHub;
+use crate::mission_file::access::{FileAccess, default_dir};
 use crate::spec::ClusterSpec;
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
@@ -67,12 +68,29 @@ impl Executor {
         self
     }
 
-    /// Publishes and sends missions as `sender` (an operator's name)
-    /// instead of [`SENDER`], so the router and the robots see who
-    /// commanded them.
+    /// An operator's session: publishes and sends missions as `sender`
+    /// (the operator's name) instead of [`SENDER`], so the router and the
+    /// robots see who commanded them; and reads and writes mission files
+    /// only in the station's missions directory (`[fleet] mission_dir`,
+    /// else [`default_dir`](crate::mission_file::access::default_dir)): an
+    /// operator, maybe attached over TCP from elsewhere, has no account on
+    /// the station's machine ([`crate::mission_file::access`]).
     pub fn with_sender(mut self, sender: &str) -> Executor {
         self.ctx.publishers = self.ctx.gcs.router().publishers(sender);
         self.ctx.sender = sender.to_string();
+        let dir = self.ctx.gcs.config().fleet.mission_dir.clone();
+        self.ctx.files = FileAccess::Confined(dir.unwrap_or_else(default_dir));
+        self
+    }
+
+    /// Mission files only in `dir` (what [`Executor::with_sender`] sets
+    /// for an operator's session), or, with `None`, wherever the station
+    /// process may read and write (a script the station runs itself).
+    pub fn with_mission_dir(mut self, dir: Option<std::path::PathBuf>) -> Executor {
+        self.ctx.files = match dir {
+            Some(d) => FileAccess::Confined(d),
+            None => FileAccess::Station,
+        };
         self
     }
 
@@ -117,11 +135,15 @@ impl Executor {
     /// Runs one statement. Errors point at the statement or the argument at
     /// fault.
     /// Each command and its outcome goes into the recording, if one is
-    /// being made.
+    /// being made: the summary, then each detail line (`status`'s robots),
+    /// one per line, so a replay prints what the run printed.
     pub async fn execute(&mut self, stmt: &Statement) -> Result<Outcome, LangError> {
         let result = stmt.command.apply(&mut self.ctx, stmt.span).await;
         let summary = match &result {
-            Ok(o) => o.summary.clone(),
+            Ok(o) => std::iter::once(o.summary.as_str())
+                .chain(o.details.iter().map(String::as_str))
+                .collect::<Vec<_>>()
+                .join("\n"),
             Err(e) => e.to_string(),
         };
         self.ctx.gcs.router().record_operator(OperatorRecord {

@@ -20,6 +20,7 @@ pub mod follow;
 pub mod formation;
 pub mod help;
 pub mod log;
+pub mod mission;
 pub mod mode;
 pub mod nav;
 pub mod nav_wait;
@@ -94,6 +95,12 @@ pub static VERBS: &[Verb] = &[
         usage: "send TARGET [CHANNEL]",
         help: "send each robot's waypoint list as a mission (default channel wp/gcs)",
         parse: |a| send::SendWaypoints::parse(a).map(Command::SendWaypoints),
+    },
+    Verb {
+        name: "mission",
+        usage: "mission save|load TARGET FILE [origin LAT,LON[,ALT]|home]",
+        help: "save a robot's (or a cluster's) waypoints, times and loop to FILE on the station, or load them (.toml: MECH's format; .waypoints, .txt: QGC WPL 110)",
+        parse: |a| mission::MissionFile::parse(a).map(Command::MissionFile),
     },
     Verb {
         name: "cluster",
@@ -253,6 +260,7 @@ pub enum Command {
     Drive(drive::Drive),
     SetWaypoints(waypoint::SetWaypoints),
     SendWaypoints(send::SendWaypoints),
+    MissionFile(mission::MissionFile),
     Cluster(cluster::Cluster),
     Stop(stop::Stop),
     EStop,
@@ -289,6 +297,7 @@ impl Command {
             Command::Drive(c) => c.apply(ctx, at).await,
             Command::SetWaypoints(c) => c.apply(ctx, at).await,
             Command::SendWaypoints(c) => c.apply(ctx, at).await,
+            Command::MissionFile(c) => c.apply(ctx, at).await,
             Command::Cluster(c) => c.apply(ctx, at).await,
             Command::Stop(c) => c.apply(ctx, at).await,
             Command::EStop => estop::engage(ctx).await,

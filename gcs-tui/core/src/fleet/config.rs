@@ -22,6 +22,10 @@ pub struct FleetConfig {
     pub command_channel: String,
     /// Arrival radius (m) of missions sent from the GCS.
     pub arrival_radius: f64,
+    /// Where operators' `mission save` and `mission load` read and write
+    /// (files named relative to it, none outside); unset:
+    /// `$XDG_DATA_HOME/mech/missions` (`~/.local/share/mech/missions`).
+    pub mission_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for FleetConfig {
@@ -33,6 +37,7 @@ impl Default for FleetConfig {
             mission_channel: "wp/gcs".into(),
             command_channel: "cmd/gcs".into(),
             arrival_radius: 0.1,
+            mission_dir: None,
         }
     }
 }

@@ -164,11 +164,15 @@ pub(super) fn decision(m: &TappedMessage) -> Vec<u8> {
     bytes(&v)
 }
 
-/// An operator command and its outcome.
+/// An operator command and its outcome: the record's first line is the
+/// summary, any further lines the details (`status`'s robots).
 pub(super) fn operator(o: &OperatorRecord) -> Vec<u8> {
+    let mut lines = o.summary.split('\n');
+    let summary = lines.next().unwrap_or_default();
+    let details: Vec<&str> = lines.collect();
     bytes(&json!({
         "t": secs(o.at), "source": o.source, "line": o.line, "text": o.text,
-        "ok": o.ok, "summary": o.summary,
+        "ok": o.ok, "summary": summary, "details": details,
     }))
 }
 

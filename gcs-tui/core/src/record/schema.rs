@@ -212,20 +212,47 @@ fn scene_update() -> Value {
     )
 }
 
-fn event() -> Value {
-    object(
-        MECH_EVENT,
-        "A station event (mech_core::Event); `event` names it, `t` is seconds since the router started. The other fields depend on the event.",
-        json!({"t": number(), "event": {"type": "string", "enum": EVENT_NAMES}}),
-    )
-}
+/// The fields of each event beside `t` and `event`, every one required:
+/// the data is `mech_core::Event` as serde writes it, and a test records
+/// every variant and validates it against this schema.
+const EVENT_FIELDS: &[(&str, &[&str])] = &[
+    ("listening", &["udp", "tcp"]),
+    ("registered", &["hello", "id", "addr", "known"]),
+    ("links", &["robot", "links"]),
+    ("link", &["robot", "state"]),
+    ("telemetry", &["robot", "telemetry"]),
+    ("link_quality", &["robot", "quality"]),
+    ("route_changed", &["robot", "channel", "epoch"]),
+    ("route_acked", &["robot", "channel", "epoch"]),
+    (
+        "mission_sent",
+        &["robot", "channel", "id", "waypoints", "looped"],
+    ),
+    ("mission_acked", &["robot", "id", "accepted", "reason"]),
+    ("mission_failed", &["robot", "id", "reason"]),
+    ("estop", &["engage", "id"]),
+    ("estop_acked", &["robot", "engage", "id"]),
+    ("estop_complete", &["engage", "id"]),
+    ("channel_publisher", &["channel", "publisher"]),
+    ("cluster_command", &["channel", "command"]),
+    ("bye", &["robot", "reason"]),
+    ("notice", &["from", "notice"]),
+    ("bad_packet", &["from", "error"]),
+    ("rejected", &["from", "reason", "detail"]),
+    (
+        "refused",
+        &["count", "sources", "by_reason", "from", "detail"],
+    ),
+];
 
 /// Names of every event, as [`crate::Event::name`] gives them.
 pub const EVENT_NAMES: &[&str] = &[
     "listening",
     "registered",
+    "links",
     "link",
     "telemetry",
+    "link_quality",
     "route_changed",
     "route_acked",
     "mission_sent",
@@ -240,10 +267,136 @@ pub const EVENT_NAMES: &[&str] = &[
     "notice",
     "bad_packet",
     "rejected",
+    "refused",
 ];
 
+fn nullable(type_name: &str) -> Value {
+    json!({"type": [type_name, "null"]})
+}
+
+fn boolean() -> Value {
+    json!({"type": "boolean"})
+}
+
+/// An object whose every listed property is required and nothing else is
+/// allowed: MECH's own messages, so a field added to the data and not to
+/// the schema fails the recording test.
+fn strict(title: &str, description: &str, properties: Value) -> Value {
+    let required: Vec<String> = properties
+        .as_object()
+        .map(|m| m.keys().cloned().collect())
+        .unwrap_or_default();
+    let mut v = object(title, description, properties);
+    if let Value::Object(m) = &mut v {
+        m.insert("required".into(), json!(required));
+        m.insert("additionalProperties".into(), json!(false));
+    }
+    v
+}
+
+/// The schema of an event field, by name (one meaning per name across
+/// events).
+fn event_field(name: &str) -> Value {
+    match name {
+        "robot" | "publisher" | "from" | "reason" | "error" | "detail" | "udp" => string(),
+        "tcp" | "channel" => nullable("string"),
+        "id" | "epoch" | "count" | "sources" => integer(),
+        "by_reason" => json!({"description": "messages refused for each reason",
+            "type": "object", "additionalProperties": integer()}),
+        "known" | "looped" | "accepted" | "engage" => boolean(),
+        "state" => json!({"type": "string", "enum": ["connected", "stale", "lost"]}),
+        "hello" => strict(
+            "mech.Hello",
+            "the registration as the robot sent it",
+            json!({"name": string(), "platform": string(),
+                   "capabilities": {"description": "command kinds it obeys (docs/protocol.md numbers)",
+                                    "type": "array", "items": integer()},
+                   "motors": integer(), "max_speed": number(), "max_yaw_rate": number(),
+                   "agent_version": string()}),
+        ),
+        "addr" => json!({"title": "mech.LinkAddr", "description": "where the robot was heard from",
+            "oneOf": [
+                {"type": "object", "properties": {"udp": string()}, "required": ["udp"], "additionalProperties": false},
+                {"type": "object", "properties": {"radio": string()}, "required": ["radio"], "additionalProperties": false}]}),
+        "links" => strict(
+            "mech.RobotLinks",
+            "the robot's live links and the one commands go out on",
+            json!({"udp": boolean(), "radio": nullable("string"),
+                   "active": {"type": "string", "enum": ["udp", "radio", ""]},
+                   "radio_budget_hz": nullable("number")}),
+        ),
+        "telemetry" => telemetry(),
+        "quality" => link_quality(),
+        "waypoints" => array(strict(
+            "mech.Waypoint",
+            "m; time: s after the mission starts",
+            json!({"x": number(), "y": number(), "z": number(), "time": nullable("number")}),
+        )),
+        "command" => strict(
+            "mech.ClusterCommand",
+            "a cluster command (docs/protocol.md)",
+            json!({"cluster": string(), "members": array(string()),
+                   "goal": {"description": "velocity or pose goal, as [kind, fields]"},
+                   "formation": {"description": "the formation, or null"}}),
+        ),
+        "notice" => strict(
+            "mech.Notice",
+            "a notice from a robot or controller",
+            json!({"level": one_of("mech.Level", &[("DEBUG", 0), ("INFO", 1), ("WARN", 2), ("ERROR", 3)]),
+                   "code": integer(), "text": string()}),
+        ),
+        _ => json!({}),
+    }
+}
+
+/// A robot's link as the router measures it (`mech_core::LinkQuality`):
+/// rates in messages per second, loss a fraction, times in seconds.
+fn link_quality() -> Value {
+    strict(
+        "mech.LinkQuality",
+        "the link as the router measures it over its last seconds; rtt and window in seconds",
+        json!({"rx_hz": number(), "tx_hz": number(), "loss": nullable("number"),
+               "rtt": {"description": "mean round trip, s (null: not measured)", "type": ["number", "null"]},
+               "window": {"description": "the time the figures cover, s", "type": "number"},
+               "received": integer(), "sent": integer(), "lost": integer()}),
+    )
+}
+
+/// Every event's fields at the top level (so Foxglove's message paths
+/// offer them: `/mech/events{event=="link_quality"}.quality.rtt`), and
+/// for each event which of them it has, all of them, and no other.
+fn event() -> Value {
+    let mut properties = serde_json::Map::new();
+    properties.insert("t".into(), number());
+    properties.insert(
+        "event".into(),
+        json!({"type": "string", "enum": EVENT_NAMES}),
+    );
+    let mut cases = Vec::new();
+    for (name, fields) in EVENT_FIELDS {
+        for f in *fields {
+            properties.insert((*f).to_string(), event_field(f));
+        }
+        let mut allowed = vec!["t", "event"];
+        allowed.extend_from_slice(fields);
+        cases.push(json!({
+            "if": {"properties": {"event": {"const": name}}, "required": ["event"]},
+            "then": {"required": fields, "propertyNames": {"enum": allowed}}}));
+    }
+    let mut v = object(
+        MECH_EVENT,
+        "A station event (mech_core::Event); `event` names it, `t` is seconds since the router started. The other fields depend on the event.",
+        Value::Object(properties),
+    );
+    if let Value::Object(m) = &mut v {
+        m.insert("required".into(), json!(["t", "event"]));
+        m.insert("allOf".into(), Value::Array(cases));
+    }
+    v
+}
+
 fn decision() -> Value {
-    object(
+    let mut v = object(
         MECH_DECISION,
         "What the router did with one message it received. `n` numbers messages as the router counts them (and is the sequence of the same message on /mech/raw).",
         json!({"t": number(), "n": integer(), "from": string(), "kind": string(),
@@ -252,20 +405,29 @@ fn decision() -> Value {
                "outcome": {"type": "string", "enum": ["forwarded", "dropped", "consumed"]},
                "forwarded": integer(), "reason": string(), "detail": string(),
                "body": {"description": "the decoded body (MessagePack form as JSON)"}}),
-    )
+    );
+    // An unreadable message has no header fields; a kept one no reason.
+    if let Value::Object(m) = &mut v {
+        m.insert(
+            "required".into(),
+            json!(["t", "n", "from", "kind", "outcome", "forwarded"]),
+        );
+        m.insert("additionalProperties".into(), json!(false));
+    }
+    v
 }
 
 fn operator() -> Value {
-    object(
+    strict(
         MECH_OPERATOR,
-        "A command the operator gave (command line, script, key) and its outcome",
+        "A command the operator gave (command line, script, key) and its outcome; a script's end is a record with line 0 and no text",
         json!({"t": number(), "source": string(), "line": integer(), "text": string(),
-               "ok": {"type": "boolean"}, "summary": string()}),
+               "ok": {"type": "boolean"}, "summary": string(), "details": array(string())}),
     )
 }
 
 fn clusters() -> Value {
-    object(
+    strict(
         MECH_CLUSTERS,
         "Every cluster defined at the station, by name, with its members",
         json!({"t": number(), "clusters": {"type": "object",
@@ -274,12 +436,12 @@ fn clusters() -> Value {
 }
 
 fn telemetry() -> Value {
-    let pose = object(
+    let pose = strict(
         "mech.Pose",
         "m, rad",
         json!({"x": number(), "y": number(), "z": number(), "heading": number()}),
     );
-    let velocity = object(
+    let velocity = strict(
         "mech.Velocity",
         "m/s, rad/s",
         json!({"vx": number(), "vy": number(), "vz": number(), "wz": number()}),
@@ -306,12 +468,12 @@ fn telemetry() -> Value {
             ("FAULT", 4),
         ],
     );
-    let mission = object(
+    let mission = strict(
         "mech.MissionProgress",
         "the mission held",
         json!({"id": integer(), "next": integer(), "total": integer()}),
     );
-    object(
+    strict(
         MECH_TELEMETRY,
         "A robot's telemetry as it sent it (docs/protocol.md)",
         json!({"pose": pose, "velocity": velocity, "mode": mode, "channel": string(),
@@ -320,7 +482,8 @@ fn telemetry() -> Value {
                "health": one_of("mech.Health", &[("OK", 0), ("DEGRADED", 1), ("FAULT", 2)]),
                "battery": {"type": ["number", "null"]}, "position_quality": number(),
                "actuators": array(number()), "mission": {"anyOf": [mission, {"type": "null"}]},
-               "stale": integer()}),
+               "stale": integer(),
+               "velocity_source": one_of("mech.VelocitySource", &[("COMMANDED", 0), ("MEASURED", 1)])}),
     )
 }
 
@@ -331,7 +494,9 @@ mod tests {
     #[test]
     fn every_event_name_is_listed_and_topics_name_their_robot() {
         let names: Vec<&str> = EVENT_NAMES.to_vec();
-        assert!(names.contains(&"estop_complete") && names.len() == 18);
+        assert!(names.contains(&"estop_complete") && names.len() == 21);
+        let described: Vec<&str> = EVENT_FIELDS.iter().map(|(n, _)| *n).collect();
+        assert_eq!(described, names, "every event has its fields described");
         assert_eq!(
             telemetry_robot(&telemetry_topic("robot_1")),
             Some("robot_1")
@@ -384,6 +549,15 @@ mod tests {
                 from: "gcs".into(),
                 error: "e".into(),
             },
+            Event::Refused {
+                count: 3,
+                sources: 2,
+                by_reason: [("bad-tag".to_string(), 2), ("shed".to_string(), 1)]
+                    .into_iter()
+                    .collect(),
+                from: "udp:1.2.3.4:5".into(),
+                detail: "x".into(),
+            },
         ];
         for e in events {
             let v = serde_json::to_value(&e).unwrap();
@@ -391,5 +565,294 @@ mod tests {
             assert!(EVENT_NAMES.contains(&e.name()));
             assert_eq!(serde_json::from_value::<Event>(v).unwrap(), e);
         }
+    }
+
+    /// One of every event, as the recorder writes it.
+    fn every_event() -> Vec<crate::event::Event> {
+        use crate::counters::{LinkQuality, RejectReason};
+        use crate::event::{Event, LinkAddr, LinkState, RobotLinks};
+        use mech_proto::{
+            ClusterCommand, ClusterGoal, ClusterVelocity, CommandKind, Formation, FormationKind,
+            Hello, Level, Notice, NoticeCode, Offset, Waypoint,
+        };
+        let robot = || "robot_1".to_string();
+        let telemetry = sample_telemetry();
+        vec![
+            Event::Listening {
+                udp: "127.0.0.1:7400".parse().unwrap(),
+                tcp: None,
+            },
+            Event::Registered {
+                hello: Hello {
+                    name: robot(),
+                    platform: "diff-drive".into(),
+                    capabilities: vec![CommandKind::Twist, CommandKind::Actuators],
+                    motors: 2,
+                    max_speed: 0.5,
+                    max_yaw_rate: 2.0,
+                    agent_version: "0.1.0".into(),
+                },
+                id: 1,
+                addr: LinkAddr::Udp("127.0.0.1:40000".parse().unwrap()),
+                known: false,
+            },
+            Event::Registered {
+                hello: Hello {
+                    name: "robot_2".into(),
+                    platform: "kiwi".into(),
+                    capabilities: vec![],
+                    motors: 3,
+                    max_speed: 0.5,
+                    max_yaw_rate: 2.0,
+                    agent_version: "0.1.0".into(),
+                },
+                id: 2,
+                addr: LinkAddr::Radio("/dev/ttyUSB0".into()),
+                known: true,
+            },
+            Event::Links {
+                robot: robot(),
+                links: RobotLinks {
+                    udp: true,
+                    radio: Some("/dev/ttyUSB0".into()),
+                    active: "udp",
+                    radio_budget_hz: Some(14.0),
+                },
+            },
+            Event::Link {
+                robot: robot(),
+                state: LinkState::Stale,
+            },
+            Event::Telemetry {
+                robot: robot(),
+                telemetry,
+            },
+            Event::LinkQuality {
+                robot: robot(),
+                quality: LinkQuality {
+                    rx_hz: 21.0,
+                    tx_hz: 4.0,
+                    loss: Some(0.01),
+                    rtt: Some(std::time::Duration::from_micros(420)),
+                    window: std::time::Duration::from_secs(5),
+                    received: 100,
+                    sent: 20,
+                    lost: 1,
+                },
+            },
+            Event::LinkQuality {
+                robot: robot(),
+                quality: LinkQuality::default(),
+            },
+            Event::RouteChanged {
+                robot: robot(),
+                channel: None,
+                epoch: 2,
+            },
+            Event::RouteAcked {
+                robot: robot(),
+                channel: Some("wp/gcs".into()),
+                epoch: 2,
+            },
+            Event::MissionSent {
+                robot: robot(),
+                channel: "wp/gcs".into(),
+                id: 3,
+                waypoints: vec![
+                    Waypoint {
+                        x: 1.0,
+                        y: 2.0,
+                        z: 0.0,
+                        time: None,
+                    },
+                    Waypoint {
+                        x: 2.0,
+                        y: 2.0,
+                        z: 0.0,
+                        time: Some(10.0),
+                    },
+                ],
+                looped: true,
+            },
+            Event::MissionAcked {
+                robot: robot(),
+                id: 3,
+                accepted: true,
+                reason: String::new(),
+            },
+            Event::MissionFailed {
+                robot: robot(),
+                id: 3,
+                reason: "no acknowledgement".into(),
+            },
+            Event::EStop {
+                engage: true,
+                id: 7,
+            },
+            Event::EStopAcked {
+                robot: robot(),
+                engage: true,
+                id: 7,
+            },
+            Event::EStopComplete {
+                engage: false,
+                id: 8,
+            },
+            Event::ChannelPublisher {
+                channel: "joy/0".into(),
+                publisher: "gcs".into(),
+            },
+            Event::ClusterCommand {
+                channel: "fleet/c1".into(),
+                command: ClusterCommand {
+                    cluster: "c1".into(),
+                    members: vec![robot()],
+                    goal: ClusterGoal::Velocity(ClusterVelocity {
+                        vx: 0.1,
+                        vy: 0.0,
+                        wz: 0.0,
+                        scale_rate: 0.0,
+                    }),
+                    formation: Some(Formation {
+                        kind: FormationKind::Custom,
+                        spacing: 1.0,
+                        offsets: vec![Offset { x: 1.0, y: 0.0 }],
+                    }),
+                },
+            },
+            Event::Bye {
+                robot: robot(),
+                reason: "shutdown".into(),
+            },
+            Event::Notice {
+                from: robot(),
+                notice: Notice {
+                    level: Level::Warn,
+                    code: NoticeCode::DriverFault,
+                    text: "left wheel stalled".into(),
+                },
+            },
+            Event::BadPacket {
+                from: "udp:127.0.0.1:5".into(),
+                error: "truncated".into(),
+            },
+            Event::Rejected {
+                from: "udp:1.2.3.4:5".into(),
+                reason: RejectReason::Replay,
+                detail: "stamp seen".into(),
+            },
+        ]
+    }
+
+    fn sample_telemetry() -> mech_proto::Telemetry {
+        use mech_proto::{
+            Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
+            Velocity, VelocitySource,
+        };
+        Telemetry {
+            pose: Pose {
+                x: 1.0,
+                y: 2.0,
+                z: 0.0,
+                heading: 0.5,
+            },
+            velocity: Velocity::default(),
+            mode: ControlMode::Twist,
+            channel: "joy/0".into(),
+            computation: Computation::Onboard,
+            failsafe: FailsafeState::Ok,
+            health: Health::Ok,
+            battery: Some(0.8),
+            position_quality: 1.0,
+            actuators: vec![0.1, -0.1],
+            mission: Some(MissionProgress {
+                id: 3,
+                next: 1,
+                total: 2,
+            }),
+            stale: 0,
+            velocity_source: VelocitySource::Measured,
+        }
+    }
+
+    /// What `tests/scripts/validate_recording.py` (Python's `jsonschema`
+    /// and `mcap`) says of `file`; `None` where Python or its packages are
+    /// missing outside CI (`scripts/deps.sh` installs them; CI must run it).
+    fn python_validates(file: &std::path::Path) -> Option<Value> {
+        let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/scripts/validate_recording.py");
+        let out = std::process::Command::new("python3")
+            .arg(script)
+            .arg(file)
+            .output();
+        let missing = |why: &str| {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI must validate recordings: {why}"
+            );
+            println!("skipped the schema validation: {why} (bash scripts/deps.sh)");
+            None
+        };
+        let out = match out {
+            Ok(out) => out,
+            Err(e) => return missing(&e.to_string()),
+        };
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        if stderr.contains("No module named") {
+            return missing(&stderr);
+        }
+        assert!(out.status.success(), "validator: {stderr}");
+        Some(serde_json::from_slice(&out.stdout).expect("one JSON object"))
+    }
+
+    #[test]
+    fn every_event_validates_against_the_schema_the_file_embeds() {
+        use crate::event::Stamped;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("events.mcap");
+        let mut file =
+            super::super::file::McapFile::create(&path, true, Default::default()).unwrap();
+        let events = file.channel(EVENTS, Some(MECH_EVENT)).unwrap();
+        let wrong = file.channel("/wrong", Some(MECH_EVENT)).unwrap();
+        let all = every_event();
+        let mut names: Vec<&str> = all.iter().map(|e| e.name()).collect();
+        names.dedup();
+        assert_eq!(names, EVENT_NAMES, "one of every event, in order");
+        for (i, e) in all.into_iter().enumerate() {
+            let stamped = Stamped {
+                at: std::time::Duration::from_millis(i as u64),
+                event: e,
+            };
+            let json = super::super::encode::event(&stamped);
+            file.write(events, None, i as u64, &json).unwrap();
+        }
+        // What the schema must refuse: a field it does not describe, a
+        // round trip in serde's Duration form, an event it does not know.
+        for bad in [
+            json!({"t": 0.0, "event": "link", "robot": "r", "state": "stale", "extra": 1}),
+            json!({"t": 0.0, "event": "link_quality", "robot": "r", "quality": {
+                "rx_hz": 1.0, "tx_hz": 1.0, "loss": null, "rtt": {"secs": 0, "nanos": 5},
+                "window": 5.0, "received": 1, "sent": 1, "lost": 0}}),
+            json!({"t": 0.0, "event": "unheard_of"}),
+        ] {
+            file.write(wrong, None, 0, &serde_json::to_vec(&bad).unwrap())
+                .unwrap();
+        }
+        file.finish(Default::default()).unwrap();
+        let Some(read) = python_validates(&path) else {
+            return;
+        };
+        assert_eq!(
+            read["validated"][EVENTS].as_u64(),
+            Some(EVENT_NAMES.len() as u64 + 2),
+            "{read}"
+        );
+        let errors = read["errors"].as_array().unwrap();
+        assert!(
+            errors.iter().all(|e| e["topic"] == "/wrong"),
+            "every event validates: {read:#}"
+        );
+        assert_eq!(read["validated"]["/wrong"], 3, "{read}");
+        assert!(errors.len() >= 3, "each wrong message refused: {read:#}");
     }
 }

@@ -235,6 +235,10 @@ struct Operator {
     text: String,
     ok: bool,
     summary: String,
+    /// Lines after the summary (files from before they were recorded have
+    /// none).
+    #[serde(default)]
+    details: Vec<String>,
 }
 
 #[derive(Deserialize)]
@@ -268,7 +272,10 @@ fn entry(kind: &Kind, at: Duration, data: &[u8]) -> Result<Option<Entry>, serde_
                 line: o.line,
                 text: o.text,
                 ok: o.ok,
-                summary: o.summary,
+                summary: std::iter::once(o.summary)
+                    .chain(o.details)
+                    .collect::<Vec<_>>()
+                    .join("\n"),
             })
         }
         Kind::Clusters => Entry::Clusters {

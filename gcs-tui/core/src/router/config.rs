@@ -52,6 +52,20 @@ pub struct RouterConfig {
     /// A channel silent for longer is no longer listed as live.
     #[serde(with = "secs")]
     pub channel_live_for: Duration,
+    /// TCP peers served at once (each holds a file descriptor): the
+    /// router's descriptor budget. When it is taken, the oldest peer that
+    /// has sent no valid message yet is closed to make room; if every
+    /// peer has, the new connection is closed. Lowered at start, with a
+    /// warning, if the process may not open that many files.
+    pub tcp_max_peers: usize,
+    /// TCP peers served at once from one IP address, with the same rule
+    /// within the address.
+    pub tcp_peers_per_address: usize,
+    /// A TCP peer that sends no valid message (signed by a listed key,
+    /// when the station authenticates) within this long of connecting is
+    /// closed (seconds).
+    #[serde(with = "secs")]
+    pub tcp_idle: Duration,
     /// Queue length of each subscriber (in-process or TCP); a full queue
     /// drops that subscriber's events and counts them, never blocks routing.
     pub subscriber_queue: usize,
@@ -118,6 +132,9 @@ impl Default for RouterConfig {
             tick: Duration::from_millis(20),
             subscriber_timeout: Duration::from_secs(5),
             channel_live_for: Duration::from_secs(3),
+            tcp_max_peers: 1024,
+            tcp_peers_per_address: 16,
+            tcp_idle: Duration::from_secs(10),
             subscriber_queue: 4096,
             default_route: None,
             udp_workers: 2,
@@ -149,6 +166,14 @@ impl RouterConfig {
             if d.is_zero() {
                 return Err(ConfigError(format!("router.{name} must be positive")));
             }
+        }
+        if self.tcp_max_peers == 0 || self.tcp_peers_per_address == 0 {
+            return Err(ConfigError::new(
+                "router.tcp_max_peers and router.tcp_peers_per_address must be at least 1",
+            ));
+        }
+        if self.tcp_idle.is_zero() {
+            return Err(ConfigError::new("router.tcp_idle must be positive"));
         }
         if self.subscriber_queue == 0 {
             return Err(ConfigError::new(

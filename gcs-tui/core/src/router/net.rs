@@ -31,6 +31,7 @@ use tokio::time::MissedTickBehavior;
 pub(super) use bind::{Bound, bind};
 pub use radio::RadioStatus;
 pub(super) use radio::{RadioPort, open_radios};
+pub(super) use tcp::TcpLimits;
 
 use super::Shared;
 use super::config::SerialEndpoint;
@@ -214,19 +215,22 @@ pub(super) struct Tasks {
 impl Tasks {
     /// Starts every task on the bound endpoints and opened radios: a
     /// thread per UDP socket (polling for up to `poll`), a reader and a
-    /// writer thread per radio, the timers every `tick`, the TCP acceptor.
+    /// writer thread per radio, the timers every `tick`, the TCP acceptor
+    /// (its peers within `tcp`, fitted to the descriptor limit).
     pub(super) fn start(
         shared: &Arc<Shared>,
         bound: Bound,
         ports: Vec<RadioPort>,
         poll: Duration,
         tick: Duration,
+        tcp: TcpLimits,
     ) -> Result<Tasks, super::RouterError> {
         let workers = udp::start_workers(shared, bound.udp, poll)?;
         let radio_threads = radio::start(shared, ports)?;
         let mut tokio = vec![tokio::spawn(timers(shared.clone(), tick))];
         if let Some(listener) = bound.tcp {
-            tokio.push(tokio::spawn(tcp::accept(shared.clone(), listener)));
+            let limits = tcp.within_descriptor_limit();
+            tokio.push(tokio::spawn(tcp::accept(shared.clone(), listener, limits)));
         }
         Ok(Tasks {
             tokio,

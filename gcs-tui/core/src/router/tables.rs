@@ -14,6 +14,8 @@
 //!   robot's measured link quality);
 //! - [`gate`]: the authenticated control plane (what comes in is checked,
 //!   what goes out is signed);
+//! - [`refusals`]: how refused traffic is reported (counted summaries);
+//! - [`sources`]: known peers first and failure budgets, under a flood;
 //! - [`tap`]: the recorder's tap.
 //!
 //! Everything here is synchronous and runs under the router's tables lock,
@@ -36,17 +38,21 @@ mod gate;
 mod link_quality;
 mod links;
 mod missions;
+mod refusals;
 mod registration;
 mod routes;
+mod sources;
 pub(crate) mod tap;
 mod telemetry;
 
 use mech_proto::{Body, Envelope, Header};
 use tokio::time::Instant;
-use tracing::{debug, warn};
+use tracing::warn;
 
 use super::config::RouterConfig;
 use tap::{MessageTap, Tap, TapSlot};
+
+pub(crate) use sources::Treatment;
 
 use crate::auth::{Identity, Keyring};
 use crate::counters::{Counters, DropReason, Drops, Rejections};
@@ -168,6 +174,8 @@ pub(crate) struct Tables {
     missions: missions::Missions,
     estop: estop::EStops,
     gate: gate::Gate,
+    refusals: refusals::Refusals,
+    sources: sources::Sources,
     totals: Totals,
     tap: TapSlot,
     /// Sequence number of the router's own messages.
@@ -202,6 +210,8 @@ impl Tables {
             missions: missions::Missions::new(seed),
             estop: estop::EStops::new(seed),
             gate: gate::Gate::new(auth),
+            refusals: refusals::Refusals::default(),
+            sources: sources::Sources::default(),
             totals: Totals::default(),
             tap: TapSlot::default(),
             seq: 0,
@@ -235,25 +245,28 @@ impl Tables {
         }
     }
 
-    /// A message that cannot be read or is not expected: counted, logged
-    /// (rate-limited) and reported.
+    /// A message that cannot be read or is not expected: counted, and
+    /// reported and logged summarized (see [`refusals`]).
     fn bad(&mut self, error: String, cx: &mut Ctx<'_>) -> Delivery {
         self.totals.dropped.count(DropReason::BadPacket);
         self.tap.note_refusal(|| error.clone());
-        let n = self.totals.dropped.bad_packet;
-        let from = cx.from;
-        // Logged at warn for the 1st, 2nd, 4th, 8th... so a flood of garbage
-        // cannot flood the log; every one is counted and reported as an event.
-        if n.is_power_of_two() {
-            warn!(%from, %error, count = n, "bad packet");
-        } else {
-            debug!(%from, %error, "bad packet");
-        }
-        cx.event(Event::BadPacket {
-            from: from.to_string(),
-            error,
-        });
+        let from = refusals::Source::Peer(cx.from);
+        self.refused(refusals::Why::BadPacket, from, || error, cx);
         Delivery::Dropped(DropReason::BadPacket)
+    }
+
+    /// Reports a refusal, summarized: the first after a quiet second at
+    /// once, the rest counted into the next summary (see [`Tables::tick`]).
+    fn refused(
+        &mut self,
+        why: refusals::Why,
+        from: refusals::Source,
+        detail: impl FnOnce() -> String,
+        cx: &mut Ctx<'_>,
+    ) {
+        if let Some(e) = self.refusals.note(why, from, detail, cx.now) {
+            cx.event(e);
+        }
     }
 
     /// Counts a message dropped for `reason` router-wide.
@@ -267,6 +280,64 @@ impl Tables {
     pub(crate) fn handle(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
         self.totals.received += 1;
         let delivery = self.decide(bytes, cx);
+        if let Peer::Udp(addr) = cx.from {
+            match delivery {
+                Delivery::Dropped(DropReason::Rejected | DropReason::BadPacket) => {
+                    self.sources.refused(addr.ip(), cx.now);
+                }
+                Delivery::Dropped(DropReason::Stopped | DropReason::Shed) => {}
+                _ => self.sources.vouch(addr, cx.now),
+            }
+        }
+        self.offer(bytes, delivery, cx);
+        delivery
+    }
+
+    /// Orders a batch of `n` received datagrams from `from(i)` (see
+    /// [`sources`]): read it with [`Tables::batch_item`].
+    pub(crate) fn order_batch(
+        &mut self,
+        n: usize,
+        from: impl Fn(usize) -> Peer,
+        behind: bool,
+        now: Instant,
+    ) {
+        let addr = |i| match from(i) {
+            Peer::Udp(a) => Some(a),
+            _ => None,
+        };
+        self.sources.order(n, addr, behind, now);
+    }
+
+    /// The `k`-th datagram of the batch last ordered, and what it gets.
+    pub(crate) fn batch_item(&self, k: usize) -> (usize, Treatment) {
+        self.sources.ordered(k)
+    }
+
+    /// A datagram shed unread (see [`sources`]): counted, reported
+    /// (summarized) and offered to the recording.
+    pub(crate) fn shed(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
+        self.totals.received += 1;
+        let delivery = self.drop_for(DropReason::Shed);
+        if let Peer::Udp(addr) = cx.from {
+            let refused = self.sources.failing(addr.ip(), cx.now).unwrap_or(0);
+            let why = || {
+                format!(
+                    "not read: the router was behind, and {} had {refused} messages refused \
+                     in the last second",
+                    addr.ip()
+                )
+            };
+            self.tap.note_refusal(why);
+            let from = refusals::Source::Peer(cx.from);
+            self.refused(refusals::Why::Shed, from, why, cx);
+        }
+        self.offer(bytes, delivery, cx);
+        delivery
+    }
+
+    /// Offers a decided message to the recording, when recording.
+    fn offer(&mut self, bytes: &[u8], delivery: Delivery, cx: &mut Ctx<'_>) {
         let detail = self.tap.take_refusal();
         if let Some(tap) = self.tap.get() {
             tap.message(MessageTap {
@@ -278,7 +349,6 @@ impl Tables {
                 detail,
             });
         }
-        delivery
     }
 
     /// The decision for one received message.
@@ -287,6 +357,9 @@ impl Tables {
             Ok(h) => h,
             Err(e) => return self.bad(e.to_string(), cx),
         };
+        if let Err(d) = self.screen(bytes, head.sender, cx) {
+            return d;
+        }
         if head.kind == mech_proto::COMMAND_KIND {
             // The body is checked (a truncated or out-of-range command is
             // never forwarded) but not re-encoded: the received bytes go on.
@@ -295,7 +368,7 @@ impl Tables {
                 Ok(c) => c,
                 Err(e) => return self.bad(e.to_string(), cx),
             };
-            let admitted = match self.admit(bytes, head.sender, true, cx) {
+            let admitted = match self.admit(bytes, head.sender, gate::Fresh::Always, cx) {
                 Ok((id, _)) => id,
                 Err(d) => return d,
             };
@@ -310,9 +383,12 @@ impl Tables {
             Err(e) => return self.bad(e.to_string(), cx),
         };
         let sender = env.header.sender.as_str();
-        // A time request is answered whatever its stamp: the requester does
-        // not know the station's time yet.
-        let fresh = !matches!(env.body, Body::TimeRequest(_));
+        // A time request's stamp can be judged only if the requester's
+        // clock is right: it may not know the station's time yet.
+        let fresh = match env.body {
+            Body::TimeRequest(_) => gate::Fresh::NearClock,
+            _ => gate::Fresh::Always,
+        };
         let (admitted, tag) = match self.admit(bytes, sender, fresh, cx) {
             Ok(a) => a,
             Err(d) => return d,
@@ -377,6 +453,9 @@ impl Tables {
         self.retry_estop(cx);
         self.retry_missions(cx);
         self.subscribers.lapse(cx.now);
+        if let Some(e) = self.refusals.due(cx.now) {
+            cx.event(e);
+        }
     }
 
     /// A copy of the counters the tables keep (send failures are added by

@@ -26,6 +26,8 @@
 //!   table's filter as typed, the history, the last error;
 //! - `manual` ([`ManualControl`]): keyboard teleop and gamepads on the App's
 //!   own clock;
+//! - `history` ([`History`]): each robot's last minute, sampled from the
+//!   snapshots, for the plots and the table's trends;
 //! - `mouse`: clicks, drags, the wheel and hovering resolved against the
 //!   layout (no state of its own).
 
@@ -41,6 +43,7 @@ use crate::gamepad::{DriveKey, PadEvent};
 mod cards;
 mod events;
 mod fleet;
+mod history;
 mod manual;
 mod map;
 mod mouse;
@@ -54,6 +57,7 @@ mod waypoints;
 pub use cards::CardsState;
 pub use events::{EventLog, LogLevel, LogLine};
 pub use fleet::FleetState;
+pub use history::{HISTORY_SECONDS, History, RobotHistory, SAMPLE_PERIOD, Sample};
 pub use manual::ManualControl;
 pub use map::MapState;
 pub use prompt::{Prompt, PromptError, PromptLine, parse_waypoint};
@@ -243,6 +247,7 @@ pub struct App {
     pub events: EventLog,
     pub prompt: PromptLine,
     pub manual: ManualControl,
+    pub history: History,
     /// False once the operator quit: the event loop ends.
     pub running: bool,
     outbox: Vec<Request>,
@@ -262,6 +267,7 @@ impl App {
             events: EventLog::default(),
             prompt: PromptLine::default(),
             manual: ManualControl::new(now),
+            history: History::new(now),
             running: true,
             outbox: Vec::new(),
         }

@@ -8,10 +8,14 @@ use std::cmp::Ordering;
 use mech_core::names::natural_cmp;
 use mech_proto::{FailsafeState, MissionProgress};
 
+use super::series::Series;
 use super::view::{RobotView, failsafe_str, health_str, link_label, mode_str};
 
 /// Cells before the first column: the selection mark and a space.
 pub const GUTTER: usize = 2;
+
+/// Cells of the trend drawn after the column the table is sorted by.
+pub const TREND_WIDTH: usize = 8;
 
 /// One column of the fleet table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -150,6 +154,21 @@ impl Column {
         }
     }
 
+    /// The series of the last minute the trend after this column draws
+    /// when the table is sorted by it (and the least span its bars scale
+    /// to, so noise stays flat): the numbers that move.
+    pub fn trend(self) -> Option<(Series, f64)> {
+        match self {
+            Column::Speed => Some((Series::Speed, 0.05)),
+            Column::Battery => Some((Series::Battery, 2.0)),
+            Column::Rx => Some((Series::Rx, 2.0)),
+            Column::Tx => Some((Series::Tx, 2.0)),
+            Column::Loss => Some((Series::Loss, 2.0)),
+            Column::Rtt => Some((Series::Rtt, 0.5)),
+            _ => None,
+        }
+    }
+
     /// Order of two robots by this column, ascending; ties are left to
     /// the caller (the table keeps natural name order among equals).
     pub fn cmp(self, a: &RobotView, b: &RobotView) -> Ordering {
@@ -247,15 +266,33 @@ pub fn visible(width: usize) -> Vec<Column> {
         .collect()
 }
 
-/// The column under cell `x` of a table laid out with `columns` (`x`
-/// counted from the table's left inner edge).
-pub fn column_at(columns: &[Column], x: usize) -> Option<Column> {
+/// How the table is laid out in `width` cells when sorted by `sort`: the
+/// columns shown, and the column a trend follows: the sort column, when it
+/// has one and still shows with the trend's room taken.
+pub fn layout(width: usize, sort: Column) -> (Vec<Column>, Option<Column>) {
+    if sort.trend().is_some() {
+        let narrower = visible(width.saturating_sub(TREND_WIDTH + 1));
+        if narrower.contains(&sort) {
+            return (narrower, Some(sort));
+        }
+    }
+    (visible(width), None)
+}
+
+/// The column under cell `x` of a table laid out with `columns` (and a
+/// trend after `trend_after`), `x` counted from the table's left inner
+/// edge; the trend's cells are its column's.
+pub fn column_at(columns: &[Column], trend_after: Option<Column>, x: usize) -> Option<Column> {
     let mut left = GUTTER;
     for c in columns {
-        if x >= left && x < left + c.width() {
+        let mut width = c.width();
+        if trend_after == Some(*c) {
+            width += 1 + TREND_WIDTH;
+        }
+        if x >= left && x < left + width {
             return Some(*c);
         }
-        left += c.width() + 1;
+        left += width + 1;
     }
     None
 }
@@ -337,10 +374,34 @@ mod tests {
     #[test]
     fn a_click_finds_its_column() {
         let cols = [Column::Name, Column::Link];
-        assert_eq!(column_at(&cols, 0), None, "the gutter");
-        assert_eq!(column_at(&cols, GUTTER), Some(Column::Name));
-        assert_eq!(column_at(&cols, GUTTER + 10), None, "the separator");
-        assert_eq!(column_at(&cols, GUTTER + 11), Some(Column::Link));
+        assert_eq!(column_at(&cols, None, 0), None, "the gutter");
+        assert_eq!(column_at(&cols, None, GUTTER), Some(Column::Name));
+        assert_eq!(column_at(&cols, None, GUTTER + 10), None, "the separator");
+        assert_eq!(column_at(&cols, None, GUTTER + 11), Some(Column::Link));
+        let cols = [Column::Name, Column::Loss, Column::Rtt];
+        let trend = Some(Column::Loss);
+        let rtt = GUTTER + 11 + 7 + TREND_WIDTH + 1;
+        assert_eq!(
+            column_at(&cols, trend, rtt - 2),
+            Some(Column::Loss),
+            "the trend"
+        );
+        assert_eq!(column_at(&cols, trend, rtt), Some(Column::Rtt));
+    }
+
+    #[test]
+    fn the_sort_column_has_its_trend_where_it_helps_and_fits() {
+        let (cols, trend) = layout(78, Column::Loss);
+        assert_eq!(trend, Some(Column::Loss));
+        let used: usize = GUTTER + cols.iter().map(|c| c.width() + 1).sum::<usize>() + TREND_WIDTH;
+        assert!(used <= 78, "{cols:?}");
+        assert_eq!(
+            layout(78, Column::Name),
+            (visible(78), None),
+            "names do not trend"
+        );
+        let (_, trend) = layout(20, Column::Pose);
+        assert_eq!(trend, None, "pose is not shown that narrow, nor trended");
     }
 
     #[test]

@@ -120,3 +120,39 @@ pub fn app(n: usize, w: u16, h: u16) -> App {
     app.update(Action::FitFleet);
     app
 }
+
+/// The last minute of [`fleet`]`(n)`, played into `app`: a snapshot every
+/// [`SAMPLE_PERIOD`](super::app::SAMPLE_PERIOD) on the App's clock, each
+/// robot driving along its heading at 5 cm/s more than its fixture speed
+/// (and reporting a little less a minute ago), turning a little, its
+/// battery draining and its link's loss and round trip wandering, so that
+/// the last snapshot is `fleet(n)` but for the speeds. Deterministic: every
+/// value is a function of the robot and the time.
+pub fn minute(app: &mut App, n: usize) {
+    // After the App's first snapshot, which falls out of the minute.
+    let start = app.manual.now + Duration::from_secs_f64(super::app::SAMPLE_PERIOD);
+    let steps = (super::app::HISTORY_SECONDS / super::app::SAMPLE_PERIOD) as u32;
+    for k in 0..=steps {
+        let t = f64::from(k) * super::app::SAMPLE_PERIOD;
+        let ago = super::app::HISTORY_SECONDS - t;
+        let mut f = fleet(n);
+        for (i, r) in f.robots.iter_mut().enumerate() {
+            let phase = i as f64;
+            let speed = r.velocity.vx + 0.05;
+            let turn = 0.004 * (i % 3) as f64;
+            r.pose.heading -= turn * ago;
+            r.pose.x -= speed * ago * r.pose.heading.cos();
+            r.pose.y -= speed * ago * r.pose.heading.sin();
+            r.velocity.vx = speed * (1.0 - ago / 120.0);
+            r.battery = r.battery.map(|b| (b + 0.002 * ago).min(1.0));
+            let wave = ((t / 6.0 + phase).sin() * 0.5 + 0.5) * (ago / 60.0);
+            r.quality.loss = r.quality.loss.map(|l| l + 0.04 * wave);
+            r.quality.rtt = r
+                .quality
+                .rtt
+                .map(|d| d + Duration::from_micros((800.0 * wave) as u64));
+        }
+        app.update(Action::Tick(start + Duration::from_secs_f64(t)));
+        app.update(Action::Fleet(f));
+    }
+}

@@ -1,8 +1,10 @@
 //! The fleet table: one row per robot (name, platform, link, route, mode,
 //! failsafe, pose, speed, battery, mission, and the link's rates, loss and
 //! round trip), sorted by any column and filtered with `/`, the columns
-//! that fit the width. Only the rows on screen are drawn, from the rows
-//! the App keeps sorted.
+//! that fit the width; sorted by a number that moves (speed, battery,
+//! rates, loss, round trip), that column's last minute as a sparkline
+//! beside it. Only the rows on screen are drawn, from the rows the App
+//! keeps sorted.
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -12,7 +14,8 @@ use ratatui::widgets::{Block, Paragraph, Widget};
 
 use super::app::{App, Focus};
 use super::cards::{link_style, loss_style};
-use super::columns::{self, Column, GUTTER};
+use super::columns::{self, Column, GUTTER, TREND_WIDTH};
+use super::plots;
 use super::theme::Theme;
 use super::view::RobotView;
 use mech_proto::FailsafeState;
@@ -64,9 +67,9 @@ impl Widget for TablePanel<'_> {
         let block = Block::bordered().title(title(app)).border_style(border);
         let inner = block.inner(area);
         block.render(area, buf);
-        let shown = columns::visible(usize::from(inner.width));
+        let (shown, trend) = columns::layout(usize::from(inner.width), app.table.sort);
         let mut lines = Vec::with_capacity(usize::from(inner.height));
-        lines.push(header(app, &shown, &t));
+        lines.push(header(app, &shown, trend, &t));
         let cursor = app.cursor_row();
         let rows = usize::from(inner.height.saturating_sub(1));
         for (k, &i) in app
@@ -78,7 +81,12 @@ impl Widget for TablePanel<'_> {
             .take(rows)
         {
             let r = &app.fleet.robots[i];
-            let mut line = row(r, i, app.cards.selection.contains(&r.name), &shown, &t);
+            let selected = app.cards.selection.contains(&r.name);
+            let mut line = row(r, i, selected, &shown, &t);
+            if let Some((after, (series, span))) = trend.and_then(|c| Some((c, c.trend()?))) {
+                let spark = plots::trend(&app.history, &r.name, series, TREND_WIDTH, span);
+                insert_after(&mut line, &shown, after, spark);
+            }
             if cursor == Some(k) {
                 line = line.patch_style(if focused { t.selected() } else { t.title() });
             }
@@ -111,7 +119,19 @@ fn title(app: &App) -> String {
     s
 }
 
-fn header(app: &App, shown: &[Column], t: &Theme) -> Line<'static> {
+/// Puts `text` (the trend) after the cells of column `after` in `line`
+/// (a row or the header: a gutter span, then per column a separator and
+/// its cell).
+fn insert_after(line: &mut Line<'static>, shown: &[Column], after: Column, text: String) {
+    if let Some(k) = shown.iter().position(|c| *c == after) {
+        // The gutter, then for column k its cell at 2k+1 (after k separators).
+        let at = (2 * k + 2).min(line.spans.len());
+        line.spans.insert(at, Span::raw(text));
+        line.spans.insert(at, Span::raw(" "));
+    }
+}
+
+fn header(app: &App, shown: &[Column], trend: Option<Column>, t: &Theme) -> Line<'static> {
     let mut spans = vec![Span::raw(" ".repeat(GUTTER))];
     for (k, c) in shown.iter().enumerate() {
         if k > 0 {
@@ -126,7 +146,11 @@ fn header(app: &App, shown: &[Column], t: &Theme) -> Line<'static> {
             t.title(),
         ));
     }
-    Line::from(spans)
+    let mut line = Line::from(spans);
+    if let Some(after) = trend {
+        insert_after(&mut line, shown, after, fit("1 MIN", TREND_WIDTH, false));
+    }
+    line
 }
 
 /// One robot's row; `i` is its place in the fleet (its colour).

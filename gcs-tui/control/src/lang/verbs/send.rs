@@ -1,6 +1,8 @@
 //! `send TARGET [CHANNEL]`: sends each robot's waypoint draft as a mission,
 //! or, for a cluster with a `cluster-waypoint` draft and no channel, starts
-//! the cluster's waypoints.
+//! the cluster's waypoints. A robot runs a mission only while routed to its
+//! channel: for those routed elsewhere the outcome says so, with the
+//! command that routes them.
 
 use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
@@ -39,6 +41,7 @@ impl SendWaypoints {
             .clone()
             .unwrap_or_else(|| ctx.gcs.config().fleet.mission_channel.clone());
         let mut ids = Vec::new();
+        let mut hints = Vec::new();
         for r in &robots {
             let draft = ctx.gcs.with_fleet(|f| {
                 f.robot(r)
@@ -56,10 +59,19 @@ impl SendWaypoints {
                 .await
                 .map_err(|e| LangError::new(target.span, e.to_string()))?;
             ids.push(format!("{r}: mission {id}"));
+            let routed = ctx
+                .gcs
+                .with_fleet(|f| f.robot(r).and_then(|x| x.route.requested.clone()));
+            if routed.as_deref() != Some(channel.as_str()) {
+                hints.push(format!(
+                    "{r} is routed to {}: it runs the mission once routed to {channel} \
+                     (route {r} {channel})",
+                    routed.as_deref().unwrap_or("none")
+                ));
+            }
         }
-        Ok(Outcome::new(format!(
-            "sent on {channel}: {}",
-            ids.join(", ")
-        )))
+        let mut outcome = Outcome::new(format!("sent on {channel}: {}", ids.join(", ")));
+        outcome.details = hints;
+        Ok(outcome)
     }
 }

@@ -10,7 +10,7 @@ use std::time::Duration;
 use nix::sys::socket::MsgFlags;
 use tracing::debug;
 
-use super::batch::{RecvBatch, SendBatch};
+use super::batch::{BATCH, RecvBatch, SendBatch};
 use crate::router::tables::{Effects, Peer};
 use crate::router::{RouterError, Shared};
 
@@ -92,7 +92,9 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
         }
         decided.clear();
         let message = |i| batch_message(&received, i);
-        let ticket = shared.decide_each(n, message, &mut fx, |i, fx| decided.take(i, fx));
+        // A full batch: more datagrams wait in the socket.
+        let behind = n == BATCH;
+        let ticket = shared.decide_each(n, message, behind, &mut fx, |i, fx| decided.take(i, fx));
         shared.events.deliver(ticket);
         send_decided(&shared, fd, &mut sender, &received, &mut decided);
         polling_until = poll.until();

@@ -5,34 +5,36 @@
 //! own operator and are never checked.
 //!
 //! [`Gate`] owns the keys, the stamps of what the router signs, the count
-//! of rejections and the memory that rate-limits their logging and the
-//! answers to time requests.
+//! of rejections and which time requests are answered ([`time`]). How
+//! rejections are reported is `super::refusals`'s.
 
-use std::collections::HashMap;
-use std::time::Duration;
+mod time;
 
 use mech_proto::auth::{FROM_ROUTER, Stamper, Tag, split};
 use mech_proto::{Body, Time, TimeRequest};
-use tokio::time::Instant;
 use tracing::warn;
 
+use super::refusals::{Source, Why};
 use super::{Ctx, Delivery, Peer, Tables};
 use crate::auth::{Identity, Keyring, Rejection, Role};
 use crate::counters::{DropReason, RejectReason, Rejections};
-use crate::event::Event;
-
-/// The shortest time between two answers to one key's time requests: a
-/// replayed request cannot make the router a reflector.
-const TIME_ANSWER_GAP: Duration = Duration::from_millis(100);
-
-/// Distinct sources whose last rejection log line is remembered; beyond
-/// that the memory is cleared (a flood from many sources logs more, never
-/// grows the table without bound).
-const REJECT_LOG_SOURCES: usize = 4096;
+use time::{TimeAnswers, Verdict};
 
 /// A message that passed the gate: the key id it was signed with (`None`
 /// from an in-process publisher or when authentication is off).
 pub(super) type Admitted = Option<u32>;
+
+/// When a message's stamp must be fresh on its stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Fresh {
+    /// Always (every message but a time request).
+    Always,
+    /// When its stamp is within the freshness window of the station's
+    /// clock: a time request from a robot whose clock is right (it has
+    /// one, or kept station time from before) can be judged like any
+    /// message; one from a robot without a clock cannot.
+    NearClock,
+}
 
 /// Keys, stamps and rejections.
 #[derive(Debug)]
@@ -43,10 +45,8 @@ pub(super) struct Gate {
     /// Stamps of what the router signs.
     stamper: Stamper,
     rejected: Rejections,
-    /// When each source's last rejection was logged.
-    reject_logged: HashMap<String, Instant>,
-    /// When each key's last time request was answered.
-    time_answers: HashMap<u32, Instant>,
+    /// Which time requests were answered.
+    time_answers: TimeAnswers,
 }
 
 impl Gate {
@@ -55,8 +55,7 @@ impl Gate {
             keys,
             stamper: Stamper::default(),
             rejected: Rejections::default(),
-            reject_logged: HashMap::new(),
-            time_answers: HashMap::new(),
+            time_answers: TimeAnswers::default(),
         }
     }
 
@@ -77,36 +76,6 @@ impl Gate {
 
     pub(super) fn rejections(&self) -> Rejections {
         self.rejected
-    }
-
-    /// Counts a rejection from `source`; `true` when it is due to be logged
-    /// and reported (at most once per source per second).
-    fn count_rejection(&mut self, source: &str, reason: RejectReason, now: Instant) -> bool {
-        self.rejected.count(reason);
-        let due = self
-            .reject_logged
-            .get(source)
-            .is_none_or(|t| now.saturating_duration_since(*t) >= Duration::from_secs(1));
-        if due {
-            if self.reject_logged.len() >= REJECT_LOG_SOURCES {
-                self.reject_logged.clear();
-            }
-            self.reject_logged.insert(source.to_string(), now);
-        }
-        due
-    }
-
-    /// Whether a time request signed with `key_id` may be answered at
-    /// `now` (noted as answered when it may).
-    fn time_answer_due(&mut self, key_id: u32, now: Instant) -> bool {
-        let recent = self
-            .time_answers
-            .get(&key_id)
-            .is_some_and(|t| now.saturating_duration_since(*t) < TIME_ANSWER_GAP);
-        if !recent {
-            self.time_answers.insert(key_id, now);
-        }
-        !recent
     }
 
     /// `region` (a message without its `auth` element) with a tag for
@@ -133,27 +102,57 @@ impl Gate {
 }
 
 impl Tables {
-    /// Checks the tag and freshness of a message from `cx.from`. On failure
-    /// the rejection is counted (and logged, rate-limited) and the delivery
-    /// to return is given.
-    pub(super) fn admit(
+    /// The gate's checks that cost no MAC ([`Keyring::screen`]), made
+    /// before a message's body is read: a forgery without a tag, with a key
+    /// the station does not list or with another's key costs no decoding
+    /// and no MAC. On failure the rejection is counted and reported.
+    pub(super) fn screen(
         &mut self,
         bytes: &[u8],
         sender: &str,
-        fresh: bool,
         cx: &mut Ctx<'_>,
-    ) -> Result<(Admitted, Option<Tag>), Delivery> {
-        let Some(keys) = self.gate.keys.as_mut().filter(|_| cx.from != Peer::Local) else {
-            return Ok((None, None));
+    ) -> Result<(), Delivery> {
+        let Some(keys) = self.gate.keys.as_ref().filter(|_| cx.from != Peer::Local) else {
+            return Ok(());
         };
         let checked = match split(bytes) {
             Err(e) => Err(Rejection {
                 reason: RejectReason::BadTag,
                 detail: format!("from {sender:?}: {e}"),
             }),
-            Ok((region, tag)) => keys
-                .verify(region, tag, sender, mech_proto::unix_micros(), fresh)
-                .map(|v| (Some(v.tag.key_id), Some(v.tag))),
+            Ok((_, tag)) => keys.screen(tag, sender),
+        };
+        checked.map_err(|r| self.reject(r, cx))
+    }
+
+    /// Checks the tag and freshness of a message from `cx.from`. On failure
+    /// the rejection is counted (and reported, summarized) and the delivery
+    /// to return is given.
+    pub(super) fn admit(
+        &mut self,
+        bytes: &[u8],
+        sender: &str,
+        fresh: Fresh,
+        cx: &mut Ctx<'_>,
+    ) -> Result<(Admitted, Option<Tag>), Delivery> {
+        let Some(keys) = self.gate.keys.as_mut().filter(|_| cx.from != Peer::Local) else {
+            return Ok((None, None));
+        };
+        let now_us = mech_proto::unix_micros();
+        let checked = match split(bytes) {
+            Err(e) => Err(Rejection {
+                reason: RejectReason::BadTag,
+                detail: format!("from {sender:?}: {e}"),
+            }),
+            Ok((region, tag)) => {
+                let fresh = match (fresh, tag) {
+                    (Fresh::Always, _) => true,
+                    (Fresh::NearClock, Some(t)) => keys.near_clock(t.stamp_us, now_us),
+                    (Fresh::NearClock, None) => false,
+                };
+                keys.verify(region, tag, sender, now_us, fresh)
+                    .map(|v| (Some(v.tag.key_id), Some(v.tag)))
+            }
         };
         checked.map_err(|r| self.reject(r, cx))
     }
@@ -185,27 +184,19 @@ impl Tables {
         }
     }
 
-    /// Counts a rejection of the message from `cx.from`; logs it and
-    /// reports it as an event at most once per source per second.
+    /// Counts a rejection of the message from `cx.from` and reports it
+    /// (summarized: see `super::refusals`).
     fn reject(&mut self, r: Rejection, cx: &mut Ctx<'_>) -> Delivery {
-        self.reject_from(cx.from.to_string(), r, cx);
+        self.reject_from(Source::Peer(cx.from), r, cx);
         Delivery::Dropped(DropReason::Rejected)
     }
 
-    /// [`Tables::reject`] for a source named by text.
-    fn reject_from(&mut self, source: String, r: Rejection, cx: &mut Ctx<'_>) {
+    /// [`Tables::reject`] for any source.
+    fn reject_from(&mut self, source: Source, r: Rejection, cx: &mut Ctx<'_>) {
         self.tap
             .note_refusal(|| format!("{}: {}", r.reason.as_str(), r.detail));
-        if !self.gate.count_rejection(&source, r.reason, cx.now) {
-            return;
-        }
-        let total = self.gate.rejected.total();
-        warn!(from = %source, reason = r.reason.as_str(), total, "rejected: {}", r.detail);
-        cx.event(Event::Rejected {
-            from: source,
-            reason: r.reason,
-            detail: r.detail,
-        });
+        self.gate.rejected.count(r.reason);
+        self.refused(Why::Rejected(r.reason), source, || r.detail, cx);
     }
 
     /// The gate for a publisher inside the station that carries messages
@@ -235,7 +226,7 @@ impl Tables {
             reason: RejectReason::NotPermitted,
             detail,
         };
-        self.reject_from(sender.to_string(), r.clone(), cx);
+        self.reject_from(Source::Named(sender.to_string()), r.clone(), cx);
         Err(r)
     }
 
@@ -273,12 +264,13 @@ impl Tables {
                     }),
                 }),
         };
-        checked.inspect_err(|r| self.reject_from(source.to_string(), r.clone(), cx))
+        checked.inspect_err(|r| self.reject_from(Source::Named(source.to_string()), r.clone(), cx))
     }
 
-    /// Answers a time request signed with a listed key (its stamp may be
-    /// anything: the requester does not know the time yet), at most every
-    /// [`TIME_ANSWER_GAP`] per key.
+    /// Answers a time request signed with a listed key, unless it is a
+    /// copy of one answered before or may be one and its source had an
+    /// answer a moment ago (see [`time`]). Unsigned ones (authentication
+    /// off) are answered each time.
     pub(super) fn answer_time(
         &mut self,
         request: TimeRequest,
@@ -286,9 +278,34 @@ impl Tables {
         sender: &str,
         cx: &mut Ctx<'_>,
     ) -> Delivery {
-        let key_id = tag.map_or(0, |t| t.key_id);
-        if !self.gate.time_answer_due(key_id, cx.now) {
-            return Delivery::Consumed;
+        if let Some(tag) = tag {
+            let r = time::Request {
+                key_id: tag.key_id,
+                link: tag.link,
+                stamp_us: tag.stamp_us,
+                nonce: request.nonce,
+                from: cx.from,
+            };
+            let why = match self.gate.time_answers.judge(r, cx.now) {
+                Verdict::Answer => None,
+                Verdict::Repeated => Some(format!(
+                    "{sender:?} time request {:016x} was answered before (a copy)",
+                    request.nonce
+                )),
+                Verdict::TooSoon => Some(format!(
+                    "{sender:?} time request {:016x} is not newer than one answered, and its \
+                     source had an answer less than {} ms ago (a copy?)",
+                    request.nonce,
+                    time::ANSWER_GAP.as_millis()
+                )),
+            };
+            if let Some(detail) = why {
+                let r = Rejection {
+                    reason: RejectReason::Replay,
+                    detail,
+                };
+                return self.reject(r, cx);
+            }
         }
         let body = Body::Time(Time {
             nonce: request.nonce,
@@ -315,5 +332,133 @@ impl Tables {
             }
             Err(e) => warn!(error = %e, "cannot re-sign a message to pass on"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Time requests and the gate, with injected router time and the
+    //! station's real clock for stamps (as the gate reads it).
+    use std::time::Duration;
+
+    use mech_proto::auth::Key;
+    use mech_proto::{Envelope, Header};
+    use tokio::time::Instant;
+
+    use super::*;
+    use crate::auth::Identity;
+    use crate::router::RouterConfig;
+    use crate::router::tables::{Effects, Outbox};
+
+    const SECOND: u64 = 1_000_000;
+
+    fn key() -> Key {
+        Key::new(&[9; 32])
+    }
+
+    /// Tables with robot_1's key, started now (stamps before now are from
+    /// before the router started).
+    fn tables() -> Tables {
+        let robot = Identity::new(Role::Robot, "robot_1", key(), vec![]);
+        let ring = Keyring::new(
+            vec![robot],
+            Duration::from_secs(10),
+            mech_proto::unix_micros(),
+        );
+        Tables::new(RouterConfig::default(), Some(ring))
+    }
+
+    fn peer(port: u16) -> Peer {
+        Peer::Udp(([127, 0, 0, 1], port).into())
+    }
+
+    /// robot_1's time request with `nonce`, signed at `stamp_us`.
+    fn request(nonce: u64, stamp_us: u64) -> Vec<u8> {
+        let header = Header {
+            sender: "robot_1".into(),
+            destination: "router".into(),
+            ..Header::default()
+        };
+        let body = Body::TimeRequest(TimeRequest { nonce });
+        let mut b = mech_proto::encode(&Envelope::new(header, body)).unwrap();
+        key().seal(&mut b, 0, stamp_us).unwrap();
+        b
+    }
+
+    /// Decides `bytes` from `from` at `now`; returns the peers answered
+    /// with a Time carrying the request's nonce.
+    fn decide(t: &mut Tables, bytes: &[u8], from: Peer, now: Instant) -> Vec<Peer> {
+        let mut fx = Effects::default();
+        t.handle(bytes, &mut Ctx::new(now, from, &mut fx));
+        let Outbox { owned, .. } = fx.out;
+        owned
+            .into_iter()
+            .filter(|(_, b)| matches!(mech_proto::decode(b).unwrap().body, Body::Time(_)))
+            .map(|(p, _)| p)
+            .collect()
+    }
+
+    /// The issue's attack: one request of a robot without a clock,
+    /// captured and replayed every 10 ms (from the attacker's address and
+    /// spoofed from the robot's), while the robot asks again every 250 ms
+    /// with new nonces and rising stamps: every request of the robot is
+    /// answered at once, and no copy is answered again.
+    #[test]
+    fn copies_of_a_time_request_never_take_the_robots_turn() {
+        let (robot, attacker) = (peer(9000), peer(6666));
+        let mut t = tables();
+        let t0 = Instant::now();
+        let booted = 5 * SECOND; // the robot's clock: 1970
+        let captured = request(1, booted);
+        assert_eq!(decide(&mut t, &captured, robot, t0), [robot]);
+        for step in 1..=300u64 {
+            let now = t0 + Duration::from_millis(step * 10);
+            let from = if step % 3 == 0 { robot } else { attacker };
+            assert_eq!(decide(&mut t, &captured, from, now), [], "copy {step}");
+            if step % 25 == 0 {
+                let mine = request(step, booted + step * 10_000);
+                assert_eq!(decide(&mut t, &mine, robot, now), [robot], "at {step}");
+            }
+        }
+        assert_eq!(t.rejections().replay, 300, "every copy refused, counted");
+    }
+
+    /// After a station restart the nonces answered before are forgotten:
+    /// an old copy gets one answer (signed for the robot, with the old
+    /// nonce the robot ignores), never a second.
+    #[test]
+    fn after_a_restart_an_old_copy_is_answered_once() {
+        let (t0, attacker) = (Instant::now(), peer(6666));
+        let captured = request(7, 5 * SECOND);
+        let mut t = tables();
+        assert_eq!(decide(&mut t, &captured, peer(9000), t0), [peer(9000)]);
+        let mut restarted = tables();
+        let later = t0 + Duration::from_secs(60);
+        assert_eq!(
+            decide(&mut restarted, &captured, attacker, later),
+            [attacker]
+        );
+        let later = later + Duration::from_secs(1);
+        assert_eq!(decide(&mut restarted, &captured, attacker, later), []);
+    }
+
+    /// A request whose stamp is near the station's clock comes from a
+    /// robot whose clock is right: it is judged like any message. Stamped
+    /// before the router started, or not newer than the robot's stream,
+    /// it is a copy.
+    #[test]
+    fn a_time_request_near_the_clock_must_be_fresh() {
+        let (t0, robot) = (Instant::now(), peer(9000));
+        let mut t = tables();
+        let now_us = mech_proto::unix_micros();
+        let before_start = request(1, now_us - 2 * SECOND);
+        assert_eq!(decide(&mut t, &before_start, robot, t0), []);
+        assert_eq!(t.rejections().replay, 1);
+        let fresh = request(2, now_us + 1000);
+        assert_eq!(decide(&mut t, &fresh, robot, t0), [robot]);
+        // A copy of it with a new nonce cannot exist (the tag covers it);
+        // the same bytes again are refused by the stream.
+        assert_eq!(decide(&mut t, &fresh, robot, t0), []);
+        assert_eq!(t.rejections().replay, 2);
     }
 }

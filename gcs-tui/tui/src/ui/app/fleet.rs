@@ -68,13 +68,19 @@ impl FleetState {
 }
 
 impl App {
-    /// Takes the station's state; keeps only the selected robots that are
+    /// Takes the station's state (and a sample of it for the plots, on the
+    /// replay's clock in a replay); keeps only the selected robots that are
     /// still there, and fits the map once, to the first robots that
     /// reported where they are (a robot that registered has no position
     /// until its first telemetry, and reads as the origin).
     pub(super) fn apply_snapshot(&mut self, s: FleetSnapshot) {
         let placed = s.robots.iter().any(|r| r.pose.x != 0.0 || r.pose.y != 0.0);
+        let t = match s.replay {
+            Some(clock) => clock.at,
+            None => self.history.live_time(self.manual.now),
+        };
         self.fleet.apply(s);
+        self.history.record(t, &self.fleet.robots);
         let fleet = &self.fleet;
         self.cards
             .selection

@@ -113,9 +113,9 @@ impl App {
         if self.table.detail || row < inner.y || col < inner.x {
             return;
         }
-        let shown = columns::visible(usize::from(inner.width));
+        let (shown, trend) = columns::layout(usize::from(inner.width), self.table.sort);
         if row == inner.y {
-            if let Some(c) = columns::column_at(&shown, usize::from(col - inner.x)) {
+            if let Some(c) = columns::column_at(&shown, trend, usize::from(col - inner.x)) {
                 self.sort_by(c);
             }
             return;

@@ -49,6 +49,12 @@ impl PromptLine {
         self.history_pos = None;
     }
 
+    /// Offers `line` without taking the keyboard: it becomes the newest
+    /// line of the history, so `:` then ↑ brings it back to run with Enter.
+    pub fn offer_command(&mut self, line: &str) {
+        self.remember(line);
+    }
+
     /// Keeps a command line run in the history (not twice in a row, at
     /// most [`HISTORY_LINES`]).
     fn remember(&mut self, line: &str) {

@@ -1,6 +1,8 @@
 //! The waypoint list being edited (in mission order) and placing mode, in
 //! which clicks on the map add waypoints; adding (at most a mission's
-//! worth), and sending the list to the selected robots.
+//! worth), and sending the list to the selected robots, saying which of
+//! them will not follow it until routed to the mission's channel (and
+//! offering the command that routes them in the command line's history).
 
 use mech_proto::Waypoint;
 
@@ -76,9 +78,74 @@ impl App {
             ),
         );
         self.outbox.push(Request::Mission {
-            robots,
+            robots: robots.clone(),
             waypoints: self.waypoints.list.clone(),
         });
+        let views: Vec<_> = robots
+            .iter()
+            .filter_map(|r| self.robot(r).cloned())
+            .collect();
+        self.history.mission_sent(&views, &self.waypoints.list);
+        self.offer_mission_route(&robots);
+    }
+
+    /// A robot runs a mission only while routed to its channel: for those
+    /// of `robots` routed elsewhere (or to none) the event log says so, and
+    /// the route that makes them follow it waits in the command line's
+    /// history (`:` then ↑, Enter), without taking the keyboard.
+    fn offer_mission_route(&mut self, robots: &[String]) {
+        let elsewhere: Vec<(String, String)> = robots
+            .iter()
+            .filter_map(|name| {
+                let r = self.robot(name)?;
+                (r.route.channel != WAYPOINT_CHANNEL).then(|| {
+                    let now = match r.route.channel.as_str() {
+                        "" => "none".to_string(),
+                        c => c.to_string(),
+                    };
+                    (name.clone(), now)
+                })
+            })
+            .collect();
+        if elsewhere.is_empty() {
+            return;
+        }
+        for (name, now) in &elsewhere {
+            self.log(
+                LogLevel::Warn,
+                format!(
+                    "{name} is routed to {now}: it follows these waypoints only once \
+                     routed to {WAYPOINT_CHANNEL} (:route {name} {WAYPOINT_CHANNEL})"
+                ),
+            );
+        }
+        let names: Vec<&str> = elsewhere.iter().map(|(n, _)| n.as_str()).collect();
+        let line = format!("route {} {WAYPOINT_CHANNEL}", self.route_target(&names));
+        self.log(
+            LogLevel::Info,
+            format!("`:` then ↑ brings `{line}`: Enter runs it"),
+        );
+        self.prompt.offer_command(&line);
+    }
+
+    /// One target naming exactly `robots`: the robot, a cluster whose
+    /// members they are, `all` for the whole fleet; else the first robot
+    /// (the log names every one).
+    fn route_target(&self, robots: &[&str]) -> String {
+        if let [one] = robots {
+            return (*one).to_string();
+        }
+        let same = |members: &[String]| {
+            members.len() == robots.len() && robots.iter().all(|r| members.iter().any(|m| m == r))
+        };
+        if let Some(c) = self.fleet.clusters.iter().find(|c| same(&c.members)) {
+            return c.name.clone();
+        }
+        let fleet: Vec<String> = self.fleet.robots.iter().map(|r| r.name.clone()).collect();
+        if same(&fleet) {
+            return "all".into();
+        }
+        robots.first().map(|r| (*r).to_string()).unwrap_or_default()
     }
 }
 

@@ -1,0 +1,346 @@
+//! `mission save` / `mission load` against a real station: MECH's own
+//! format and QGC WPL 110 round trips (waypoints, arrival times, loop, a
+//! cluster's headings), a file as MAVProxy's `wp save` writes it (written
+//! by pymavlink's `MAVWPLoader.save`, which `wp save` calls), read back by
+//! pymavlink itself, and the missions directory an operator's session is
+//! kept in.
+
+#![allow(clippy::unwrap_used)]
+
+#[path = "../../core/tests/support/agent.rs"]
+mod agent;
+
+use std::path::{Path, PathBuf};
+
+use agent::{Peer, config};
+use mech_control::lang::Executor;
+use mech_core::Gcs;
+use mech_proto::Waypoint;
+
+/// The fixture: home, a takeoff, a 2 m x 3 m square around a field in the
+/// Netherlands (the second waypoint held 2 s), and a jump back to the
+/// first waypoint forever, as pymavlink's `MAVWPLoader.save` writes it.
+fn mavproxy_file() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/mavproxy-wp-save.txt")
+}
+
+async fn station(mission_dir: Option<&Path>) -> (Gcs, Vec<Peer>) {
+    let mut c = config();
+    c.fleet.mission_dir = mission_dir.map(Path::to_path_buf);
+    let gcs = Gcs::start(c).await.unwrap();
+    let mut robots = Vec::new();
+    for name in ["robot_1", "robot_2"] {
+        let mut r = Peer::new(name, gcs.router().udp_addr()).await;
+        r.register().await;
+        robots.push(r);
+    }
+    (gcs, robots)
+}
+
+fn draft(gcs: &Gcs, robot: &str) -> (Vec<Waypoint>, bool) {
+    gcs.with_fleet(|f| {
+        let r = f.robot(robot).unwrap();
+        (r.waypoints.draft.clone(), r.waypoints.looped)
+    })
+}
+
+fn near(a: &[Waypoint], b: &[Waypoint], tol: f64) {
+    assert_eq!(a.len(), b.len(), "{a:?}\n{b:?}");
+    for (p, q) in a.iter().zip(b) {
+        let d = ((p.x - q.x).powi(2) + (p.y - q.y).powi(2) + (p.z - q.z).powi(2)).sqrt();
+        assert!(d < tol, "{p:?} {q:?}: {d} m apart");
+    }
+}
+
+fn path(dir: &Path, name: &str) -> String {
+    dir.join(name).to_str().unwrap().to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_file_mavproxy_wrote_loads_around_its_home_and_round_trips() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gcs, _robots) = station(None).await;
+    let mut exec = Executor::new(gcs.clone());
+    let fixture = mavproxy_file();
+    let fixture = fixture.to_str().unwrap();
+
+    let refused = exec
+        .execute_line(&format!("mission load robot_1 {fixture}"))
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("line 4: item 2 is in frame 3 (MAV_FRAME_GLOBAL_RELATIVE_ALT"),
+        "{refused}"
+    );
+    assert!(refused.contains("origin LAT,LON"), "{refused}");
+
+    let loaded = exec
+        .execute_line(&format!("mission load robot_1 {fixture} origin home"))
+        .await
+        .unwrap();
+    assert!(
+        loaded
+            .summary
+            .starts_with("robot_1: 4 waypoints, looped loaded from"),
+        "{loaded:?}"
+    );
+    assert!(loaded.summary.contains("(QGC WPL 110)"), "{loaded:?}");
+    assert_eq!(
+        loaded.details,
+        [
+            "skipped, not waypoints: item 1 (22, NAV_TAKEOFF)",
+            "1 hold time(s) (param 1) not kept: a MECH waypoint is passed, not held"
+        ]
+    );
+    let (square, looped) = draft(&gcs, "robot_1");
+    assert!(looped);
+    // 0.000036 deg of latitude north and 0.000029 deg of longitude east of
+    // home at 52 deg N: 4.00 m and 1.99 m.
+    let r = 6_371_000.0_f64;
+    let north = (0.000036_f64).to_radians() * r;
+    let east = (0.000029_f64).to_radians() * r * 52.001234_f64.to_radians().cos();
+    near(
+        &square[..1],
+        &[Waypoint {
+            x: east,
+            y: north,
+            z: 0.0,
+            time: None,
+        }],
+        1e-6,
+    );
+    assert!((north - 4.003).abs() < 0.001 && (east - 1.985).abs() < 0.001);
+
+    // Back to QGC WPL around the same origin, and in again: the same square.
+    let out = path(dir.path(), "square.waypoints");
+    let saved = exec
+        .execute_line(&format!(
+            "mission save robot_1 {out} origin 52.001234,4.371234,1.5"
+        ))
+        .await
+        .unwrap();
+    assert!(
+        saved
+            .summary
+            .contains("(QGC WPL 110, MAV_FRAME_GLOBAL_RELATIVE_ALT)"),
+        "{saved:?}"
+    );
+    exec.execute_line(&format!("mission load robot_2 {out} origin home"))
+        .await
+        .unwrap();
+    let (again, looped) = draft(&gcs, "robot_2");
+    assert!(looped);
+    near(&again, &square, 1e-3);
+
+    // The same in MECH's format: exact.
+    let toml = path(dir.path(), "square.toml");
+    exec.execute_line(&format!("mission save robot_1 {toml}"))
+        .await
+        .unwrap();
+    exec.execute_line("waypoint robot_2 9,9").await.unwrap();
+    exec.execute_line(&format!("mission load robot_2 {toml}"))
+        .await
+        .unwrap();
+    assert_eq!(draft(&gcs, "robot_2"), (square.clone(), true));
+
+    // pymavlink, which MAVProxy's wp load calls, reads what MECH wrote.
+    if let Some(items) = pymavlink_reads(&out) {
+        assert_eq!(items.len(), 6, "home, four waypoints, the jump: {items:?}");
+        let home = &items[0];
+        assert_eq!((home[0], home[1]), (0.0, 16.0));
+        assert!((home[2] - 52.001234).abs() < 1e-9 && (home[3] - 4.371234).abs() < 1e-9);
+        for w in &items[1..5] {
+            assert_eq!((w[0], w[1]), (3.0, 16.0), "{w:?}");
+        }
+        let jump = &items[5];
+        assert_eq!((jump[1], jump[4], jump[5]), (177.0, 1.0, -1.0), "{jump:?}");
+        let fixture_first = [52.001270, 4.371263];
+        assert!(
+            (items[1][2] - fixture_first[0]).abs() < 1e-7
+                && (items[1][3] - fixture_first[1]).abs() < 1e-7,
+            "{items:?}"
+        );
+    }
+    gcs.shutdown().await;
+}
+
+/// What pymavlink's `MAVWPLoader.load` reads in `file`: per item frame,
+/// command, x, y, z, param1, param2; `None` without Python or pymavlink
+/// outside CI (`scripts/deps.sh` installs them for the tests).
+fn pymavlink_reads(file: &str) -> Option<Vec<Vec<f64>>> {
+    let program = r#"
+import json, sys
+from pymavlink import mavwp
+w = mavwp.MAVWPLoader()
+w.load(sys.argv[1])
+print(json.dumps([[p.frame, p.command, p.x, p.y, p.param1, p.param2] for p in w.wpoints]))
+"#;
+    let out = std::process::Command::new("python3")
+        .args(["-c", program, file])
+        .output();
+    let skip = |why: String| {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI needs pymavlink: {why}"
+        );
+        println!("skipped pymavlink's reading: {why}");
+        None
+    };
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => return skip(e.to_string()),
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if stderr.contains("No module named") {
+        return skip(stderr.to_string());
+    }
+    assert!(out.status.success(), "pymavlink: {stderr}");
+    // x and y come back as the float32 of a MAVLink MISSION_ITEM: compare
+    // them loosely; the test reads them as degrees.
+    let items: Vec<Vec<f64>> = serde_json::from_slice(&out.stdout).unwrap();
+    Some(
+        items
+            .into_iter()
+            .map(|i| vec![i[0], i[1], i[2], i[3], i[4], i[5]])
+            .collect(),
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn times_loops_and_a_clusters_headings_survive_mechs_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gcs, _robots) = station(None).await;
+    let mut exec = Executor::new(gcs.clone());
+    exec.execute_line("waypoint robot_1 1,2 3,2@15s 3.5,-1,0.5@20.5s loop")
+        .await
+        .unwrap();
+    let before = draft(&gcs, "robot_1");
+    let file = path(dir.path(), "timed.toml");
+    let saved = exec
+        .execute_line(&format!("mission save robot_1 {file}"))
+        .await
+        .unwrap();
+    assert!(
+        saved
+            .summary
+            .contains("3 waypoints, looped, 2 timed saved to"),
+        "{saved:?}"
+    );
+    exec.execute_line("waypoint robot_1 clear").await.unwrap();
+    exec.execute_line(&format!("mission load robot_1 {file}"))
+        .await
+        .unwrap();
+    assert_eq!(draft(&gcs, "robot_1"), before);
+
+    // QGC WPL has no arrival times: the outcome says they were dropped.
+    let wpl = path(dir.path(), "timed.waypoints");
+    let saved = exec
+        .execute_line(&format!("mission save robot_1 {wpl}"))
+        .await
+        .unwrap();
+    assert!(
+        saved.details[0].starts_with("2 arrival time(s) not written"),
+        "{saved:?}"
+    );
+
+    // A cluster's waypoints, headings and loop, both formats.
+    exec.execute_line("cluster c1 robot_1 robot_2")
+        .await
+        .unwrap();
+    exec.execute_line("cluster-waypoint c1 0.5,0.5,90deg 1.5,0.5 1.5,1.5,0 loop")
+        .await
+        .unwrap();
+    let cluster_before = exec.control().cluster_draft("c1").unwrap();
+    for name in ["c1.toml", "c1.waypoints"] {
+        let file = path(dir.path(), name);
+        exec.execute_line(&format!("mission save c1 {file}"))
+            .await
+            .unwrap();
+        exec.execute_line("cluster-waypoint c1 9,9").await.unwrap();
+        let loaded = exec
+            .execute_line(&format!("mission load c1 {file}"))
+            .await
+            .unwrap();
+        assert!(loaded.summary.contains("3 waypoints, looped"), "{loaded:?}");
+        let (after, looped) = exec.control().cluster_draft("c1").unwrap();
+        assert!(looped, "{name}");
+        assert_eq!(after.len(), 3);
+        for (a, b) in after.iter().zip(&cluster_before.0) {
+            assert!(
+                (a.x - b.x).abs() < 1e-8 && (a.y - b.y).abs() < 1e-8,
+                "{name}"
+            );
+            match (a.heading, b.heading) {
+                (Some(h), Some(k)) => assert!((h - k).abs() < 1e-6, "{name}: {h} {k}"),
+                (None, None) => {}
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+    }
+    let e = exec
+        .execute_line(&format!(
+            "mission load robot_1 {}",
+            path(dir.path(), "c1.toml")
+        ))
+        .await
+        .unwrap_err();
+    assert!(e.message.contains("load it into a cluster"), "{e}");
+    let no_draft = exec
+        .execute_line(&format!(
+            "mission save robot_2 {}",
+            path(dir.path(), "x.toml")
+        ))
+        .await
+        .unwrap_err();
+    assert!(
+        no_draft.message.contains("robot_2 has no waypoints"),
+        "{no_draft}"
+    );
+    let bad_name = exec
+        .execute_line(&format!(
+            "mission save robot_1 {}",
+            path(dir.path(), "x.json")
+        ))
+        .await
+        .unwrap_err();
+    assert!(bad_name.message.contains("name it .toml"), "{bad_name}");
+    gcs.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_operators_session_reads_and_writes_only_in_the_missions_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let missions = dir.path().join("missions");
+    let (gcs, _robots) = station(Some(&missions)).await;
+    let mut ana = Executor::new(gcs.clone()).with_sender("ana");
+    ana.execute_line("waypoint robot_1 1,1 2,1").await.unwrap();
+    let outside = path(dir.path(), "outside.toml");
+    for bad in [
+        outside.as_str(),
+        "../outside.toml",
+        "lab/../../outside.toml",
+    ] {
+        let e = ana
+            .execute_line(&format!("mission save robot_1 {bad}"))
+            .await
+            .unwrap_err();
+        assert!(e.message.contains("missions directory"), "{bad}: {e}");
+    }
+    assert!(!Path::new(&outside).exists());
+    let saved = ana
+        .execute_line("mission save robot_1 lab/line.toml")
+        .await
+        .unwrap();
+    assert!(missions.join("lab/line.toml").is_file(), "{saved:?}");
+    ana.execute_line("mission load robot_2 lab/line.toml")
+        .await
+        .unwrap();
+    assert_eq!(draft(&gcs, "robot_2").0.len(), 2);
+    let e = ana
+        .execute_line("mission load robot_2 /etc/hostname")
+        .await
+        .unwrap_err();
+    assert!(e.message.contains("missions directory"), "{e}");
+    gcs.shutdown().await;
+}

@@ -1,0 +1,244 @@
+//! Markers for rviz2 on `/mech/markers` (visualization_msgs/MarkerArray):
+//! each robot's name over it, and each goal the bridge sent, with a line
+//! from the robot to it while it is being approached.
+//!
+//! Waypoints of missions other controllers sent (the station's `wp/gcs`)
+//! and the arena are not in the telemetry an external client receives, so
+//! they are not drawn.
+
+use mech_proto::Telemetry;
+
+use crate::fleet::Goal;
+use crate::msgs::builtin::{Duration, Time};
+use crate::msgs::geometry::{Point, Pose, Vector3};
+use crate::msgs::std::{ColorRgba, Header};
+use crate::msgs::visualization::{ADD, DELETE, LINE_STRIP, Marker, SPHERE, TEXT_VIEW_FACING};
+
+/// Marker namespaces: rviz2 lists and toggles them.
+pub const NS_NAMES: &str = "mech/names";
+pub const NS_GOALS: &str = "mech/goals";
+pub const NS_GOAL_LINES: &str = "mech/goal_lines";
+
+/// Markers live this long without an update (they are sent every second),
+/// so a bridge that stops leaves nothing behind.
+const LIFETIME: Duration = Duration { sec: 3, nanosec: 0 };
+
+const WHITE: ColorRgba = ColorRgba {
+    r: 1.0,
+    g: 1.0,
+    b: 1.0,
+    a: 1.0,
+};
+const ORANGE: ColorRgba = ColorRgba {
+    r: 1.0,
+    g: 0.6,
+    b: 0.1,
+    a: 0.9,
+};
+const GREEN: ColorRgba = ColorRgba {
+    r: 0.2,
+    g: 0.9,
+    b: 0.3,
+    a: 0.9,
+};
+const GREY: ColorRgba = ColorRgba {
+    r: 0.6,
+    g: 0.6,
+    b: 0.6,
+    a: 0.7,
+};
+
+fn marker(ns: &str, id: i32, kind: i32, map: &str, stamp: Time) -> Marker {
+    Marker {
+        header: Header {
+            stamp,
+            frame_id: map.to_string(),
+        },
+        ns: ns.to_string(),
+        id,
+        r#type: kind,
+        action: ADD,
+        pose: Pose::default(),
+        lifetime: LIFETIME,
+        ..Marker::default()
+    }
+}
+
+/// Where a goal stands, from the robot's telemetry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GoalState {
+    /// Sent, not yet acknowledged, or held but not being run (the robot
+    /// is routed elsewhere).
+    Waiting,
+    /// The robot is running it.
+    Active,
+    /// The robot reports it finished.
+    Reached,
+    /// Refused by the robot or never acknowledged.
+    Failed,
+}
+
+/// The state of `goal` given the robot's latest telemetry.
+pub fn goal_state(goal: &Goal, t: &Telemetry) -> GoalState {
+    if goal.unacked || goal.ack.as_ref().is_some_and(|(ok, _)| !ok) {
+        return GoalState::Failed;
+    }
+    match t.mission {
+        Some(m) if m.id == goal.mission.id && m.next >= m.total => GoalState::Reached,
+        Some(m) if m.id == goal.mission.id && t.channel == goal.channel => GoalState::Active,
+        _ => GoalState::Waiting,
+    }
+}
+
+/// The markers of robot number `index` (its marker ids), named `name`.
+pub fn robot_markers(
+    index: i32,
+    name: &str,
+    t: &Telemetry,
+    goal: Option<&Goal>,
+    map: &str,
+    stamp: Time,
+) -> Vec<Marker> {
+    let p = &t.pose;
+    let mut label = marker(NS_NAMES, index, TEXT_VIEW_FACING, map, stamp);
+    label.pose.position = Point {
+        x: p.x,
+        y: p.y,
+        z: p.z + 0.4,
+    };
+    label.scale.z = 0.2;
+    label.color = WHITE;
+    label.text = name.to_string();
+    let mut out = vec![label];
+    let Some(goal) = goal else {
+        out.push(deleted(NS_GOALS, index, map, stamp));
+        out.push(deleted(NS_GOAL_LINES, index, map, stamp));
+        return out;
+    };
+    let Some(w) = goal.waypoint() else {
+        return out;
+    };
+    let state = goal_state(goal, t);
+    let mut sphere = marker(NS_GOALS, index, SPHERE, map, stamp);
+    sphere.pose.position = Point {
+        x: w.x,
+        y: w.y,
+        z: w.z,
+    };
+    let d = 2.0 * goal.mission.arrival_radius.max(0.05);
+    sphere.scale = Vector3 { x: d, y: d, z: d };
+    sphere.color = match state {
+        GoalState::Reached => GREEN,
+        GoalState::Failed => GREY,
+        GoalState::Waiting | GoalState::Active => ORANGE,
+    };
+    out.push(sphere);
+    if state == GoalState::Active {
+        let mut line = marker(NS_GOAL_LINES, index, LINE_STRIP, map, stamp);
+        line.scale.x = 0.03;
+        line.color = ORANGE;
+        line.points = vec![
+            Point {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            },
+            Point {
+                x: w.x,
+                y: w.y,
+                z: w.z,
+            },
+        ];
+        out.push(line);
+    } else {
+        out.push(deleted(NS_GOAL_LINES, index, map, stamp));
+    }
+    out
+}
+
+fn deleted(ns: &str, id: i32, map: &str, stamp: Time) -> Marker {
+    Marker {
+        action: DELETE,
+        ..marker(ns, id, SPHERE, map, stamp)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fleet::tests::telemetry;
+    use mech_proto::{Mission, MissionProgress, Waypoint};
+    use std::time::Instant;
+
+    fn goal() -> Goal {
+        let now = Instant::now();
+        Goal {
+            mission: Mission {
+                id: 7,
+                waypoints: vec![Waypoint {
+                    x: 2.0,
+                    y: 1.0,
+                    z: 0.0,
+                    time: None,
+                }],
+                looped: false,
+                arrival_radius: 0.1,
+                start_index: 0,
+            },
+            channel: "ros2goal/robot_1".into(),
+            first_sent: now,
+            last_sent: now,
+            ack: Some((true, String::new())),
+            unacked: false,
+        }
+    }
+
+    #[test]
+    fn a_goal_is_a_sphere_with_a_line_while_the_robot_runs_it() {
+        let mut t = telemetry(0.5, 0.0);
+        t.channel = "ros2goal/robot_1".into();
+        t.mission = Some(MissionProgress {
+            id: 7,
+            next: 0,
+            total: 1,
+        });
+        let g = goal();
+        assert_eq!(goal_state(&g, &t), GoalState::Active);
+        let m = robot_markers(3, "robot_1", &t, Some(&g), "map", Time::default());
+        assert_eq!(m.len(), 3);
+        assert_eq!(
+            (m[0].ns.as_str(), m[0].text.as_str(), m[0].id),
+            (NS_NAMES, "robot_1", 3)
+        );
+        assert_eq!((m[1].r#type, m[1].pose.position.x), (SPHERE, 2.0));
+        assert_eq!((m[2].r#type, m[2].points.len()), (LINE_STRIP, 2));
+        assert!(m.iter().all(|m| m.header.frame_id == "map"));
+
+        t.mission = Some(MissionProgress {
+            id: 7,
+            next: 1,
+            total: 1,
+        });
+        assert_eq!(goal_state(&g, &t), GoalState::Reached);
+        let m = robot_markers(3, "robot_1", &t, Some(&g), "map", Time::default());
+        assert_eq!((m[1].color, m[2].action), (GREEN, DELETE));
+
+        t.channel = "joy/0".into();
+        t.mission = None;
+        assert_eq!(goal_state(&g, &t), GoalState::Waiting, "routed elsewhere");
+    }
+
+    #[test]
+    fn a_robot_without_a_goal_has_its_label_only() {
+        let m = robot_markers(
+            0,
+            "robot_2",
+            &telemetry(0.0, 0.0),
+            None,
+            "map",
+            Time::default(),
+        );
+        assert_eq!(m[0].action, ADD);
+        assert!(m[1..].iter().all(|m| m.action == DELETE));
+    }
+}
