@@ -113,8 +113,9 @@ pub async fn run_script(program: &str, attached: &mut Attached, source: &str) ->
 }
 
 /// Runs `source` on a station core started for it in this process (`--script`
-/// without a station to attach to), with `demo` simulated robots first
-/// and recording to `record` if given, printing `--script`'s JSON lines on
+/// without a station to attach to), with `demo` simulated robots first,
+/// recording to `record` if given and the Foxglove live view when
+/// `[foxglove]` (or `--foxglove`) asks for one, printing `--script`'s JSON lines on
 /// stdout; the summary line adds the router's counters and the recording.
 /// Its exit code, see [`script_exit_code`].
 pub async fn run_script_in_process(
@@ -131,8 +132,19 @@ pub async fn run_script_in_process(
     let gcs = Gcs::start(config.core())
         .await
         .context("cannot start the router")?;
+    let live = match crate::foxglove::Live::start(&gcs, &config.foxglove).await {
+        Ok(live) => live,
+        Err(e) => {
+            gcs.shutdown().await;
+            return Err(e);
+        }
+    };
+    if let Some(view) = live.describe() {
+        eprintln!("{program}: {view}");
+    }
     if let Some(file) = record {
         if let Err(e) = gcs.start_recording(RecordTarget::File(file)) {
+            live.stop();
             gcs.shutdown().await;
             return Err(e).context("cannot start recording");
         }
@@ -156,6 +168,7 @@ pub async fn run_script_in_process(
     }
     .await;
     executor.shutdown().await;
+    live.stop();
     gcs.shutdown().await;
     tracing::info!(code, "{program} stopped");
     Ok(code)

@@ -42,7 +42,9 @@ struct Cli {
     operator: Option<String>,
     /// Serve the Foxglove live view here (e.g. 127.0.0.1:8765): Foxglove
     /// or Lichtblick connect to ws://ADDR and show the fleet live, on the
-    /// topics of a recording. Needs a build with the `foxglove` feature.
+    /// topics of a recording. For the station this process runs: the
+    /// TUI's, `serve`'s, and `--script`'s without `--attach`. Needs a build
+    /// with the `foxglove` feature.
     #[arg(long, value_name = "ADDR", global = true)]
     foxglove: Option<SocketAddr>,
     #[command(subcommand)]
@@ -135,6 +137,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         let code = runtime()?.block_on(async {
             match attach_address(&cli, &config) {
                 Some(addr) => {
+                    if cli.foxglove.is_some() {
+                        anyhow::bail!(
+                            "--foxglove serves the live view of a station this process runs; \
+                             an attached station serves its own (mech-gcs serve --foxglove ADDR)"
+                        );
+                    }
                     let mut attached = attach(&addr, attach_options(&cli, true)?).await?;
                     Ok(cli::run_script(PROGRAM, &mut attached, &source).await)
                 }

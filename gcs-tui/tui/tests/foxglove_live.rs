@@ -3,7 +3,7 @@
 //! --demo 2 --foxglove 127.0.0.1:0` names the view in its ready line and a
 //! viewer speaking `foxglove.websocket.v1` gets a recording's channels
 //! from it; the TUI's own station (`mech-gcs --demo 2 --foxglove ADDR` in
-//! a terminal) serves it too. Without the feature, asking for the live
+//! a terminal) and a script's (`--script` without `--attach`) serve it too. Without the feature, asking for the live
 //! view is an error that names the feature. The live view itself (moving
 //! robots, bad clients) is tested in mech-station. Loopback only.
 
@@ -128,6 +128,60 @@ mod live {
             station.dir.0.join("gcs.sock").exists(),
             "it serves its operators"
         );
+    }
+
+    /// `mech-gcs --demo 2 --foxglove ADDR --script FILE` serves the live
+    /// view for as long as its script runs, naming it on stderr; with
+    /// `--attach` the flag is refused, since an attached station serves its
+    /// own.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_script_run_serves_the_live_view_and_an_attached_one_says_it_cannot() {
+        let dir = Dir::new("script");
+        let script = dir.0.join("hold.mech");
+        std::fs::write(&script, "sleep 60s\n").expect("script");
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
+            .args(["--demo", "2", "--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
+            .args(["--foxglove", "127.0.0.1:0", "--script"])
+            .arg(&script)
+            .env("XDG_STATE_HOME", &dir.0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("mech-gcs --script starts");
+        let err = child.stderr.take().expect("stderr piped");
+        let mut lines = BufReader::new(err).lines();
+        let mut said = Vec::new();
+        let ws: Option<SocketAddr> = loop {
+            let Some(Ok(line)) = lines.next() else { break None };
+            if let Some(a) = line.split("Foxglove live view on ws://").nth(1) {
+                break a.trim().parse().ok();
+            }
+            said.push(line);
+        };
+        std::thread::spawn(move || for _ in lines {});
+        let Some(ws) = ws else {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the script run named no live view: {said:?}");
+        };
+        let mut viewer = Client::connect(ws).await;
+        check_channels(&mut viewer).await;
+        let _ = child.kill();
+        let _ = child.wait();
+
+        let out = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
+            .arg("--attach")
+            .arg(dir.0.join("nobody.sock"))
+            .args(["--foxglove", "127.0.0.1:0", "--script"])
+            .arg(&script)
+            .env("XDG_STATE_HOME", &dir.0)
+            .stdin(Stdio::null())
+            .output()
+            .expect("mech-gcs runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_ne!(out.status.code(), Some(0), "{stderr}");
+        assert!(stderr.contains("serves its own"), "{stderr}");
     }
 
     /// A tmux server, killed on drop.

@@ -473,9 +473,9 @@ fn telemetry() -> Value {
         "the mission held",
         json!({"id": integer(), "next": integer(), "total": integer()}),
     );
-    strict(
+    let mut v = strict(
         MECH_TELEMETRY,
-        "A robot's telemetry as it sent it (docs/protocol.md)",
+        "A robot's telemetry as it sent it (docs/protocol.md); `safety` only from robots with a safety layer",
         json!({"pose": pose, "velocity": velocity, "mode": mode, "channel": string(),
                "computation": one_of("mech.Computation", &[("ONBOARD", 0), ("OFFBOARD", 1)]),
                "failsafe": failsafe,
@@ -483,7 +483,33 @@ fn telemetry() -> Value {
                "battery": {"type": ["number", "null"]}, "position_quality": number(),
                "actuators": array(number()), "mission": {"anyOf": [mission, {"type": "null"}]},
                "stale": integer(),
-               "velocity_source": one_of("mech.VelocitySource", &[("COMMANDED", 0), ("MEASURED", 1)])}),
+               "velocity_source": one_of("mech.VelocitySource", &[("COMMANDED", 0), ("MEASURED", 1)]),
+               "safety": safety_report()}),
+    );
+    if let Some(Value::Array(required)) = v.get_mut("required") {
+        required.retain(|f| f != "safety");
+    }
+    v
+}
+
+/// A robot's safety layer as its telemetry reports it
+/// (`mech_proto::SafetyReport`, `docs/safety.md`).
+fn safety_report() -> Value {
+    let counts = strict(
+        "mech.InterventionCounts",
+        "how many times each intervention began since the robot started",
+        json!({"fence": integer(), "keep_out": integer(), "separation": integer(),
+               "stale_neighbours": integer(), "slow_zone": integer(), "returning": integer()}),
+    );
+    strict(
+        "mech.SafetyReport",
+        "the robot's safety layer: its state, the arena in force, what it does to the command now",
+        json!({"state": one_of("mech.SafetyState", &[("NO_ARENA", 0), ("ON", 1), ("OFF", 2)]),
+               "arena": integer(),
+               "intervention": one_of("mech.Intervention", &[("NONE", 0), ("FENCE", 1), ("KEEP_OUT", 2),
+                   ("SEPARATION", 3), ("STALE_NEIGHBOURS", 4), ("SLOW_ZONE", 5), ("RETURNING", 6)]),
+               "counts": counts,
+               "radius": {"description": "m", "type": "number"}}),
     )
 }
 
@@ -741,6 +767,15 @@ mod tests {
                 reason: RejectReason::Replay,
                 detail: "stamp seen".into(),
             },
+            Event::Refused {
+                count: 1200,
+                sources: 16,
+                by_reason: [("bad-tag".to_string(), 1000), ("shed".to_string(), 200)]
+                    .into_iter()
+                    .collect(),
+                from: "udp:1.2.3.4:5".into(),
+                detail: "bad tag".into(),
+            },
         ]
     }
 
@@ -772,6 +807,16 @@ mod tests {
             }),
             stale: 0,
             velocity_source: VelocitySource::Measured,
+            safety: Some(mech_proto::SafetyReport {
+                state: mech_proto::SafetyState::On,
+                arena: 2,
+                intervention: mech_proto::Intervention::Separation,
+                counts: mech_proto::InterventionCounts {
+                    separation: 3,
+                    ..Default::default()
+                },
+                radius: 0.15,
+            }),
         }
     }
 
