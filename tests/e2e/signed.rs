@@ -74,9 +74,13 @@ fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
         ),
     )
     .unwrap();
+    // The listed controller starts when the test reads `listed` (Python
+    // took seconds to start on a loaded machine), so the script waits for
+    // the robot to move rather than a fixed time.
     let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
                   wait route robot_1 ext/python 5s\nsleep 500ms\nstatus robot_1\nlog intruder\n\
-                  sleep 2s\nstatus robot_1\nlog listed\nsleep 4s\nstatus robot_1\n";
+                  sleep 2s\nstatus robot_1\nlog listed\nwait moved robot_1 0.3 30s\n\
+                  status robot_1\n";
     let args: [&std::ffi::OsStr; 4] = [
         "--config".as_ref(),
         config.as_os_str(),
