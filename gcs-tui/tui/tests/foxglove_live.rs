@@ -140,7 +140,14 @@ mod live {
         let script = dir.0.join("hold.mech");
         std::fs::write(&script, "sleep 60s\n").expect("script");
         let mut child = Command::new(env!("CARGO_BIN_EXE_mech-gcs"))
-            .args(["--demo", "2", "--udp", "127.0.0.1:0", "--tcp", "127.0.0.1:0"])
+            .args([
+                "--demo",
+                "2",
+                "--udp",
+                "127.0.0.1:0",
+                "--tcp",
+                "127.0.0.1:0",
+            ])
             .args(["--foxglove", "127.0.0.1:0", "--script"])
             .arg(&script)
             .env("XDG_STATE_HOME", &dir.0)
@@ -153,7 +160,9 @@ mod live {
         let mut lines = BufReader::new(err).lines();
         let mut said = Vec::new();
         let ws: Option<SocketAddr> = loop {
-            let Some(Ok(line)) = lines.next() else { break None };
+            let Some(Ok(line)) = lines.next() else {
+                break None;
+            };
             if let Some(a) = line.split("Foxglove live view on ws://").nth(1) {
                 break a.trim().parse().ok();
             }
