@@ -25,6 +25,29 @@ fn cpu_ticks() -> u64 {
         + f.get(12).and_then(|s| s.parse::<u64>().ok()).unwrap_or(0)
 }
 
+/// A message from the router to `robot`, encoded.
+fn from_router(robot: &str, body: Body) -> Option<Vec<u8>> {
+    let header = Header {
+        sender: "router".into(),
+        destination: robot.to_string(),
+        ..Header::default()
+    };
+    mech_proto::encode(&Envelope::new(header, body)).ok()
+}
+
+/// The router's answer to a robot's registration: routed to none.
+fn welcome(robot: &str) -> Body {
+    Body::Welcome(Welcome {
+        robot_id: 0,
+        route: Route {
+            robot: robot.to_string(),
+            channel: String::new(),
+            epoch: 0,
+        },
+        router_version: "bench".into(),
+    })
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> std::io::Result<()> {
     let n: usize = std::env::args()
@@ -55,24 +78,7 @@ async fn main() -> std::io::Result<()> {
         {
             match mech_proto::decode(&buf[..len]).map(|e| e.body) {
                 Ok(Body::Hello(h)) => {
-                    let route = Route {
-                        robot: h.name.clone(),
-                        channel: String::new(),
-                        epoch: 0,
-                    };
-                    let w = Envelope::new(
-                        Header {
-                            sender: "router".into(),
-                            destination: h.name.clone(),
-                            ..Header::default()
-                        },
-                        Body::Welcome(Welcome {
-                            robot_id: 0,
-                            route,
-                            router_version: "bench".into(),
-                        }),
-                    );
-                    if let Ok(bytes) = mech_proto::encode(&w) {
+                    if let Some(bytes) = from_router(&h.name, welcome(&h.name)) {
                         router.send_to(&bytes, from).await?;
                     }
                     if addrs.insert(h.name, from).is_none() {
@@ -86,15 +92,7 @@ async fn main() -> std::io::Result<()> {
         if Instant::now() >= next_heartbeat {
             next_heartbeat = Instant::now() + Duration::from_millis(250);
             for (name, to) in &addrs {
-                let hb = Envelope::new(
-                    Header {
-                        sender: "router".into(),
-                        destination: name.clone(),
-                        ..Header::default()
-                    },
-                    Body::Heartbeat(Heartbeat::new(0)),
-                );
-                if let Ok(bytes) = mech_proto::encode(&hb) {
+                if let Some(bytes) = from_router(name, Body::Heartbeat(Heartbeat::new(0))) {
                     router.send_to(&bytes, *to).await?;
                 }
             }

@@ -80,6 +80,13 @@ fn telemetry(env: &Envelope) -> Option<Telemetry> {
 
 /// Registers, routes, commands, rejects a wrong channel, stops on silence.
 async fn scenario<R: RouterSide>(r: &mut R) {
+    register_and_route(r).await;
+    drive_on_the_route(r).await;
+}
+
+/// The robot's Hello, the router's Welcome (routed to none), then a route
+/// to `joy/0`, each acknowledged.
+async fn register_and_route<R: RouterSide>(r: &mut R) {
     let hello = wait_for(r, "Hello", |e| match &e.body {
         Body::Hello(h) => Some(h.clone()),
         _ => None,
@@ -119,7 +126,10 @@ async fn scenario<R: RouterSide>(r: &mut R) {
         matches!(&e.body, Body::RouteAck(a) if a.epoch == 1 && a.channel == "joy/0").then_some(())
     })
     .await;
+}
 
+/// Obeys `joy/0`, refuses another channel, stops on its silence, resumes.
+async fn drive_on_the_route<R: RouterSide>(r: &mut R) {
     // Obeys the routed channel.
     r.send(&from_router(NAME, "joy/0", twist(0.2))).await;
     let t = wait_for(r, "driving telemetry", |e| {

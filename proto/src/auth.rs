@@ -176,8 +176,8 @@ pub fn split(bytes: &[u8]) -> Result<(&[u8], Option<Tag>), AuthError> {
     }
 }
 
-/// Why a message failed authentication. Receivers count these by
-/// [`AuthError::reason`].
+/// Why a message failed authentication. Receivers count these by reason
+/// (the station's `RejectReason`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum AuthError {
     /// No tag where one is required.
@@ -196,18 +196,6 @@ pub enum AuthError {
     /// The tag or the auth element is malformed.
     #[error("malformed tag: {0}")]
     Shape(&'static str),
-}
-
-impl AuthError {
-    /// A short counter key: `unsigned`, `unknown-key`, `bad-tag`, `replay`.
-    pub fn reason(&self) -> &'static str {
-        match self {
-            AuthError::Unsigned => "unsigned",
-            AuthError::UnknownKey(_) => "unknown-key",
-            AuthError::BadTag | AuthError::Shape(_) => "bad-tag",
-            AuthError::Replay => "replay",
-        }
-    }
 }
 
 /// Messages a stream may deliver out of order: a stamp older than the
@@ -248,6 +236,30 @@ impl Stream {
 
     /// Accepts `stamp_us` if it is new to this stream and recent enough.
     pub fn accept(&mut self, stamp_us: u64) -> Result<(), AuthError> {
+        if stamp_us > self.newest_us {
+            // The usual case, a stamp newer than all: neither a repeat nor
+            // too old, so it takes the oldest stamp's place (one pass over
+            // the window instead of three).
+            self.remember(stamp_us);
+            self.newest_us = stamp_us;
+            return Ok(());
+        }
+        self.accept_late(stamp_us)
+    }
+
+    /// A stamp newer than all, remembered in place of the oldest once the
+    /// window is full.
+    fn remember(&mut self, stamp_us: u64) {
+        if self.len < REORDER_WINDOW {
+            self.recent[self.len] = stamp_us;
+            self.len += 1;
+        } else if let Some(oldest) = (0..REORDER_WINDOW).min_by_key(|&i| self.recent[i]) {
+            self.recent[oldest] = stamp_us;
+        }
+    }
+
+    /// [`Stream::accept`] for a stamp no newer than the newest accepted.
+    fn accept_late(&mut self, stamp_us: u64) -> Result<(), AuthError> {
         let recent = &self.recent[..self.len];
         let oldest = recent.iter().copied().min().unwrap_or(self.start_us);
         let too_old = stamp_us < self.start_us
@@ -475,6 +487,53 @@ mod tests {
         assert!(f.admits(95, 100) && f.admits(105, 100));
         assert!(!f.admits(89, 100) && !f.admits(111, 100));
         assert!(!f.admits(49, 55), "from before the receiver started");
+    }
+
+    proptest::proptest! {
+        /// A stamp newer than all takes the short way; whatever way it
+        /// takes, the stream accepts exactly what its rule says (a stamp
+        /// once, from the start on, within the window and the span behind
+        /// the newest).
+        #[test]
+        fn streams_accept_what_the_rule_says(
+            steps in proptest::collection::vec((0u64..4, 0u64..200), 1..400)
+        ) {
+            let mut s = Stream::starting_at(1_000);
+            let mut accepted: Vec<u64> = vec![1_000];
+            let mut newest = 1_000u64;
+            for (kind, d) in steps {
+                // Mostly forward, sometimes back, sometimes far back.
+                let stamp = match kind {
+                    0 | 1 => newest + d,
+                    2 => newest.saturating_sub(d),
+                    _ => newest.saturating_sub(d * 10_000),
+                };
+                let window = &accepted[accepted.len().saturating_sub(REORDER_WINDOW)..];
+                let mut recent = window.to_vec();
+                recent.sort_unstable();
+                let oldest = recent[0];
+                let new = stamp >= 1_000
+                    && stamp.saturating_add(REORDER_SPAN_US) >= newest
+                    && !(window.len() == REORDER_WINDOW && stamp <= oldest)
+                    && !recent.contains(&stamp);
+                proptest::prop_assert_eq!(s.accept(stamp).is_ok(), new, "{}", stamp);
+                if new {
+                    // What the stream remembers: the newest WINDOW stamps
+                    // by value once full (the oldest makes room).
+                    accepted.push(stamp);
+                    if accepted.len() > REORDER_WINDOW {
+                        let (i, _) = accepted
+                            .iter()
+                            .enumerate()
+                            .min_by_key(|(_, v)| **v)
+                            .unwrap();
+                        accepted.remove(i);
+                    }
+                    newest = newest.max(stamp);
+                }
+                proptest::prop_assert_eq!(s.last_us(), newest);
+            }
+        }
     }
 
     #[test]

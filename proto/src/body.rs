@@ -16,8 +16,10 @@ use crate::{MAX_FLEET_PARTS, MAX_TEXT_LEN, MAX_WAYPOINTS};
 
 /// Registration, robot -> router. Sent at start-up and again whenever the
 /// agent has not heard a [`Welcome`] (the router treats a repeat from a new
-/// address as the same robot moving, not a new robot).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// address as the same robot moving, not a new robot). The default says
+/// nothing (no name, no platform, no capabilities): what a station holds
+/// for a robot whose registration it has not heard.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Hello {
     /// Unique robot name, e.g. `robot_1`; also the envelope sender.
     pub name: String,
@@ -104,75 +106,85 @@ pub struct Velocity {
     pub wz: f64,
 }
 
-/// What the robot is doing with its actuators right now.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum ControlMode {
-    /// No command yet, or routed to none: actuators at zero.
-    #[default]
-    Idle = 0,
-    Actuators = 1,
-    SteeringThrottle = 2,
-    VelocityHeading = 3,
-    Twist = 4,
-    /// Running an onboard waypoint mission.
-    Waypoints = 5,
-    /// Obeying a [`crate::Stop`] command.
-    Stopped = 6,
+crate::named_enum! {
+    /// What the robot is doing with its actuators right now.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum ControlMode: "control mode" {
+        /// No command yet, or routed to none: actuators at zero.
+        #[default]
+        Idle = 0 => "idle",
+        Actuators = 1 => "actuators",
+        SteeringThrottle = 2 => "steering-throttle",
+        VelocityHeading = 3 => "velocity-heading",
+        Twist = 4 => "twist",
+        /// Running an onboard waypoint mission.
+        Waypoints = 5 => "waypoints",
+        /// Obeying a [`crate::Stop`] command.
+        Stopped = 6 => "stopped",
+    }
 }
 
-/// Where the closed loop runs for this robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum Computation {
-    /// On the robot (onboard waypoint navigation, direct commands).
-    #[default]
-    Onboard = 0,
-    /// In the ground station: the robot is routed to an `offboard/<robot>`
-    /// channel that closes the loop on telemetry.
-    Offboard = 1,
+crate::named_enum! {
+    /// Where the closed loop runs for this robot.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum Computation: "computation" {
+        /// On the robot (onboard waypoint navigation, direct commands).
+        #[default]
+        Onboard = 0 => "onboard",
+        /// In the ground station: the robot is routed to an `offboard/<robot>`
+        /// channel that closes the loop on telemetry.
+        Offboard = 1 => "offboard",
+    }
 }
 
-/// Why a robot's actuators are being held at zero, if they are.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum FailsafeState {
-    /// Not holding: commands are obeyed.
-    #[default]
-    Ok = 0,
-    /// The active channel has been silent longer than the failsafe timeout.
-    ChannelSilent = 1,
-    /// No message from the router within the link timeout.
-    RouterLost = 2,
-    /// Latched emergency stop; only an explicit release clears it.
-    EStopped = 3,
-    /// A driver reported an error; the agent zeroed what it could.
-    Fault = 4,
+crate::named_enum! {
+    /// Why a robot's actuators are being held at zero, if they are.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum FailsafeState: "failsafe state" {
+        /// Not holding: commands are obeyed.
+        #[default]
+        Ok = 0 => "ok",
+        /// The active channel has been silent longer than the failsafe timeout.
+        ChannelSilent = 1 => "channel-silent",
+        /// No message from the router within the link timeout.
+        RouterLost = 2 => "router-lost",
+        /// Latched emergency stop; only an explicit release clears it.
+        EStopped = 3 => "estopped",
+        /// A driver reported an error; the agent zeroed what it could.
+        Fault = 4 => "fault",
+    }
 }
 
-/// Overall health as the agent judges it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum Health {
-    #[default]
-    Ok = 0,
-    /// Working, but something needs attention (low battery, poor position fix).
-    Degraded = 1,
-    /// A driver has failed.
-    Fault = 2,
+crate::named_enum! {
+    /// Overall health as the agent judges it.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum Health: "health" {
+        #[default]
+        Ok = 0 => "ok",
+        /// Working, but something needs attention (low battery, poor position fix).
+        Degraded = 1 => "degraded",
+        /// A driver has failed.
+        Fault = 2 => "fault",
+    }
 }
 
-/// Where a robot's reported velocity comes from, so the station can tell a
-/// robot that drives from one whose wheel is stuck.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum VelocitySource {
-    /// The twist the current actuator outputs should produce (the platform's
-    /// forward kinematics): what a robot without wheel encoders knows.
-    #[default]
-    Commanded = 0,
-    /// Measured by wheel encoders.
-    Measured = 1,
+crate::named_enum! {
+    /// Where a robot's reported velocity comes from, so the station can tell a
+    /// robot that drives from one whose wheel is stuck.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum VelocitySource: "velocity source" {
+        /// The twist the current actuator outputs should produce (the platform's
+        /// forward kinematics): what a robot without wheel encoders knows.
+        #[default]
+        Commanded = 0 => "commanded",
+        /// Measured by wheel encoders.
+        Measured = 1 => "measured",
+    }
 }
 
 /// Progress of the mission the robot holds.
@@ -187,8 +199,9 @@ pub struct MissionProgress {
 }
 
 /// Robot state, robot -> router -> subscribers, at the agent's telemetry rate
-/// (default 20 Hz).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// (default 20 Hz). The default is a robot not heard from yet: idle, at the
+/// origin, nothing reported.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Telemetry {
     pub pose: Pose,
     pub velocity: Velocity,
@@ -364,15 +377,17 @@ tagged_enum! {
     }
 }
 
-/// Named formation shapes; `Custom` uses [`Formation::offsets`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum FormationKind {
-    Line = 0,
-    Column = 1,
-    Wedge = 2,
-    Circle = 3,
-    Custom = 4,
+crate::named_enum! {
+    /// Named formation shapes; `Custom` uses [`Formation::offsets`].
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum FormationKind: "formation" {
+        Line = 0 => "line",
+        Column = 1 => "column",
+        Wedge = 2 => "wedge",
+        Circle = 3 => "circle",
+        Custom = 4 => "custom",
+    }
 }
 
 /// Member slot offset in the cluster frame, metres (x forward, y left).
@@ -483,57 +498,30 @@ pub struct Time {
     pub station_us: u64,
 }
 
-/// What an operator asks a robot's autopilot (PX4, ArduPilot) to do. The
-/// agent never arms, disarms or changes the autopilot's mode by itself:
-/// only on one of these.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum AutopilotAction {
-    /// Stop the motors (refused by the autopilot in flight).
-    Disarm = 0,
-    /// Start the motors.
-    Arm = 1,
-    /// Hand control to the agent: PX4 OFFBOARD, ArduPilot GUIDED.
-    Offboard = 2,
-    /// The autopilot holds where it is on its own: PX4 Hold (AUTO.LOITER),
-    /// ArduCopter LOITER, ArduRover HOLD.
-    Hold = 3,
-    /// Land where it is: PX4 AUTO.LAND, ArduCopter LAND.
-    Land = 4,
-    /// Climb to `altitude` metres above home (MAV_CMD_NAV_TAKEOFF).
-    Takeoff = 5,
+crate::named_enum! {
+    /// What an operator asks a robot's autopilot (PX4, ArduPilot) to do. The
+    /// agent never arms, disarms or changes the autopilot's mode by itself:
+    /// only on one of these.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum AutopilotAction: "autopilot action" {
+        /// Stop the motors (refused by the autopilot in flight).
+        Disarm = 0 => "disarm",
+        /// Start the motors.
+        Arm = 1 => "arm",
+        /// Hand control to the agent: PX4 OFFBOARD, ArduPilot GUIDED.
+        Offboard = 2 => "offboard",
+        /// The autopilot holds where it is on its own: PX4 Hold (AUTO.LOITER),
+        /// ArduCopter LOITER, ArduRover HOLD.
+        Hold = 3 => "hold",
+        /// Land where it is: PX4 AUTO.LAND, ArduCopter LAND.
+        Land = 4 => "land",
+        /// Climb to `altitude` metres above home (MAV_CMD_NAV_TAKEOFF).
+        Takeoff = 5 => "takeoff",
+    }
 }
 
 impl AutopilotAction {
-    /// Every action, in wire order.
-    pub const ALL: [AutopilotAction; 6] = [
-        AutopilotAction::Disarm,
-        AutopilotAction::Arm,
-        AutopilotAction::Offboard,
-        AutopilotAction::Hold,
-        AutopilotAction::Land,
-        AutopilotAction::Takeoff,
-    ];
-
-    /// The name used in the command language and in notices.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            AutopilotAction::Disarm => "disarm",
-            AutopilotAction::Arm => "arm",
-            AutopilotAction::Offboard => "offboard",
-            AutopilotAction::Hold => "hold",
-            AutopilotAction::Land => "land",
-            AutopilotAction::Takeoff => "takeoff",
-        }
-    }
-
-    /// Parses the name given by [`AutopilotAction::as_str`].
-    pub fn parse(name: &str) -> Option<AutopilotAction> {
-        AutopilotAction::ALL
-            .into_iter()
-            .find(|a| a.as_str() == name)
-    }
-
     /// Whether the action can start the vehicle moving, and so is refused
     /// while the robot is e-stopped.
     pub fn starts_motion(self) -> bool {
@@ -683,7 +671,9 @@ impl Welcome {
 }
 
 impl Telemetry {
-    fn validate(&self) -> Result<(), Error> {
+    /// The checks a received telemetry passes (finite, in range, a valid
+    /// channel name), for telemetry that arrives another way (a bridge).
+    pub fn validate(&self) -> Result<(), Error> {
         pose(&self.pose)?;
         finite(self.velocity.vx, "velocity vx")?;
         finite(self.velocity.vy, "velocity vy")?;

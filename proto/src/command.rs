@@ -6,8 +6,6 @@
 //! lists are not a [`Command`] but a [`crate::Mission`], because they are
 //! delivered reliably and acknowledged.
 
-use std::fmt;
-
 use serde::{Deserialize, Serialize};
 use serde_repr::{Deserialize_repr, Serialize_repr};
 
@@ -67,54 +65,21 @@ tagged_enum! {
     }
 }
 
-/// The kinds of command a robot can accept; a robot lists its capabilities in
-/// [`crate::Hello`]. The numbers equal the [`Command`] kinds, plus
-/// `Waypoints` for [`crate::Mission`].
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr,
-)]
-#[repr(u8)]
-pub enum CommandKind {
-    Actuators = 1,
-    SteeringThrottle = 2,
-    VelocityHeading = 3,
-    Twist = 4,
-    Waypoints = 5,
-    Stop = 6,
-}
-
-impl CommandKind {
-    /// Every kind, in wire order.
-    pub const ALL: [CommandKind; 6] = [
-        CommandKind::Actuators,
-        CommandKind::SteeringThrottle,
-        CommandKind::VelocityHeading,
-        CommandKind::Twist,
-        CommandKind::Waypoints,
-        CommandKind::Stop,
-    ];
-
-    /// The name used in configs, the command language and the UI.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            CommandKind::Actuators => "actuators",
-            CommandKind::SteeringThrottle => "steering-throttle",
-            CommandKind::VelocityHeading => "velocity-heading",
-            CommandKind::Twist => "twist",
-            CommandKind::Waypoints => "waypoints",
-            CommandKind::Stop => "stop",
-        }
-    }
-
-    /// Parses the name given by [`CommandKind::as_str`].
-    pub fn parse(name: &str) -> Option<CommandKind> {
-        CommandKind::ALL.into_iter().find(|k| k.as_str() == name)
-    }
-}
-
-impl fmt::Display for CommandKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
+crate::named_enum! {
+    /// The kinds of command a robot can accept; a robot lists its capabilities in
+    /// [`crate::Hello`]. The numbers equal the [`Command`] kinds, plus
+    /// `Waypoints` for [`crate::Mission`].
+    #[derive(
+        Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize_repr, Deserialize_repr,
+    )]
+    #[repr(u8)]
+    pub enum CommandKind: "command kind" {
+        Actuators = 1 => "actuators",
+        SteeringThrottle = 2 => "steering-throttle",
+        VelocityHeading = 3 => "velocity-heading",
+        Twist = 4 => "twist",
+        Waypoints = 5 => "waypoints",
+        Stop = 6 => "stop",
     }
 }
 

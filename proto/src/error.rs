@@ -1,8 +1,6 @@
 //! The one error type of the codec and framing, with a coarse [`ErrorKind`]
 //! that routers and agents use as a counter key.
 
-use std::fmt;
-
 /// Why bytes could not become a message, or a message could not become bytes.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum Error {
@@ -35,18 +33,20 @@ pub enum Error {
     Encode(String),
 }
 
-/// Coarse classes of [`Error`], for counters ("dropped: 3 malformed, 1 version").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum ErrorKind {
-    Empty,
-    Oversized,
-    Version,
-    UnknownKind,
-    Malformed,
-    Invalid,
-    Checksum,
-    Framing,
-    Encode,
+crate::named_enum! {
+    /// Coarse classes of [`Error`], for counters ("dropped: 3 malformed, 1 version").
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+    pub enum ErrorKind: "error kind" {
+        Empty => "empty",
+        Oversized => "oversized",
+        Version => "version",
+        UnknownKind => "unknown-kind",
+        Malformed => "malformed",
+        Invalid => "invalid",
+        Checksum => "checksum",
+        Framing => "framing",
+        Encode => "encode",
+    }
 }
 
 impl Error {
@@ -67,41 +67,5 @@ impl Error {
 
     pub(crate) fn invalid(text: impl Into<String>) -> Error {
         Error::Invalid(text.into())
-    }
-}
-
-impl ErrorKind {
-    /// Every kind, for tables of counters.
-    pub const ALL: [ErrorKind; 9] = [
-        ErrorKind::Empty,
-        ErrorKind::Oversized,
-        ErrorKind::Version,
-        ErrorKind::UnknownKind,
-        ErrorKind::Malformed,
-        ErrorKind::Invalid,
-        ErrorKind::Checksum,
-        ErrorKind::Framing,
-        ErrorKind::Encode,
-    ];
-
-    /// Short lowercase name for counters and logs.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            ErrorKind::Empty => "empty",
-            ErrorKind::Oversized => "oversized",
-            ErrorKind::Version => "version",
-            ErrorKind::UnknownKind => "unknown-kind",
-            ErrorKind::Malformed => "malformed",
-            ErrorKind::Invalid => "invalid",
-            ErrorKind::Checksum => "checksum",
-            ErrorKind::Framing => "framing",
-            ErrorKind::Encode => "encode",
-        }
-    }
-}
-
-impl fmt::Display for ErrorKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
     }
 }

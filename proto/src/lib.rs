@@ -21,6 +21,7 @@ mod command;
 mod envelope;
 mod error;
 pub mod framing;
+pub mod named;
 mod names;
 mod safety;
 mod tagged;
@@ -43,6 +44,7 @@ pub use envelope::{
     peek, signed_region,
 };
 pub use error::{Error, ErrorKind};
+pub use named::Named;
 pub use safety::{
     Arena, ArenaAck, Disc, Intervention, InterventionCounts, MAX_BOUNDARY_VERTICES, MAX_EXTENT,
     MAX_KEEP_OUTS, MAX_NEIGHBOURS, MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_SLOW_ZONES, Neighbour,

@@ -164,52 +164,28 @@ pub enum SafetyState {
     Off = 2,
 }
 
-/// Why the safety layer changed the command it was about to obey.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
-#[repr(u8)]
-pub enum Intervention {
-    /// The command is obeyed as it is.
-    #[default]
-    None = 0,
-    /// Slowed or stopped so the stopping point stays inside the boundary.
-    Fence = 1,
-    /// Slowed or stopped so the stopping point stays out of a keep-out or
-    /// static obstacle.
-    KeepOut = 2,
-    /// Slowed, stopped or turned aside to keep apart from a neighbour.
-    Separation = 3,
-    /// Neighbour information is stale: crawling.
-    StaleNeighbours = 4,
-    /// Inside or approaching a slow zone: speed capped.
-    SlowZone = 5,
-    /// Outside the arena, in a keep-out or within the margin: only motion
-    /// back to safety is allowed.
-    Returning = 6,
-}
-
-impl Intervention {
-    /// Every intervention, in wire order.
-    pub const ALL: [Intervention; 7] = [
-        Intervention::None,
-        Intervention::Fence,
-        Intervention::KeepOut,
-        Intervention::Separation,
-        Intervention::StaleNeighbours,
-        Intervention::SlowZone,
-        Intervention::Returning,
-    ];
-
-    /// The name used in the command language, the UI and recordings.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Intervention::None => "none",
-            Intervention::Fence => "fence",
-            Intervention::KeepOut => "keep-out",
-            Intervention::Separation => "separation",
-            Intervention::StaleNeighbours => "stale-neighbours",
-            Intervention::SlowZone => "slow-zone",
-            Intervention::Returning => "returning",
-        }
+crate::named_enum! {
+    /// Why the safety layer changed the command it was about to obey.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize_repr, Deserialize_repr)]
+    #[repr(u8)]
+    pub enum Intervention: "intervention" {
+        /// The command is obeyed as it is.
+        #[default]
+        None = 0 => "none",
+        /// Slowed or stopped so the stopping point stays inside the boundary.
+        Fence = 1 => "fence",
+        /// Slowed or stopped so the stopping point stays out of a keep-out or
+        /// static obstacle.
+        KeepOut = 2 => "keep-out",
+        /// Slowed, stopped or turned aside to keep apart from a neighbour.
+        Separation = 3 => "separation",
+        /// Neighbour information is stale: crawling.
+        StaleNeighbours = 4 => "stale-neighbours",
+        /// Inside or approaching a slow zone: speed capped.
+        SlowZone = 5 => "slow-zone",
+        /// Outside the arena, in a keep-out or within the margin: only motion
+        /// back to safety is allowed.
+        Returning = 6 => "returning",
     }
 }
 

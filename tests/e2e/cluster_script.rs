@@ -3,10 +3,11 @@
 //! `mech-gcs --script tests/scripts/cluster_mission.mech`, over real UDP
 //! sockets. Checks the exit code and the JSON lines the script prints.
 
-use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+use crate::station::free_port;
 
 /// Kills the agents however the test ends.
 struct Agents(Vec<Child>);
@@ -18,11 +19,6 @@ impl Drop for Agents {
             let _ = c.wait();
         }
     }
-}
-
-fn free_udp_port() -> u16 {
-    let s = UdpSocket::bind("127.0.0.1:0").expect("bind a free port");
-    s.local_addr().expect("local address").port()
 }
 
 fn agent_config(dir: &Path, name: &str, platform: &str, x: f64, y: f64, seed: u64) -> PathBuf {
@@ -39,12 +35,9 @@ fn agent_config(dir: &Path, name: &str, platform: &str, x: f64, y: f64, seed: u6
     path
 }
 
-#[test]
-fn cluster_mission_script_passes_headless() {
-    let dir = std::env::temp_dir().join(format!("mech-e2e-cluster-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let port = free_udp_port();
-    let router = format!("127.0.0.1:{port}");
+/// Two differential drives and two kiwis, simulated with position noise,
+/// registering with the router at `router`.
+fn start_agents(dir: &Path, router: &str) -> Agents {
     let robots = [
         ("robot_1", "diff-drive", 1.0, 0.8),
         ("robot_2", "kiwi", 1.8, 0.8),
@@ -53,11 +46,11 @@ fn cluster_mission_script_passes_headless() {
     ];
     let mut agents = Agents(Vec::new());
     for (i, (name, platform, x, y)) in robots.iter().enumerate() {
-        let config = agent_config(&dir, name, platform, *x, *y, 11 + i as u64);
+        let config = agent_config(dir, name, platform, *x, *y, 11 + i as u64);
         let child = Command::new(mech_e2e::binary("mech-agent"))
             .arg("--config")
             .arg(&config)
-            .args(["--sim", "--router", &router])
+            .args(["--sim", "--router", router])
             .env("RUST_LOG", "warn")
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -65,14 +58,18 @@ fn cluster_mission_script_passes_headless() {
             .expect("mech-agent starts");
         agents.0.push(child);
     }
+    agents
+}
 
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/cluster_mission.mech");
+/// Runs `mech-gcs --script` on the router at `router` until it exits
+/// (at most 240 s).
+fn run_script(script: &Path, router: &str, dir: &Path) -> std::process::Output {
     let started = Instant::now();
     let mut gcs = Command::new(mech_e2e::binary("mech-gcs"))
         .arg("--script")
-        .arg(&script)
-        .args(["--udp", &router, "--tcp", "127.0.0.1:0"])
-        .env("XDG_STATE_HOME", &dir)
+        .arg(script)
+        .args(["--udp", router, "--tcp", "127.0.0.1:0"])
+        .env("XDG_STATE_HOME", dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -85,7 +82,19 @@ fn cluster_mission_script_passes_headless() {
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-    let out = gcs.wait_with_output().expect("mech-gcs output");
+    gcs.wait_with_output().expect("mech-gcs output")
+}
+
+#[test]
+fn cluster_mission_script_passes_headless() {
+    let dir = std::env::temp_dir().join(format!("mech-e2e-cluster-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let port = free_port();
+    let router = format!("127.0.0.1:{port}");
+    let agents = start_agents(&dir, &router);
+
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/cluster_mission.mech");
+    let out = run_script(&script, &router, &dir);
     drop(agents);
     let _ = std::fs::remove_dir_all(&dir);
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -139,7 +148,7 @@ fn cluster_mission_script_passes_headless() {
     // repeated while the station was slow to welcome it, or the router
     // unheard for its timeout on a loaded machine) must confirm its route
     // anew, and the router reports that acknowledgement too.
-    for (robot, ..) in robots {
+    for robot in ["robot_1", "robot_2", "robot_3", "robot_4"] {
         let acks: Vec<&str> = lines
             .iter()
             .filter(|v| v["event"] == "route_acked" && v["robot"] == robot)

@@ -44,6 +44,49 @@ fn channels_request(key: &Key) -> Vec<u8> {
     frame
 }
 
+/// 1,100 TCP connections to `router` from 69 loopback addresses, held
+/// open and silent (those that connected within 2 s each).
+fn idle_connections(router: SocketAddr) -> Vec<tokio::net::TcpStream> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    runtime.block_on(async {
+        let mut held = Vec::new();
+        for i in 0..1_100u32 {
+            let host = 2 + (i % 69) as u8;
+            let s = tokio::net::TcpSocket::new_v4().expect("socket");
+            s.bind(SocketAddr::from(([127, 0, 0, host], 0)))
+                .expect("bind");
+            if let Ok(Ok(c)) = tokio::time::timeout(Duration::from_secs(2), s.connect(router)).await
+            {
+                held.push(c);
+            }
+        }
+        held
+    })
+}
+
+/// A controller signing with `secret` asks `router` for its channels over
+/// TCP, and is answered.
+fn a_signed_controller_is_answered(router: SocketAddr, secret: &[u8; 32]) {
+    let mut controller = std::net::TcpStream::connect(router).expect("connects");
+    controller
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .expect("timeout");
+    controller
+        .write_all(&channels_request(&Key::new(secret)))
+        .expect("sent");
+    let mut len = [0u8; 4];
+    controller
+        .read_exact(&mut len)
+        .expect("the router answers the controller");
+    let mut answer = vec![0; u32::from_be_bytes(len) as usize];
+    controller.read_exact(&mut answer).expect("the answer");
+    let answer = mech_proto::decode(&answer).expect("decodes");
+    assert!(matches!(answer.body, Body::Channels(_)), "{answer:?}");
+}
+
 /// 1,100 connections that never send anything, from 69 addresses, to the
 /// router's TCP endpoint of a station that may open 1,024 files (the
 /// default limit of a systemd service): a signed TCP controller is still
@@ -96,42 +139,10 @@ fn idle_tcp_connections_keep_no_controller_or_operator_out() {
     }
     assert!(ready.contains("serving"), "{ready:?}");
     let router: SocketAddr = ([127, 0, 0, 1], tcp).into();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    let idle = runtime.block_on(async {
-        let mut held = Vec::new();
-        for i in 0..1_100u32 {
-            let host = 2 + (i % 69) as u8;
-            let s = tokio::net::TcpSocket::new_v4().expect("socket");
-            s.bind(SocketAddr::from(([127, 0, 0, host], 0)))
-                .expect("bind");
-            if let Ok(Ok(c)) = tokio::time::timeout(Duration::from_secs(2), s.connect(router)).await
-            {
-                held.push(c);
-            }
-        }
-        held
-    });
+    let idle = idle_connections(router);
     assert!(idle.len() >= 1_000, "{} connected", idle.len());
 
-    // A signed controller over TCP is answered.
-    let mut controller = std::net::TcpStream::connect(router).expect("connects");
-    controller
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .expect("timeout");
-    controller
-        .write_all(&channels_request(&Key::new(&secret)))
-        .expect("sent");
-    let mut len = [0u8; 4];
-    controller
-        .read_exact(&mut len)
-        .expect("the router answers the controller");
-    let mut answer = vec![0; u32::from_be_bytes(len) as usize];
-    controller.read_exact(&mut answer).expect("the answer");
-    let answer = mech_proto::decode(&answer).expect("decodes");
-    assert!(matches!(answer.body, Body::Channels(_)), "{answer:?}");
+    a_signed_controller_is_answered(router, &secret);
 
     // An operator attaches on the control socket.
     let mut operator = std::os::unix::net::UnixStream::connect(&socket).expect("connects");

@@ -33,34 +33,10 @@ fn is_braille(c: char) -> bool {
     ('\u{2801}'..='\u{28ff}').contains(&c)
 }
 
-fn plots_at(w: u16, h: u16) {
-    if Command::new("tmux").arg("-V").output().is_err() {
-        assert!(std::env::var_os("CI").is_none(), "CI needs tmux");
-        println!("skipped: tmux is not installed");
-        return;
-    }
-    let id = format!("mech-e2e-plots-{}-{w}", std::process::id());
-    let state = std::env::temp_dir().join(&id);
-    std::fs::create_dir_all(&state).expect("temp dir");
-    let tmux = Tmux {
-        socket: id,
-        session: "gcs".into(),
-        state: state.clone(),
-    };
-    let cmd = format!(
-        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
-        state.display(),
-        mech_e2e::binary("mech-gcs").display()
-    );
-    let (ws, hs) = (w.to_string(), h.to_string());
-    let out = tmux.run(&["new-session", "-d", "-s", "gcs", "-x", &ws, "-y", &hs, &cmd]);
-    assert!(out.status.success(), "tmux new-session: {out:?}");
-    tmux.wait_for("two connected robots", Duration::from_secs(30), |s| {
-        s.contains("robots 2 (2 ok") || s.contains("2/2 ok")
-    });
-
-    // A waypoint in the middle of the demo arena (3.9 m x 2.8 m from the
-    // origin), sent to robot_1, which is routed to none.
+/// A waypoint in the middle of the demo arena (3.9 m x 2.8 m from the
+/// origin), sent to robot_1, which is routed to none; then the route the
+/// command line's history offers, run.
+fn waypoint_sent_then_routed(tmux: &Tmux) {
     tmux.keys(&["n"]);
     tmux.wait_for("robot_1 selected", Duration::from_secs(5), |s| {
         s.contains("sel 1")
@@ -86,6 +62,20 @@ fn plots_at(w: u16, h: u16) {
         s.contains(":route robot_1 wp/gcs")
     });
     tmux.keys(&["Enter"]);
+}
+
+fn plots_at(w: u16, h: u16) {
+    if Command::new("tmux").arg("-V").output().is_err() {
+        assert!(std::env::var_os("CI").is_none(), "CI needs tmux");
+        println!("skipped: tmux is not installed");
+        return;
+    }
+    let tmux = Tmux::demo(&format!("mech-e2e-plots-{}-{w}", std::process::id()), w, h);
+    tmux.wait_for("two connected robots", Duration::from_secs(30), |s| {
+        s.contains("robots 2 (2 ok") || s.contains("2/2 ok")
+    });
+
+    waypoint_sent_then_routed(&tmux);
 
     // The table, sorted by loss (two columns back from the name), draws
     // the last minute of loss beside it.

@@ -41,8 +41,8 @@ print(env(p.Kind.CHANNELS_REQUEST, [], destination="router", channel=""))
 print(env(p.Kind.TIME_REQUEST, [2**64 - 1], destination="router", channel=""))
 "#;
 
-#[test]
-fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
+/// What [`PYTHON_ENCODES`] writes, built with mech-proto, in its order.
+fn encoded_by_python() -> Vec<Envelope> {
     let twist = |vx| {
         Cmd::Twist(Twist {
             vx,
@@ -51,7 +51,7 @@ fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
     };
     let ext = |body| Envelope::new(header("py", "robot_1", "ext/python"), body);
     let to_router = |channel: &str, body| Envelope::new(header("py", "router", channel), body);
-    let expected = [
+    vec![
         ext(Body::Command(Cmd::Twist(Twist {
             vx: 0.3,
             vy: -0.1,
@@ -107,7 +107,12 @@ fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
         to_router("", Body::Subscribe(Subscribe { telemetry: true })),
         to_router("", Body::ChannelsRequest(mech_proto::ChannelsRequest {})),
         to_router("", Body::TimeRequest(TimeRequest { nonce: u64::MAX })),
-    ];
+    ]
+}
+
+#[test]
+fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
+    let expected = encoded_by_python();
     let mut c = python();
     c.args(["-c", PYTHON_ENCODES]);
     let out = run_ok(c, "python3 with mech_client");
@@ -124,8 +129,8 @@ fn the_python_encoder_agrees_with_mech_proto_byte_for_byte() {
     }
 }
 
-#[test]
-fn the_python_decoder_reads_what_mech_proto_writes() {
+/// One message of each kind the Python decoder reads from a station.
+fn decoded_by_python() -> [Body; 5] {
     let telemetry = Telemetry {
         pose: Pose {
             x: 1.5,
@@ -156,7 +161,7 @@ fn the_python_decoder_reads_what_mech_proto_writes() {
         velocity_source: VelocitySource::Measured,
         safety: None,
     };
-    let messages = [
+    [
         Body::Telemetry(telemetry),
         Body::Channels(Channels {
             channels: vec![Channel {
@@ -181,8 +186,12 @@ fn the_python_decoder_reads_what_mech_proto_writes() {
             code: NoticeCode::NotRouted,
             text: "robot_1 obeys \"\"".into(),
         }),
-    ];
-    let hex: Vec<String> = messages
+    ]
+}
+
+#[test]
+fn the_python_decoder_reads_what_mech_proto_writes() {
+    let hex: Vec<String> = decoded_by_python()
         .into_iter()
         .map(|b| {
             mech_proto::encode(&Envelope::new(header("robot_1", "py", ""), b))

@@ -31,75 +31,43 @@ fn active_at(lines: &[Line], robot: &str, until_us: u64) -> String {
         .unwrap_or_default()
 }
 
-#[test]
-fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() {
-    let dir = tempfile::tempdir().unwrap();
-    let (air, ra, rb) = (
-        PtyPair::new(dir.path(), "station"),
-        PtyPair::new(dir.path(), "ra"),
-        PtyPair::new(dir.path(), "rb"),
-    );
-    let _hub = RadioHub::start(&air.b, &[&ra.b, &rb.b], 0.0, 1);
-    let port = station::free_port();
-    let wifi = UdpProxy::start(
-        "127.0.0.1:0".parse().unwrap(),
-        format!("127.0.0.1:{port}").parse().unwrap(),
-        2,
-    );
-    let radio = format!(
-        "[[router.serial]]\nport = \"{}\"\nbaud = 115200\n",
-        air.a.display()
-    );
-    let config = station::config(dir.path(), port, &radio);
-    let script = "wait connected ra 20s\nwait connected rb 20s\nroute all ext/t\n\
-                  wait route ra ext/t 5s\nwait route rb ext/t 5s\nlog routed\nsleep 60s\n";
-    let gcs = Station::start(&config, script, dir.path());
+/// Robot `ra` on the radio alone, `rb` on UDP through `wifi` first and
+/// the radio second.
+fn start_robots(
+    dir: &std::path::Path,
+    ra: &std::path::Path,
+    rb: &std::path::Path,
+    wifi: std::net::SocketAddr,
+) -> (Agent, Agent) {
     let serial = |p: &std::path::Path| {
         format!(
             "kind = \"serial\"\nport = \"{}\"\nbaud = 115200\ntelemetry_rate_hz = 10",
             p.display()
         )
     };
-    let a_links = format!("[link]\n{}", serial(&ra.a));
+    let a_links = format!("[link]\n{}", serial(ra));
     let b_links = format!(
         "[[links]]\nkind = \"udp\"\nrouter = \"{}\"\n[[links]]\n{}",
-        wifi.addr,
-        serial(&rb.a)
+        wifi,
+        serial(rb)
     );
-    let mut a = Agent::start(
+    let a = Agent::start(
         "ra",
-        &agent::config(dir.path(), "ra", 1.0, &a_links, FAILSAFE),
+        &agent::config(dir, "ra", 1.0, &a_links, FAILSAFE),
         None,
     );
-    let mut b = Agent::start(
+    let b = Agent::start(
         "rb",
-        &agent::config(dir.path(), "rb", 2.0, &b_links, FAILSAFE),
+        &agent::config(dir, "rb", 2.0, &b_links, FAILSAFE),
         None,
     );
-    let ctl = Controller::start(
-        format!("127.0.0.1:{port}").parse().unwrap(),
-        &["ra", "rb"],
-        "ext/t",
-        0.1,
-    );
-    ctl.publish(true);
-    gcs.wait_log("routed", Duration::from_secs(40));
-    std::thread::sleep(Duration::from_secs(2));
+    (a, b)
+}
 
-    let cut = unix_us();
-    wifi.faults.block(true);
-    std::thread::sleep(Duration::from_secs(3));
-    let back = unix_us();
-    wifi.faults.block(false);
-    std::thread::sleep(Duration::from_secs(3));
-    let end = unix_us();
-    ctl.publish(false);
-    std::thread::sleep(Duration::from_secs(1));
-    let (ca, cb) = (a.stop(), b.stop());
-    let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
+/// The station saw rb on UDP until `cut`, then on the radio only until
+/// `back`, then on UDP again by `end`; ra on the radio, with a budget.
+fn the_station_followed_rbs_links(gcs: &Station, cut: u64, back: u64, end: u64) {
     let lines = gcs.lines();
-
-    // The station saw rb on UDP, then on the radio only, then on UDP again.
     assert_eq!(active_at(&lines, "rb", cut), "udp", "{:#?}", gcs.tail());
     assert_eq!(active_at(&lines, "rb", back), "radio", "{:#?}", gcs.tail());
     assert_eq!(active_at(&lines, "rb", end), "udp", "{:#?}", gcs.tail());
@@ -133,6 +101,55 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
         switch(cut, "radio"),
         switch(back, "udp")
     );
+}
+
+#[test]
+fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let (air, ra, rb) = (
+        PtyPair::new(dir.path(), "station"),
+        PtyPair::new(dir.path(), "ra"),
+        PtyPair::new(dir.path(), "rb"),
+    );
+    let _hub = RadioHub::start(&air.b, &[&ra.b, &rb.b], 0.0, 1);
+    let port = station::free_port();
+    let wifi = UdpProxy::start(
+        "127.0.0.1:0".parse().unwrap(),
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        2,
+    );
+    let radio = format!(
+        "[[router.serial]]\nport = \"{}\"\nbaud = 115200\n",
+        air.a.display()
+    );
+    let config = station::config(dir.path(), port, &radio);
+    let script = "wait connected ra 20s\nwait connected rb 20s\nroute all ext/t\n\
+                  wait route ra ext/t 5s\nwait route rb ext/t 5s\nlog routed\nsleep 60s\n";
+    let gcs = Station::start(&config, script, dir.path());
+    let (mut a, mut b) = start_robots(dir.path(), &ra.a, &rb.a, wifi.addr);
+    let ctl = Controller::start(
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        &["ra", "rb"],
+        "ext/t",
+        0.1,
+    );
+    ctl.publish(true);
+    gcs.wait_log("routed", Duration::from_secs(40));
+    std::thread::sleep(Duration::from_secs(2));
+
+    let cut = unix_us();
+    wifi.faults.block(true);
+    std::thread::sleep(Duration::from_secs(3));
+    let back = unix_us();
+    wifi.faults.block(false);
+    std::thread::sleep(Duration::from_secs(3));
+    let end = unix_us();
+    ctl.publish(false);
+    std::thread::sleep(Duration::from_secs(1));
+    let (ca, cb) = (a.stop(), b.stop());
+    let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
+
+    the_station_followed_rbs_links(&gcs, cut, back, end);
     // rb kept driving while UDP was cut: its telemetry came over the radio.
     let during = ctl
         .samples()

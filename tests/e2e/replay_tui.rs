@@ -5,7 +5,7 @@
 //! pause, seek and speed typed at the prompt, refuse anything meant for a
 //! robot, and open no network socket.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
@@ -68,19 +68,9 @@ fn prompt(tmux: &Tmux, line: &str) {
     std::thread::sleep(Duration::from_millis(150));
 }
 
-#[test]
-fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
-    if Command::new("tmux").arg("-V").output().is_err() {
-        println!("skipped: tmux is not installed");
-        return;
-    }
-    let state = std::env::temp_dir().join(format!("mech-e2e-replay-tui-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&state);
-    std::fs::create_dir_all(&state).expect("temp dir");
-    let file = state.join("run.mcap");
-    record(&file, &state);
-    let (end_x, _) = last_position(&file);
-
+/// `mech-gcs replay FILE` in a tmux session, under strace (its network
+/// calls written to the returned file) when strace is installed.
+fn replay_in_tmux(file: &Path, state: &Path) -> (Tmux, Option<PathBuf>) {
     let trace = state.join("replay.strace");
     let strace = Command::new("strace").arg("-V").output().is_ok();
     let replay = format!(
@@ -100,7 +90,7 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
     let tmux = Tmux {
         socket: format!("mech-e2e-replay-{}", std::process::id()),
         session: "replay".into(),
-        state: state.clone(),
+        state: state.to_path_buf(),
     };
     let out = tmux.run(&[
         "new-session",
@@ -114,6 +104,23 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
         &cmd,
     ]);
     assert!(out.status.success(), "tmux new-session: {out:?}");
+    (tmux, strace.then_some(trace))
+}
+
+#[test]
+fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
+    if Command::new("tmux").arg("-V").output().is_err() {
+        println!("skipped: tmux is not installed");
+        return;
+    }
+    let state = std::env::temp_dir().join(format!("mech-e2e-replay-tui-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&state);
+    std::fs::create_dir_all(&state).expect("temp dir");
+    let file = state.join("run.mcap");
+    record(&file, &state);
+    let (end_x, _) = last_position(&file);
+
+    let (tmux, trace) = replay_in_tmux(&file, &state);
 
     // From the start at a tenth of the speed: robot_1 where the run
     // spawned it, as soon as it registered.
@@ -163,7 +170,7 @@ fn a_replay_in_the_tui_moves_the_robot_as_it_ran_and_sends_nothing() {
     assert!((again - x0).abs() < 0.05, "{again} vs {x0}");
 
     tmux.keys(&["Escape", "q"]);
-    if strace {
+    if let Some(trace) = trace {
         let calls = wait_for_file(&trace);
         let inet: Vec<&str> = calls.lines().filter(|l| l.contains("AF_INET")).collect();
         assert!(inet.is_empty(), "the replay used the network: {inet:#?}");

@@ -9,26 +9,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// A free UDP port on loopback (the router binds it right after).
-fn free_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
-}
-
-fn keygen(name: &str, file: &Path) {
-    let out = Command::new(mech_e2e::binary("mech-gcs"))
-        .args(["keygen", name, "--out"])
-        .arg(file)
-        .output()
-        .expect("mech-gcs keygen runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+use crate::station::{free_port, keygen};
 
 /// Runs the documented Python controller with `key` for `seconds`.
 fn python_controller(key: &Path, port: u16, seconds: f64) {
@@ -53,6 +34,25 @@ fn position(line: &str) -> (f64, f64) {
     (xy.next().unwrap(), xy.next().unwrap())
 }
 
+/// Writes `text` to `path`, and gives the path back.
+fn write(path: &Path, text: &str) -> std::path::PathBuf {
+    std::fs::write(path, text).unwrap();
+    path.to_path_buf()
+}
+
+/// A simulated kiwi `name`, registering with the router on `port`, with
+/// `auth` (an `[auth]` section, or nothing).
+fn robot_config(dir: &Path, name: &str, port: u16, auth: &str) -> std::path::PathBuf {
+    write(
+        &dir.join(format!("{name}.toml")),
+        &format!(
+            "name = \"{name}\"\n[platform]\nkind = \"kiwi\"\nradius = 0.1\n\
+             max_wheel_speed = 0.5\n[position]\nkind = \"sim\"\n\
+             [link]\nkind = \"udp\"\nrouter = \"127.0.0.1:{port}\"\n{auth}"
+        ),
+    )
+}
+
 #[test]
 fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
     let dir = tempfile::tempdir().unwrap();
@@ -63,17 +63,15 @@ fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
     keygen("python", &listed);
     keygen("python", &intruder);
     let port = free_port();
-    let config = dir.path().join("gcs.toml");
-    std::fs::write(
-        &config,
-        format!(
+    let config = write(
+        &dir.path().join("gcs.toml"),
+        &format!(
             "[router]\nudp = \"127.0.0.1:{port}\"\ntcp = \"127.0.0.1:0\"\n\
              [auth]\nmode = \"required\"\n\
              [[auth.keys]]\nrole = \"controller\"\nname = \"python\"\nfile = \"python.key\"\n\
              channels = [\"ext/python\"]\n"
         ),
-    )
-    .unwrap();
+    );
     // The listed controller starts when the test reads `listed` (Python
     // took seconds to start on a loaded machine), so the script waits for
     // the robot to move rather than a fixed time.
@@ -157,30 +155,15 @@ fn a_robot_with_its_key_registers_and_one_without_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     keygen("rover", &dir.path().join("rover.key"));
     let port = free_port();
-    let config = dir.path().join("gcs.toml");
-    std::fs::write(
-        &config,
-        format!(
+    let config = write(
+        &dir.path().join("gcs.toml"),
+        &format!(
             "[router]\nudp = \"127.0.0.1:{port}\"\ntcp = \"127.0.0.1:0\"\n\
              [[auth.keys]]\nrole = \"robot\"\nname = \"rover\"\nfile = \"rover.key\"\n"
         ),
-    )
-    .unwrap();
-    let agent_config = |name: &str, auth: &str| {
-        let path = dir.path().join(format!("{name}.toml"));
-        std::fs::write(
-            &path,
-            format!(
-                "name = \"{name}\"\n[platform]\nkind = \"kiwi\"\nradius = 0.1\n\
-                 max_wheel_speed = 0.5\n[position]\nkind = \"sim\"\n\
-                 [link]\nkind = \"udp\"\nrouter = \"127.0.0.1:{port}\"\n{auth}"
-            ),
-        )
-        .unwrap();
-        path
-    };
-    let keyed = agent_config("rover", "[auth]\nkey = \"rover.key\"\n");
-    let unkeyed = agent_config("stray", "");
+    );
+    let keyed = robot_config(dir.path(), "rover", port, "[auth]\nkey = \"rover.key\"\n");
+    let unkeyed = robot_config(dir.path(), "stray", port, "");
     let check = Command::new(mech_e2e::binary("mech-agent"))
         .args(["--check", "--config"])
         .arg(&keyed)

@@ -118,7 +118,8 @@ impl Station {
     }
 }
 
-fn keygen(name: &str, file: &Path) {
+/// A key named `name` in `file`, made by `mech-gcs keygen`.
+pub fn keygen(name: &str, file: &Path) {
     let out = Command::new(mech_e2e::binary("mech-gcs"))
         .args(["keygen", name, "--out"])
         .arg(file)

@@ -13,6 +13,28 @@ pub struct Tmux {
 }
 
 impl Tmux {
+    /// `mech-gcs --demo 2` in a detached tmux session `gcs` of `w` x `h`
+    /// cells; `id` names the tmux server and the temporary directory the
+    /// station keeps its state in.
+    pub fn demo(id: &str, w: u16, h: u16) -> Tmux {
+        let state = std::env::temp_dir().join(id);
+        std::fs::create_dir_all(&state).expect("temp dir");
+        let cmd = format!(
+            "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
+            state.display(),
+            mech_e2e::binary("mech-gcs").display()
+        );
+        let tmux = Tmux {
+            socket: id.to_string(),
+            session: "gcs".into(),
+            state,
+        };
+        let (ws, hs) = (w.to_string(), h.to_string());
+        let out = tmux.run(&["new-session", "-d", "-s", "gcs", "-x", &ws, "-y", &hs, &cmd]);
+        assert!(out.status.success(), "tmux new-session: {out:?}");
+        tmux
+    }
+
     pub fn run(&self, args: &[&str]) -> Output {
         Command::new("tmux")
             .arg("-L")

@@ -15,31 +15,7 @@ fn waypoint_typed_sent_and_routed_arrives_on_the_card() {
         println!("skipped: tmux is not installed");
         return;
     }
-    let state = std::env::temp_dir().join(format!("mech-e2e-tui-{}", std::process::id()));
-    std::fs::create_dir_all(&state).expect("temp dir");
-    let tmux = Tmux {
-        socket: format!("mech-e2e-tui-{}", std::process::id()),
-        session: "gcs".into(),
-        state: state.clone(),
-    };
-    let gcs = mech_e2e::binary("mech-gcs");
-    let cmd = format!(
-        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
-        state.display(),
-        gcs.display()
-    );
-    let out = tmux.run(&[
-        "new-session",
-        "-d",
-        "-s",
-        "gcs",
-        "-x",
-        "160",
-        "-y",
-        "48",
-        &cmd,
-    ]);
-    assert!(out.status.success(), "tmux new-session: {out:?}");
+    let tmux = Tmux::demo(&format!("mech-e2e-tui-{}", std::process::id()), 160, 48);
 
     let screen = tmux.wait_for("two connected robots", Duration::from_secs(20), |s| {
         s.contains("robots 2 (2 ok")

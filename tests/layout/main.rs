@@ -1,7 +1,8 @@
 //! The workspace's shape, checked: no import cycles between the modules of
 //! any crate, a station core that needs no terminal, gamepad or simulator,
 //! a station service and a Zenoh station that need no terminal or gamepad,
-//! and a default build without Zenoh.
+//! a default build without Zenoh, and the size limits of structs, impl
+//! blocks and functions (`limits`).
 //!
 //! Modules may depend on their parent and their children freely (a parent
 //! re-exports its children, a child uses its parent's shared types); what
@@ -10,6 +11,8 @@
 //! between the siblings `a` and `c` under their common ancestor (the crate
 //! root here). Test modules (`#[cfg(test)]` to the end of a file) are left
 //! out: a test may reach anywhere.
+
+mod limits;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};

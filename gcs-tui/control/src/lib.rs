@@ -53,8 +53,8 @@ pub use lang::verbs::nav::NavSide;
 pub use offboard::{NavConfig, NavOutput, OffboardNavigator};
 pub use spec::{
     ClusterSpec, ClusterStickRates, ClusterSticks, DEFAULT_SPACING, SpecError,
-    cluster_velocity_from_sticks, formation_kind, formation_name, parse_cluster_waypoint,
-    parse_formation, parse_offset,
+    cluster_velocity_from_sticks, formation_kind, parse_cluster_waypoint, parse_formation,
+    parse_offset,
 };
 pub use tracking::{Reference, TrackingGains, track};
 

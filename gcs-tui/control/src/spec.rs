@@ -111,27 +111,9 @@ pub fn parse_formation(words: &[&str]) -> Result<Formation, SpecError> {
     })
 }
 
-/// The formation kind named `s`.
+/// The formation kind named `s` ([`FormationKind::as_str`]).
 pub fn formation_kind(s: &str) -> Result<FormationKind, SpecError> {
-    match s {
-        "line" => Ok(FormationKind::Line),
-        "column" => Ok(FormationKind::Column),
-        "wedge" => Ok(FormationKind::Wedge),
-        "circle" => Ok(FormationKind::Circle),
-        "custom" => Ok(FormationKind::Custom),
-        other => Err(SpecError::UnknownFormation(other.to_string())),
-    }
-}
-
-/// The name of a formation kind, as [`formation_kind`] reads it.
-pub fn formation_name(kind: FormationKind) -> &'static str {
-    match kind {
-        FormationKind::Line => "line",
-        FormationKind::Column => "column",
-        FormationKind::Wedge => "wedge",
-        FormationKind::Circle => "circle",
-        FormationKind::Custom => "custom",
-    }
+    FormationKind::parse(s).ok_or_else(|| SpecError::UnknownFormation(s.to_string()))
 }
 
 /// A cluster as written in the GCS configuration:

@@ -73,7 +73,9 @@ struct SquareRun {
     seconds: f64,
 }
 
-fn drive_square(noise: bool) -> SquareRun {
+/// Four robots of two platforms gathered into a circle; the cluster pose
+/// they gathered at.
+fn gathered(noise: bool) -> (Bench, ClusterController, mech_proto::ClusterPose) {
     let mut world = Bench::with_noise(
         &[
             ("robot_1", PlatformSpec::diff_drive(), pose(-0.5, 0.4, 0.3)),
@@ -91,7 +93,6 @@ fn drive_square(noise: bool) -> SquareRun {
         ClusterConfig::default(),
     )
     .unwrap();
-    // Gather into formation first.
     for _ in 0..ticks(8.0) {
         tick(&mut world, &mut cluster);
     }
@@ -101,7 +102,37 @@ fn drive_square(noise: bool) -> SquareRun {
         gathered < if noise { 0.1 } else { 0.05 },
         "gathered into slots: {gathered:.3} m"
     );
+    (world, cluster, start)
+}
 
+/// Slot errors sampled along a run.
+#[derive(Default)]
+struct SlotErrors {
+    /// Against the reported positions (what the controller sees).
+    reported: Vec<f64>,
+    /// Against the true positions.
+    truth: Vec<f64>,
+    /// Against the true positions, diff-drive then kiwi.
+    per_platform: [Vec<f64>; 2],
+}
+
+impl SlotErrors {
+    /// One period's slots, with the members' true poses when they were
+    /// computed.
+    fn sample(&mut self, poses: &[(String, mech_proto::Pose)], slots: &[mech_control::SlotTarget]) {
+        for s in slots {
+            self.reported.push(s.error);
+            let p = poses.iter().find(|(n, _)| *n == s.robot).unwrap().1;
+            let e = (p.x - s.x).hypot(p.y - s.y);
+            self.truth.push(e);
+            let diff = s.robot == "robot_1" || s.robot == "robot_3";
+            self.per_platform[usize::from(!diff)].push(e);
+        }
+    }
+}
+
+fn drive_square(noise: bool) -> SquareRun {
+    let (mut world, mut cluster, start) = gathered(noise);
     let side = 3.0;
     let corners = [
         (start.x + side, start.y, Some(FRAC_PI_2)),
@@ -116,9 +147,7 @@ fn drive_square(noise: bool) -> SquareRun {
             .collect(),
         false,
     );
-    let mut reported = Vec::new();
-    let mut truth = Vec::new();
-    let mut per_platform = [Vec::new(), Vec::new()];
+    let mut errors = SlotErrors::default();
     let mut reached = Vec::new();
     let mut finished = false;
     let t0 = world.now_s();
@@ -130,14 +159,7 @@ fn drive_square(noise: bool) -> SquareRun {
             .collect();
         let out = tick(&mut world, &mut cluster);
         assert_eq!(out.commands.len(), 4, "every member commanded");
-        for s in &out.status.slots {
-            reported.push(s.error);
-            let p = poses.iter().find(|(n, _)| *n == s.robot).unwrap().1;
-            let e = (p.x - s.x).hypot(p.y - s.y);
-            truth.push(e);
-            let diff = s.robot == "robot_1" || s.robot == "robot_3";
-            per_platform[usize::from(!diff)].push(e);
-        }
+        errors.sample(&poses, &out.status.slots);
         for e in &out.events {
             match e {
                 ControlEvent::WaypointReached { index } => reached.push(*index),
@@ -163,10 +185,13 @@ fn drive_square(noise: bool) -> SquareRun {
     );
     let stats = |e: &[f64]| (e.iter().copied().fold(0.0, f64::max), rms(e));
     SquareRun {
-        reported: stats(&reported),
-        truth: stats(&truth),
-        per_platform: [stats(&per_platform[0]), stats(&per_platform[1])],
-        samples: reported.len(),
+        reported: stats(&errors.reported),
+        truth: stats(&errors.truth),
+        per_platform: [
+            stats(&errors.per_platform[0]),
+            stats(&errors.per_platform[1]),
+        ],
+        samples: errors.reported.len(),
         seconds: world.now_s() - t0,
     }
 }

@@ -174,7 +174,7 @@ async fn follower_holds_offset_while_the_leader_runs_a_mission() {
         (t.error < 0.05).then_some(())
     })
     .await;
-    let start = gcs.with_fleet(|f| f.robot("robot_1").unwrap().pose);
+    let start = gcs.with_fleet(|f| f.robot("robot_1").unwrap().telemetry.pose);
     run(
         &mut exec,
         &format!(
@@ -197,6 +197,7 @@ async fn follower_holds_offset_while_the_leader_runs_a_mission() {
         gcs.with_fleet(|f| {
             f.robot("robot_1")
                 .unwrap()
+                .telemetry
                 .mission
                 .is_some_and(|m| m.next == m.total)
         })
@@ -217,7 +218,7 @@ async fn follower_holds_offset_while_the_leader_runs_a_mission() {
 async fn mission_switched_onboard_offboard_onboard_finishes_in_order() {
     let _serial = SERIAL.lock().await;
     let (gcs, mut exec, fleet) = start(1, vec![PlatformSpec::diff_drive()]).await;
-    let p = gcs.with_fleet(|f| f.robot("robot_1").unwrap().pose);
+    let p = gcs.with_fleet(|f| f.robot("robot_1").unwrap().telemetry.pose);
     let pts: Vec<String> = [(0.5, 0.0), (0.5, 0.5), (0.0, 0.5), (0.0, 1.0), (0.5, 1.0)]
         .iter()
         .map(|(dx, dy)| format!("{:.3},{:.3}", p.x + dx, p.y + dy))
@@ -235,7 +236,7 @@ async fn mission_switched_onboard_offboard_onboard_finishes_in_order() {
     assert!(on.contains("resumes at waypoint 4 of 5"), "{on}");
     let reached = run(&mut exec, "nav-wait robot_1 5 30s").await;
     println!("{reached}");
-    let end = gcs.with_fleet(|f| f.robot("robot_1").unwrap().pose);
+    let end = gcs.with_fleet(|f| f.robot("robot_1").unwrap().telemetry.pose);
     assert!(
         (end.x - p.x - 0.5).hypot(end.y - p.y - 1.0) < 0.15,
         "ended at the last waypoint"
@@ -292,7 +293,15 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         "formation from the config"
     );
 
-    // An external program publishes a cluster command on the cluster's channel.
+    an_external_cluster_command_sets_formation_and_motion(&gcs, &exec).await;
+    a_gamepad_velocity_lapses_and_the_cluster_holds(&exec).await;
+    fleet.shutdown().await;
+    gcs.shutdown().await;
+}
+
+/// An external program publishes a cluster command on the cluster's
+/// channel: its formation and velocity goal drive the cluster.
+async fn an_external_cluster_command_sets_formation_and_motion(gcs: &Gcs, exec: &Executor) {
     let mut matlab = gcs.router().publisher("matlab", "fleet/c1");
     let command = mech_proto::ClusterCommand {
         cluster: "c1".into(),
@@ -328,12 +337,14 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         }),
         "the external velocity goal drives the cluster"
     );
+}
 
-    // A gamepad velocity lapses unless refreshed: the cluster holds (the
-    // external program's velocity, which does not lapse, is replaced by
-    // the gamepad's, so a hold can only be the lapse). It lapses 0.5 s
-    // after it was given (the hub's drive_timeout; its timing is checked
-    // with stepped time in the hub's unit tests).
+/// A gamepad velocity lapses unless refreshed: the cluster holds (the
+/// external program's velocity, which does not lapse, is replaced by the
+/// gamepad's, so a hold can only be the lapse). It lapses 0.5 s after it
+/// was given (the hub's drive_timeout; its timing is checked with stepped
+/// time in the hub's unit tests).
+async fn a_gamepad_velocity_lapses_and_the_cluster_holds(exec: &Executor) {
     let before = exec
         .control()
         .cluster_view("c1")
@@ -376,6 +387,4 @@ async fn external_program_and_gamepad_drive_a_cluster_from_config() {
         (after.y - before.y).abs() < 0.1 * (0.5 + 0.5) + 0.02,
         "moved at most until the timeout"
     );
-    fleet.shutdown().await;
-    gcs.shutdown().await;
 }

@@ -152,6 +152,98 @@ fn inside(mission: &Mission, world: &Bench) -> Option<usize> {
         .position(|w| (w.x - p.x).hypot(w.y - p.y) <= mission.arrival_radius + 0.02)
 }
 
+/// What the GCS sees of a mission across switches: waypoint reached
+/// events (from onboard progress and from the offboard loop), and the
+/// arrival circles the true path entered, in order.
+#[derive(Default)]
+struct Seen {
+    reached: Vec<usize>,
+    entered: Vec<usize>,
+    /// The onboard progress's `next` last read.
+    last_next: u32,
+}
+
+impl Seen {
+    /// Notes the arrival circle the robot is in, if it just entered it.
+    fn track(&mut self, mission: &Mission, world: &Bench) {
+        if let Some(i) = inside(mission, world) {
+            if self.entered.last() != Some(&i) {
+                self.entered.push(i);
+            }
+        }
+    }
+
+    /// Notes the waypoints the onboard progress says were reached since the
+    /// last reading.
+    fn progress(&mut self, next: u32) {
+        self.reached
+            .extend((self.last_next..next).map(|i| i as usize));
+        self.last_next = next;
+    }
+}
+
+/// Onboard until waypoint 1 is reached and the robot is mid-leg to 2.
+fn onboard_to_mid_leg(world: &mut Bench, mission: &Mission, seen: &mut Seen) {
+    for _ in 0..ticks(60.0) {
+        world.advance(period());
+        seen.track(mission, world);
+        let p = world.telemetry("robot_1").unwrap().mission.unwrap();
+        seen.progress(p.next);
+        if p.next == 2 && inside(mission, world).is_none() {
+            break;
+        }
+    }
+}
+
+/// Switched to offboard (routed, then taking over from the reported
+/// progress) until waypoint 3 is reached and the robot is mid-leg to 4.
+fn offboard_to_mid_leg(world: &mut Bench, mission: &Mission, seen: &mut Seen) -> OffboardNavigator {
+    let reported = world.telemetry("robot_1").unwrap().mission;
+    world.route("robot_1", OFFBOARD);
+    let mut nav =
+        OffboardNavigator::take_over("robot_1", mission.clone(), reported, NavConfig::default());
+    assert_eq!(nav.progress().next, 2);
+    for _ in 0..ticks(60.0) {
+        let events = offboard_tick(world, &mut nav);
+        seen.track(mission, world);
+        seen.reached.extend(reached(&events));
+        if nav.progress().next == 4 && inside(mission, world).is_none() {
+            break;
+        }
+    }
+    nav
+}
+
+/// Back to onboard (a fresh mission id starting at the current next) until
+/// the mission finishes; whether it did.
+fn onboard_to_the_end(
+    world: &mut Bench,
+    mission: &Mission,
+    nav: &OffboardNavigator,
+    seen: &mut Seen,
+) -> bool {
+    let back = nav.onboard_mission(2);
+    world.mission("robot_1", ONBOARD, back);
+    world.route("robot_1", ONBOARD);
+    seen.last_next = 4;
+    for _ in 0..ticks(60.0) {
+        world.advance(period());
+        seen.track(mission, world);
+        if let Some(p) = world
+            .telemetry("robot_1")
+            .unwrap()
+            .mission
+            .filter(|p| p.id == 2)
+        {
+            seen.progress(p.next);
+            if p.next == p.total {
+                return true;
+            }
+        }
+    }
+    false
+}
+
 #[test]
 fn live_switch_onboard_offboard_onboard_keeps_mission_progress() {
     for (name, spec) in [
@@ -161,50 +253,13 @@ fn live_switch_onboard_offboard_onboard_keeps_mission_progress() {
         let mut world = one_robot(spec, 0.0, ONBOARD);
         let mission = square_mission(1);
         world.mission("robot_1", ONBOARD, mission.clone());
-        // What the GCS sees: waypoint reached events from onboard progress and
-        // from the offboard loop, and the true path's arrival circles.
-        let mut seen = Vec::new();
-        let mut entered: Vec<usize> = Vec::new();
-        let mut last_next = 0u32;
-        let track = |world: &Bench, entered: &mut Vec<usize>| {
-            if let Some(i) = inside(&mission, world) {
-                if entered.last() != Some(&i) {
-                    entered.push(i);
-                }
-            }
-        };
-
-        // Onboard until waypoint 1 is reached and the robot is mid-leg to 2.
-        for _ in 0..ticks(60.0) {
-            world.advance(period());
-            track(&world, &mut entered);
-            let p = world.telemetry("robot_1").unwrap().mission.unwrap();
-            seen.extend((last_next..p.next).map(|i| i as usize));
-            last_next = p.next;
-            if p.next == 2 && inside(&mission, &world).is_none() {
-                break;
-            }
-        }
-        assert_eq!(last_next, 2, "{name}: onboard progress before the switch");
-
-        // Switch to offboard: route, then take over from the reported progress.
-        let reported = world.telemetry("robot_1").unwrap().mission;
-        world.route("robot_1", OFFBOARD);
-        let mut nav = OffboardNavigator::take_over(
-            "robot_1",
-            mission.clone(),
-            reported,
-            NavConfig::default(),
+        let mut seen = Seen::default();
+        onboard_to_mid_leg(&mut world, &mission, &mut seen);
+        assert_eq!(
+            seen.last_next, 2,
+            "{name}: onboard progress before the switch"
         );
-        assert_eq!(nav.progress().next, 2);
-        for _ in 0..ticks(60.0) {
-            let events = offboard_tick(&mut world, &mut nav);
-            track(&world, &mut entered);
-            seen.extend(reached(&events));
-            if nav.progress().next == 4 && inside(&mission, &world).is_none() {
-                break;
-            }
-        }
+        let nav = offboard_to_mid_leg(&mut world, &mission, &mut seen);
         assert_eq!(
             nav.progress().next,
             4,
@@ -214,41 +269,19 @@ fn live_switch_onboard_offboard_onboard_keeps_mission_progress() {
             world.telemetry("robot_1").unwrap().computation,
             mech_proto::Computation::Offboard
         );
-
-        // Back to onboard: a fresh mission id starting at the current next.
-        let back = nav.onboard_mission(2);
-        world.mission("robot_1", ONBOARD, back);
-        world.route("robot_1", ONBOARD);
-        last_next = 4;
-        let mut finished = false;
-        for _ in 0..ticks(60.0) {
-            world.advance(period());
-            track(&world, &mut entered);
-            if let Some(p) = world
-                .telemetry("robot_1")
-                .unwrap()
-                .mission
-                .filter(|p| p.id == 2)
-            {
-                seen.extend((last_next..p.next).map(|i| i as usize));
-                last_next = p.next;
-                if p.next == p.total {
-                    finished = true;
-                    break;
-                }
-            }
-        }
+        let finished = onboard_to_the_end(&mut world, &mission, &nav, &mut seen);
+        let (reached, entered) = (&seen.reached, &seen.entered);
         println!(
-            "live switch {name}: reached {seen:?}, arrival circles entered in order {entered:?}"
+            "live switch {name}: reached {reached:?}, arrival circles entered in order {entered:?}"
         );
         assert!(finished, "{name}: mission finished onboard");
         assert_eq!(
-            seen,
+            *reached,
             vec![0, 1, 2, 3, 4],
             "{name}: every waypoint once, in order"
         );
         assert_eq!(
-            entered,
+            *entered,
             vec![0, 1, 2, 3, 4],
             "{name}: the robot visited each waypoint once, in order"
         );

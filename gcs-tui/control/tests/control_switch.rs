@@ -159,7 +159,7 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     while gcs
         .snapshot()
         .robot("robot_1")
-        .and_then(|r| r.mission)
+        .and_then(|r| r.telemetry.mission)
         .is_none_or(|m| m.next != 2)
     {
         assert!(
@@ -173,60 +173,9 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     let mut latencies = Vec::new();
     let mut router_latencies = Vec::new();
     for round in 0..20 {
-        let requested = Instant::now();
-        let out = exec.execute_line("nav robot_1 offboard").await.unwrap();
-        let (route_at, _) = next_matching(
-            &mut rx,
-            "route to offboard/robot_1",
-            |e| matches!(&e.body, Body::Route(r) if r.channel == "offboard/robot_1"),
-        )
-        .await;
-        let (cmd_at, _) = next_matching(&mut rx, "offboard command", |e| {
-            matches!(e.body, Body::Command(_)) && e.header.channel == "offboard/robot_1"
-        })
-        .await;
-        assert!(
-            route_at <= cmd_at,
-            "the route change reaches the robot before the first command"
-        );
-        assert!(
-            out.summary.contains("from waypoint 2 of 5"),
-            "round {round}: {}",
-            out.summary
-        );
-        latencies.push(cmd_at.duration_since(requested));
-        let view = exec.control().nav_view("robot_1").unwrap();
-        router_latencies.push(view.switch_latency.unwrap());
-
-        let back = exec.execute_line("nav robot_1 onboard").await.unwrap();
-        assert!(
-            back.summary.contains("resumes at waypoint 2 of 5"),
-            "{}",
-            back.summary
-        );
-        let (mission_at, mission) =
-            next_matching(&mut rx, "mission", |e| matches!(e.body, Body::Mission(_))).await;
-        let Body::Mission(m) = mission.body else {
-            unreachable!()
-        };
-        assert_eq!(m.start_index, 2, "handed back at the same next waypoint");
-        let (route_back_at, _) = next_matching(
-            &mut rx,
-            "route to wp/gcs",
-            |e| matches!(&e.body, Body::Route(r) if r.channel == "wp/gcs"),
-        )
-        .await;
-        assert!(
-            mission_at < route_back_at,
-            "the mission is stored before the robot is routed to run it"
-        );
-        assert!(
-            exec.control().nav_view("robot_1").is_none(),
-            "the GCS loop stopped"
-        );
-        // Telemetry with the new mission's progress before the next round.
-        tokio::time::sleep(Duration::from_millis(120)).await;
-        while rx.try_recv().is_ok() {}
+        let (to_robot, at_router) = offboard_and_back(&mut exec, &mut rx, round).await;
+        latencies.push(to_robot);
+        router_latencies.push(at_router);
     }
     latencies.sort();
     router_latencies.sort();
@@ -241,6 +190,73 @@ async fn nav_switch_keeps_progress_and_reaches_the_robot_in_one_hop() {
     );
     agent.abort();
     gcs.shutdown().await;
+}
+
+/// One round of the switch: offboard (the route reaches the robot before
+/// the first command, which resumes from the reported progress), then back
+/// onboard (the mission is stored before the route back). Returns how long
+/// the offboard switch took to the robot's first offboard command, and to
+/// the router forwarding it.
+async fn offboard_and_back(
+    exec: &mut Executor,
+    rx: &mut mpsc::UnboundedReceiver<(Instant, Envelope)>,
+    round: usize,
+) -> (Duration, Duration) {
+    let requested = Instant::now();
+    let out = exec.execute_line("nav robot_1 offboard").await.unwrap();
+    let (route_at, _) = next_matching(
+        rx,
+        "route to offboard/robot_1",
+        |e| matches!(&e.body, Body::Route(r) if r.channel == "offboard/robot_1"),
+    )
+    .await;
+    let (cmd_at, _) = next_matching(rx, "offboard command", |e| {
+        matches!(e.body, Body::Command(_)) && e.header.channel == "offboard/robot_1"
+    })
+    .await;
+    assert!(
+        route_at <= cmd_at,
+        "the route change reaches the robot before the first command"
+    );
+    assert!(
+        out.summary.contains("from waypoint 2 of 5"),
+        "round {round}: {}",
+        out.summary
+    );
+    let to_robot = cmd_at.duration_since(requested);
+    let view = exec.control().nav_view("robot_1").unwrap();
+    let at_router = view.switch_latency.unwrap();
+
+    let back = exec.execute_line("nav robot_1 onboard").await.unwrap();
+    assert!(
+        back.summary.contains("resumes at waypoint 2 of 5"),
+        "{}",
+        back.summary
+    );
+    let (mission_at, mission) =
+        next_matching(rx, "mission", |e| matches!(e.body, Body::Mission(_))).await;
+    let Body::Mission(m) = mission.body else {
+        unreachable!()
+    };
+    assert_eq!(m.start_index, 2, "handed back at the same next waypoint");
+    let (route_back_at, _) = next_matching(
+        rx,
+        "route to wp/gcs",
+        |e| matches!(&e.body, Body::Route(r) if r.channel == "wp/gcs"),
+    )
+    .await;
+    assert!(
+        mission_at < route_back_at,
+        "the mission is stored before the robot is routed to run it"
+    );
+    assert!(
+        exec.control().nav_view("robot_1").is_none(),
+        "the GCS loop stopped"
+    );
+    // Telemetry with the new mission's progress before the next round.
+    tokio::time::sleep(Duration::from_millis(120)).await;
+    while rx.try_recv().is_ok() {}
+    (to_robot, at_router)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -266,7 +282,7 @@ async fn offboard_resumes_from_progress_reported_before_the_robot_was_routed_els
     exec.execute_line("route robot_1 joy/0").await.unwrap();
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert_eq!(
-        gcs.with_fleet(|f| f.robot("robot_1").unwrap().mission),
+        gcs.with_fleet(|f| f.robot("robot_1").unwrap().telemetry.mission),
         None
     );
 

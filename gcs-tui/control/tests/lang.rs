@@ -369,7 +369,9 @@ async fn wait_moved_holds_once_the_robot_is_farther_than_the_distance() {
         .send_telemetry(agent::telemetry(1.0, 2.0, "", None))
         .await;
     let at = |x: f64| {
-        move |f: &mech_core::fleet::Fleet| f.robot("robot_1").is_some_and(|r| r.pose.x == x)
+        move |f: &mech_core::fleet::Fleet| {
+            f.robot("robot_1").is_some_and(|r| r.telemetry.pose.x == x)
+        }
     };
     assert!(agent::eventually(Duration::from_secs(10), || gcs.with_fleet(at(1.0))).await);
     let err = exec

@@ -56,14 +56,10 @@ fn path(dir: &Path, name: &str) -> String {
     dir.join(name).to_str().unwrap().to_string()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_file_mavproxy_wrote_loads_around_its_home_and_round_trips() {
-    let dir = tempfile::tempdir().unwrap();
-    let (gcs, _robots) = station(None).await;
-    let mut exec = Executor::new(gcs.clone());
-    let fixture = mavproxy_file();
-    let fixture = fixture.to_str().unwrap();
-
+/// The fixture is refused without an origin (its frame is relative to
+/// home), and loads around its home with `origin home`, the takeoff and
+/// the hold time noted.
+async fn loads_only_around_its_home(exec: &mut Executor, fixture: &str) {
     let refused = exec
         .execute_line(&format!("mission load robot_1 {fixture}"))
         .await
@@ -93,6 +89,39 @@ async fn a_file_mavproxy_wrote_loads_around_its_home_and_round_trips() {
             "1 hold time(s) (param 1) not kept: a MECH waypoint is passed, not held"
         ]
     );
+}
+
+/// pymavlink, which MAVProxy's wp load calls, reads what MECH wrote in
+/// `out`: home, the square in the fixture's frame, the jump.
+fn pymavlink_reads_the_square(out: &str) {
+    if let Some(items) = pymavlink_reads(out) {
+        assert_eq!(items.len(), 6, "home, four waypoints, the jump: {items:?}");
+        let home = &items[0];
+        assert_eq!((home[0], home[1]), (0.0, 16.0));
+        assert!((home[2] - 52.001234).abs() < 1e-9 && (home[3] - 4.371234).abs() < 1e-9);
+        for w in &items[1..5] {
+            assert_eq!((w[0], w[1]), (3.0, 16.0), "{w:?}");
+        }
+        let jump = &items[5];
+        assert_eq!((jump[1], jump[4], jump[5]), (177.0, 1.0, -1.0), "{jump:?}");
+        let fixture_first = [52.001270, 4.371263];
+        assert!(
+            (items[1][2] - fixture_first[0]).abs() < 1e-7
+                && (items[1][3] - fixture_first[1]).abs() < 1e-7,
+            "{items:?}"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_file_mavproxy_wrote_loads_around_its_home_and_round_trips() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gcs, _robots) = station(None).await;
+    let mut exec = Executor::new(gcs.clone());
+    let fixture = mavproxy_file();
+    let fixture = fixture.to_str().unwrap();
+
+    loads_only_around_its_home(&mut exec, fixture).await;
     let (square, looped) = draft(&gcs, "robot_1");
     assert!(looped);
     // 0.000036 deg of latitude north and 0.000029 deg of longitude east of
@@ -144,24 +173,7 @@ async fn a_file_mavproxy_wrote_loads_around_its_home_and_round_trips() {
         .unwrap();
     assert_eq!(draft(&gcs, "robot_2"), (square.clone(), true));
 
-    // pymavlink, which MAVProxy's wp load calls, reads what MECH wrote.
-    if let Some(items) = pymavlink_reads(&out) {
-        assert_eq!(items.len(), 6, "home, four waypoints, the jump: {items:?}");
-        let home = &items[0];
-        assert_eq!((home[0], home[1]), (0.0, 16.0));
-        assert!((home[2] - 52.001234).abs() < 1e-9 && (home[3] - 4.371234).abs() < 1e-9);
-        for w in &items[1..5] {
-            assert_eq!((w[0], w[1]), (3.0, 16.0), "{w:?}");
-        }
-        let jump = &items[5];
-        assert_eq!((jump[1], jump[4], jump[5]), (177.0, 1.0, -1.0), "{jump:?}");
-        let fixture_first = [52.001270, 4.371263];
-        assert!(
-            (items[1][2] - fixture_first[0]).abs() < 1e-7
-                && (items[1][3] - fixture_first[1]).abs() < 1e-7,
-            "{items:?}"
-        );
-    }
+    pymavlink_reads_the_square(&out);
     gcs.shutdown().await;
 }
 
@@ -207,6 +219,44 @@ print(json.dumps([[p.frame, p.command, p.x, p.y, p.param1, p.param2] for p in w.
     )
 }
 
+/// A cluster's waypoints, headings and loop survive both formats (files
+/// written in `dir`).
+async fn a_clusters_waypoints_round_trip(exec: &mut Executor, dir: &Path) {
+    exec.execute_line("cluster c1 robot_1 robot_2")
+        .await
+        .unwrap();
+    exec.execute_line("cluster-waypoint c1 0.5,0.5,90deg 1.5,0.5 1.5,1.5,0 loop")
+        .await
+        .unwrap();
+    let cluster_before = exec.control().cluster_draft("c1").unwrap();
+    for name in ["c1.toml", "c1.waypoints"] {
+        let file = path(dir, name);
+        exec.execute_line(&format!("mission save c1 {file}"))
+            .await
+            .unwrap();
+        exec.execute_line("cluster-waypoint c1 9,9").await.unwrap();
+        let loaded = exec
+            .execute_line(&format!("mission load c1 {file}"))
+            .await
+            .unwrap();
+        assert!(loaded.summary.contains("3 waypoints, looped"), "{loaded:?}");
+        let (after, looped) = exec.control().cluster_draft("c1").unwrap();
+        assert!(looped, "{name}");
+        assert_eq!(after.len(), 3);
+        for (a, b) in after.iter().zip(&cluster_before.0) {
+            assert!(
+                (a.x - b.x).abs() < 1e-8 && (a.y - b.y).abs() < 1e-8,
+                "{name}"
+            );
+            match (a.heading, b.heading) {
+                (Some(h), Some(k)) => assert!((h - k).abs() < 1e-6, "{name}: {h} {k}"),
+                (None, None) => {}
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn times_loops_and_a_clusters_headings_survive_mechs_format() {
     let dir = tempfile::tempdir().unwrap();
@@ -244,40 +294,7 @@ async fn times_loops_and_a_clusters_headings_survive_mechs_format() {
         "{saved:?}"
     );
 
-    // A cluster's waypoints, headings and loop, both formats.
-    exec.execute_line("cluster c1 robot_1 robot_2")
-        .await
-        .unwrap();
-    exec.execute_line("cluster-waypoint c1 0.5,0.5,90deg 1.5,0.5 1.5,1.5,0 loop")
-        .await
-        .unwrap();
-    let cluster_before = exec.control().cluster_draft("c1").unwrap();
-    for name in ["c1.toml", "c1.waypoints"] {
-        let file = path(dir.path(), name);
-        exec.execute_line(&format!("mission save c1 {file}"))
-            .await
-            .unwrap();
-        exec.execute_line("cluster-waypoint c1 9,9").await.unwrap();
-        let loaded = exec
-            .execute_line(&format!("mission load c1 {file}"))
-            .await
-            .unwrap();
-        assert!(loaded.summary.contains("3 waypoints, looped"), "{loaded:?}");
-        let (after, looped) = exec.control().cluster_draft("c1").unwrap();
-        assert!(looped, "{name}");
-        assert_eq!(after.len(), 3);
-        for (a, b) in after.iter().zip(&cluster_before.0) {
-            assert!(
-                (a.x - b.x).abs() < 1e-8 && (a.y - b.y).abs() < 1e-8,
-                "{name}"
-            );
-            match (a.heading, b.heading) {
-                (Some(h), Some(k)) => assert!((h - k).abs() < 1e-6, "{name}: {h} {k}"),
-                (None, None) => {}
-                other => panic!("{name}: {other:?}"),
-            }
-        }
-    }
+    a_clusters_waypoints_round_trip(&mut exec, dir.path()).await;
     let e = exec
         .execute_line(&format!(
             "mission load robot_1 {}",

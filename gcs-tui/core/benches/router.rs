@@ -2,7 +2,9 @@
 //! --bench router`). Prints numbers; asserts nothing about time.
 //!
 //! (a) latency the router adds (controller -> router -> agent) against a
-//!     direct controller -> agent baseline in the same run, p50/p99/p99.9;
+//!     direct controller -> agent baseline and a bare UDP relay (a thread
+//!     in `recv_from`/`send_to`, as peerbench's `udp-relay`) in the same
+//!     run, p50/p99/p99.9;
 //! (b) sustained forwarded messages per second with zero loss (a bounded
 //!     number of messages in flight, so kernel buffers never overflow);
 //!     (a) and (b) run twice: unauthenticated, then with every message
@@ -14,7 +16,10 @@
 //!     plus one in-process subscriber, counting every drop;
 //! (r) recording: the router threads' CPU time per message with and
 //!     without a recording (1,000 robots at 50 Hz; 100 at 20 Hz), the
-//!     recorder thread's, and the file size per robot-hour.
+//!     recorder thread's, and the file size per robot-hour;
+//! (m) what polling costs: the router threads' CPU at 2k, 8k, 32k and 64k
+//!     commands per second, paced evenly as a controller (or peerbench)
+//!     sends them, with polling on (`router.udp_poll`) and off.
 
 #![allow(clippy::unwrap_used)]
 
@@ -449,9 +454,14 @@ fn main() {
         config().router.udp_workers,
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
+    // `MECH_BENCH_AUTH=off` or `on` runs (a) and (b) one way only.
+    let auth = std::env::var("MECH_BENCH_AUTH").unwrap_or_default();
     for authenticated in [false, true] {
         if !phase('a') && !phase('b') {
             break;
+        }
+        if (auth == "off" && authenticated) || (auth == "on" && !authenticated) {
+            continue;
         }
         println!(
             "== {}",
@@ -494,6 +504,99 @@ fn main() {
         recording_cost(&rt);
         report_steal(stolen);
     }
+    if phase('m') {
+        let stolen = steal_jiffies();
+        polling_cost(&rt);
+        report_steal(stolen);
+    }
+}
+
+/// Sends `rate` commands per second for `run`, each at its due time
+/// (start + i / rate): sleeping until shortly before it, then spinning, so
+/// the stream is even, as a paced controller's is. Returns how many were
+/// sent.
+fn paced(
+    controller: &UdpSocket,
+    router: SocketAddr,
+    commands: &mut Commands,
+    rate: f64,
+    run: Duration,
+) -> u64 {
+    let start = Instant::now();
+    let mut sent = 0u64;
+    let total = (rate * run.as_secs_f64()) as u64;
+    while sent < total {
+        let due = start + Duration::from_secs_f64(sent as f64 / rate);
+        let now = Instant::now();
+        if due > now + Duration::from_micros(100) {
+            std::thread::sleep(due - now - Duration::from_micros(80));
+        }
+        while Instant::now() < due {
+            std::hint::spin_loop();
+        }
+        if controller.send_to(&commands.next(), router).is_ok() {
+            sent += 1;
+        }
+    }
+    sent
+}
+
+/// (m) the router threads' CPU at medium rates, polling on and off.
+fn polling_cost(rt: &tokio::runtime::Runtime) {
+    println!(
+        "(m) router CPU at medium rates, commands paced evenly (load average {})",
+        load_average()
+    );
+    let budget = config().router.udp_poll;
+    for poll in [budget, Duration::ZERO] {
+        let mut cfg = config();
+        cfg.router.udp_poll = poll;
+        let gcs = rt.block_on(Gcs::start(cfg)).unwrap();
+        let router = gcs.router().clone();
+        let addr = router.udp_addr();
+        let robot = agent("robot_1", addr, &mut None);
+        rt.block_on(router.set_route("robot_1", Some("joy/0")))
+            .unwrap();
+        acknowledge_routes(&robot, "robot_1", addr, &mut None);
+        let controller = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let counter = CommandCounter::start(&robot);
+        let mut commands = Commands {
+            signer: None,
+            unsigned: command("pad", "robot_1", "joy/0", 1),
+        };
+        let label = if poll.is_zero() {
+            "polling off".to_string()
+        } else {
+            format!("polling {} us", poll.as_micros())
+        };
+        for rate in [2e3, 8e3, 32e3, 64e3] {
+            let run = Duration::from_secs(4);
+            let base = counter.get();
+            let cpu0 = router_cpu();
+            let t = Instant::now();
+            let sent = paced(&controller, addr, &mut commands, rate, run);
+            let took = t.elapsed().as_secs_f64();
+            let cpu = router_cpu() - cpu0;
+            let got = counter.settle(base + sent) - base;
+            println!(
+                "  {label:<16} {:>3.0}k msg/s: router CPU {:>5.1}% of a core, {:>5.2} us/msg; {sent} sent, {} lost",
+                rate / 1e3,
+                cpu / took * 100.0,
+                cpu / got.max(1) as f64 * 1e6,
+                sent.saturating_sub(got)
+            );
+        }
+        counter.stop();
+        rt.block_on(gcs.shutdown());
+    }
+}
+
+/// The machine's load average over the last minute, as /proc/loadavg says.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "unknown".into())
 }
 
 /// (a) and (b) on a router of their own, with or without authentication.
@@ -564,7 +667,42 @@ fn forwarding(rt: &tokio::runtime::Runtime, authenticated: bool) {
     rt.block_on(gcs.shutdown());
 }
 
-/// (a) one-way latency with and without the router.
+/// A bare UDP relay, as peerbench's `udp-relay` target is: a thread
+/// blocking in `recv_from` and passing each datagram to `to` with
+/// `send_to`, until `stop` is set (it wakes at least every 100 ms to look).
+struct Relay {
+    addr: SocketAddr,
+    stop: Arc<AtomicBool>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl Relay {
+    fn start(to: SocketAddr) -> Relay {
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(100)))
+            .unwrap();
+        let addr = sock.local_addr().unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let mut buf = [0u8; 2048];
+            while !flag.load(Ordering::Relaxed) {
+                if let Ok((n, _)) = sock.recv_from(&mut buf) {
+                    let _ = sock.send_to(&buf[..n], to);
+                }
+            }
+        });
+        Relay { addr, stop, thread }
+    }
+
+    fn stop(self) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.join().unwrap();
+    }
+}
+
+/// (a) one-way latency directly, through a bare relay and through the
+/// router, interleaved so the three see the same machine.
 fn latency(
     controller: &UdpSocket,
     robot: &UdpSocket,
@@ -575,32 +713,44 @@ fn latency(
 ) {
     const SAMPLES: u32 = 20_000;
     let warm = 1000;
-    let (mut direct, mut routed) = (Vec::new(), Vec::new());
-    for i in 0..SAMPLES + warm {
+    let relay = Relay::start(robot_addr);
+    let (mut direct, mut relayed, mut routed) = (Vec::new(), Vec::new(), Vec::new());
+    let mut one_way = |to: SocketAddr, i: u32| {
         let msg = sealed(signer, command("pad", "robot_1", "joy/0", i));
         let t = Instant::now();
-        controller.send_to(&msg, robot_addr).unwrap();
-        recv_command(robot, buf).unwrap();
-        let d = t.elapsed();
-        let msg = sealed(signer, command("pad", "robot_1", "joy/0", i));
-        let t = Instant::now();
-        controller.send_to(&msg, addr).unwrap();
+        controller.send_to(&msg, to).unwrap();
         let (seq, _) = recv_command(robot, buf).unwrap();
-        let r = t.elapsed();
         assert_eq!(seq, i);
+        t.elapsed()
+    };
+    for i in 0..SAMPLES + warm {
+        let d = one_way(robot_addr, i);
+        let b = one_way(relay.addr, i);
+        let r = one_way(addr, i);
         if i >= warm {
             direct.push(d);
+            relayed.push(b);
             routed.push(r);
         }
     }
+    relay.stop();
     println!("(a) one-way latency, controller -> agent:");
     let d = percentiles("direct (baseline)", direct);
+    let b = percentiles("through a bare UDP relay", relayed);
     let r = percentiles("through the router", routed);
+    let us = |x: Duration, y: Duration| (x.as_secs_f64() - y.as_secs_f64()) * 1e6;
     println!(
         "  router adds                  p50 {:>7.1} us  p99 {:>7.1} us  p99.9 {:>7.1} us  (target p99 <= 200 us)",
-        (r[0].as_secs_f64() - d[0].as_secs_f64()) * 1e6,
-        (r[1].as_secs_f64() - d[1].as_secs_f64()) * 1e6,
-        (r[2].as_secs_f64() - d[2].as_secs_f64()) * 1e6
+        us(r[0], d[0]),
+        us(r[1], d[1]),
+        us(r[2], d[2])
+    );
+    println!(
+        "  router over the bare relay   p50 {:>7.1} us  p99 {:>7.1} us  p99.9 {:>7.1} us  (p50 {:.2}x the relay's)",
+        us(r[0], b[0]),
+        us(r[1], b[1]),
+        us(r[2], b[2]),
+        r[0].as_secs_f64() / b[0].as_secs_f64()
     );
 }
 
@@ -614,6 +764,23 @@ fn throughput(
     commands: &mut Commands,
 ) {
     let counter = CommandCounter::start(robot);
+    bounded_window(router, controller, addr, &counter, commands);
+    match stepped_rates(router, controller, robot, addr, &counter, commands) {
+        Some(r) => println!("  sustained zero-loss rate: {:.0} msg/s", r),
+        None => println!("  sustained zero-loss rate: below the first step"),
+    }
+    counter.stop();
+}
+
+/// (b), first part: at most a window of commands in flight for 3 s; the
+/// rate forwarded and the router's CPU per command.
+fn bounded_window(
+    router: &mech_core::router::RouterHandle,
+    controller: &UdpSocket,
+    addr: SocketAddr,
+    counter: &CommandCounter,
+    commands: &mut Commands,
+) {
     const WINDOW: u64 = 1024;
     let run = Duration::from_secs(3);
     let before = router.counters();
@@ -649,7 +816,18 @@ fn throughput(
         1.0 / per,
         2.0 / per
     );
-    // Stepped offered rate: the highest rate delivered in full.
+}
+
+/// (b), second part: stepped offered rates until one loses a message or
+/// the sender cannot offer it; the highest rate delivered in full.
+fn stepped_rates(
+    router: &mech_core::router::RouterHandle,
+    controller: &UdpSocket,
+    robot: &UdpSocket,
+    addr: SocketAddr,
+    counter: &CommandCounter,
+    commands: &mut Commands,
+) -> Option<f64> {
     let mut best = None;
     for rate in [
         25e3, 50e3, 75e3, 100e3, 125e3, 150e3, 175e3, 200e3, 250e3, 300e3, 350e3, 400e3,
@@ -659,7 +837,7 @@ fn throughput(
             controller,
             addr,
             robot.local_addr().unwrap(),
-            &counter,
+            counter,
             commands,
             rate,
             Duration::from_secs(2),
@@ -681,16 +859,11 @@ fn throughput(
         }
         if achieved < 0.95 * rate {
             println!("  (the sender cannot offer more on these cores)");
-            best = Some(achieved);
-            break;
+            return Some(achieved);
         }
         best = Some(achieved);
     }
-    match best {
-        Some(r) => println!("  sustained zero-loss rate: {:.0} msg/s", r),
-        None => println!("  sustained zero-loss rate: below the first step"),
-    }
-    counter.stop();
+    best
 }
 
 /// The router's own cost per command with no receive syscall.

@@ -57,7 +57,9 @@ pub enum Security {
 }
 
 impl Security {
-    pub fn as_str(self) -> &'static str {
+    /// How `status` and the service's start-up line say it (not a name:
+    /// the attach protocol writes it in snake case).
+    pub fn label(self) -> &'static str {
         match self {
             Security::Authenticated => "authenticated",
             Security::LoopbackOnly => "unsigned (loopback only)",
@@ -66,26 +68,18 @@ impl Security {
     }
 }
 
-/// What a key may do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Role {
-    Robot,
-    Controller,
-    Operator,
-    Estop,
-}
-
-impl Role {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Role::Robot => "robot",
-            Role::Controller => "controller",
-            Role::Operator => "operator",
-            Role::Estop => "estop",
-        }
+mech_proto::named_enum! {
+    /// What a key may do.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum Role: "role" {
+        Robot => "robot",
+        Controller => "controller",
+        Operator => "operator",
+        Estop => "estop",
     }
 }
+
+mech_proto::serde_by_name!(Role);
 
 /// One `[[auth.keys]]` entry.
 #[derive(Debug, Clone, Deserialize)]
@@ -333,8 +327,8 @@ fn reason_of(e: AuthError) -> RejectReason {
     }
 }
 
-/// A stream: one sender's messages under one key on one link.
-type StreamId = (u32, String, u8);
+/// A sender's stream under one key (its id) on one of its links.
+type StreamId = (u32, u8);
 
 /// The keys the router holds and the freshness of every stream: the gate
 /// of the authenticated control plane.
@@ -345,7 +339,9 @@ pub struct Keyring {
     /// last): the router signs what it sends a peer with it, so a key
     /// rotation works whichever key the peer holds.
     by_name: HashMap<String, u32>,
-    streams: HashMap<StreamId, Stream>,
+    /// Every stream, by sender name, then key and link: found from the
+    /// name as received, without making a key of it.
+    streams: HashMap<String, HashMap<StreamId, Stream>>,
     freshness: Freshness,
 }
 
@@ -502,8 +498,8 @@ impl Keyring {
             reason: RejectReason::Replay,
             detail,
         };
-        let id = (tag.key_id, sender.to_string(), tag.link);
-        if let Some(stream) = self.streams.get_mut(&id) {
+        let id = (tag.key_id, tag.link);
+        if let Some(stream) = self.streams.get_mut(sender).and_then(|s| s.get_mut(&id)) {
             let last = stream.last_us();
             return stream.accept(tag.stamp_us).map_err(|_| {
                 replay(format!(
@@ -519,7 +515,10 @@ impl Keyring {
                 (tag.stamp_us as f64 - now_us as f64) / 1e6
             )));
         }
-        self.streams.insert(id, Stream::starting_at(tag.stamp_us));
+        self.streams
+            .entry(sender.to_string())
+            .or_default()
+            .insert(id, Stream::starting_at(tag.stamp_us));
         Ok(())
     }
 }
@@ -537,10 +536,49 @@ mod tests {
     }
 
     fn signed(key: &Key, stamp: u64) -> (Vec<u8>, Tag) {
+        signed_on(key, 0, stamp)
+    }
+
+    fn signed_on(key: &Key, link: u8, stamp: u64) -> (Vec<u8>, Tag) {
         let mut b = vec![0x91, 0x01, 0xc0];
-        key.seal(&mut b, 0, stamp).unwrap();
+        key.seal(&mut b, link, stamp).unwrap();
         let (_, tag) = mech_proto::auth::split(&b).unwrap();
         (b[..2].to_vec(), tag.unwrap())
+    }
+
+    #[test]
+    fn each_key_and_link_of_a_sender_is_a_stream_of_its_own() {
+        let (old, new, other) = (Key::new(&[1; 32]), Key::new(&[2; 32]), Key::new(&[3; 32]));
+        let mut r = ring(&[("matlab", 1), ("matlab", 2), ("octave", 3)]);
+        let now = 5_000_000;
+        let mut verify = |key: &Key, sender: &str, link: u8, stamp: u64| {
+            let (region, tag) = signed_on(key, link, stamp);
+            r.verify(&region, Some(tag), sender, now, true)
+                .map(|_| ())
+                .map_err(|e| e.reason)
+        };
+        assert_eq!(verify(&old, "matlab", 0, now + 10), Ok(()));
+        // The same stamp on another link, under another key of the same
+        // name, from another sender: each starts a stream of its own.
+        assert_eq!(verify(&old, "matlab", 1, now + 10), Ok(()));
+        assert_eq!(verify(&new, "matlab", 0, now + 10), Ok(()));
+        assert_eq!(verify(&other, "octave", 0, now + 10), Ok(()));
+        // Each stream remembers its own stamps.
+        for (key, sender, link) in [
+            (&old, "matlab", 0),
+            (&old, "matlab", 1),
+            (&new, "matlab", 0),
+            (&other, "octave", 0),
+        ] {
+            let again = verify(key, sender, link, now + 10);
+            assert_eq!(again, Err(RejectReason::Replay), "{sender} {link}");
+            assert_eq!(
+                verify(key, sender, link, now + 11),
+                Ok(()),
+                "{sender} {link}"
+            );
+        }
+        assert_eq!(verify(&old, "matlab", 2, now + 11), Ok(()), "a new link");
     }
 
     #[test]

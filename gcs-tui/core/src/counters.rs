@@ -20,38 +20,26 @@ pub struct ChannelStatus {
     pub idle: Duration,
 }
 
-/// Why a message was not forwarded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum DropReason {
-    /// The destination robot is routed to another channel (or to none).
-    NotRouted,
-    /// The destination names no registered robot.
-    UnknownRobot,
-    /// The operating system refused the datagram (buffer full, unreachable).
-    SendFailed,
-    /// The message could not be decoded.
-    BadPacket,
-    /// The router has shut down.
-    Stopped,
-    /// Refused by the authenticated control plane (see [`Rejections`]).
-    Rejected,
-    /// Not read at all: the router was behind and the datagram's source
-    /// address had been refused many times in the last second (and is not
-    /// a peer it knows).
-    Shed,
-}
-
-impl DropReason {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            DropReason::NotRouted => "not-routed",
-            DropReason::UnknownRobot => "unknown-robot",
-            DropReason::SendFailed => "send-failed",
-            DropReason::BadPacket => "bad-packet",
-            DropReason::Stopped => "router-stopped",
-            DropReason::Rejected => "rejected",
-            DropReason::Shed => "shed",
-        }
+mech_proto::named_enum! {
+    /// Why a message was not forwarded.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum DropReason: "drop reason" {
+        /// The destination robot is routed to another channel (or to none).
+        NotRouted => "not-routed",
+        /// The destination names no registered robot.
+        UnknownRobot => "unknown-robot",
+        /// The operating system refused the datagram (buffer full, unreachable).
+        SendFailed => "send-failed",
+        /// The message could not be decoded.
+        BadPacket => "bad-packet",
+        /// The router has shut down.
+        Stopped => "router-stopped",
+        /// Refused by the authenticated control plane (see [`Rejections`]).
+        Rejected => "rejected",
+        /// Not read at all: the router was behind and the datagram's source
+        /// address had been refused many times in the last second (and is
+        /// not a peer it knows).
+        Shed => "shed",
     }
 }
 
@@ -104,30 +92,19 @@ impl Drops {
     }
 }
 
-/// Rejection reasons, as counted.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum RejectReason {
-    Unsigned,
-    UnknownKey,
-    BadTag,
-    Replay,
-    NotPermitted,
-}
-
-impl RejectReason {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            RejectReason::Unsigned => "unsigned",
-            RejectReason::UnknownKey => "unknown-key",
-            RejectReason::BadTag => "bad-tag",
-            RejectReason::Replay => "replay",
-            RejectReason::NotPermitted => "not-permitted",
-        }
+mech_proto::named_enum! {
+    /// Rejection reasons, as counted.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+    pub enum RejectReason: "rejection reason" {
+        Unsigned => "unsigned",
+        UnknownKey => "unknown-key",
+        BadTag => "bad-tag",
+        Replay => "replay",
+        NotPermitted => "not-permitted",
     }
 }
+
+mech_proto::serde_by_name!(RejectReason);
 
 /// Messages refused, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -14,34 +14,21 @@ use serde::{Deserialize, Serialize};
 
 use crate::counters::{LinkQuality, RejectReason};
 
-/// How recently the router heard from a robot.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LinkState {
-    /// Heard within `stale_after`.
-    #[default]
-    Connected,
-    /// Silent longer than `stale_after` (0.5 s by default).
-    Stale,
-    /// Silent longer than `lost_after` (1 s by default), or said goodbye.
-    Lost,
-}
-
-impl LinkState {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LinkState::Connected => "connected",
-            LinkState::Stale => "stale",
-            LinkState::Lost => "lost",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<LinkState> {
-        [LinkState::Connected, LinkState::Stale, LinkState::Lost]
-            .into_iter()
-            .find(|l| l.as_str() == s)
+mech_proto::named_enum! {
+    /// How recently the router heard from a robot.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+    pub enum LinkState: "link state" {
+        /// Heard within `stale_after`.
+        #[default]
+        Connected => "connected",
+        /// Silent longer than `stale_after` (0.5 s by default).
+        Stale => "stale",
+        /// Silent longer than `lost_after` (1 s by default), or said goodbye.
+        Lost => "lost",
     }
 }
+
+mech_proto::serde_by_name!(LinkState);
 
 /// Where a robot was heard from: a UDP address, or a serial radio (the
 /// router's serial endpoint, by port). Recorded as `{"udp": "ADDR"}` or

@@ -19,8 +19,10 @@ use std::time::Duration;
 use mech_proto::{FailsafeState, Health, Hello, Notice, NoticeCode, Telemetry, Waypoint};
 
 pub use config::FleetConfig;
-pub use remote::{RemoteInfo, remote_name};
-pub use robot::{MissionDelivery, PathPoint, Robot, RouteState, SentMission, WaypointList};
+pub use remote::remote_name;
+pub use robot::{
+    MissionDelivery, PathPoint, Registration, Robot, RouteState, SentMission, WaypointList,
+};
 
 use crate::counters::{ChannelStatus, Counters};
 use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
@@ -44,23 +46,14 @@ pub struct EStopState {
     pub pending: BTreeSet<String>,
 }
 
-/// Severity of an event-log line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Severity {
-    Debug,
-    Info,
-    Warn,
-    Error,
-}
-
-impl Severity {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Severity::Debug => "debug",
-            Severity::Info => "info",
-            Severity::Warn => "warn",
-            Severity::Error => "error",
-        }
+mech_proto::named_enum! {
+    /// Severity of an event-log line.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+    pub enum Severity: "severity" {
+        Debug => "debug",
+        Info => "info",
+        Warn => "warn",
+        Error => "error",
     }
 }
 
@@ -271,17 +264,16 @@ impl Fleet {
             .robots
             .entry(robot.clone())
             .or_insert_with(|| Robot::new(robot, id, addr.clone()));
-        let moved = r.addr != *addr;
-        r.id = id;
-        r.addr = addr.clone();
+        let moved = r.registration.addr != *addr;
         // A robot registering again may have restarted and lost its
         // mission: the next telemetry says (see `telemetry`).
-        r.registrations += 1;
-        r.platform = hello.platform.clone();
-        r.capabilities = hello.capabilities.clone();
-        r.motors = hello.motors;
-        r.max_speed = hello.max_speed;
-        r.max_yaw_rate = hello.max_yaw_rate;
+        let count = r.registration.count + 1;
+        r.registration = Registration {
+            id,
+            hello: hello.clone(),
+            addr: addr.clone(),
+            count,
+        };
         r.link = LinkState::Connected;
         r.remote = None;
         let text = match (known, moved) {
@@ -320,20 +312,7 @@ impl Fleet {
             return;
         };
         r.last_telemetry = Some(at);
-        r.pose = t.pose;
-        r.velocity = t.velocity;
-        r.mode = t.mode;
-        r.reported_channel = (!t.channel.is_empty()).then(|| t.channel.clone());
-        r.computation = t.computation;
-        r.failsafe = t.failsafe;
-        r.health = t.health;
-        r.battery = t.battery;
-        r.position_quality = t.position_quality;
-        r.actuators.clone_from(&t.actuators);
-        r.mission = t.mission;
-        r.stale = t.stale;
-        r.velocity_source = t.velocity_source;
-        r.safety = t.safety;
+        r.telemetry.clone_from(t);
         if t.health != Health::Fault && t.failsafe != FailsafeState::Fault {
             r.fault = None;
         }
@@ -645,7 +624,10 @@ mod tests {
             r.fault.as_deref(),
             Some("left wheel stalled: driven at 60% for 0.50 s")
         );
-        assert_eq!(r.velocity_source, mech_proto::VelocitySource::Measured);
+        assert_eq!(
+            r.telemetry.velocity_source,
+            mech_proto::VelocitySource::Measured
+        );
         // Other notices are only logged.
         f.apply(&at(
             4,
@@ -713,7 +695,7 @@ mod tests {
             ));
         }
         let r = f.robot("robot_1").unwrap();
-        assert_eq!(r.pose.x, 2.0);
+        assert_eq!(r.telemetry.pose.x, 2.0);
         assert!((r.speed() - 0.5).abs() < 1e-12);
         let xs: Vec<f64> = r.path.iter().map(|p| p.x).collect();
         assert_eq!(xs, vec![1.0, 2.0]);

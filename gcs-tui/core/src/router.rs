@@ -112,8 +112,8 @@ impl Shared {
         (r, ticket)
     }
 
-    /// Decides a batch of `n` received datagrams under one hold of the
-    /// tables lock: `message(i)` is the i-th with its source, and
+    /// Decides a batch of `n` datagrams, received at `now`, under one hold
+    /// of the tables lock: `message(i)` is the i-th with its source, and
     /// `sent(i, fx)` takes what its decision left to send. Known peers'
     /// datagrams are decided first, then the others, each sender's in the
     /// order they arrived; with `behind` (more were waiting than the batch
@@ -122,6 +122,7 @@ impl Shared {
     /// decision, so the recording has each message followed by its events.
     fn decide_each<'b>(
         &self,
+        now: std::time::Instant,
         n: usize,
         message: impl Fn(usize) -> (&'b [u8], Peer),
         behind: bool,
@@ -131,7 +132,7 @@ impl Shared {
         if self.stopped() {
             return None;
         }
-        let now = Instant::now();
+        let now = Instant::from_std(now);
         let mut ticket = None;
         let mut tables = lock(&self.tables);
         tables.order_batch(n, |i| message(i).1, behind, now);
@@ -431,7 +432,8 @@ mod tests {
         let flooder = Peer::Udp("10.9.9.9:4000".parse().unwrap());
         let mut fx = Effects::default();
         let one = |bytes: &[u8], from: Peer, fx: &mut Effects| {
-            shared.decide_each(1, |_| (bytes, from), false, fx, |_, fx| fx.out.clear());
+            let now = std::time::Instant::now();
+            shared.decide_each(now, 1, |_| (bytes, from), false, fx, |_, fx| fx.out.clear());
         };
         one(&hello("robot_1"), robot, &mut fx);
         handle.set_route("robot_1", Some("joy/0")).await.unwrap();
@@ -456,6 +458,7 @@ mod tests {
         let mut order = Vec::new();
         let mut forwarded_to = Vec::new();
         shared.decide_each(
+            std::time::Instant::now(),
             batch.len(),
             |i| batch[i],
             true,

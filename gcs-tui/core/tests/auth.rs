@@ -269,7 +269,7 @@ async fn a_hello_cannot_take_over_a_robots_address() {
     assert_eq!((r.replay, r.not_permitted), (1, 1), "{r:?}");
     tokio::time::sleep(Duration::from_millis(200)).await;
     assert_eq!(
-        s.gcs.snapshot().robot("robot_1").unwrap().addr,
+        s.gcs.snapshot().robot("robot_1").unwrap().registration.addr,
         mech_core::LinkAddr::Udp(addr)
     );
     let mut matlab = s.peer("matlab").await;

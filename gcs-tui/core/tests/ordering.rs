@@ -72,6 +72,69 @@ fn big_buffer(sock: &UdpSocket) {
     let _ = s.set_send_buffer_size(8 << 20);
 }
 
+/// Four controllers sending to `robot_2` on `ext/noise` until `stop`.
+fn noise_controllers(
+    router: std::net::SocketAddr,
+    stop: &Arc<AtomicBool>,
+) -> Vec<std::thread::JoinHandle<()>> {
+    (0..4)
+        .map(|i| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+                let name = format!("noise{i}");
+                let mut seq = 0u32;
+                while !stop.load(Ordering::Relaxed) {
+                    for _ in 0..10 {
+                        seq += 1;
+                        let env = envelope(
+                            &name,
+                            "robot_2",
+                            "ext/noise",
+                            seq,
+                            Body::Command(twist(0.1)),
+                        );
+                        let _ = sock.send_to(&mech_proto::encode(&env).unwrap(), router);
+                    }
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+            })
+        })
+        .collect()
+}
+
+/// The ordered stream: [`COMMANDS`] commands to `robot_1` from controller
+/// `burst`, numbered from 1, in bursts of [`BURST`].
+fn send_in_bursts(router: std::net::SocketAddr, arrived: &AtomicU64) {
+    let controller = UdpSocket::bind("127.0.0.1:0").unwrap();
+    big_buffer(&controller);
+    let mut seq = 0u32;
+    while seq < COMMANDS {
+        for _ in 0..BURST.min(COMMANDS - seq) {
+            seq += 1;
+            let env = envelope(
+                "burst",
+                "robot_1",
+                "ext/burst",
+                seq,
+                Body::Command(twist(0.2)),
+            );
+            controller
+                .send_to(&mech_proto::encode(&env).unwrap(), router)
+                .unwrap();
+        }
+        // Bursts faster than the router empties them would be lost at its
+        // socket (loss is not reordering, but it would leave little to
+        // check): wait until the robot has most of them, or a moment.
+        let waited = Instant::now();
+        while u64::from(seq) - arrived.load(Ordering::Relaxed) > u64::from(2 * BURST)
+            && waited.elapsed() < Duration::from_millis(20)
+        {
+            std::thread::sleep(Duration::from_micros(100));
+        }
+    }
+}
+
 #[test]
 fn a_controllers_commands_arrive_in_order_with_both_workers_busy() {
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -108,58 +171,9 @@ fn a_controllers_commands_arrive_in_order_with_both_workers_busy() {
     let arrived = Arc::new(AtomicU64::new(0));
     let reader = robot_reader(robot_sock, "burst", stop.clone(), arrived.clone());
     // Other controllers keep the router's workers busy meanwhile.
-    let noise: Vec<_> = (0..4)
-        .map(|i| {
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
-                let name = format!("noise{i}");
-                let mut seq = 0u32;
-                while !stop.load(Ordering::Relaxed) {
-                    for _ in 0..10 {
-                        seq += 1;
-                        let env = envelope(
-                            &name,
-                            "robot_2",
-                            "ext/noise",
-                            seq,
-                            Body::Command(twist(0.1)),
-                        );
-                        let _ = sock.send_to(&mech_proto::encode(&env).unwrap(), router);
-                    }
-                    std::thread::sleep(Duration::from_millis(2));
-                }
-            })
-        })
-        .collect();
-    let controller = UdpSocket::bind("127.0.0.1:0").unwrap();
-    big_buffer(&controller);
+    let noise = noise_controllers(router, &stop);
     let started = Instant::now();
-    let mut seq = 0u32;
-    while seq < COMMANDS {
-        for _ in 0..BURST.min(COMMANDS - seq) {
-            seq += 1;
-            let env = envelope(
-                "burst",
-                "robot_1",
-                "ext/burst",
-                seq,
-                Body::Command(twist(0.2)),
-            );
-            controller
-                .send_to(&mech_proto::encode(&env).unwrap(), router)
-                .unwrap();
-        }
-        // Bursts faster than the router empties them would be lost at its
-        // socket (loss is not reordering, but it would leave little to
-        // check): wait until the robot has most of them, or a moment.
-        let waited = Instant::now();
-        while u64::from(seq) - arrived.load(Ordering::Relaxed) > u64::from(2 * BURST)
-            && waited.elapsed() < Duration::from_millis(20)
-        {
-            std::thread::sleep(Duration::from_micros(100));
-        }
-    }
+    send_in_bursts(router, &arrived);
     std::thread::sleep(Duration::from_millis(500));
     stop.store(true, Ordering::Relaxed);
     for n in noise {

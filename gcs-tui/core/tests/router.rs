@@ -65,9 +65,9 @@ async fn registration_routes_to_none_and_tracks_the_robot() {
     assert_eq!(w.route.robot, "robot_1");
     let fleet = gcs.snapshot();
     let r = fleet.robot("robot_1").unwrap();
-    assert_eq!(r.addr, mech_core::LinkAddr::Udp(robot.addr()));
+    assert_eq!(r.registration.addr, mech_core::LinkAddr::Udp(robot.addr()));
     assert_eq!(r.link, LinkState::Connected);
-    assert_eq!(r.platform, "diff-drive");
+    assert_eq!(r.registration.hello.platform, "diff-drive");
     assert_eq!(r.route.requested, None);
     assert!(!r.route.is_pending());
 
@@ -148,7 +148,7 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
     let fleet = gcs.snapshot();
     assert_eq!(fleet.robots.len(), 1, "same robot, not a duplicate");
     assert_eq!(
-        fleet.robot("robot_1").unwrap().addr,
+        fleet.robot("robot_1").unwrap().registration.addr,
         mech_core::LinkAddr::Udp(second.addr())
     );
     let mut pad = Peer::new("gamepad", gcs.router().udp_addr()).await;
@@ -158,6 +158,16 @@ async fn re_registering_from_a_new_address_updates_the_robot() {
         .await;
     assert_eq!(got.header.seq, seq);
     gcs.shutdown().await;
+}
+
+/// Whether `robot_1` soon shows `channel` acknowledged, nothing pending.
+async fn acknowledged(gcs: &Gcs, channel: &str) -> bool {
+    eventually(Duration::from_secs(2), || {
+        let f = gcs.snapshot();
+        let r = f.robot("robot_1").unwrap();
+        !r.route.is_pending() && r.route.acknowledged.as_deref() == Some(channel)
+    })
+    .await
 }
 
 #[tokio::test]
@@ -174,14 +184,7 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
         .unwrap();
     assert!(gcs.snapshot().robot("robot_1").unwrap().route.is_pending());
     assert_eq!(robot.follow_route().await, "joy/0");
-    assert!(
-        eventually(Duration::from_secs(2), || {
-            let f = gcs.snapshot();
-            let r = f.robot("robot_1").unwrap();
-            !r.route.is_pending() && r.route.acknowledged.as_deref() == Some("joy/0")
-        })
-        .await
-    );
+    assert!(acknowledged(&gcs, "joy/0").await);
     let a = pad0.command("robot_1", "joy/0", 0.1).await;
     let got = robot
         .recv_matching(|e| matches!(e.body, Body::Command(_)))
@@ -224,17 +227,7 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
 
     // The agent is told, and the table shows pending until it acknowledges.
     assert_eq!(robot.follow_route().await, "joy/1");
-    assert!(
-        eventually(Duration::from_secs(2), || gcs
-            .snapshot()
-            .robot("robot_1")
-            .unwrap()
-            .route
-            .acknowledged
-            .as_deref()
-            == Some("joy/1"))
-        .await
-    );
+    assert!(acknowledged(&gcs, "joy/1").await);
 
     // Routed to none: nothing gets through.
     gcs.router().set_route("robot_1", None).await.unwrap();
@@ -503,7 +496,7 @@ async fn a_slow_subscriber_loses_only_its_own_events() {
         N as u64
     );
     assert_eq!(
-        gcs.snapshot().robot("robot_1").unwrap().pose.x,
+        gcs.snapshot().robot("robot_1").unwrap().telemetry.pose.x,
         (N - 1) as f64,
         "the fleet model never drops"
     );

@@ -6,45 +6,20 @@
 pub mod cmd_vel;
 pub mod goal;
 
-use std::fmt;
-
-/// Why a sample from ROS 2 was not forwarded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Refusal {
-    /// A component is NaN or infinite.
-    NotFinite,
-    /// A value is beyond the configured limits, or asks for motion MECH
-    /// commands cannot carry (roll or pitch rates).
-    OutOfRange,
-    /// The header's frame is not one the value can be taken in.
-    WrongFrame,
-    /// The topic names a robot the station has not reported.
-    UnknownRobot,
-}
-
-impl Refusal {
-    /// Every reason, in counter order.
-    pub const ALL: [Refusal; 4] = [
-        Refusal::NotFinite,
-        Refusal::OutOfRange,
-        Refusal::WrongFrame,
-        Refusal::UnknownRobot,
-    ];
-
-    /// The counter's name: `not_finite`, `out_of_range`, ...
-    pub fn key(self) -> &'static str {
-        match self {
-            Refusal::NotFinite => "not_finite",
-            Refusal::OutOfRange => "out_of_range",
-            Refusal::WrongFrame => "wrong_frame",
-            Refusal::UnknownRobot => "unknown_robot",
-        }
-    }
-}
-
-impl fmt::Display for Refusal {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.key())
+mech_proto::named_enum! {
+    /// Why a sample from ROS 2 was not forwarded; its name is the counter's
+    /// (`not_finite`, `out_of_range`, ...).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+    pub enum Refusal: "refusal" {
+        /// A component is NaN or infinite.
+        NotFinite => "not_finite",
+        /// A value is beyond the configured limits, or asks for motion MECH
+        /// commands cannot carry (roll or pitch rates).
+        OutOfRange => "out_of_range",
+        /// The header's frame is not one the value can be taken in.
+        WrongFrame => "wrong_frame",
+        /// The topic names a robot the station has not reported.
+        UnknownRobot => "unknown_robot",
     }
 }
 

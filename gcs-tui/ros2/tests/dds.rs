@@ -43,29 +43,19 @@ fn counter(s: &Value, key: &str) -> u64 {
         .unwrap_or(0)
 }
 
-#[test]
-fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
-    if rig::skip_unless_available() {
-        return;
-    }
-    let mut rig = Rig::start(3, &[], false);
-    let robots = ["robot_1", "robot_2", "robot_3"];
-
-    // Odometry and TF of every robot, in the ROS 2 layout.
-    let s = eventually(
-        &mut rig,
-        "odometry, TF and diagnostics of every robot",
-        |s| {
-            robots
-                .iter()
-                .all(|r| {
-                    odom(s, r).is_some_and(|o| o.3 >= 10)
-                        && s["tf"][format!("{r}/base_link")]["count"].as_u64() >= Some(10)
-                        && diag(s, r, "route").is_some()
-                })
-                .then(|| s.clone())
-        },
-    );
+/// Odometry, TF, battery and name markers of every robot, in the ROS 2
+/// layout; returns the node's state that showed them.
+fn every_robot_in_the_ros2_layout(rig: &mut Rig, robots: [&str; 3]) -> Value {
+    let s = eventually(rig, "odometry, TF and diagnostics of every robot", |s| {
+        robots
+            .iter()
+            .all(|r| {
+                odom(s, r).is_some_and(|o| o.3 >= 10)
+                    && s["tf"][format!("{r}/base_link")]["count"].as_u64() >= Some(10)
+                    && diag(s, r, "route").is_some()
+            })
+            .then(|| s.clone())
+    });
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
@@ -104,6 +94,53 @@ fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
         "{}",
         s["markers"]
     );
+    s
+}
+
+/// robot_2 routed to its ROS 2 channel, sent NaN and too fast a cmd_vel:
+/// refused, counted, never forwarded; it does not move. A robot the
+/// station does not have: refused and counted.
+fn bad_cmd_vel_refused_and_counted(rig: &mut Rig) {
+    rig.script("route robot_2 ros2/robot_2\n");
+    let s = rig.node.state();
+    let (x2, y2, _, _) = odom(&s, "robot_2").unwrap();
+    rig.node
+        .ask(json!({"op": "drive", "robot": "robot_2", "vx": "nan", "wz": 0.1}));
+    eventually(rig, "NaN cmd_vel refused and counted", |s| {
+        (counter(s, "refused_not_finite") >= 10).then_some(())
+    });
+    rig.node
+        .ask(json!({"op": "drive", "robot": "robot_2", "vx": 50.0}));
+    eventually(rig, "a 50 m/s cmd_vel refused and counted", |s| {
+        (counter(s, "refused_out_of_range") >= 10).then_some(())
+    });
+    rig.node.ask(json!({"op": "halt", "robot": "robot_2"}));
+    let s = rig.node.state();
+    let (x, y, _, _) = odom(&s, "robot_2").unwrap();
+    assert!(
+        (x - x2).hypot(y - y2) < 0.05,
+        "robot_2 moved on refused input"
+    );
+    assert_eq!(diag(&s, "robot_2", "cmd_vel_forwarded"), Some("0"), "{s}");
+
+    // A robot the station does not have: refused and counted.
+    rig.node
+        .ask(json!({"op": "drive", "robot": "robot_9", "vx": 0.2}));
+    eventually(rig, "cmd_vel for robot_9 refused as unknown", |s| {
+        (counter(s, "refused_unknown_robot") >= 10).then_some(())
+    });
+    rig.node.ask(json!({"op": "halt", "robot": "robot_9"}));
+}
+
+#[test]
+fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
+    if rig::skip_unless_available() {
+        return;
+    }
+    let mut rig = Rig::start(3, &[], false);
+    let robots = ["robot_1", "robot_2", "robot_3"];
+
+    let s = every_robot_in_the_ros2_layout(&mut rig, robots);
 
     // cmd_vel for robot_1 while it is routed to none: forwarded by the
     // bridge, dropped by the router; the robot holds still.
@@ -145,37 +182,7 @@ fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
     });
     rig.node.ask(json!({"op": "halt", "robot": "robot_1"}));
 
-    // robot_2 routed to its ROS 2 channel, sent NaN and too fast a
-    // cmd_vel: refused, counted, never forwarded; it does not move.
-    rig.script("route robot_2 ros2/robot_2\n");
-    let s = rig.node.state();
-    let (x2, y2, _, _) = odom(&s, "robot_2").unwrap();
-    rig.node
-        .ask(json!({"op": "drive", "robot": "robot_2", "vx": "nan", "wz": 0.1}));
-    eventually(&mut rig, "NaN cmd_vel refused and counted", |s| {
-        (counter(s, "refused_not_finite") >= 10).then_some(())
-    });
-    rig.node
-        .ask(json!({"op": "drive", "robot": "robot_2", "vx": 50.0}));
-    eventually(&mut rig, "a 50 m/s cmd_vel refused and counted", |s| {
-        (counter(s, "refused_out_of_range") >= 10).then_some(())
-    });
-    rig.node.ask(json!({"op": "halt", "robot": "robot_2"}));
-    let s = rig.node.state();
-    let (x, y, _, _) = odom(&s, "robot_2").unwrap();
-    assert!(
-        (x - x2).hypot(y - y2) < 0.05,
-        "robot_2 moved on refused input"
-    );
-    assert_eq!(diag(&s, "robot_2", "cmd_vel_forwarded"), Some("0"), "{s}");
-
-    // A robot the station does not have: refused and counted.
-    rig.node
-        .ask(json!({"op": "drive", "robot": "robot_9", "vx": 0.2}));
-    eventually(&mut rig, "cmd_vel for robot_9 refused as unknown", |s| {
-        (counter(s, "refused_unknown_robot") >= 10).then_some(())
-    });
-    rig.node.ask(json!({"op": "halt", "robot": "robot_9"}));
+    bad_cmd_vel_refused_and_counted(&mut rig);
 
     let last = rig.stop_bridge();
     let stats = &last["stats"];
@@ -185,6 +192,26 @@ fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
     assert!(stats["unknown_robot"].as_u64() >= Some(10), "{last}");
     assert!(stats["cmd_forwarded"].as_u64() >= Some(20), "{last}");
     assert_eq!(stats["link_rejected"], 0, "{last}");
+}
+
+/// A goal in frame odom is refused, and so is a TwistStamped in frame map
+/// (cmd_vel is body-frame).
+fn wrong_frames_refused(rig: &mut Rig, goal: (f64, f64)) {
+    rig.node
+        .ask(json!({"op": "goal", "robot": "robot_1", "x": goal.0, "y": goal.1, "frame": "odom"}));
+    eventually(rig, "a goal in frame odom refused", |s| {
+        (counter(s, "refused_wrong_frame") >= 1).then_some(())
+    });
+    assert_eq!(counter(&rig.node.state(), "goals_sent"), 0);
+
+    // A TwistStamped in the map frame is refused too (cmd_vel is
+    // body-frame).
+    rig.node
+        .ask(json!({"op": "drive", "robot": "robot_2", "vx": 0.2, "frame": "map"}));
+    eventually(rig, "a TwistStamped in frame map refused", |s| {
+        (counter(s, "refused_wrong_frame") >= 5).then_some(())
+    });
+    rig.node.ask(json!({"op": "halt", "robot": "robot_2"}));
 }
 
 #[test]
@@ -203,22 +230,7 @@ fn goal_pose_gets_a_robot_there_and_an_estop_from_ros_stops_every_robot() {
     let (x0, y0, _, _) = odom(&s, "robot_1").unwrap();
     let goal = (x0 + 1.0, y0 + 0.5);
 
-    // A goal in the wrong frame is refused.
-    rig.node
-        .ask(json!({"op": "goal", "robot": "robot_1", "x": goal.0, "y": goal.1, "frame": "odom"}));
-    eventually(&mut rig, "a goal in frame odom refused", |s| {
-        (counter(s, "refused_wrong_frame") >= 1).then_some(())
-    });
-    assert_eq!(counter(&rig.node.state(), "goals_sent"), 0);
-
-    // A TwistStamped in the map frame is refused too (cmd_vel is
-    // body-frame).
-    rig.node
-        .ask(json!({"op": "drive", "robot": "robot_2", "vx": 0.2, "frame": "map"}));
-    eventually(&mut rig, "a TwistStamped in frame map refused", |s| {
-        (counter(s, "refused_wrong_frame") >= 5).then_some(())
-    });
-    rig.node.ask(json!({"op": "halt", "robot": "robot_2"}));
+    wrong_frames_refused(&mut rig, goal);
 
     // Routed to its goal channel, robot_1 goes to the goal rviz2 would send.
     rig.script("route robot_1 ros2goal/robot_1\n");
@@ -327,7 +339,7 @@ fn at_a_station_with_keys_the_bridge_is_a_controller_its_auth_section_limits() {
     assert!(
         station_log
             .lines()
-            .any(|l| l.contains("rejected") && l.contains("ros2goal/robot_2")),
+            .any(|l| l.contains("refused") && l.contains("ros2goal/robot_2")),
         "the router says why:\n{station_log}"
     );
 

@@ -72,9 +72,9 @@ pub fn describe(replay: &Replay) -> String {
         out.push_str(&format!(
             "  {} ({}) last at ({:.2}, {:.2}), route {}\n",
             r.name,
-            r.platform,
-            r.pose.x,
-            r.pose.y,
+            r.registration.hello.platform,
+            r.telemetry.pose.x,
+            r.telemetry.pose.y,
             r.route.requested.as_deref().unwrap_or("none")
         ));
     }

@@ -118,7 +118,7 @@ fn ready_line(station: &Station, socket: &Path, config: &ConfigFile) -> String {
         "{} serving: router on {} ({}), control socket {}{tcp}",
         program(),
         router.udp_addr(),
-        router.security().as_str(),
+        router.security().label(),
         socket.display()
     )
 }

@@ -246,7 +246,9 @@ impl ReplayClock {
     }
 }
 
-/// Human-readable names for protocol enums.
+/// Short labels of protocol enums for the fleet table and cards: narrower
+/// than their written names (`as_str`: `steering-throttle`, `estopped`),
+/// and shouting the states an operator must not miss.
 pub fn mode_str(m: ControlMode) -> &'static str {
     match m {
         ControlMode::Idle => "idle",

@@ -99,6 +99,21 @@ impl Rig {
     }
 }
 
+/// A typed command's result comes after what it logged.
+async fn a_typed_result_comes_after_what_it_logged(rig: &mut Rig) {
+    rig.link.exec("route robot_2 joy/7".into());
+    rig.wait_for("robot_2's route result", Duration::from_secs(5), |a| {
+        a.events.iter().any(|l| l.text == "robot_2 routed to joy/7")
+    })
+    .await;
+    let at = |text: &str| rig.app.events.iter().position(|l| l.text == text);
+    let (logged, result) = (
+        at("robot_2 routed to joy/7 (pending)"),
+        at("robot_2 routed to joy/7"),
+    );
+    assert!(logged.is_some() && logged < result, "{:?}", rig.app.events);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn app_requests_reach_simulated_robots() {
     let mut rig = Rig::start(2).await;
@@ -160,18 +175,7 @@ async fn app_requests_reach_simulated_robots() {
         rig.app.events
     );
 
-    // A typed command's result comes after what it logged.
-    rig.link.exec("route robot_2 joy/7".into());
-    rig.wait_for("robot_2's route result", Duration::from_secs(5), |a| {
-        a.events.iter().any(|l| l.text == "robot_2 routed to joy/7")
-    })
-    .await;
-    let at = |text: &str| rig.app.events.iter().position(|l| l.text == text);
-    let (logged, result) = (
-        at("robot_2 routed to joy/7 (pending)"),
-        at("robot_2 routed to joy/7"),
-    );
-    assert!(logged.is_some() && logged < result, "{:?}", rig.app.events);
+    a_typed_result_comes_after_what_it_logged(&mut rig).await;
 
     // E-stop from the App latches every robot.
     rig.app.update(Action::EStop);
@@ -246,11 +250,54 @@ async fn rerouting_away_from_a_pad_leaves_nothing_driving_the_robot() {
     rig.stop().await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
-    use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
+/// Until robot_1 and robot_2 are more than 0.3 m from `start`, carrying
+/// the TUI's requests to the station.
+async fn members_move(rig: &mut Rig, start: &[mech_proto::Pose]) {
+    let t0 = Instant::now();
+    loop {
+        rig.carry_all();
+        rig.pump();
+        let moved = ["robot_1", "robot_2"].iter().zip(start).all(|(r, p)| {
+            let q = rig.app.robot(r).expect("member").pose;
+            (q.x - p.x).hypot(q.y - p.y) > 0.3
+        });
+        if moved {
+            return;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(15),
+            "members move under the pad: {:?}",
+            rig.app.fleet.robots
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
 
-    let mut rig = Rig::start(3).await;
+/// Until robot_1 and robot_2 are at rest: with `carry`, the TUI's requests
+/// reach the station meanwhile; without, they are dropped.
+async fn members_rest(rig: &mut Rig, carry: bool, what: &str) {
+    let t0 = Instant::now();
+    loop {
+        if carry {
+            rig.carry_all();
+        } else {
+            rig.app.take_requests();
+        }
+        rig.pump();
+        if ["robot_1", "robot_2"]
+            .iter()
+            .all(|r| rig.app.robot(r).expect("member").speed() < 0.02)
+        {
+            return;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(10), "{what}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Cluster `c1` of robot_1 and robot_2 made in the TUI and both routed to
+/// its channel, the requests carried to the station.
+fn cluster_c1(rig: &mut Rig) {
     rig.app
         .update(Action::Select(Select::Only("robot_1".into())));
     rig.app
@@ -263,6 +310,14 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
         });
     }
     rig.carry_all();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
+    use mech_gcs::gamepad::{PadAxis, PadButton, PadEvent, PadEventKind};
+
+    let mut rig = Rig::start(3).await;
+    cluster_c1(&mut rig);
     let start: Vec<_> = ["robot_1", "robot_2", "robot_3"]
         .iter()
         .map(|r| rig.app.robot(r).expect("robot").pose)
@@ -277,24 +332,7 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     for ev in events {
         rig.app.update(Action::Pad(PadEvent::new(0, ev)));
     }
-    let t0 = Instant::now();
-    loop {
-        rig.carry_all();
-        rig.pump();
-        let moved = ["robot_1", "robot_2"].iter().zip(&start).all(|(r, p)| {
-            let q = rig.app.robot(r).expect("member").pose;
-            (q.x - p.x).hypot(q.y - p.y) > 0.3
-        });
-        if moved {
-            break;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(15),
-            "members move under the pad: {:?}",
-            rig.app.fleet.robots
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    members_move(&mut rig, &start).await;
     let view = rig
         .station
         .control()
@@ -321,41 +359,14 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     // A pad velocity lapses: if the pad's stream stops reaching the hub
     // (dead-man still held, nothing carried), the cluster holds and the
     // members come to rest.
-    let t0 = Instant::now();
-    loop {
-        rig.app.take_requests();
-        rig.pump();
-        if ["robot_1", "robot_2"]
-            .iter()
-            .all(|r| rig.app.robot(r).expect("member").speed() < 0.02)
-        {
-            break;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(10),
-            "stale pad velocity lapses"
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    members_rest(&mut rig, false, "stale pad velocity lapses").await;
 
     // Releasing the dead-man holds the cluster too.
     rig.app.update(Action::Pad(PadEvent::new(
         0,
         PadEventKind::ButtonReleased(PadButton::LeftBumper),
     )));
-    let t0 = Instant::now();
-    loop {
-        rig.carry_all();
-        rig.pump();
-        if ["robot_1", "robot_2"]
-            .iter()
-            .all(|r| rig.app.robot(r).expect("member").speed() < 0.02)
-        {
-            break;
-        }
-        assert!(t0.elapsed() < Duration::from_secs(10), "members stop");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    members_rest(&mut rig, true, "members stop").await;
 
     // The command line's `cluster-move` reaches the very controller the pad
     // drove: every session of the station shares one hub. (The pad's
@@ -554,15 +565,16 @@ fn a_radio_robots_card_shows_its_live_links_and_radio_budget() {
 #[test]
 fn another_stations_robot_is_marked_remote_on_its_card_and_map() {
     let mut fleet = mech_core::Fleet::new(Default::default());
-    let info = mech_core::fleet::RemoteInfo {
-        id: 4,
+    let info = mech_proto::Hello {
+        name: "robot_9".into(),
         platform: "kiwi".into(),
         capabilities: vec![],
         motors: 3,
         max_speed: 1.0,
         max_yaw_rate: 1.0,
+        agent_version: String::new(),
     };
-    fleet.remote_info("site-b", "robot_9", &info);
+    fleet.remote_info("site-b", "robot_9", 4, &info);
     fleet.remote_link("site-b", "robot_9", LinkState::Connected);
     let snap = mech_station::snapshot(&fleet, vec![]);
     assert_eq!(snap.robots[0].remote.as_deref(), Some("site-b"));

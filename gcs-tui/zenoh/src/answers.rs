@@ -66,7 +66,7 @@ fn answer(query: &Query, station: &str, gcs: &Gcs, origin_us: u64) {
 fn state(station: &str, r: &Robot, topic: Topic, origin_us: u64) -> Option<Vec<u8>> {
     let name = r.name.as_str();
     Some(match topic {
-        Topic::Info => to_json(&InfoMsg::new(station, r, name)),
+        Topic::Info => to_json(&InfoMsg::new(station, name, &r.registration)),
         Topic::Link => to_json(&LinkMsg {
             origin: Origin::new(station, name),
             state: r.link,
@@ -75,7 +75,7 @@ fn state(station: &str, r: &Robot, topic: Topic, origin_us: u64) -> Option<Vec<u
         Topic::Telemetry => {
             let at = r.last_telemetry?;
             let stamp = origin_us + at.as_micros() as u64;
-            to_json(&TelemetryMsg::new(station, name, &r.telemetry(), stamp))
+            to_json(&TelemetryMsg::new(station, name, &r.telemetry, stamp))
         }
     })
 }

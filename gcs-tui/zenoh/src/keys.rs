@@ -85,29 +85,14 @@ pub fn check_channel(channel: &str) -> Result<(), KeyError> {
     Ok(())
 }
 
-/// What a robot's state key carries.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Topic {
-    Info,
-    Telemetry,
-    Link,
-    Route,
-}
-
-impl Topic {
-    pub const ALL: [Topic; 4] = [Topic::Info, Topic::Telemetry, Topic::Link, Topic::Route];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Topic::Info => "info",
-            Topic::Telemetry => "telemetry",
-            Topic::Link => "link",
-            Topic::Route => "route",
-        }
-    }
-
-    fn parse(s: &str) -> Option<Topic> {
-        Topic::ALL.into_iter().find(|t| t.as_str() == s)
+mech_proto::named_enum! {
+    /// What a robot's state key carries.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum Topic: "topic" {
+        Info => "info",
+        Telemetry => "telemetry",
+        Link => "link",
+        Route => "route",
     }
 }
 

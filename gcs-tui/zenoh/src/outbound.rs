@@ -174,7 +174,7 @@ impl Outbound {
             return;
         }
         if registered {
-            let info = InfoMsg::new(&self.station, &robot, name);
+            let info = InfoMsg::new(&self.station, name, &robot.registration);
             self.put(name, Topic::Info, to_json(&info)).await;
             self.publish_route(name).await;
         }

@@ -13,10 +13,10 @@ mod command;
 mod names;
 mod route;
 
-use mech_core::fleet::{RemoteInfo, Robot, RouteState};
+use mech_core::fleet::{Registration, RouteState};
 use mech_proto::{
-    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
-    Velocity, VelocitySource,
+    CommandKind, Computation, ControlMode, FailsafeState, Health, Hello, MissionProgress, Pose,
+    SafetyReport, Telemetry, Velocity, VelocitySource,
 };
 use serde::{Deserialize, Serialize};
 
@@ -104,38 +104,53 @@ impl Origin {
 }
 
 /// `mech/<station>/<robot>/telemetry`: the robot's state as its station
-/// received it.
+/// received it: the protocol's [`Telemetry`] as it is, written as JSON by
+/// [`TelemetryJson`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TelemetryMsg {
     #[serde(flatten)]
     pub origin: Origin,
     /// When the station received it: Unix time, microseconds.
     pub stamp_us: u64,
+    #[serde(flatten, with = "TelemetryJson")]
+    pub telemetry: Telemetry,
+}
+
+/// How [`Telemetry`] is written on Zenoh (serde's mirror of a type of
+/// another crate: the compiler checks every field of `Telemetry` is named
+/// here). Enums are names, not wire numbers; the channel is `null` for
+/// none; the safety report is not carried.
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Telemetry")]
+struct TelemetryJson {
     /// m, m, m, rad.
-    pub pose: Pose,
+    pose: Pose,
     /// World frame m/s; `wz` rad/s.
-    pub velocity: Velocity,
+    velocity: Velocity,
     /// `measured` (wheel encoders) or `commanded` (what the outputs should
     /// give); `commanded` when absent.
-    #[serde(default, with = "names::velocity_source")]
-    pub velocity_source: VelocitySource,
-    #[serde(with = "names::mode")]
-    pub mode: ControlMode,
+    #[serde(default, with = "mech_proto::named::by_name")]
+    velocity_source: VelocitySource,
+    #[serde(with = "mech_proto::named::by_name")]
+    mode: ControlMode,
     /// The channel the robot obeys; `null` = none.
-    pub channel: Option<String>,
-    #[serde(with = "names::computation")]
-    pub computation: Computation,
-    #[serde(with = "names::failsafe")]
-    pub failsafe: FailsafeState,
-    #[serde(with = "names::health")]
-    pub health: Health,
+    #[serde(default, with = "names::channel")]
+    channel: String,
+    #[serde(with = "mech_proto::named::by_name")]
+    computation: Computation,
+    #[serde(with = "mech_proto::named::by_name")]
+    failsafe: FailsafeState,
+    #[serde(with = "mech_proto::named::by_name")]
+    health: Health,
     /// Fraction in [0, 1].
-    pub battery: Option<f64>,
-    pub position_quality: f64,
-    pub actuators: Vec<f64>,
-    pub mission: Option<MissionProgress>,
+    battery: Option<f64>,
+    position_quality: f64,
+    actuators: Vec<f64>,
+    mission: Option<MissionProgress>,
     #[serde(default)]
-    pub stale: u32,
+    stale: u32,
+    #[serde(skip)]
+    safety: Option<SafetyReport>,
 }
 
 impl TelemetryMsg {
@@ -143,116 +158,82 @@ impl TelemetryMsg {
         TelemetryMsg {
             origin: Origin::new(station, robot),
             stamp_us,
-            pose: t.pose,
-            velocity: t.velocity,
-            velocity_source: t.velocity_source,
-            mode: t.mode,
-            channel: (!t.channel.is_empty()).then(|| t.channel.clone()),
-            computation: t.computation,
-            failsafe: t.failsafe,
-            health: t.health,
-            battery: t.battery,
-            position_quality: t.position_quality,
-            actuators: t.actuators.clone(),
-            mission: t.mission,
-            stale: t.stale,
+            telemetry: t.clone(),
         }
     }
 
-    /// The telemetry, checked as the protocol checks a received one.
-    pub fn telemetry(&self) -> Result<Telemetry, PayloadError> {
-        let t = Telemetry {
-            pose: self.pose,
-            velocity: self.velocity,
-            velocity_source: self.velocity_source,
-            safety: None,
-            mode: self.mode,
-            channel: self.channel.clone().unwrap_or_default(),
-            computation: self.computation,
-            failsafe: self.failsafe,
-            health: self.health,
-            battery: self.battery,
-            position_quality: self.position_quality,
-            actuators: self.actuators.clone(),
-            mission: self.mission,
-            stale: self.stale,
-        };
-        let body = mech_proto::Body::Telemetry(t);
-        body.validate().map_err(|e| PayloadError::Invalid {
-            what: "telemetry",
-            detail: e.to_string(),
-        })?;
-        match body {
-            mech_proto::Body::Telemetry(t) => Ok(t),
-            _ => unreachable!("built as telemetry above"),
-        }
+    /// Refuses telemetry the protocol would refuse from a robot.
+    pub fn check(&self) -> Result<(), PayloadError> {
+        self.telemetry
+            .validate()
+            .map_err(|e| PayloadError::Invalid {
+                what: "telemetry",
+                detail: e.to_string(),
+            })
     }
 }
 
-/// `mech/<station>/<robot>/info`: the robot's registration.
+/// `mech/<station>/<robot>/info`: the robot's registration, its
+/// [`Hello`] as it is (written by [`HelloJson`]) with the id its station's
+/// router gave it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InfoMsg {
     #[serde(flatten)]
     pub origin: Origin,
     /// The id its station's router gave it.
     pub id: u16,
-    pub platform: String,
-    /// Command kinds it obeys: `actuators`, `steering-throttle`,
-    /// `velocity-heading`, `twist`, `waypoints`, `stop`.
-    pub capabilities: Vec<String>,
-    pub motors: u8,
+    #[serde(flatten, with = "HelloJson")]
+    pub hello: Hello,
+}
+
+/// How [`Hello`] is written on Zenoh: the robot's name is the key's
+/// (`robot`), capabilities are names (`actuators`, `steering-throttle`,
+/// `velocity-heading`, `twist`, `waypoints`, `stop`; one this version does
+/// not know is left out), the agent's version is not carried.
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Hello")]
+struct HelloJson {
+    #[serde(skip)]
+    name: String,
+    platform: String,
+    #[serde(with = "names::capabilities")]
+    capabilities: Vec<CommandKind>,
+    motors: u8,
     /// m/s
-    pub max_speed: f64,
+    max_speed: f64,
     /// rad/s
-    pub max_yaw_rate: f64,
+    max_yaw_rate: f64,
+    #[serde(skip)]
+    agent_version: String,
 }
 
 impl InfoMsg {
-    pub fn new(station: &str, r: &Robot, robot: &str) -> InfoMsg {
+    pub fn new(station: &str, robot: &str, r: &Registration) -> InfoMsg {
         InfoMsg {
             origin: Origin::new(station, robot),
             id: r.id,
-            platform: r.platform.clone(),
-            capabilities: r
-                .capabilities
-                .iter()
-                .map(|c| c.as_str().to_string())
-                .collect(),
-            motors: r.motors,
-            max_speed: r.max_speed,
-            max_yaw_rate: r.max_yaw_rate,
+            hello: r.hello.clone(),
         }
     }
 
-    /// The registration as the fleet model keeps it; a capability this
-    /// version does not know is left out.
-    pub fn info(&self) -> Result<RemoteInfo, PayloadError> {
+    /// Refuses a registration the protocol would refuse from a robot.
+    pub fn check(&self) -> Result<(), PayloadError> {
         let bad = |detail: String| PayloadError::Invalid {
             what: "info",
             detail,
         };
+        let h = &self.hello;
         // A platform name obeys the protocol's rule for names.
-        if !mech_core::config::is_channel_name(&self.platform) {
-            return Err(bad(format!("{:?} is not a platform name", self.platform)));
+        if !mech_core::config::is_channel_name(&h.platform) {
+            return Err(bad(format!("{:?} is not a platform name", h.platform)));
         }
-        if usize::from(self.motors) > mech_proto::MAX_MOTORS {
-            return Err(bad(format!("{} motors", self.motors)));
+        if usize::from(h.motors) > mech_proto::MAX_MOTORS {
+            return Err(bad(format!("{} motors", h.motors)));
         }
-        if !(self.max_speed.is_finite() && self.max_yaw_rate.is_finite()) {
+        if !(h.max_speed.is_finite() && h.max_yaw_rate.is_finite()) {
             return Err(bad("limits must be finite".into()));
         }
-        Ok(RemoteInfo {
-            id: self.id,
-            platform: self.platform.clone(),
-            capabilities: self
-                .capabilities
-                .iter()
-                .filter_map(|c| CommandKind::parse(c))
-                .collect(),
-            motors: self.motors,
-            max_speed: self.max_speed,
-            max_yaw_rate: self.max_yaw_rate,
-        })
+        Ok(())
     }
 }
 
@@ -261,7 +242,6 @@ impl InfoMsg {
 pub struct LinkMsg {
     #[serde(flatten)]
     pub origin: Origin,
-    #[serde(with = "names::link")]
     pub state: LinkState,
 }
 
@@ -360,7 +340,104 @@ mod tests {
         assert_eq!(json["channel"], "joy/0");
         assert_eq!(json["mission"]["total"], 4);
         let back: TelemetryMsg = from_json("telemetry", &to_json(&msg)).unwrap();
-        assert_eq!(back.telemetry().unwrap(), telemetry());
+        back.check().unwrap();
+        assert_eq!(back.telemetry, telemetry());
+    }
+
+    #[test]
+    fn telemetry_json_is_byte_for_byte_the_documented_shape() {
+        let msg = TelemetryMsg::new("site-a", "robot_1", &telemetry(), 17);
+        let json = String::from_utf8(to_json(&msg)).unwrap();
+        assert_eq!(
+            json,
+            concat!(
+                r#"{"v":1,"station":"site-a","robot":"robot_1","stamp_us":17,"#,
+                r#""pose":{"x":1.5,"y":-2.0,"z":0.0,"heading":0.25},"#,
+                r#""velocity":{"vx":0.1,"vy":0.0,"vz":0.0,"wz":0.5},"#,
+                r#""velocity_source":"measured","mode":"steering-throttle","#,
+                r#""channel":"joy/0","computation":"offboard","failsafe":"channel-silent","#,
+                r#""health":"degraded","battery":0.75,"position_quality":0.9,"#,
+                r#""actuators":[0.5,-0.5],"mission":{"id":9,"next":1,"total":4},"stale":2}"#
+            )
+        );
+        let none = Telemetry {
+            channel: String::new(),
+            safety: Some(mech_proto::SafetyReport::default()),
+            ..telemetry()
+        };
+        let json: serde_json::Value =
+            serde_json::from_slice(&to_json(&TelemetryMsg::new("s", "r", &none, 1))).unwrap();
+        assert_eq!(json["channel"], serde_json::Value::Null, "none is null");
+        assert!(
+            json.get("safety").is_none(),
+            "the safety report is not carried"
+        );
+        let back: TelemetryMsg = from_json("telemetry", json.to_string().as_bytes()).unwrap();
+        assert_eq!(back.telemetry.channel, "");
+        assert_eq!(back.telemetry.safety, None);
+    }
+
+    #[test]
+    fn telemetry_of_an_older_station_reads_with_defaults() {
+        let json = concat!(
+            r#"{"v":1,"station":"s","robot":"r","stamp_us":1,"#,
+            r#""pose":{"x":0.0,"y":0.0,"z":0.0,"heading":0.0},"#,
+            r#""velocity":{"vx":0.0,"vy":0.0,"vz":0.0,"wz":0.0},"#,
+            r#""mode":"twist","computation":"onboard","failsafe":"ok","health":"ok","#,
+            r#""battery":null,"position_quality":1.0,"actuators":[],"mission":null}"#
+        );
+        let msg: TelemetryMsg = from_json("telemetry", json.as_bytes()).unwrap();
+        msg.check().unwrap();
+        assert_eq!(msg.telemetry.velocity_source, VelocitySource::Commanded);
+        assert_eq!(
+            (msg.telemetry.channel.as_str(), msg.telemetry.stale),
+            ("", 0)
+        );
+    }
+
+    fn registration() -> Registration {
+        Registration {
+            id: 3,
+            hello: Hello {
+                name: "robot_1".into(),
+                platform: "kiwi".into(),
+                capabilities: vec![CommandKind::Twist, CommandKind::Waypoints],
+                motors: 3,
+                max_speed: 1.5,
+                max_yaw_rate: 2.0,
+                agent_version: "0.1.0".into(),
+            },
+            addr: mech_core::LinkAddr::Udp(([127, 0, 0, 1], 9000).into()),
+            count: 1,
+        }
+    }
+
+    #[test]
+    fn info_json_is_the_hello_without_name_or_version() {
+        let msg = InfoMsg::new("site-a", "robot_1", &registration());
+        let json = String::from_utf8(to_json(&msg)).unwrap();
+        assert_eq!(
+            json,
+            concat!(
+                r#"{"v":1,"station":"site-a","robot":"robot_1","id":3,"platform":"kiwi","#,
+                r#""capabilities":["twist","waypoints"],"motors":3,"max_speed":1.5,"#,
+                r#""max_yaw_rate":2.0}"#
+            )
+        );
+        let mut value: serde_json::Value = serde_json::from_str(&json).unwrap();
+        value["capabilities"] = serde_json::json!(["twist", "teleport"]);
+        let back: InfoMsg = from_json("info", value.to_string().as_bytes()).unwrap();
+        back.check().unwrap();
+        assert_eq!(back.id, 3);
+        assert_eq!(
+            back.hello.capabilities,
+            vec![CommandKind::Twist],
+            "unknown left out"
+        );
+        assert_eq!((back.hello.name.as_str(), back.hello.motors), ("", 3));
+        value["motors"] = serde_json::json!(200);
+        let bad: InfoMsg = from_json("info", value.to_string().as_bytes()).unwrap();
+        assert!(matches!(bad.check(), Err(PayloadError::Invalid { .. })));
     }
 
     #[test]
@@ -370,10 +447,10 @@ mod tests {
                 .unwrap();
         json["added_later"] = serde_json::json!(true);
         let msg: TelemetryMsg = from_json("telemetry", json.to_string().as_bytes()).unwrap();
-        msg.telemetry().unwrap();
+        msg.check().unwrap();
         json["battery"] = serde_json::json!(2.0);
         let msg: TelemetryMsg = from_json("telemetry", json.to_string().as_bytes()).unwrap();
-        assert!(matches!(msg.telemetry(), Err(PayloadError::Invalid { .. })));
+        assert!(matches!(msg.check(), Err(PayloadError::Invalid { .. })));
         json["mode"] = serde_json::json!("warp");
         let e = from_json::<TelemetryMsg>("telemetry", json.to_string().as_bytes()).unwrap_err();
         assert!(e.to_string().contains("warp"), "{e}");

@@ -12,6 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use mech_core::{Gcs, LinkState};
+use mech_proto::Hello;
 use tokio::runtime::Handle;
 use tracing::debug;
 use zenoh::Session;
@@ -161,11 +162,11 @@ impl Hearing {
     ) -> Result<bool, PayloadError> {
         let msg: TelemetryMsg = from_json("telemetry", bytes)?;
         msg.origin.check("telemetry", station, robot)?;
-        let t = msg.telemetry()?;
+        msg.check()?;
         let at = self.gcs.router().elapsed();
         let applied = self
             .gcs
-            .update_fleet(|f| f.remote_telemetry(station, robot, &t, at));
+            .update_fleet(|f| f.remote_telemetry(station, robot, &msg.telemetry, at));
         if live {
             // From its station's router receiving it to this station's model.
             let age = mech_proto::unix_micros().saturating_sub(msg.stamp_us);
@@ -178,10 +179,14 @@ impl Hearing {
     fn info(&self, station: &str, robot: &str, bytes: &[u8]) -> Result<bool, PayloadError> {
         let msg: InfoMsg = from_json("info", bytes)?;
         msg.origin.check("info", station, robot)?;
-        let info = msg.info()?;
+        msg.check()?;
+        let hello = Hello {
+            name: robot.to_string(),
+            ..msg.hello
+        };
         Ok(self
             .gcs
-            .update_fleet(|f| f.remote_info(station, robot, &info)))
+            .update_fleet(|f| f.remote_info(station, robot, msg.id, &hello)))
     }
 
     fn link(&self, station: &str, robot: &str, bytes: &[u8]) -> Result<bool, PayloadError> {

@@ -52,12 +52,12 @@ async fn two_stations(robots: usize) -> (Station, Station) {
     (a, b)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
-    let (mut a, mut b) = two_stations(2).await;
+/// Station b shows site-a's robots as remote and read-only, and its
+/// `route all` touches only its own.
+async fn site_a_is_read_only_at_b(b: &mut Station) {
     let remote = b.robot("robot_1@site-a").unwrap();
     assert_eq!(remote.remote.as_deref(), Some("site-a"));
-    assert!(!remote.platform.is_empty());
+    assert!(!remote.registration.hello.platform.is_empty());
     let status = b.run("status").await.unwrap();
     assert!(
         status.contains("stations site-a connected (2 robots)"),
@@ -75,6 +75,12 @@ async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
             .unwrap()
             .contains("robot_1, robot_2 routed")
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
+    let (mut a, mut b) = two_stations(2).await;
+    site_a_is_read_only_at_b(&mut b).await;
 
     // A program on the network drives robot_1 of site-a on ext/zenoh.
     let tool = program(&a.endpoint).await;
@@ -88,23 +94,34 @@ async fn each_station_sees_the_others_robots_and_zenoh_commands_obey_routes() {
     })
     .await;
     assert_eq!(a.bridge.stats().commands_forwarded, 0);
-    assert_eq!(a.robot("robot_1").unwrap().mode, ControlMode::Idle);
+    assert_eq!(
+        a.robot("robot_1").unwrap().telemetry.mode,
+        ControlMode::Idle
+    );
 
     a.run("route robot_1 ext/zenoh").await.unwrap();
     a.until("robot_1 obeys Zenoh", WAIT, |f| {
         let r = f.robot("robot_1").unwrap();
-        (r.mode == ControlMode::Twist && r.reported_channel.as_deref() == Some("ext/zenoh"))
+        (r.telemetry.mode == ControlMode::Twist && r.reported_channel() == Some("ext/zenoh"))
             .then_some(())
-            .ok_or(format!("mode {:?} on {:?}", r.mode, r.reported_channel))
+            .ok_or(format!(
+                "mode {:?} on {:?}",
+                r.telemetry.mode,
+                r.reported_channel()
+            ))
     })
     .await;
     assert!(a.bridge.stats().commands_forwarded > 0);
-    assert_eq!(a.robot("robot_2").unwrap().mode, ControlMode::Idle);
+    assert_eq!(
+        a.robot("robot_2").unwrap().telemetry.mode,
+        ControlMode::Idle
+    );
     b.until("site-b sees robot_1 of site-a driven", WAIT, |f| {
         let r = f.robot("robot_1@site-a").unwrap();
-        (r.mode == ControlMode::Twist && r.route.requested.as_deref() == Some("ext/zenoh"))
-            .then_some(())
-            .ok_or(format!("{:?} {:?}", r.mode, r.route))
+        (r.telemetry.mode == ControlMode::Twist
+            && r.route.requested.as_deref() == Some("ext/zenoh"))
+        .then_some(())
+        .ok_or(format!("{:?} {:?}", r.telemetry.mode, r.route))
     })
     .await;
 

@@ -199,7 +199,7 @@ impl ControlHub {
                     arrival_radius: radius,
                     start_index: 0,
                 });
-                (mission, r.mission)
+                (mission, r.telemetry.mission)
             })
         });
         let Some((mission, reported)) = found else {

@@ -45,7 +45,7 @@ impl PeriodInputs {
             progress: fleet
                 .robots
                 .iter()
-                .filter_map(|(n, r)| Some((n.clone(), r.mission?)))
+                .filter_map(|(n, r)| Some((n.clone(), r.telemetry.mission?)))
                 .collect(),
         }
     }
@@ -124,13 +124,13 @@ fn member_states(f: &Fleet) -> Vec<MemberState> {
             Some(MemberState {
                 robot: r.name.clone(),
                 platform: PlatformLimits::new(
-                    &r.platform,
-                    &r.capabilities,
-                    r.max_speed,
-                    r.max_yaw_rate,
+                    &r.registration.hello.platform,
+                    &r.registration.hello.capabilities,
+                    r.registration.hello.max_speed,
+                    r.registration.hello.max_yaw_rate,
                 ),
-                pose: r.pose,
-                velocity: r.velocity,
+                pose: r.telemetry.pose,
+                velocity: r.telemetry.velocity,
                 stamp: stamp.as_secs_f64(),
             })
         })

@@ -1,10 +1,11 @@
 //! The cursor over a command's arguments and the small word parsers the
-//! verbs share (target, channel, number, count, duration, point, failsafe
-//! state), each reporting errors at the offending word's line and column.
+//! verbs share (target, channel, number, count, duration, point, a named
+//! value such as a failsafe state), each reporting errors at the offending
+//! word's line and column.
 
 use std::time::Duration;
 
-use mech_proto::{FailsafeState, Waypoint};
+use mech_proto::{Named, Waypoint};
 
 use super::lexer::Word;
 use super::{LangError, Span};
@@ -52,6 +53,18 @@ impl<'a> Args<'a> {
     /// with the verb's usage.
     pub fn missing(&self, what: &str) -> LangError {
         LangError::new(self.end, format!("missing {what} (usage: {})", self.usage))
+    }
+
+    /// The next word as one of `T`'s written names ([`Named`]); an
+    /// unknown word is an error at it that lists the names.
+    pub fn named<T: Named>(&mut self) -> Result<T, LangError> {
+        let w = self.next(T::WHAT)?;
+        T::from_name(&w.text).ok_or_else(|| {
+            LangError::new(
+                w.span,
+                format!("unknown {} {:?}; use {}", T::WHAT, w.text, T::names()),
+            )
+        })
     }
 
     /// The next word, left in place (for optional arguments).
@@ -225,29 +238,6 @@ pub fn point(s: &str) -> Option<Waypoint> {
         z,
         time: time.map(|t| t.as_secs_f64()),
     })
-}
-
-/// Failsafe state names, as the language and the UI write them.
-pub fn failsafe(s: &str) -> Option<FailsafeState> {
-    Some(match s {
-        "ok" => FailsafeState::Ok,
-        "channel-silent" => FailsafeState::ChannelSilent,
-        "router-lost" => FailsafeState::RouterLost,
-        "estopped" => FailsafeState::EStopped,
-        "fault" => FailsafeState::Fault,
-        _ => return None,
-    })
-}
-
-/// The name [`failsafe`] parses.
-pub fn failsafe_name(s: FailsafeState) -> &'static str {
-    match s {
-        FailsafeState::Ok => "ok",
-        FailsafeState::ChannelSilent => "channel-silent",
-        FailsafeState::RouterLost => "router-lost",
-        FailsafeState::EStopped => "estopped",
-        FailsafeState::Fault => "fault",
-    }
 }
 
 #[cfg(test)]

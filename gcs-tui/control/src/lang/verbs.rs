@@ -483,12 +483,46 @@ mod tests {
     }
 
     #[test]
+    fn a_named_word_is_read_by_its_name_and_a_wrong_one_lists_the_names() {
+        assert!(matches!(
+            control("cluster-expect c1 max-error 0.2"),
+            Command::ClusterExpect(ClusterExpect {
+                metric: ErrorMetric::Max,
+                ..
+            })
+        ));
+        let e = parse_line("cluster-expect c1 mean-error 0.2").unwrap_err();
+        assert_eq!(e.span.column, 19);
+        assert_eq!(
+            e.message,
+            "unknown error metric \"mean-error\"; use max-error, rms-error"
+        );
+        let e = parse_line("expect failsafe robot_1 broken").unwrap_err();
+        assert_eq!(e.span.column, 25);
+        assert_eq!(
+            e.message,
+            "unknown failsafe state \"broken\"; use ok, channel-silent, router-lost, estopped, fault"
+        );
+        let e = parse_line("expect link robot_1 gone").unwrap_err();
+        assert!(
+            e.message.ends_with("use connected, stale, lost"),
+            "{}",
+            e.message
+        );
+    }
+
+    #[test]
     fn bad_arguments_point_at_the_word() {
         let e = parse_line("formation c1 blob").unwrap_err();
         assert_eq!(e.span.column, 14);
         assert!(e.message.contains("unknown formation"));
         let e = parse_line("nav robot_1 sideways").unwrap_err();
-        assert!(e.message.contains("onboard or toggle"));
+        assert!(
+            e.message
+                .contains("unknown navigation side \"sideways\"; use onboard, offboard, toggle"),
+            "{}",
+            e.message
+        );
         let e = parse_line("cluster-waypoint c1 1").unwrap_err();
         assert!(e.message.contains("cluster waypoint"));
         assert!(parse_line("cluster-move c1 0.1").is_err());

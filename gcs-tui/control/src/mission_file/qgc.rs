@@ -208,6 +208,38 @@ pub fn read(
     origin: Option<Origin>,
     cluster: bool,
 ) -> Result<(MissionPlan, Vec<String>), MissionFileError> {
+    let items = items(text)?;
+    let home = items.iter().find(|i| i.seq == 0).copied();
+    let geo = geo_origin(origin, home)?;
+    let body: Vec<Item> = items.into_iter().filter(|i| i.seq != 0).collect();
+    let w = walk(&body, geo)?;
+    let mut notes = Vec::new();
+    if !w.skipped.is_empty() {
+        notes.push(format!("skipped, not waypoints: {}", w.skipped.join(", ")));
+    }
+    if w.holds > 0 {
+        notes.push(format!(
+            "{} hold time(s) (param 1) not kept: a MECH waypoint is passed, not held",
+            w.holds
+        ));
+    }
+    let plan = if cluster {
+        MissionPlan::Cluster {
+            waypoints: w.group,
+            looped: w.looped,
+        }
+    } else {
+        MissionPlan::Robot {
+            waypoints: w.robot,
+            looped: w.looped,
+        }
+    };
+    Ok((plan, notes))
+}
+
+/// The items of a file, after its header line; comments and blank lines
+/// left out.
+fn items(text: &str) -> Result<Vec<Item>, MissionFileError> {
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
     let header = lines
         .by_ref()
@@ -232,8 +264,16 @@ pub fn read(
         }
         items.push(parse_item(n, l)?);
     }
-    let home = items.iter().find(|i| i.seq == 0).copied();
-    let geo = match origin {
+    Ok(items)
+}
+
+/// Where the file's latitudes and longitudes are measured from: the
+/// origin given, or the file's home (item 0) for `origin home`.
+fn geo_origin(
+    origin: Option<Origin>,
+    home: Option<Item>,
+) -> Result<Option<GeoOrigin>, MissionFileError> {
+    Ok(match origin {
         None => None,
         Some(Origin::Geo(g)) => Some(g),
         Some(Origin::Home) => {
@@ -252,30 +292,43 @@ pub fn read(
                 alt: h.z,
             })
         }
-    };
-    let mut robot = Vec::new();
-    let mut group = Vec::new();
+    })
+}
+
+/// What a file's items (home left out) make: the waypoints for a robot and
+/// for a cluster, whether the mission loops, and what was left out.
+#[derive(Debug, Default)]
+struct Walked {
+    robot: Vec<Waypoint>,
+    group: Vec<ClusterWaypoint>,
+    looped: bool,
+    /// Items that are not waypoints, described.
+    skipped: Vec<String>,
+    /// Waypoints with a hold time (not kept).
+    holds: usize,
+}
+
+/// Walks the items in order: waypoints placed, one closing `DO_JUMP` to
+/// the first waypoint as a loop, anything else skipped.
+fn walk(body: &[Item], geo: Option<GeoOrigin>) -> Result<Walked, MissionFileError> {
+    let mut w = Walked::default();
     let mut first_seq = None;
-    let mut looped = false;
-    let mut skipped = Vec::new();
-    let mut holds = 0;
-    let body: Vec<Item> = items.into_iter().filter(|i| i.seq != 0).collect();
     for (k, item) in body.iter().enumerate() {
         match item.command {
             command::NAV_WAYPOINT | command::NAV_SPLINE_WAYPOINT => {
                 let (x, y, z) = place(item, geo)?;
                 first_seq.get_or_insert(item.seq);
                 if item.params[0] > 0.0 {
-                    holds += 1;
+                    w.holds += 1;
                 }
-                robot.push(Waypoint {
+                w.robot.push(Waypoint {
                     x,
                     y,
                     z,
                     time: None,
                 });
                 let yaw = item.params[3];
-                group.push(ClusterWaypoint {
+                w.group.push(ClusterWaypoint {
                     x,
                     y,
                     heading: yaw
@@ -298,32 +351,14 @@ pub fn read(
                         ),
                     ));
                 }
-                looped = true;
+                w.looped = true;
             }
-            c => skipped.push(format!("item {} ({c}, {})", item.seq, command_name(c))),
+            c => w
+                .skipped
+                .push(format!("item {} ({c}, {})", item.seq, command_name(c))),
         }
     }
-    let mut notes = Vec::new();
-    if !skipped.is_empty() {
-        notes.push(format!("skipped, not waypoints: {}", skipped.join(", ")));
-    }
-    if holds > 0 {
-        notes.push(format!(
-            "{holds} hold time(s) (param 1) not kept: a MECH waypoint is passed, not held"
-        ));
-    }
-    let plan = if cluster {
-        MissionPlan::Cluster {
-            waypoints: group,
-            looped,
-        }
-    } else {
-        MissionPlan::Robot {
-            waypoints: robot,
-            looped,
-        }
-    };
-    Ok((plan, notes))
+    Ok(w)
 }
 
 /// A waypoint item's place in the arena (x east, y north, z up, m).

@@ -8,24 +8,10 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{CommandKind, Telemetry};
+use mech_proto::{Hello, Telemetry};
 
 use super::{Fleet, Robot, RouteState, Severity};
 use crate::event::{LinkAddr, LinkState};
-
-/// What another station says about one of its robots: its registration.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RemoteInfo {
-    /// The id that station's router gave it.
-    pub id: u16,
-    pub platform: String,
-    pub capabilities: Vec<CommandKind>,
-    pub motors: u8,
-    /// m/s
-    pub max_speed: f64,
-    /// rad/s
-    pub max_yaw_rate: f64,
-}
 
 /// The name a robot of another station is shown under: `robot@station`.
 pub fn remote_name(robot: &str, station: &str) -> String {
@@ -47,18 +33,16 @@ impl Fleet {
         (r.remote.as_deref() == Some(station)).then_some(r)
     }
 
-    /// Records a remote robot's registration. Returns `false` (nothing
-    /// changed) when its name belongs to one of this station's robots.
-    pub fn remote_info(&mut self, station: &str, robot: &str, info: &RemoteInfo) -> bool {
+    /// Records a remote robot's registration: the id its station's router
+    /// gave it and its [`Hello`] as that station publishes it. Returns
+    /// `false` (nothing changed) when its name belongs to one of this
+    /// station's robots.
+    pub fn remote_info(&mut self, station: &str, robot: &str, id: u16, hello: &Hello) -> bool {
         let Some(r) = self.remote_entry(station, robot) else {
             return false;
         };
-        r.id = info.id;
-        r.platform.clone_from(&info.platform);
-        r.capabilities.clone_from(&info.capabilities);
-        r.motors = info.motors;
-        r.max_speed = info.max_speed;
-        r.max_yaw_rate = info.max_yaw_rate;
+        r.registration.id = id;
+        r.registration.hello.clone_from(hello);
         true
     }
 
@@ -149,25 +133,29 @@ mod tests {
     use super::*;
     use crate::fleet::FleetConfig;
 
-    fn info() -> RemoteInfo {
-        RemoteInfo {
-            id: 3,
+    fn info() -> Hello {
+        Hello {
+            name: "robot_1".into(),
             platform: "kiwi".into(),
-            capabilities: vec![CommandKind::Twist],
+            capabilities: vec![mech_proto::CommandKind::Twist],
             motors: 3,
             max_speed: 1.0,
             max_yaw_rate: 2.0,
+            agent_version: String::new(),
         }
     }
 
     #[test]
     fn remote_robots_are_kept_apart_and_left_out_of_all() {
         let mut f = Fleet::new(FleetConfig::default());
-        assert!(f.remote_info("site-b", "robot_1", &info()));
+        assert!(f.remote_info("site-b", "robot_1", 3, &info()));
         assert!(f.remote_link("site-b", "robot_1", LinkState::Connected));
         let r = f.robot("robot_1@site-b").unwrap();
         assert_eq!(r.remote.as_deref(), Some("site-b"));
-        assert_eq!((r.platform.as_str(), r.id), ("kiwi", 3));
+        assert_eq!(
+            (r.registration.hello.platform.as_str(), r.registration.id),
+            ("kiwi", 3)
+        );
         assert!(!r.is_local());
         assert_eq!(f.resolve("all").unwrap(), Vec::<String>::new());
         assert_eq!(
@@ -183,9 +171,9 @@ mod tests {
         let addr = SocketAddr::from(([127, 0, 0, 1], 9000));
         f.robots
             .insert("a@b".into(), Robot::new("a@b", 1, LinkAddr::Udp(addr)));
-        assert!(!f.remote_info("b", "a", &info()));
+        assert!(!f.remote_info("b", "a", 3, &info()));
         assert!(f.robot("a@b").unwrap().is_local());
-        assert_eq!(f.robot("a@b").unwrap().platform, "");
+        assert_eq!(f.robot("a@b").unwrap().registration.hello.platform, "");
     }
 
     #[test]
@@ -236,8 +224,8 @@ mod tests {
         };
         assert!(f.remote_telemetry("site-b", "r1", &t, Duration::from_secs(2)));
         let r = f.robot("r1@site-b").unwrap();
-        assert_eq!((r.pose.x, r.pose.y), (2.0, 1.0));
-        assert_eq!(r.reported_channel.as_deref(), Some("ext/x"));
+        assert_eq!((r.telemetry.pose.x, r.telemetry.pose.y), (2.0, 1.0));
+        assert_eq!(r.reported_channel(), Some("ext/x"));
         assert_eq!(r.path.len(), 1);
         assert_eq!(r.last_telemetry, Some(Duration::from_secs(2)));
     }

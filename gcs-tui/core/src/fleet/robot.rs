@@ -1,14 +1,11 @@
-//! One robot as the station knows it: identity and platform from its
-//! registration, pose and state from telemetry, its route, waypoints,
-//! mission and recent trail.
+//! One robot as the station knows it: its registration and its last
+//! telemetry as the robot sent them, its link, route, waypoints, mission
+//! and recent trail.
 
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use mech_proto::{
-    CommandKind, Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Telemetry,
-    Velocity, VelocitySource, Waypoint,
-};
+use mech_proto::{CommandKind, Hello, Telemetry, Waypoint};
 
 use crate::counters::{LinkQuality, Traffic};
 use crate::event::{LinkAddr, LinkState, RobotLinks};
@@ -77,68 +74,55 @@ pub struct PathPoint {
     pub y: f64,
 }
 
+/// How a robot registered: what it said in its [`Hello`] and what the
+/// router made of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registration {
+    /// Router-assigned id, stable while the station runs.
+    pub id: u16,
+    /// The robot's registration as it sent it: platform, capabilities,
+    /// motors, limits (for another station's robot, as that station
+    /// publishes it).
+    pub hello: Hello,
+    /// Where the robot registered from.
+    pub addr: LinkAddr,
+    /// Times the robot registered (more than once: it restarted or lost
+    /// the router).
+    pub count: u32,
+}
+
 /// Everything the GCS knows about one robot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Robot {
+    /// The name the station shows it under (`robot@station` for another
+    /// station's).
     pub name: String,
-    /// Router-assigned id, stable while the GCS runs.
-    pub id: u16,
-    pub platform: String,
-    pub capabilities: Vec<CommandKind>,
-    pub motors: u8,
-    /// m/s
-    pub max_speed: f64,
-    /// rad/s
-    pub max_yaw_rate: f64,
-    /// Where the robot registered from.
-    pub addr: LinkAddr,
+    pub registration: Registration,
     pub link: LinkState,
     /// Which of its links (UDP, radio) the router hears now, and its radio
     /// telemetry budget.
     pub links: RobotLinks,
-    /// Times the robot registered (more than once: it restarted or lost
-    /// the router).
-    pub registrations: u32,
-    /// Router time of the last telemetry.
+    /// Rates each way, loss and round trip, as the router last measured
+    /// them (once a second).
+    pub quality: LinkQuality,
+    /// Traffic counters (copied in by [`crate::Gcs::snapshot`]).
+    pub traffic: Traffic,
+    /// Router time of the last telemetry; `None` while `telemetry` is the
+    /// default of a robot not heard from yet.
     pub last_telemetry: Option<Duration>,
-    pub pose: Pose,
-    pub velocity: Velocity,
-    /// What the robot does with its actuators, from telemetry.
-    pub mode: ControlMode,
-    /// The channel the robot reports obeying (telemetry).
-    pub reported_channel: Option<String>,
+    /// The robot's last telemetry, as it sent it.
+    pub telemetry: Telemetry,
+    /// The robot's last driver fault notice ("left wheel stalled: ..."),
+    /// kept while its telemetry reports the fault.
+    pub fault: Option<String>,
     pub route: RouteState,
-    pub computation: Computation,
-    pub failsafe: FailsafeState,
-    pub health: Health,
-    /// Fraction in `[0, 1]`.
-    pub battery: Option<f64>,
-    pub position_quality: f64,
-    pub actuators: Vec<f64>,
-    pub mission: Option<MissionProgress>,
     pub waypoints: WaypointList,
     /// Recent trail, oldest first.
     pub path: VecDeque<PathPoint>,
     /// Mode the GCS command line uses when it drives this robot.
     pub gcs_mode: Option<CommandKind>,
-    /// Traffic counters (copied in by [`crate::Gcs::snapshot`]).
-    pub traffic: Traffic,
     /// Id of the last e-stop or release this robot acknowledged.
     pub estop_ack: Option<(bool, u32)>,
-    /// Messages the robot reports it ignored as stale (telemetry).
-    pub stale: u32,
-    /// Rates each way, loss and round trip, as the router last measured
-    /// them (once a second).
-    pub quality: LinkQuality,
-    /// Whether `velocity` was measured by wheel encoders or follows from
-    /// the commanded outputs (telemetry).
-    pub velocity_source: VelocitySource,
-    /// What the robot's safety layer reports (telemetry); `None` for a
-    /// robot without one.
-    pub safety: Option<mech_proto::SafetyReport>,
-    /// The robot's last driver fault notice ("left wheel stalled: ..."),
-    /// kept while its telemetry reports the fault.
-    pub fault: Option<String>,
     /// The station this robot belongs to when it is another station's,
     /// shown here read-only through a bridge (`mech-zenoh`); `None` for
     /// this station's own robots. Only that station routes it.
@@ -149,62 +133,54 @@ impl Robot {
     pub(super) fn new(name: &str, id: u16, addr: LinkAddr) -> Robot {
         Robot {
             name: name.to_string(),
-            id,
-            platform: String::new(),
-            capabilities: Vec::new(),
-            motors: 0,
-            max_speed: 0.0,
-            max_yaw_rate: 0.0,
-            addr,
+            registration: Registration {
+                id,
+                hello: Hello::default(),
+                addr,
+                count: 0,
+            },
             link: LinkState::Connected,
             links: RobotLinks::default(),
-            registrations: 0,
+            quality: LinkQuality::default(),
+            traffic: Traffic::default(),
             last_telemetry: None,
-            pose: Pose::default(),
-            velocity: Velocity::default(),
-            mode: ControlMode::Idle,
-            reported_channel: None,
+            telemetry: Telemetry::default(),
+            fault: None,
             route: RouteState::default(),
-            computation: Computation::Onboard,
-            failsafe: FailsafeState::Ok,
-            health: Health::Ok,
-            battery: None,
-            position_quality: 0.0,
-            actuators: Vec::new(),
-            mission: None,
             waypoints: WaypointList::default(),
             path: VecDeque::new(),
             gcs_mode: None,
-            traffic: Traffic::default(),
             estop_ack: None,
-            stale: 0,
-            quality: LinkQuality::default(),
-            velocity_source: VelocitySource::Commanded,
-            safety: None,
-            fault: None,
             remote: None,
         }
     }
 
+    /// The channel the robot reports obeying (telemetry); `None` = none.
+    pub fn reported_channel(&self) -> Option<&str> {
+        Some(self.telemetry.channel.as_str()).filter(|c| !c.is_empty())
+    }
+
     /// Ground speed, m/s.
     pub fn speed(&self) -> f64 {
-        self.velocity.vx.hypot(self.velocity.vy)
+        let v = self.telemetry.velocity;
+        v.vx.hypot(v.vy)
     }
 
     /// Heading, rad, counter-clockwise from +x.
     pub fn heading(&self) -> f64 {
-        self.pose.heading
+        self.telemetry.pose.heading
     }
 
     /// Distance (m, in the plane) from the robot to a point.
     pub fn distance_to(&self, x: f64, y: f64) -> f64 {
-        (self.pose.x - x).hypot(self.pose.y - y)
+        let p = self.telemetry.pose;
+        (p.x - x).hypot(p.y - y)
     }
 
     /// Whether the last mission sent was acknowledged and the robot reports
     /// it finished.
     pub fn arrived(&self) -> bool {
-        match (&self.waypoints.sent, &self.mission) {
+        match (&self.waypoints.sent, &self.telemetry.mission) {
             (Some(sent), Some(p)) => {
                 sent.delivery == MissionDelivery::Acked
                     && p.id == sent.id
@@ -221,34 +197,15 @@ impl Robot {
         self.remote.is_none()
     }
 
-    /// The robot's last telemetry, as the fleet model keeps it.
-    pub fn telemetry(&self) -> Telemetry {
-        Telemetry {
-            pose: self.pose,
-            velocity: self.velocity,
-            mode: self.mode,
-            channel: self.reported_channel.clone().unwrap_or_default(),
-            computation: self.computation,
-            failsafe: self.failsafe,
-            health: self.health,
-            battery: self.battery,
-            position_quality: self.position_quality,
-            actuators: self.actuators.clone(),
-            mission: self.mission,
-            stale: self.stale,
-            velocity_source: self.velocity_source,
-            safety: self.safety,
-        }
-    }
-
     /// After a registration, the first telemetry tells whether the robot
     /// still holds the mission it acknowledged: if not (its agent
     /// restarted), the mission is marked lost and its id returned, once.
     pub(super) fn mission_lost(&mut self) -> Option<u32> {
         let sent = self.waypoints.sent.as_mut()?;
-        let held = self.mission.is_some_and(|p| p.id == sent.id);
-        let on_its_channel = self.reported_channel.as_deref() == Some(sent.channel.as_str());
-        if self.registrations > 1
+        let held = self.telemetry.mission.is_some_and(|p| p.id == sent.id);
+        let reported = &self.telemetry.channel;
+        let on_its_channel = !reported.is_empty() && *reported == sent.channel;
+        if self.registration.count > 1
             && on_its_channel
             && sent.delivery == MissionDelivery::Acked
             && !held
@@ -261,6 +218,6 @@ impl Robot {
 
     /// Whether the robot obeys `kind` commands.
     pub fn can(&self, kind: CommandKind) -> bool {
-        self.capabilities.contains(&kind)
+        self.registration.hello.capabilities.contains(&kind)
     }
 }

@@ -73,7 +73,7 @@ fn robot(t: Time, r: &Robot) -> Value {
         LinkState::Stale => rgba(0.95, 0.7, 0.1, 1.0),
         LinkState::Lost => rgba(0.9, 0.2, 0.2, 1.0),
     };
-    let p = r.pose;
+    let p = r.telemetry.pose;
     entity(t, format!("robot/{}", r.name), |m| {
         m.insert(
             "arrows".into(),
@@ -129,7 +129,7 @@ fn cluster(t: Time, c: &Cluster, fleet: &Fleet) -> Option<Value> {
         .members
         .iter()
         .filter_map(|m| fleet.robot(m))
-        .map(|r| r.pose)
+        .map(|r| r.telemetry.pose)
         .collect();
     if poses.is_empty() {
         return None;

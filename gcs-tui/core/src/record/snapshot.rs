@@ -35,15 +35,10 @@ fn robot(r: &Robot, out: &mut Vec<Event>) {
     out.push(Event::Registered {
         hello: Hello {
             name: name.clone(),
-            platform: r.platform.clone(),
-            capabilities: r.capabilities.clone(),
-            motors: r.motors,
-            max_speed: r.max_speed,
-            max_yaw_rate: r.max_yaw_rate,
-            agent_version: String::new(),
+            ..r.registration.hello.clone()
         },
-        id: r.id,
-        addr: r.addr.clone(),
+        id: r.registration.id,
+        addr: r.registration.addr.clone(),
         known: false,
     });
     if r.route.epoch != 0 {
@@ -64,7 +59,7 @@ fn robot(r: &Robot, out: &mut Vec<Event>) {
     if r.last_telemetry.is_some() {
         out.push(Event::Telemetry {
             robot: name.clone(),
-            telemetry: r.telemetry(),
+            telemetry: r.telemetry.clone(),
         });
     }
     if r.link != LinkState::Connected {

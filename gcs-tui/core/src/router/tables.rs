@@ -19,11 +19,13 @@
 //! - [`tap`]: the recorder's tap.
 //!
 //! Everything here is synchronous and runs under the router's tables lock,
-//! held for one decision (or one batch of datagrams): a few hash lookups,
-//! and for signed traffic a MAC check and a MAC. A decision does no I/O and
-//! calls nothing outside the tables: it leaves what to send and what
-//! happened in its [`Ctx`]. The caller queues the events in order before it
-//! releases the lock, then delivers them and sends (see `super::Shared`).
+//! held for one decision (or one batch of datagrams): the header read, a
+//! command's body checked in place (any other message decoded), a few hash
+//! lookups, and for signed traffic a MAC check and a MAC. A decision does
+//! no I/O and calls nothing outside the tables: it leaves what to send and
+//! what happened in its [`Ctx`]. The caller queues the events in order
+//! before it releases the lock, then delivers them and sends (see
+//! `super::Shared`).
 //!
 //! [`Tables::handle`] reads the header, then hands the message to one
 //! function per message kind; [`Tables::tick`] runs each concern's timers.

@@ -11,7 +11,7 @@
 
 use std::time::{Duration, Instant};
 
-use mech_proto::{ControlMode, FailsafeState, Health};
+use mech_proto::{FailsafeState, Health};
 
 use crate::fleet::Robot;
 use crate::msgs::diagnostic::{self, DiagnosticStatus, KeyValue};
@@ -32,37 +32,6 @@ fn kv(key: &str, value: impl ToString) -> KeyValue {
     KeyValue {
         key: key.to_string(),
         value: value.to_string(),
-    }
-}
-
-/// `failsafe`'s name, as the protocol documents it.
-pub fn failsafe_name(f: FailsafeState) -> &'static str {
-    match f {
-        FailsafeState::Ok => "ok",
-        FailsafeState::ChannelSilent => "channel-silent",
-        FailsafeState::RouterLost => "router-lost",
-        FailsafeState::EStopped => "estopped",
-        FailsafeState::Fault => "fault",
-    }
-}
-
-fn health_name(h: Health) -> &'static str {
-    match h {
-        Health::Ok => "ok",
-        Health::Degraded => "degraded",
-        Health::Fault => "fault",
-    }
-}
-
-fn mode_name(m: ControlMode) -> &'static str {
-    match m {
-        ControlMode::Idle => "idle",
-        ControlMode::Actuators => "actuators",
-        ControlMode::SteeringThrottle => "steering-throttle",
-        ControlMode::VelocityHeading => "velocity-heading",
-        ControlMode::Twist => "twist",
-        ControlMode::Waypoints => "waypoints",
-        ControlMode::Stopped => "stopped",
     }
 }
 
@@ -108,9 +77,9 @@ pub fn robot_status(name: &str, r: &Robot, cx: RobotContext<'_>) -> DiagnosticSt
         message,
         hardware_id: name.to_string(),
         values: vec![
-            kv("failsafe", failsafe_name(t.failsafe)),
-            kv("health", health_name(t.health)),
-            kv("mode", mode_name(t.mode)),
+            kv("failsafe", t.failsafe.as_str()),
+            kv("health", t.health.as_str()),
+            kv("mode", t.mode.as_str()),
             kv("route", route),
             kv("obeys_cmd_vel", t.channel == cx.cmd_channel),
             kv("obeys_goal_pose", t.channel == cx.goal_channel),

@@ -175,6 +175,22 @@ pub struct Rig {
     _ns: Netns,
 }
 
+/// `mech-gcs keygen NAME` for each of `keys`, as `NAME.key` in `dir`.
+fn keygen(dir: &Path, keys: &[&str]) {
+    for k in keys {
+        let out = Command::new(binary("mech-gcs"))
+            .args(["keygen", k, "--out"])
+            .arg(dir.join(format!("{k}.key")))
+            .output()
+            .expect("mech-gcs keygen runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
+
 impl Rig {
     /// Starts the station with `robots` simulated robots, the bridge with
     /// `bridge_args`, and the node watching every robot.
@@ -195,18 +211,7 @@ impl Rig {
     ) -> Rig {
         let ns = Netns::create();
         let dir = tempfile::tempdir().expect("temp dir");
-        for k in keys {
-            let out = Command::new(binary("mech-gcs"))
-                .args(["keygen", k, "--out"])
-                .arg(dir.path().join(format!("{k}.key")))
-                .output()
-                .expect("mech-gcs keygen runs");
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
+        keygen(dir.path(), keys);
         let socket = dir.path().join("gcs.sock");
         let log = |name: &str| std::fs::File::create(dir.path().join(name)).expect("log file");
         let mut station = ns.command(binary("mech-gcs"));

@@ -4,6 +4,7 @@
 //! the section for the TUI, which reads it ([`teleop_config`]).
 
 use mech_core::ConfigError;
+use mech_proto::Named;
 use mech_station::ConfigFile;
 use serde::Deserialize;
 
@@ -49,10 +50,10 @@ impl Default for GamepadConfig {
         GamepadConfig {
             deadzone: t.shaping.deadzone,
             expo: t.shaping.expo,
-            deadman: t.deadman.map_or("none", button_name).to_string(),
-            mode_button: button_name(t.mode_button).to_string(),
-            estop_button: button_name(t.estop_button).to_string(),
-            initial_mode: mode_name(t.initial_mode).to_string(),
+            deadman: t.deadman.map_or("none", PadButton::as_str).to_string(),
+            mode_button: t.mode_button.as_str().to_string(),
+            estop_button: t.estop_button.as_str().to_string(),
+            initial_mode: t.initial_mode.as_str().to_string(),
             rate_hz: t.rate_hz,
             max_speed: t.limits.max_speed,
             max_yaw_rate: t.limits.max_yaw_rate,
@@ -61,72 +62,23 @@ impl Default for GamepadConfig {
     }
 }
 
-const BUTTONS: [(&str, PadButton); 17] = [
-    ("south", PadButton::South),
-    ("east", PadButton::East),
-    ("north", PadButton::North),
-    ("west", PadButton::West),
-    ("left-bumper", PadButton::LeftBumper),
-    ("right-bumper", PadButton::RightBumper),
-    ("left-trigger", PadButton::LeftTrigger),
-    ("right-trigger", PadButton::RightTrigger),
-    ("select", PadButton::Select),
-    ("start", PadButton::Start),
-    ("mode", PadButton::Mode),
-    ("left-thumb", PadButton::LeftThumb),
-    ("right-thumb", PadButton::RightThumb),
-    ("dpad-up", PadButton::DPadUp),
-    ("dpad-down", PadButton::DPadDown),
-    ("dpad-left", PadButton::DPadLeft),
-    ("dpad-right", PadButton::DPadRight),
-];
-
-const MODES: [(&str, TeleopMode); 5] = [
-    ("steering-throttle", TeleopMode::SteeringThrottle),
-    ("velocity-heading", TeleopMode::VelocityHeading),
-    ("tank", TeleopMode::Tank),
-    ("twist", TeleopMode::Twist),
-    ("cluster", TeleopMode::Cluster),
-];
-
-fn button_name(b: PadButton) -> &'static str {
-    BUTTONS
-        .iter()
-        .find(|(_, x)| *x == b)
-        .map_or("?", |(n, _)| n)
-}
-
-fn mode_name(m: TeleopMode) -> &'static str {
-    MODES.iter().find(|(_, x)| *x == m).map_or("?", |(n, _)| n)
-}
-
 fn button(key: &str, name: &str) -> Result<PadButton, ConfigError> {
-    BUTTONS
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, b)| *b)
-        .ok_or_else(|| {
-            let names: Vec<&str> = BUTTONS.iter().map(|(n, _)| *n).collect();
-            ConfigError(format!(
-                "gamepad.{key}: unknown button {name:?}; buttons are {}",
-                names.join(", ")
-            ))
-        })
+    PadButton::parse(name).ok_or_else(|| {
+        ConfigError(format!(
+            "gamepad.{key}: unknown button {name:?}; buttons are {}",
+            PadButton::names()
+        ))
+    })
 }
 
 /// The mode named `name`, or an error naming `gamepad.<key>` and the modes.
 fn mode(key: &str, name: &str) -> Result<TeleopMode, ConfigError> {
-    MODES
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, m)| *m)
-        .ok_or_else(|| {
-            let names: Vec<&str> = MODES.iter().map(|(n, _)| *n).collect();
-            ConfigError(format!(
-                "gamepad.{key}: unknown mode {name:?}; modes are {}",
-                names.join(", ")
-            ))
-        })
+    TeleopMode::parse(name).ok_or_else(|| {
+        ConfigError(format!(
+            "gamepad.{key}: unknown mode {name:?}; modes are {}",
+            TeleopMode::names()
+        ))
+    })
 }
 
 /// The teleop settings of a configuration file's `[gamepad]` section (the

@@ -29,26 +29,28 @@ impl PadId {
     }
 }
 
-/// Buttons the teleop logic understands (the SDL / gilrs layout names).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum PadButton {
-    South,
-    East,
-    North,
-    West,
-    LeftBumper,
-    RightBumper,
-    LeftTrigger,
-    RightTrigger,
-    Select,
-    Start,
-    Mode,
-    LeftThumb,
-    RightThumb,
-    DPadUp,
-    DPadDown,
-    DPadLeft,
-    DPadRight,
+mech_proto::named_enum! {
+    /// Buttons the teleop logic understands (the SDL / gilrs layout names).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum PadButton: "button" {
+        South => "south",
+        East => "east",
+        North => "north",
+        West => "west",
+        LeftBumper => "left-bumper",
+        RightBumper => "right-bumper",
+        LeftTrigger => "left-trigger",
+        RightTrigger => "right-trigger",
+        Select => "select",
+        Start => "start",
+        Mode => "mode",
+        LeftThumb => "left-thumb",
+        RightThumb => "right-thumb",
+        DPadUp => "dpad-up",
+        DPadDown => "dpad-down",
+        DPadLeft => "dpad-left",
+        DPadRight => "dpad-right",
+    }
 }
 
 /// Analogue axes, each in `[-1, 1]`; stick Y is positive when pushed away

@@ -16,33 +16,29 @@ use mech_proto::{
 
 use mech_control::{ClusterStickRates, ClusterSticks, cluster_velocity_from_sticks};
 
-/// What the sticks drive.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum TeleopMode {
-    #[default]
-    SteeringThrottle,
-    VelocityHeading,
-    Tank,
-    Twist,
-    Cluster,
+mech_proto::named_enum! {
+    /// What the sticks drive.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+    pub enum TeleopMode: "teleop mode" {
+        #[default]
+        SteeringThrottle => "steering-throttle",
+        VelocityHeading => "velocity-heading",
+        Tank => "tank",
+        Twist => "twist",
+        Cluster => "cluster",
+    }
 }
 
 impl TeleopMode {
-    pub const ALL: [TeleopMode; 5] = [
-        TeleopMode::SteeringThrottle,
-        TeleopMode::VelocityHeading,
-        TeleopMode::Tank,
-        TeleopMode::Twist,
-        TeleopMode::Cluster,
-    ];
-
     /// The next mode in the cycle the mode button walks through.
     pub fn next(self) -> TeleopMode {
         let i = Self::ALL.iter().position(|m| *m == self).unwrap_or(0);
         Self::ALL[(i + 1) % Self::ALL.len()]
     }
 
-    pub fn as_str(self) -> &'static str {
+    /// How the routes panel and the log show the mode (shorter than its
+    /// name).
+    pub fn label(self) -> &'static str {
         match self {
             TeleopMode::SteeringThrottle => "steer-throttle",
             TeleopMode::VelocityHeading => "vel-heading",

@@ -317,6 +317,15 @@ pub fn cluster_centre(app: &App, c: &super::view::ClusterOnScreen) -> Option<(f6
         .filter_map(|n| app.robot(n))
         .map(|r| (r.pose.x, r.pose.y))
         .collect();
+    centre_of(c, &pos)
+}
+
+/// [`cluster_centre`] of a cluster whose members on the map are at `pos`
+/// (in member order).
+pub fn centre_of(c: &super::view::ClusterOnScreen, pos: &[(f64, f64)]) -> Option<(f64, f64)> {
+    if let Some((x, y, _)) = c.control.as_ref().and_then(|k| k.measured) {
+        return Some((x, y));
+    }
     if pos.is_empty() {
         return None;
     }

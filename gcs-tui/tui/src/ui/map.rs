@@ -80,6 +80,30 @@ impl Shape for Dots<'_> {
     }
 }
 
+/// A robot's recent path: its points as dots, each painted once for a run
+/// of points on the same dot. Painting a dot again in the same colour
+/// leaves it as it was, so the picture is exactly the one every point
+/// painted gives, while a path sampled finer than the map's dots (a fleet
+/// seen whole) costs a paint per dot it crosses, not per point.
+struct Path<'a> {
+    proj: &'a Projection,
+    points: &'a [(f64, f64)],
+    color: Color,
+}
+
+impl Shape for Path<'_> {
+    fn draw(&self, painter: &mut Painter) {
+        let mut last = None;
+        for &(x, y) in self.points {
+            let dot = self.proj.world_to_dot(x, y);
+            if let Some((i, j)) = dot.filter(|_| dot != last) {
+                painter.paint(i, j, self.color);
+                last = dot;
+            }
+        }
+    }
+}
+
 /// A straight segment rasterised on the dot grid (clipped to the view).
 struct Segment<'a> {
     proj: &'a Projection,
@@ -174,7 +198,7 @@ fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, text: &MapT
     }
     // Paths of the last seconds.
     for (i, r) in app.fleet.robots.iter().enumerate() {
-        ctx.draw(&Dots {
+        ctx.draw(&Path {
             proj,
             points: &r.trail,
             color: t.robot(i),
@@ -273,17 +297,16 @@ fn paint_clusters(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
         .map(|r| (r.name.as_str(), r))
         .collect();
     for c in &app.fleet.clusters {
-        let centre = labels::cluster_centre(app, c);
-        paint_cluster(ctx, c, centre, &by_name, proj, t);
+        paint_cluster(ctx, c, &by_name, proj, t);
     }
 }
 
-/// A cluster's members joined to its `centre` (the controller's measured
-/// pose, or the members' centroid), and what its controller reports.
+/// A cluster's members joined to its centre (the controller's measured
+/// pose, or the members' centroid: [`labels::cluster_centre`]), and what
+/// its controller reports.
 fn paint_cluster(
     ctx: &mut Context,
     c: &ClusterOnScreen,
-    centre: Option<(f64, f64)>,
     by_name: &HashMap<&str, &RobotView>,
     proj: &Projection,
     t: &Theme,
@@ -294,7 +317,7 @@ fn paint_cluster(
         .filter_map(|n| by_name.get(n.as_str()))
         .map(|r| (r.pose.x, r.pose.y))
         .collect();
-    let Some((cx, cy)) = centre else {
+    let Some((cx, cy)) = labels::centre_of(c, &pos) else {
         return;
     };
     if let Some(k) = c.control.as_ref() {

@@ -144,7 +144,7 @@ fn controller_lines(app: &App, t: &Theme, lines: &mut Vec<Line<'_>>) {
             Span::styled("hold LB", t.dim())
         };
         lines.push(Line::from(vec![
-            Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.as_str())),
+            Span::raw(format!(" {:<6} {:<8} ", p.channel(), p.mode.label())),
             state,
             Span::styled(format!(" {}", p.name), t.dim()),
         ]));

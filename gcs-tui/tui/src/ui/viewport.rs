@@ -141,10 +141,15 @@ impl Projection {
         (usize::from(self.width) * 2, usize::from(self.height) * 4)
     }
 
-    /// The braille dot containing a world point, if it is on screen.
+    /// The braille dot containing a world point, if it is on screen: dot
+    /// `floor((x - left) / m)`, `floor((top - y) / m)`. The bounds are
+    /// checked on the quotients before they are cut to integers, which for
+    /// a quotient in `[0, dots)` is the floor: the same dot, without a
+    /// `floor` call per point (the map projects every point of every path,
+    /// every frame).
     pub fn world_to_dot(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let i = ((x - self.left) / self.metres_per_dot).floor();
-        let j = ((self.top - y) / self.metres_per_dot).floor();
+        let i = (x - self.left) / self.metres_per_dot;
+        let j = (self.top - y) / self.metres_per_dot;
         let (w, h) = self.dots();
         (i >= 0.0 && j >= 0.0 && i < w as f64 && j < h as f64).then_some((i as usize, j as usize))
     }
@@ -312,6 +317,28 @@ mod tests {
             let j = ((dh - 1) as f64 * j_frac) as usize;
             let (x, y) = p.dot_to_world(i, j);
             prop_assert_eq!(p.world_to_dot(x, y), Some((i, j)));
+        }
+
+        /// The dot of any point, on the map, at its edges or off it, is the
+        /// floor of its distance in dots from the top-left corner.
+        #[test]
+        fn a_point_is_on_the_dot_its_floored_distance_says(
+            scale in 0.01f64..1.0, w in 2u16..100, h in 2u16..40,
+            x in -60.0f64..60.0, y in -100.0f64..100.0, edge in 0usize..4,
+        ) {
+            let p = Viewport::new(0.5, -0.25, scale).project(w, h);
+            let (dw, dh) = p.dots();
+            // Points exactly on a dot's edge, and at the map's edges.
+            let (x, y) = match edge {
+                0 => (x, y),
+                1 => (p.left + (x * 10.0).round() * scale, p.top - (y * 10.0).round() * scale),
+                2 => (p.left + dw as f64 * scale, p.top - dh as f64 * scale),
+                _ => (p.left - 1e-12, p.top + 1e-12),
+            };
+            let i = ((x - p.left) / scale).floor();
+            let j = ((p.top - y) / scale).floor();
+            let on = i >= 0.0 && j >= 0.0 && i < dw as f64 && j < dh as f64;
+            prop_assert_eq!(p.world_to_dot(x, y), on.then_some((i as usize, j as usize)));
         }
     }
 }

@@ -127,7 +127,9 @@ pub fn shown(f: &Fleet, robot: &str, state: LinkState) -> Result<(), String> {
     if r.link != state {
         return Err(format!("{robot} is {}", r.link.as_str()));
     }
-    if state == LinkState::Connected && (r.platform.is_empty() || r.last_telemetry.is_none()) {
+    if state == LinkState::Connected
+        && (r.registration.hello.platform.is_empty() || r.last_telemetry.is_none())
+    {
         return Err(format!("{robot} has no registration or telemetry yet"));
     }
     Ok(())

@@ -6,11 +6,13 @@ use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
-/// Which tracking statistic `cluster-expect` checks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ErrorMetric {
-    Max,
-    Rms,
+mech_proto::named_enum! {
+    /// Which tracking statistic `cluster-expect` checks.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum ErrorMetric: "error metric" {
+        Max => "max-error",
+        Rms => "rms-error",
+    }
 }
 
 /// `metric` of `cluster`'s slot error must be at most `limit` metres, over
@@ -25,17 +27,7 @@ pub struct ClusterExpect {
 impl ClusterExpect {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<ClusterExpect, LangError> {
         let cluster = a.target()?;
-        let w = a.next("max-error or rms-error")?;
-        let metric = match w.text.as_str() {
-            "max-error" => ErrorMetric::Max,
-            "rms-error" => ErrorMetric::Rms,
-            other => {
-                return Err(LangError::new(
-                    w.span,
-                    format!("expected max-error or rms-error, found {other:?}"),
-                ));
-            }
-        };
+        let metric = a.named::<ErrorMetric>()?;
         let limit = a.number("error limit (m)")?;
         Ok(ClusterExpect {
             cluster,

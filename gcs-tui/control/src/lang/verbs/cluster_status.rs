@@ -9,7 +9,6 @@ use crate::hub::ClusterView;
 use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
-use crate::spec::formation_name;
 
 /// Report on `cluster`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -52,7 +51,7 @@ fn report(name: &str, v: &ClusterView) -> Outcome {
     Outcome {
         summary: format!(
             "{name} {} {}: desired {}, measured {}; {}; slot error max {:.3} m, RMS {:.3} m since sent",
-            formation_name(st.formation.kind),
+            st.formation.kind.as_str(),
             v.channel,
             pose(st.desired),
             pose(st.measured),

@@ -7,7 +7,7 @@ use mech_core::fleet::{Fleet, Robot};
 use mech_proto::FailsafeState;
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe, failsafe_name};
+use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -53,24 +53,12 @@ impl Expectation {
             }
             "link" => {
                 let target = a.target()?;
-                let w = a.next("link state")?;
-                let state = LinkState::parse(&w.text).ok_or_else(|| {
-                    LangError::new(
-                        w.span,
-                        format!(
-                            "unknown link state {:?}; use connected, stale or lost",
-                            w.text
-                        ),
-                    )
-                })?;
+                let state = a.named::<LinkState>()?;
                 Expectation::Link(target, state)
             }
             "failsafe" => {
                 let target = a.target()?;
-                let w = a.next("failsafe state")?;
-                let state = failsafe(&w.text).ok_or_else(|| {
-                    LangError::new(w.span, format!("unknown failsafe state {:?}; use ok, channel-silent, router-lost, estopped or fault", w.text))
-                })?;
+                let state = a.named::<FailsafeState>()?;
                 Expectation::Failsafe(target, state)
             }
             "dropped" => {
@@ -111,7 +99,7 @@ impl Expectation {
                     worst = worst.max(d);
                     (d > *tolerance).then(|| format!(
                         "{name} is {d:.3} m from ({x}, {y}), more than {tolerance} m (at {:.3}, {:.3})",
-                        r.pose.x, r.pose.y
+                        r.telemetry.pose.x, r.telemetry.pose.y
                     ))
                 })?;
                 Ok(format!("within {worst:.3} m"))
@@ -139,15 +127,15 @@ impl Expectation {
             }
             Expectation::Failsafe(target, state) => {
                 each(f, target, |name, r| {
-                    (r.failsafe != *state).then(|| {
+                    (r.telemetry.failsafe != *state).then(|| {
                         format!(
                             "{name} failsafe is {}, expected {}",
-                            failsafe_name(r.failsafe),
-                            failsafe_name(*state)
+                            r.telemetry.failsafe.as_str(),
+                            state.as_str()
                         )
                     })
                 })?;
-                Ok(format!("failsafe {}", failsafe_name(*state)))
+                Ok(format!("failsafe {}", state.as_str()))
             }
             Expectation::DroppedAtLeast { channel, min } => dropped_at_least(f, channel, *min),
         }

@@ -8,7 +8,7 @@ use super::control_error;
 use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
-use crate::spec::{formation_name, parse_formation};
+use crate::spec::parse_formation;
 
 /// Give `cluster` this formation.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,7 +38,7 @@ impl SetFormation {
             .map_err(|e| control_error(cluster, e))?;
         let shape = match formation.kind {
             FormationKind::Custom => format!("custom, {} offsets", formation.offsets.len()),
-            k => format!("{}, spacing {} m", formation_name(k), formation.spacing),
+            k => format!("{}, spacing {} m", k.as_str(), formation.spacing),
         };
         Ok(Outcome::new(format!("{}: formation {shape}", cluster.name)))
     }

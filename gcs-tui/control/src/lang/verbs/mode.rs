@@ -38,7 +38,10 @@ impl Mode {
                 if !robot.can(mode) {
                     return Err(LangError::new(
                         target.span,
-                        format!("{r} ({}) cannot obey {mode} commands", robot.platform),
+                        format!(
+                            "{r} ({}) cannot obey {mode} commands",
+                            robot.registration.hello.platform
+                        ),
                     ));
                 }
             }

@@ -8,13 +8,15 @@ use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
-/// Where navigation should run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NavSide {
-    Onboard,
-    Offboard,
-    /// Whichever side it is not on now (the TUI's `o` key).
-    Toggle,
+mech_proto::named_enum! {
+    /// Where navigation should run.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum NavSide: "navigation side" {
+        Onboard => "onboard",
+        Offboard => "offboard",
+        /// Whichever side it is not on now (the TUI's `o` key).
+        Toggle => "toggle",
+    }
 }
 
 /// Run `robot`'s navigation on `side`.
@@ -27,18 +29,7 @@ pub struct Nav {
 impl Nav {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Nav, LangError> {
         let robot = a.target()?;
-        let w = a.next("offboard, onboard or toggle")?;
-        let side = match w.text.as_str() {
-            "offboard" => NavSide::Offboard,
-            "onboard" => NavSide::Onboard,
-            "toggle" => NavSide::Toggle,
-            other => {
-                return Err(LangError::new(
-                    w.span,
-                    format!("expected offboard, onboard or toggle, found {other:?}"),
-                ));
-            }
-        };
+        let side = a.named::<NavSide>()?;
         Ok(Nav { robot, side })
     }
 

@@ -36,7 +36,11 @@ impl NavWait {
         let (hub, gcs) = (&ctx.control, &ctx.gcs);
         let ((next, side), took) = poll_until(self.timeout, at, || {
             let offboard = hub.nav_view(name).map(|v| v.progress.next);
-            let onboard = gcs.with_fleet(|f| f.robot(name).and_then(|r| r.mission).map(|m| m.next));
+            let onboard = gcs.with_fleet(|f| {
+                f.robot(name)
+                    .and_then(|r| r.telemetry.mission)
+                    .map(|m| m.next)
+            });
             let now = offboard.or(onboard);
             let side = if offboard.is_some() {
                 "offboard"

@@ -7,7 +7,7 @@ use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
 
 use super::channel_name;
-use crate::lang::args::{Args, Target, failsafe_name};
+use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -76,7 +76,7 @@ impl Status {
             summary: format!(
                 "{} robots; station {}{refused}{}{radios}{recording}",
                 details.len(),
-                router.security().as_str(),
+                router.security().label(),
                 ctx.gcs.with_fleet(stations),
             ),
             details,
@@ -105,23 +105,23 @@ fn status_line(r: &Robot) -> String {
     format!(
         "{} #{} {} {} at ({:.2}, {:.2}) heading {:.2} speed {:.2} mode {:?} route {}{} failsafe {}",
         r.name,
-        r.id,
-        r.platform,
+        r.registration.id,
+        r.registration.hello.platform,
         r.link.as_str(),
-        r.pose.x,
-        r.pose.y,
-        r.pose.heading,
+        r.telemetry.pose.x,
+        r.telemetry.pose.y,
+        r.telemetry.pose.heading,
         r.speed(),
-        r.mode,
+        r.telemetry.mode,
         channel_name(&r.route.requested),
         if r.route.is_pending() {
             " (pending)"
         } else {
             ""
         },
-        failsafe_name(r.failsafe),
-    ) + &if r.stale > 0 {
-        format!(" ignored-stale {}", r.stale)
+        r.telemetry.failsafe.as_str(),
+    ) + &if r.telemetry.stale > 0 {
+        format!(" ignored-stale {}", r.telemetry.stale)
     } else {
         String::new()
     } + &link_quality(&r.quality)

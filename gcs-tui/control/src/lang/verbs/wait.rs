@@ -125,7 +125,7 @@ impl WaitFor {
             .unwrap_or_else(|| vec![target.name.clone()])
             .into_iter()
             .filter_map(|name| {
-                let p = f.robot(&name)?.pose;
+                let p = f.robot(&name)?.telemetry.pose;
                 Some((name, (p.x, p.y)))
             })
             .collect()
@@ -197,7 +197,7 @@ fn not_arrived(r: &Robot) -> Option<String> {
     if r.arrived() {
         return None;
     }
-    Some(match (&r.waypoints.sent, &r.mission) {
+    Some(match (&r.waypoints.sent, &r.telemetry.mission) {
         (None, _) => format!("{} has no mission", r.name),
         (Some(s), _) if s.delivery != MissionDelivery::Acked => {
             format!("{} mission {} is {:?}", r.name, s.id, s.delivery)

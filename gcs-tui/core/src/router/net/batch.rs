@@ -8,9 +8,10 @@
 //! sent on at once.
 //!
 //! The system calls go through `nix`'s safe wrappers; this module owns the
-//! receive buffers, so the hot path allocates per batch, never per
-//! datagram (the wrappers' headers are made per call: they hold raw
-//! pointers, and a worker's future must stay `Send`).
+//! receive buffers and the message headers the calls fill in, made once
+//! per worker and kept, so a batch allocates nothing: not per datagram,
+//! not per system call. The headers hold raw pointers, which keeps
+//! [`RecvBatch`] and [`SendBatch`] on the worker thread that made them.
 
 use std::io::{IoSlice, IoSliceMut};
 use std::net::{SocketAddr, SocketAddrV4, SocketAddrV6};
@@ -27,7 +28,13 @@ pub(super) const BATCH: usize = 32;
 pub(super) struct RecvBatch {
     /// One buffer per datagram, one byte longer than the largest message,
     /// so an oversized datagram shows as such instead of as a truncated one.
-    bufs: Vec<Vec<u8>>,
+    bufs: [Vec<u8>; BATCH],
+    /// The headers `recvmmsg` fills in (with their source addresses),
+    /// pointed at `bufs` on each call. The kernel leaves in each header the
+    /// length of the address it wrote, and takes it as the room for the
+    /// next: every datagram on one socket has a source of the socket's own
+    /// family, so that room is always enough.
+    headers: MultiHeaders<SockaddrStorage>,
     /// Length and source of each datagram received.
     got: Vec<(usize, SocketAddr)>,
 }
@@ -43,9 +50,8 @@ impl std::fmt::Debug for RecvBatch {
 impl RecvBatch {
     pub(super) fn new() -> RecvBatch {
         RecvBatch {
-            bufs: (0..BATCH)
-                .map(|_| vec![0; mech_proto::MAX_MESSAGE_LEN + 1])
-                .collect(),
+            bufs: std::array::from_fn(|_| vec![0; mech_proto::MAX_MESSAGE_LEN + 1]),
+            headers: MultiHeaders::preallocate(BATCH, None),
             got: Vec::with_capacity(BATCH),
         }
     }
@@ -57,10 +63,8 @@ impl RecvBatch {
     /// socket is shut down for reading.
     pub(super) fn recv(&mut self, fd: RawFd, flags: MsgFlags) -> std::io::Result<usize> {
         self.got.clear();
-        let mut iovs: Vec<[IoSliceMut<'_>; 1]> =
-            self.bufs.iter_mut().map(|b| [IoSliceMut::new(b)]).collect();
-        let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(BATCH, None);
-        let results = recvmmsg(fd, &mut headers, iovs.iter_mut(), flags, None)
+        let mut iovs = self.bufs.each_mut().map(|b| [IoSliceMut::new(b)]);
+        let results = recvmmsg(fd, &mut self.headers, iovs.iter_mut(), flags, None)
             .map_err(std::io::Error::from)?;
         for m in results {
             // A datagram without an IP source cannot be answered or judged.
@@ -95,6 +99,11 @@ pub(super) struct SendBatch {
     /// Segmentation offload works (cleared the first time the kernel
     /// refuses it; everything then goes through `sendmmsg`).
     gso: bool,
+    /// The headers `sendmmsg` fills in, each call setting every field it
+    /// sends with (buffers, destination).
+    headers: MultiHeaders<SockaddrStorage>,
+    /// The destinations of one `sendmmsg`, kept for their allocation.
+    addrs: Vec<Option<SockaddrStorage>>,
 }
 
 /// Most segments in one offloaded send (the kernel's limit is 64 or more).
@@ -112,7 +121,11 @@ pub(super) struct Sent {
 
 impl SendBatch {
     pub(super) fn new() -> SendBatch {
-        SendBatch { gso: true }
+        SendBatch {
+            gso: true,
+            headers: MultiHeaders::preallocate(BATCH, None),
+            addrs: Vec::with_capacity(BATCH),
+        }
     }
 
     /// Sends `msgs` in order from `fd`, [`BATCH`] per system call. With
@@ -148,14 +161,22 @@ impl SendBatch {
                 rest.len()
             };
             let chunk = &rest[..singles.min(BATCH)];
-            let iovs: Vec<[IoSlice<'_>; 1]> =
-                chunk.iter().map(|(_, b)| [IoSlice::new(b)]).collect();
-            let addrs: Vec<Option<SockaddrStorage>> = chunk
-                .iter()
-                .map(|(a, _)| Some(SockaddrStorage::from(*a)))
-                .collect();
-            let mut headers = MultiHeaders::<SockaddrStorage>::preallocate(chunk.len(), None);
-            match sendmmsg(fd, &mut headers, &iovs, &addrs, [], flags) {
+            let mut iovs = [[IoSlice::new(&[])]; BATCH];
+            for (iov, (_, b)) in iovs.iter_mut().zip(chunk) {
+                *iov = [IoSlice::new(b)];
+            }
+            self.addrs.clear();
+            self.addrs
+                .extend(chunk.iter().map(|(a, _)| Some(SockaddrStorage::from(*a))));
+            let sent = sendmmsg(
+                fd,
+                &mut self.headers,
+                &iovs[..chunk.len()],
+                &self.addrs,
+                [],
+                flags,
+            );
+            match sent {
                 Ok(results) => {
                     let n = results.count();
                     if n == 0 {
@@ -184,11 +205,14 @@ impl SendBatch {
         run: &[(SocketAddr, &[u8])],
         flags: MsgFlags,
     ) -> Option<Result<(), ()>> {
-        let iovs: Vec<IoSlice<'_>> = run.iter().map(|(_, b)| IoSlice::new(b)).collect();
+        let mut iovs = [IoSlice::new(&[]); GSO_SEGMENTS];
+        for (iov, (_, b)) in iovs.iter_mut().zip(run) {
+            *iov = IoSlice::new(b);
+        }
         let size = run[0].1.len() as u16;
         let cmsg = [ControlMessage::UdpGsoSegments(&size)];
         let to = SockaddrStorage::from(run[0].0);
-        match sendmsg(fd, &iovs, &cmsg, flags, Some(&to)) {
+        match sendmsg(fd, &iovs[..run.len()], &cmsg, flags, Some(&to)) {
             Ok(_) => Some(Ok(())),
             Err(nix::errno::Errno::EAGAIN) => Some(Err(())),
             Err(e) => {
@@ -263,5 +287,41 @@ mod tests {
             .unwrap_err();
         assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock);
         assert!(round_trips("[::1]:7400".parse().unwrap()));
+    }
+
+    /// The headers a batch keeps between calls still give every datagram
+    /// its own source and length, batch after batch, on either family.
+    #[test]
+    fn kept_headers_give_each_datagram_its_source_batch_after_batch() {
+        for host in ["127.0.0.1:0", "[::1]:0"] {
+            let rx = std::net::UdpSocket::bind(host).unwrap();
+            let to = rx.local_addr().unwrap();
+            let senders: Vec<std::net::UdpSocket> = (0..3)
+                .map(|_| std::net::UdpSocket::bind(host).unwrap())
+                .collect();
+            let (mut out, mut batch) = (SendBatch::new(), RecvBatch::new());
+            for round in 0..4usize {
+                // A batch of a different size each round, its senders in
+                // turn, each datagram as long as its place.
+                let n = [BATCH, 3, BATCH - 1, 1][round];
+                let mut expected = Vec::new();
+                for i in 0..n {
+                    let s = &senders[(i + round) % senders.len()];
+                    let bytes = vec![round as u8; 1 + i];
+                    let sent = out.send(s.as_raw_fd(), &[(to, &bytes)], MsgFlags::empty());
+                    assert_eq!(sent.sent, 1);
+                    expected.push((bytes, s.local_addr().unwrap()));
+                }
+                let mut got = Vec::new();
+                while got.len() < n {
+                    let k = batch.recv(rx.as_raw_fd(), MsgFlags::MSG_DONTWAIT).unwrap();
+                    got.extend((0..k).map(|i| {
+                        let (bytes, from) = batch.datagram(i);
+                        (bytes.to_vec(), from)
+                    }));
+                }
+                assert_eq!(got, expected, "{host} round {round}");
+            }
+        }
     }
 }

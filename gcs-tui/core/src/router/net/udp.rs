@@ -5,7 +5,7 @@
 use std::net::SocketAddr;
 use std::os::fd::{AsRawFd, RawFd};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use nix::sys::socket::MsgFlags;
 use tracing::debug;
@@ -53,9 +53,10 @@ pub(super) fn start_workers(
 /// delivers the batch's events once the lock is released (see
 /// `crate::router::events`; a batch of commands has none), and sends what
 /// it decided with `sendmmsg`. At low rates a batch is the one
-/// datagram that woke it: nothing waits to fill one. While traffic is
-/// dense it polls its socket for a moment before sleeping again
-/// ([`Poll`]), so that a busy sender does not pay a wake-up per datagram.
+/// datagram that woke it: nothing waits to fill one. While datagrams
+/// follow each other closely it polls its socket for a moment before
+/// sleeping again ([`Poll`]), so that a busy sender does not pay a wake-up
+/// per datagram.
 fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Duration) {
     let mut received = RecvBatch::new();
     let mut sender = SendBatch::new();
@@ -63,11 +64,18 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
     let mut fx = Effects::default();
     let mut poll = Poll::new(poll);
     let fd = socket.as_raw_fd();
-    // Set while traffic is dense: until then, take what comes next
-    // without going to sleep.
+    // When the last batch arrived, and until when to poll after it.
+    let mut last_arrived = Instant::now();
     let mut polling_until = None;
     while !shared.stopped() {
-        let polling = polling_until.is_some_and(|t| std::time::Instant::now() < t);
+        let polling = match polling_until {
+            Some(t) if Instant::now() >= t => {
+                poll.caught_nothing();
+                polling_until = None;
+                false
+            }
+            until => until.is_some(),
+        };
         let flags = if polling {
             MsgFlags::MSG_DONTWAIT
         } else {
@@ -87,17 +95,19 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
                 continue;
             }
         };
-        if !polling {
-            poll.woke_with(n);
-        }
+        // The one clock reading of a batch: when it arrived.
+        let arrived = Instant::now();
+        poll.came(arrived - last_arrived, n, polling);
+        last_arrived = arrived;
         decided.clear();
         let message = |i| batch_message(&received, i);
         // A full batch: more datagrams wait in the socket.
         let behind = n == BATCH;
-        let ticket = shared.decide_each(n, message, behind, &mut fx, |i, fx| decided.take(i, fx));
+        let take = |i, fx: &mut Effects| decided.take(i, fx);
+        let ticket = shared.decide_each(arrived, n, message, behind, &mut fx, take);
         shared.events.deliver(ticket);
         send_decided(&shared, fd, &mut sender, &received, &mut decided);
-        polling_until = poll.until();
+        polling_until = poll.next().map(|budget| arrived + budget);
     }
 }
 
@@ -115,41 +125,86 @@ fn receive_error(e: &std::io::Error) {
     }
 }
 
-/// When a UDP worker polls its socket instead of sleeping.
+/// The longest time between two batches' arrivals that polling pays for:
+/// sleeping and being woken costs a thread about this much CPU (on the
+/// project's 2-vCPU VM, 15-18 us per datagram at 2,000 datagrams/s,
+/// where every datagram wakes the worker, against 6 us at 50,000/s), so
+/// polling for datagrams that come closer than this (above 100,000 a
+/// second) saves CPU, and polling for sparser ones spends more than the
+/// wake-ups it spares.
+const BREAK_EVEN: Duration = Duration::from_micros(10);
+
+/// Longest back-off, in batches, after polls that caught nothing.
+const MAX_BACKOFF: u32 = 1024;
+
+/// The hit rate, in 1/256, at or above which a worker polls.
+const POLL_AT: u32 = 192;
+
+/// When a UDP worker polls its socket instead of sleeping: only while
+/// polling pays for itself.
 ///
 /// Sleeping in `recvmmsg` costs the next datagram's sender a wake-up of this
 /// thread (on a virtual machine, an inter-processor interrupt and a
-/// hypervisor exit), and this thread a context switch. When datagrams queue
-/// up faster than the worker wakes for them, that is most of the cost of a
-/// datagram. So when a wake-up finds more than one datagram waiting, the
-/// worker polls (yielding the core between tries) for up to `budget` after
-/// each batch, for as long as datagrams keep coming within it, and only
-/// then sleeps. A wake-up that finds one datagram means the worker keeps
-/// up: it sleeps at once, so traffic it keeps up with (a 2 kHz command
-/// stream, a fleet's telemetry) costs no polling CPU and no latency. A
-/// zero budget turns polling off.
+/// hypervisor exit), and this thread a context switch. When datagrams
+/// follow each other closer than that costs, polling (yielding the core
+/// between tries) is cheaper and faster; when they do not, every poll burns
+/// its whole wait for nothing. So each batch counts a hit when it arrived
+/// within [`BREAK_EVEN`] of the one before (or more than one datagram was
+/// waiting), whether the worker polled or slept for it;
+/// the worker polls, for up to `budget`, only while at least three of four
+/// recent batches were hits. A poll that catches nothing also stops polling
+/// for a back-off that doubles with each such poll in a row (1, 2, 4 ...
+/// [`MAX_BACKOFF`] batches) and ends at the first poll that catches
+/// something. So a dense stream (a sender at the router's peak) is polled
+/// for, while a 2 kHz command stream or a steady 64 kHz stream, whose
+/// datagrams come further apart than a wake-up costs, is slept for and
+/// costs no polling CPU. A zero budget turns polling off.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Poll {
     budget: Duration,
-    queued: bool,
+    /// Recent batches that came quickly, in 1/256: a moving average over
+    /// about the last eight.
+    hits: u32,
+    /// Batches still to sleep after, backing off.
+    skip: u32,
+    /// The next back-off, in batches.
+    backoff: u32,
 }
 
 impl Poll {
     pub(super) fn new(budget: Duration) -> Poll {
         Poll {
             budget,
-            queued: false,
+            hits: 0,
+            skip: 0,
+            backoff: 1,
         }
     }
 
-    /// A blocking receive returned `n` datagrams.
-    pub(super) fn woke_with(&mut self, n: usize) {
-        self.queued = !self.budget.is_zero() && n >= 2;
+    /// A receive returned `n` datagrams, `after` the last batch arrived;
+    /// `polled`: the worker was polling for them (else it slept).
+    pub(super) fn came(&mut self, after: Duration, n: usize, polled: bool) {
+        let hit = n >= 2 || after <= BREAK_EVEN.min(self.budget);
+        self.hits = self.hits - self.hits / 8 + if hit { 32 } else { 0 };
+        if polled {
+            self.backoff = 1;
+        }
     }
 
-    /// Until when to poll after a batch just handled; `None`: sleep at once.
-    pub(super) fn until(&self) -> Option<std::time::Instant> {
-        self.queued.then(|| std::time::Instant::now() + self.budget)
+    /// A poll ran its whole budget and caught nothing: sleep for the next
+    /// back-off, and double it.
+    pub(super) fn caught_nothing(&mut self) {
+        self.skip = self.backoff;
+        self.backoff = (self.backoff * 2).min(MAX_BACKOFF);
+    }
+
+    /// How long to poll after a batch just handled; `None`: sleep at once.
+    pub(super) fn next(&mut self) -> Option<Duration> {
+        if self.skip > 0 {
+            self.skip -= 1;
+            return None;
+        }
+        (!self.budget.is_zero() && self.hits >= POLL_AT).then_some(self.budget)
     }
 }
 
@@ -166,6 +221,9 @@ fn batch_message(batch: &RecvBatch, i: usize) -> (&[u8], Peer) {
 struct Decided {
     sends: Vec<(Peer, Payload)>,
     owned: Vec<Vec<u8>>,
+    /// Room for a batch's UDP datagrams as `SendBatch` takes them, empty
+    /// between batches (see [`emptied`]).
+    udp: Vec<(SocketAddr, &'static [u8])>,
 }
 
 impl Decided {
@@ -208,11 +266,11 @@ fn send_decided(
     if decided.sends.is_empty() || shared.stopped() {
         return;
     }
+    let mut udp: Vec<(SocketAddr, &[u8])> = std::mem::take(&mut decided.udp);
     let bytes = |p: &Payload| match *p {
         Payload::Received(i) => batch.datagram(i).0,
         Payload::Owned(i) => decided.owned[i].as_slice(),
     };
-    let mut udp: Vec<(SocketAddr, &[u8])> = Vec::with_capacity(decided.sends.len());
     for (peer, payload) in &decided.sends {
         match peer {
             Peer::Udp(addr) => udp.push((*addr, bytes(payload))),
@@ -223,33 +281,123 @@ fn send_decided(
     if sent.failed > 0 {
         shared.net.count_send_failures(sent.failed);
     }
+    decided.udp = emptied(udp);
+}
+
+/// `v` emptied, its allocation kept for the next batch: a vector of
+/// another lifetime, collected in place (same element layout), so a batch
+/// allocates nothing to send.
+fn emptied(mut v: Vec<(SocketAddr, &[u8])>) -> Vec<(SocketAddr, &'static [u8])> {
+    v.clear();
+    let nowhere = SocketAddr::from(([0, 0, 0, 0], 0));
+    v.into_iter().map(|_| (nowhere, &[][..])).collect()
 }
 
 #[cfg(test)]
 mod tests {
-    use super::Poll;
+    use super::{BREAK_EVEN, MAX_BACKOFF, Poll, emptied};
+    use std::net::SocketAddr;
     use std::time::Duration;
 
     #[test]
+    fn a_batch_sends_from_the_room_the_last_one_left() {
+        let payload = [7u8; 8];
+        let mut udp: Vec<(SocketAddr, &[u8])> = Vec::with_capacity(32);
+        udp.push(("127.0.0.1:9".parse().unwrap(), &payload));
+        let (room, at) = (udp.capacity(), udp.as_ptr() as usize);
+        let kept = emptied(udp);
+        assert!(kept.is_empty());
+        assert_eq!((kept.capacity(), kept.as_ptr() as usize), (room, at));
+    }
+
+    const BUDGET: Duration = Duration::from_micros(30);
+    const QUICK: Duration = Duration::from_micros(2);
+    /// A gap a wake-up costs less than: a 32 kHz stream's.
+    const SLOW: Duration = Duration::from_micros(31);
+
+    /// Batches until `poll` first polls, of at most `limit`, each found
+    /// after `after` with `n` datagrams, the worker sleeping for them.
+    fn batches_until_polling(poll: &mut Poll, after: Duration, n: usize, limit: usize) -> usize {
+        (1..=limit)
+            .find(|_| {
+                poll.came(after, n, false);
+                poll.next().is_some()
+            })
+            .unwrap_or(limit + 1)
+    }
+
+    #[test]
     fn a_worker_polls_only_when_datagrams_queue_up() {
-        let mut poll = Poll::new(Duration::from_micros(30));
+        let mut poll = Poll::new(BUDGET);
         // Before any traffic, and while each wake-up finds one datagram
-        // (the worker keeps up), it sleeps at once after each batch.
-        assert!(poll.until().is_none());
-        poll.woke_with(1);
-        assert!(poll.until().is_none());
-        // Datagrams queued while it slept: it polls, for the budget.
-        poll.woke_with(2);
-        let until = poll.until().expect("polls");
-        assert!(until <= std::time::Instant::now() + Duration::from_micros(30));
-        poll.woke_with(32);
-        assert!(poll.until().is_some());
-        // Keeping up again: back to sleeping at once.
-        poll.woke_with(1);
-        assert!(poll.until().is_none());
+        // long after the last (the worker keeps up), it sleeps at once.
+        assert!(poll.next().is_none());
+        assert_eq!(batches_until_polling(&mut poll, SLOW, 1, 1000), 1001);
+        // Datagrams queued while it slept, batch after batch: it polls,
+        // for the budget, after a few batches.
+        let queued = batches_until_polling(&mut poll, SLOW, 2, 100);
+        assert!((2..=16).contains(&queued), "{queued}");
+        assert_eq!(poll.next(), Some(BUDGET));
+        poll.came(QUICK, 32, true);
+        assert_eq!(poll.next(), Some(BUDGET));
+        // Keeping up again: back to sleeping within a few batches.
+        let sleeping = (1..=100)
+            .find(|_| {
+                poll.came(SLOW, 1, false);
+                poll.next().is_none()
+            })
+            .expect("sleeps again");
+        assert!(sleeping <= 4, "{sleeping}");
         // Off: never polls.
         let mut off = Poll::new(Duration::ZERO);
-        off.woke_with(32);
-        assert!(off.until().is_none());
+        assert_eq!(batches_until_polling(&mut off, QUICK, 32, 1000), 1001);
+    }
+
+    #[test]
+    fn a_stream_closer_than_a_wake_up_is_polled_for_and_a_sparser_one_is_not() {
+        let close = BREAK_EVEN / 2;
+        let mut poll = Poll::new(BUDGET);
+        assert!(batches_until_polling(&mut poll, close, 1, 100) <= 16);
+        // Each poll catches the next datagram: polling goes on.
+        for _ in 0..1000 {
+            poll.came(close, 1, true);
+            assert_eq!(poll.next(), Some(BUDGET));
+        }
+        // A steady stream further apart than a wake-up costs (at 64 kHz,
+        // 15.6 us): never polled for.
+        let mut poll = Poll::new(BUDGET);
+        let apart = BREAK_EVEN + Duration::from_micros(1);
+        assert_eq!(batches_until_polling(&mut poll, apart, 1, 10_000), 10_001);
+    }
+
+    #[test]
+    fn polls_that_catch_nothing_back_off_exponentially_until_one_catches() {
+        let mut poll = Poll::new(BUDGET);
+        assert!(batches_until_polling(&mut poll, QUICK, 4, 100) <= 16);
+        // Bursts: a poll that catches nothing, then batches that come
+        // quickly again. Count the batches slept after, per poll missed.
+        let mut slept = Vec::new();
+        for _ in 0..12 {
+            assert!(poll.next().is_some(), "polls between back-offs");
+            poll.caught_nothing();
+            let mut n = 0;
+            loop {
+                poll.came(QUICK, 4, false);
+                if poll.next().is_some() {
+                    break;
+                }
+                n += 1;
+            }
+            slept.push(n);
+        }
+        assert_eq!(slept, [1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 1024]);
+        assert_eq!(MAX_BACKOFF, 1024);
+        // A poll that catches a datagram ends the back-off.
+        poll.came(QUICK, 1, true);
+        poll.caught_nothing();
+        poll.came(QUICK, 4, false);
+        assert!(poll.next().is_none(), "one batch of back-off");
+        poll.came(QUICK, 4, false);
+        assert!(poll.next().is_some());
     }
 }

@@ -20,7 +20,7 @@ use tokio::time::Instant;
 use tracing::warn;
 
 use super::Peer;
-use crate::counters::RejectReason;
+use crate::counters::{DropReason, RejectReason};
 use crate::event::{Event, REFUSED_SOURCES_COUNTED as SOURCES_COUNTED};
 
 /// The shortest time between two reports.
@@ -38,11 +38,12 @@ pub(super) enum Why {
 }
 
 impl Why {
+    /// The reason's name: the drop reason's, or the gate's rejection's.
     fn as_str(self) -> &'static str {
         match self {
-            Why::BadPacket => "bad-packet",
+            Why::BadPacket => DropReason::BadPacket.as_str(),
             Why::Rejected(r) => r.as_str(),
-            Why::Shed => "shed",
+            Why::Shed => DropReason::Shed.as_str(),
         }
     }
 }

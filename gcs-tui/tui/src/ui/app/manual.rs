@@ -143,7 +143,7 @@ impl App {
                     );
                 }
                 TeleopAction::ModeChanged(m) => {
-                    self.log(LogLevel::Info, format!("{} mode {}", o.channel, m.as_str()));
+                    self.log(LogLevel::Info, format!("{} mode {}", o.channel, m.label()));
                 }
             }
         }
