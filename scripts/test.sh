@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # Runs every MECH test: installs missing system packages, builds both
-# binaries (the end-to-end tests run them) and every test, then runs the
-# tests in three lanes at once, then the Foxglove live view, which is built
-# only with mech-station's `foxglove` feature (mech-gcs's forwards to it).
+# binaries (the end-to-end tests run them) and every test, runs the whole
+# workspace's tests (every failing test binary, not only the first), then
+# the Foxglove live view, which is built only with mech-station's `foxglove`
+# feature (mech-gcs's forwards to it). Ends with the time each step took;
+# fails if any test failed.
 #
-# The lanes: the fault-injection suite (real-time scenarios, one after
-# another, mostly waiting), the end-to-end tests (real processes, mostly
-# waiting) and every other crate's tests (most of the CPU). Each lane's
-# output is printed whole when it ends; the script ends with the time each
-# step took and fails if any test failed.
+# The tests run in one `cargo test --workspace`: a run of a part of the
+# workspace (`--exclude`, or only some `--test` targets) resolves other
+# features for the shared crates (dev-dependencies count only for the
+# targets built), so it builds the workspace a second time (16 min beside
+# other builds, measured).
 #
 #   bash scripts/test.sh            the suite
 #   bash scripts/test.sh --stress   the suite with a CPU hog per core beside
@@ -29,9 +31,8 @@ for arg in "$@"; do
     esac
 done
 
-# Background jobs (hogs, lanes) each get a process group of their own
-# (job control on while they start), so that ending the script ends them
-# and every process they started.
+# The hogs each get a process group of their own (job control on while
+# they start), so that ending the script ends them.
 background=()
 spawn() {
     set -m
@@ -39,13 +40,11 @@ spawn() {
     background+=($!)
     set +m
 }
-logs=$(mktemp -d)
 finish() {
     for pid in "${background[@]}"; do
         kill -- "-$pid" 2>/dev/null || true
     done
     wait 2>/dev/null || true
-    rm -rf "$logs"
 }
 trap finish EXIT
 trap 'exit 130' INT
@@ -62,47 +61,24 @@ fi
 timings=()
 started=$SECONDS
 step() {
-    local name=$1 t0=$SECONDS
+    local name=$1 t0=$SECONDS rc=0
     shift
-    "$@"
+    "$@" || rc=$?
     timings+=("$(printf '%5d s  %s' $((SECONDS - t0)) "$name")")
+    return "$rc"
 }
 
 step "system packages" bash scripts/deps.sh
 step "build: binaries" cargo build --workspace --bins
 step "build: tests" cargo test --workspace --no-run
 
-# Every lane selects the workspace (`--workspace`, or `--exclude`), so each
-# resolves features as the builds above did and builds nothing again.
-lane_names=(faults e2e crates)
-lane_faults() { cargo test --workspace --test faults; }
-lane_e2e() { cargo test --workspace --no-fail-fast --test e2e --test layout; }
-lane_crates() { cargo test --workspace --no-fail-fast --exclude mech-e2e; }
-lane() {
-    local rc=0
-    "lane_$1" >"$logs/$1.log" 2>&1 || rc=$?
-    echo "$rc $((SECONDS - lanes_started))" >"$logs/$1.end"
-}
-lanes_started=$SECONDS
-declare -A lane_pid
-for name in "${lane_names[@]}"; do
-    spawn lane "$name"
-    lane_pid[$name]=${background[-1]}
-done
-echo "tests: lanes ${lane_names[*]} run at once (logs in $logs)"
 failed=()
-for name in "${lane_names[@]}"; do
-    wait "${lane_pid[$name]}" || true
-    echo "=== $name ==="
-    cat "$logs/$name.log"
-    read -r rc took <"$logs/$name.end" || { rc=1; took=0; }
-    [ "$rc" -eq 0 ] || failed+=("$name")
-    timings+=("$(printf '%5d s  tests: %s' "$took" "$name")")
-done
-timings+=("$(printf '%5d s  tests: all lanes' $((SECONDS - lanes_started)))")
+tests=0
+step "tests" cargo test --workspace --no-fail-fast || tests=$?
+[ "$tests" -eq 0 ] || failed+=(tests)
 
-# After the lanes: this build replaces target/debug/mech-gcs, which the
-# end-to-end tests run, with the Foxglove build.
+# Last: this build replaces target/debug/mech-gcs, which the end-to-end
+# tests run, with the Foxglove build.
 fox=0
 step "foxglove (build and test)" cargo test --workspace \
     --features mech-station/foxglove,mech-gcs/foxglove --test foxglove_live || fox=$?
