@@ -5,7 +5,9 @@
 //! silent the station commands it over the radio before its failsafe
 //! trips, and back over UDP when UDP returns.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+use mech_proto::FailsafeState;
 
 use mech_e2e::harness::agent::{self, Agent};
 use mech_e2e::harness::controller::Controller;
@@ -145,7 +147,21 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
     std::thread::sleep(Duration::from_secs(3));
     let end = unix_us();
     ctl.publish(false);
-    std::thread::sleep(Duration::from_secs(1));
+    // The final silence: each robot's failsafe trips a channel timeout
+    // after the controller stopped, waited for in its telemetry.
+    for robot in ["ra", "rb"] {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while ctl
+            .first(robot, end, |s| s.failsafe == FailsafeState::ChannelSilent)
+            .is_none()
+        {
+            assert!(
+                Instant::now() < deadline,
+                "{robot}'s failsafe did not trip after the controller stopped"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
     let (ca, cb) = (a.stop(), b.stop());
     let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
 
