@@ -134,6 +134,51 @@ fn quality(gcs: &Gcs, robot: &str) -> Option<LinkQuality> {
     gcs.with_fleet(|f| f.robot(robot).map(|r| r.quality))
 }
 
+/// `robot`'s first link-quality report whose figures cover the router's
+/// full five seconds, and the router time its window ends at (the
+/// report's stamp).
+async fn full_window(
+    gcs: &Gcs,
+    events: &mut mech_core::router::Subscription,
+    robot: &str,
+) -> (LinkQuality, Duration) {
+    tokio::time::timeout(Duration::from_secs(60), async {
+        loop {
+            let ev = events.recv().await.expect("the router runs");
+            match &ev.event {
+                Event::LinkQuality { robot: r, quality }
+                    if r == robot && quality.window >= Duration::from_secs(5) =>
+                {
+                    break (*quality, ev.at);
+                }
+                _ => {}
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| {
+        panic!(
+            "{robot}'s link measured over 5 s: {:?}",
+            quality(gcs, robot)
+        )
+    })
+}
+
+/// The robots on the router directly read no loss.
+fn direct_robots_read_no_loss(gcs: &Gcs, fleet: &SimFleet) {
+    for name in fleet.names() {
+        let q = quality(gcs, &name).expect("registered");
+        let loss = q.loss.expect("it sent in the window");
+        println!(
+            "{name} direct: loss {:.1}%, rx {:.1}/s, rtt {}",
+            loss * 100.0,
+            q.rx_hz,
+            q.rtt_text()
+        );
+        assert!(loss < 0.01, "{name} reads about 0: {q:?}");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     let mut config = CoreConfig::default();
@@ -156,28 +201,7 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     let proxy = lossy_proxy(router, counts.clone(), stopped.clone()).await;
     robot("robot_9", proxy, stopped.clone()).await;
 
-    // Until robot_9's figures cover the router's full five seconds (the
-    // report, stamped with the router time its window ends at).
-    let (lossy, at) = tokio::time::timeout(Duration::from_secs(60), async {
-        loop {
-            let ev = events.recv().await.expect("the router runs");
-            match &ev.event {
-                Event::LinkQuality { robot, quality }
-                    if robot == "robot_9" && quality.window >= Duration::from_secs(5) =>
-                {
-                    break (*quality, ev.at);
-                }
-                _ => {}
-            }
-        }
-    })
-    .await
-    .unwrap_or_else(|_| {
-        panic!(
-            "robot_9's link measured over 5 s: {:?}",
-            quality(&gcs, "robot_9")
-        )
-    });
+    let (lossy, at) = full_window(&gcs, &mut events, "robot_9").await;
     assert_eq!(events.dropped(), 0, "every report seen");
     let (passed, dropped) = (
         counts.passed.load(Ordering::Relaxed),
@@ -214,17 +238,7 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
         lossy.rx_hz
     );
 
-    for name in fleet.names() {
-        let q = quality(&gcs, &name).expect("registered");
-        let loss = q.loss.expect("it sent in the window");
-        println!(
-            "{name} direct: loss {:.1}%, rx {:.1}/s, rtt {}",
-            loss * 100.0,
-            q.rx_hz,
-            q.rtt_text()
-        );
-        assert!(loss < 0.01, "{name} reads about 0: {q:?}");
-    }
+    direct_robots_read_no_loss(&gcs, &fleet);
     let _ = stop.send(true);
     fleet.shutdown().await;
     gcs.shutdown().await;
