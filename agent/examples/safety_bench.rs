@@ -34,7 +34,26 @@ fn trial(layer_on: bool) -> SafetyTrial {
 
 /// Eight robots swapping places across the centre of the demo arena.
 fn crossing(layer_on: bool) -> SafetyTrial {
+    crossing_with(
+        layer_on,
+        Duration::from_millis(100),
+        Duration::from_millis(50),
+        false,
+    )
+}
+
+/// The crossing with neighbour states every `period`, `latency` old when
+/// they arrive; with `stagger`, the missions start one control period
+/// apart (as a station sending them one by one does).
+fn crossing_with(
+    layer_on: bool,
+    period: Duration,
+    latency: Duration,
+    stagger: bool,
+) -> SafetyTrial {
     let mut t = trial(layer_on);
+    t.neighbour_period = period;
+    t.latency = latency;
     let specs = platforms();
     let (cx, cy, r) = (1.95, 1.4, 1.05);
     for i in 0..8 {
@@ -62,6 +81,9 @@ fn crossing(layer_on: bool) -> SafetyTrial {
                 start_index: 0,
             },
         );
+        if stagger {
+            t.step();
+        }
     }
     let mut waited = 0.0;
     while !t.all_arrived() && waited < 120.0 {
@@ -248,6 +270,45 @@ fn main() {
         ),
         (a, b) => println!("  NOT ALL ARRIVED: without {a:?}, with {b:?}"),
     }
+
+    println!(
+        "\nthe crossing under other neighbour rates and latencies (s until the last arrived):"
+    );
+    let mut within = (0, 0);
+    for (period, latency) in [
+        (50, 25),
+        (50, 50),
+        (50, 75),
+        (50, 100),
+        (100, 20),
+        (100, 50),
+        (100, 100),
+        (100, 150),
+    ] {
+        for stagger in [false, true] {
+            let (p, l) = (
+                Duration::from_millis(period),
+                Duration::from_millis(latency),
+            );
+            let on = crossing_with(true, p, l, stagger);
+            let off = crossing_with(false, p, l, stagger);
+            let (alone, with) = (off.last_arrival(), on.last_arrival());
+            let ok = matches!((alone, with), (Some(a), Some(b)) if b <= 2.0 * a);
+            let m = on.metrics();
+            within.1 += 1;
+            within.0 += usize::from(ok);
+            println!(
+                "  states every {period:>3} ms, {latency:>3} ms old, {:<9} without {:>6}  with {:>6}  min gap {:>7.2} mm  violations {}{}",
+                if stagger { "staggered" } else { "together" },
+                alone.map_or("-".into(), |a| format!("{a:.2}")),
+                with.map_or("jammed".into(), |b| format!("{b:.2}")),
+                m.min_gap * 1000.0,
+                m.separation_violations + m.margin_violations + m.breaches,
+                if ok { "" } else { "  NOT within 2x" },
+            );
+        }
+    }
+    println!("  within twice the time: {} of {}", within.0, within.1);
 
     println!("\nCPU per filter step (a robot driven into its neighbours; median / p99 / max, µs):");
     for (name, spec) in [

@@ -22,6 +22,9 @@
 //! - `autopilot_requests`: operators' requests queued for the autopilot.
 //! - `actuation`: the failsafe's verdict, and `Actuation::obey`, the one
 //!   place every obeyed command becomes actuator outputs.
+//! - `safety`: fleet safety, the [`crate::safety::SafetyLayer`] fed with
+//!   the station's arena and neighbours, which `Actuation::obey` applies
+//!   to whatever is about to be obeyed.
 //! - `telemetry` and `counters`: what the robot reports.
 //!
 //! The onboard controller ([`crate::control`]) and the failsafe's rules
@@ -36,6 +39,7 @@ mod estop;
 mod intake;
 mod missions;
 mod registration;
+mod safety;
 mod sensors;
 mod settings;
 mod step;
@@ -64,6 +68,7 @@ use estop::EStopLatch;
 use intake::Intake;
 use missions::Missions;
 use registration::Registration;
+use safety::Safety;
 use sensors::Sensors;
 use step::Step;
 use telemetry::{Snapshot, TelemetrySchedule};
@@ -98,6 +103,7 @@ pub struct Agent {
     /// The mode commanded, and the platform's kinematics.
     controller: Controller,
     actuation: Actuation,
+    safety: Safety,
     telemetry: TelemetrySchedule,
     counters: Counters,
 }
@@ -123,6 +129,7 @@ impl Agent {
             autopilot: AutopilotRequests::new(settings.autopilot),
             sensors: Sensors::new(&settings, p),
             actuation: Actuation::new(settings.failsafe, p.motors()),
+            safety: Safety::new(settings.safety),
             telemetry: TelemetrySchedule::new(settings.telemetry_period),
             counters: Counters::default(),
             controller,
@@ -258,6 +265,8 @@ impl Agent {
                 self.registration.unknown_to_router(&mut step);
             }
             Body::PositionFix(fix) => self.sensors.position_fix(fix, &mut step),
+            Body::Arena(arena) => self.safety.arena(&arena, &mut step),
+            Body::Neighbours(n) => self.safety.neighbours(&n, &self.settings.name, now),
             _ => {}
         }
         out
@@ -297,7 +306,14 @@ impl Agent {
         let mission = self.missions.following(self.intake.channel());
         let outputs = self
             .actuation
-            .obey(drive, &mut self.controller, mission, &mut self.sensors, now)
+            .obey(
+                drive,
+                &mut self.controller,
+                mission,
+                &mut self.sensors,
+                &mut self.safety,
+                &mut step,
+            )
             .to_vec();
         if self.registration.registered() {
             self.report(now, &mut outgoing);
@@ -344,6 +360,7 @@ impl Agent {
         {
             self.estop.forget_ids();
             self.intake.forget_senders();
+            self.safety.registered();
         }
         self.apply_route(route, now, out);
     }
@@ -454,6 +471,11 @@ impl Agent {
         self.actuation.outputs()
     }
 
+    /// What the fleet safety layer is doing (as telemetry reports it).
+    pub fn safety(&self) -> mech_proto::SafetyReport {
+        self.safety.report()
+    }
+
     /// The stored mission for `channel`, if any.
     pub fn mission(&self, channel: &str) -> Option<&MissionRun> {
         self.missions.get(channel)
@@ -487,6 +509,7 @@ impl Agent {
             outputs,
             mission: self.missions.get(channel).map(MissionRun::progress),
             stale: self.counters.stale_total(),
+            safety: self.safety.report(),
         }
         .telemetry()
     }

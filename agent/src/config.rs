@@ -755,6 +755,7 @@ impl RobotConfig {
         s.external_position = !simulated && matches!(position, PositionConfig::External);
         s.has_position = simulated || !matches!(position, PositionConfig::None);
         s.gains = self.control;
+        s.safety = *self.safety.get_ref();
         if let Some(e) = &self.encoders {
             s.wheels = Some(e.get_ref().wheel_settings());
             s.fusion = e.get_ref().fusion_settings();
@@ -914,6 +915,10 @@ mod tests {
         .unwrap();
         assert_eq!(c.safety.get_ref().radius, 0.2);
         assert_eq!(c.safety.get_ref().max_deceleration, 2.0);
+        // The agent core (and a `--sim` robot) runs with it.
+        for simulated in [false, true] {
+            assert_eq!(c.agent_settings(simulated).safety, *c.safety.get_ref());
+        }
         let e = error(&format!("{MINIMAL}[safety]\nradius = -0.2\n"));
         assert!(
             e.contains("bad.toml:6") && e.contains("safety.radius"),

@@ -87,9 +87,9 @@ impl Default for SafetyConfig {
             stale_after: 0.3,
             crawl_speed: 0.05,
             yield_turn_rate: 1.0,
-            yield_time: 2.0,
+            yield_time: 0.4,
             yield_angle: std::f64::consts::FRAC_PI_2,
-            horizon: 2.0,
+            horizon: 1.5,
         }
     }
 }
@@ -138,13 +138,20 @@ impl SafetyConfig {
     }
 }
 
+/// Clearance kept between two robots' discs, m, until an [`Arena`] says
+/// otherwise (its `margin`): the station's default.
+pub const DEFAULT_MARGIN: f64 = 0.1;
+
 /// The arena the robot obeys now.
 #[derive(Debug, Clone, PartialEq)]
 struct ArenaInForce {
     id: u32,
     enabled: bool,
-    /// `None` for an empty arena (nothing to enforce).
+    /// `None` for an empty arena (no fence; neighbours are still kept
+    /// apart from, if the station sends them).
     fence: Option<Fence>,
+    /// The arena's margin, also between robots.
+    margin: f64,
 }
 
 /// A robot blocked by a neighbour yields: it heads to the right of where
@@ -199,7 +206,10 @@ impl SafetyLayer {
     /// Takes an arena addressed to this robot. Returns the acknowledgement
     /// to send, or `None` when the arena is older than the one in force
     /// (ids compared as wrapping counters; a repeat of the current one is
-    /// acknowledged again).
+    /// acknowledged again). An empty arena (the station has none, or
+    /// cleared it) also forgets the neighbours held: the station sends
+    /// none without an arena, so what is held would only grow stale and
+    /// keep the robot crawling.
     pub fn apply_arena(&mut self, arena: &Arena) -> Option<ArenaAck> {
         if let Some(now) = &self.arena
             && !self.fresh_station
@@ -208,10 +218,15 @@ impl SafetyLayer {
             return None;
         }
         self.fresh_station = false;
+        if arena.is_empty() {
+            self.neighbours = None;
+            self.yielding = None;
+        }
         self.arena = Some(ArenaInForce {
             id: arena.id,
             enabled: arena.enabled,
             fence: (!arena.is_empty()).then(|| Fence::from_arena(arena)),
+            margin: arena.margin,
         });
         Some(ArenaAck {
             robot: arena.robot.clone(),
@@ -252,6 +267,17 @@ impl SafetyLayer {
         }
     }
 
+    /// Whether the layer limits commands now: it is not switched off, and
+    /// it has a fence or neighbours to keep apart from. Without an arena
+    /// it has no fence, but separation works once neighbours come.
+    pub fn enforcing(&self) -> bool {
+        match &self.arena {
+            Some(a) if !a.enabled => false,
+            Some(ArenaInForce { fence: Some(_), .. }) => true,
+            _ => self.neighbours.is_some(),
+        }
+    }
+
     /// Whether the neighbour information is older than `stale_after` at
     /// `now` (or there has been none).
     pub fn stale(&self, now: Duration) -> bool {
@@ -271,18 +297,16 @@ impl SafetyLayer {
         outputs: &[f64],
         now: Duration,
     ) -> Filtered {
-        let fence = match &self.arena {
-            Some(ArenaInForce {
-                enabled: true,
-                fence: Some(fence),
-                ..
-            }) => fence,
-            _ => return self.noted(outputs.to_vec(), Intervention::None),
+        if !self.enforcing() {
+            return self.noted(outputs.to_vec(), Intervention::None);
+        }
+        let (fence, margin) = match &self.arena {
+            Some(a) => (a.fence.as_ref(), a.margin),
+            None => (None, DEFAULT_MARGIN),
         };
         let position = Vec2::new(pose.x, pose.y);
         if !(position.is_finite() && pose.heading.is_finite() && velocity.is_finite()) {
-            // No pose to judge by: hold still.
-            return self.noted(vec![0.0; outputs.len()], Intervention::Fence);
+            return self.hold(outputs.len());
         }
         let (twist, desired) = mapping::commanded_motion(platform, pose.heading, outputs);
         let braking = self.config.braking();
@@ -292,18 +316,12 @@ impl SafetyLayer {
             .max(desired.norm())
             .max(velocity.norm());
         let reach = braking.distance(fastest);
-        let margin = fence.margin;
         let mut c = Constraints::new(position, braking);
-        fence.constrain(&mut c, self.config.radius, reach);
+        if let Some(fence) = fence {
+            fence.constrain(&mut c, self.config.radius, reach);
+        }
         if let Some(n) = &self.neighbours {
-            n.constrain(
-                &mut c,
-                velocity,
-                self.config.radius,
-                fence.margin,
-                reach,
-                now,
-            );
+            n.constrain(&mut c, velocity, self.config.radius, margin, reach, now);
         }
         if self.stale(now) {
             c.caps
@@ -324,6 +342,27 @@ impl SafetyLayer {
             mapping::outputs_for(platform, pose.heading, &twist, &decision)
         };
         self.noted(out, decision.intervention)
+    }
+
+    /// Every output zero, for a robot the layer cannot judge (it has no
+    /// position estimate, or a non-finite one) while it enforces
+    /// something: without knowing where the robot is, standing still is
+    /// the only command known to keep it inside and apart. Counted as a
+    /// fence intervention when there is a fence, else as separation.
+    pub fn hold(&mut self, motors: usize) -> Filtered {
+        let fenced = matches!(self.arena, Some(ArenaInForce { fence: Some(_), .. }));
+        let why = if fenced {
+            Intervention::Fence
+        } else {
+            Intervention::Separation
+        };
+        self.noted(vec![0.0; motors], why)
+    }
+
+    /// Nothing was commanded this period (the robot's outputs are held at
+    /// zero for another reason: failsafe, e-stop, idle): no intervention.
+    pub fn idle(&mut self) {
+        self.noted(Vec::new(), Intervention::None);
     }
 
     /// The decision, yielding to the right for `yield_time` once a
@@ -550,6 +589,76 @@ mod tests {
         assert_eq!(r.counts.stale_neighbours, 1);
         assert_eq!(r.intervention, Intervention::StaleNeighbours);
         assert_eq!(r.state, SafetyState::On);
+    }
+
+    fn neighbour_at(x: f64, y: f64) -> Neighbour {
+        Neighbour {
+            id: 2,
+            x,
+            y,
+            z: 0.0,
+            vx: 0.0,
+            vy: 0.0,
+            vz: 0.0,
+            radius: 0.15,
+            age_ms: 0,
+            cooperative: true,
+        }
+    }
+
+    #[test]
+    fn without_an_arena_neighbours_are_still_kept_apart_from() {
+        let kiwi = PlatformSpec::kiwi().build();
+        let out = forward(kiwi.as_ref(), 0.5);
+        let me = Pose::default();
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        assert!(!l.enforcing(), "nothing known: nothing enforced");
+        let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(f.outputs, out);
+        // A neighbour 0.45 m ahead, 0.4 m needed: 2.5 cm to advance.
+        l.apply_neighbours(
+            &neighbours(1, vec![neighbour_at(0.45, 0.0)]),
+            Duration::ZERO,
+        );
+        assert!(l.enforcing());
+        assert_eq!(l.state(), SafetyState::NoArena, "the layer says so");
+        let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(f.intervention, Intervention::Separation);
+        let towards = kiwi.motion(&f.outputs).vx;
+        assert!(towards < 0.15, "{towards}: braking within 2.5 cm");
+        // Stale: a crawl, as with an arena.
+        let later = Duration::from_millis(400);
+        let away = forward(kiwi.as_ref(), -0.5);
+        let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &away, later);
+        assert_eq!(f.intervention, Intervention::StaleNeighbours);
+        // An empty arena (the station has none): the neighbours held are
+        // forgotten, so they cannot keep the robot crawling.
+        let mut empty = arena(3, true);
+        empty.boundary.clear();
+        l.apply_arena(&empty).unwrap();
+        assert!(!l.enforcing());
+        let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &away, later);
+        assert_eq!((f.outputs, f.intervention), (away, Intervention::None));
+    }
+
+    #[test]
+    fn a_robot_without_a_position_is_held_while_the_layer_enforces() {
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.apply_arena(&arena(1, true));
+        let f = l.hold(3);
+        assert_eq!(f.outputs, vec![0.0; 3]);
+        assert_eq!(f.intervention, Intervention::Fence);
+        let nan = Pose {
+            x: f64::NAN,
+            ..Pose::default()
+        };
+        let kiwi = PlatformSpec::kiwi().build();
+        let out = forward(kiwi.as_ref(), 0.3);
+        let f = l.filter(kiwi.as_ref(), &nan, Vec2::ZERO, &out, Duration::ZERO);
+        assert_eq!(f.outputs, vec![0.0; 3]);
+        l.idle();
+        assert_eq!(l.report().intervention, Intervention::None);
+        assert_eq!(l.report().counts.fence, 1, "one run of holds, one count");
     }
 
     #[test]

@@ -95,6 +95,9 @@ pub struct SimFleetOptions {
     pub secrets: std::collections::BTreeMap<String, [u8; mech_proto::auth::KEY_LEN]>,
     /// The router's sender name, which signing robots check.
     pub router_name: String,
+    /// Every agent's `[safety]`: footprint and braking for the fleet
+    /// safety layer, which the station's arena switches on.
+    pub safety: crate::safety::SafetyConfig,
 }
 
 impl Default for SimFleetOptions {
@@ -114,6 +117,7 @@ impl Default for SimFleetOptions {
             noise_model: UwbNoiseModel::default(),
             secrets: std::collections::BTreeMap::new(),
             router_name: mech_proto::ROUTER.to_string(),
+            safety: crate::safety::SafetyConfig::default(),
         }
     }
 }
@@ -165,6 +169,7 @@ impl SimFleet {
             let mut settings = AgentSettings::new(&name);
             settings.failsafe = options.failsafe;
             settings.telemetry_period = telemetry;
+            settings.safety = options.safety;
             let noise = options
                 .noise
                 .then(|| UwbNoise::new(options.noise_model, options.seed.wrapping_add(i as u64)));

@@ -123,8 +123,19 @@ fn ten_robots_under_random_twists_for_a_minute_never_touch_or_leave() {
 /// Eight robots on a circle around the arena's centre, each sent to the
 /// point opposite: every path crosses every other at the centre.
 fn crossing(layer_on: bool, config: SafetyConfig) -> SafetyTrial {
+    crossing_with(layer_on, config, |_| {})
+}
+
+/// The crossing, the trial set up by `setup` first (neighbour rate,
+/// latency).
+fn crossing_with(
+    layer_on: bool,
+    config: SafetyConfig,
+    setup: impl Fn(&mut SafetyTrial),
+) -> SafetyTrial {
     let mut t = SafetyTrial::new(demo_arena(), config, layer_on);
     t.tolerance = TOLERANCE;
+    setup(&mut t);
     let specs = platforms();
     let (cx, cy, r) = (1.95, 1.4, 1.05);
     for i in 0..8 {
@@ -178,6 +189,43 @@ fn eight_robots_crossing_on_missions_all_arrive_apart_within_twice_the_time() {
         0,
         "{m:?}"
     );
+}
+
+/// The crossing with neighbour states as the station's broadcaster sends
+/// them by default (20 Hz) and nearly fresh, as on a loopback link: with
+/// robots that yield for long and look far ahead, the eight jam in the
+/// middle, each turned away from a neighbour that turned away from it.
+#[test]
+fn eight_robots_crossing_with_states_at_20_hz_all_arrive_within_twice_the_time() {
+    let at_20_hz = |t: &mut SafetyTrial| {
+        t.neighbour_period = std::time::Duration::from_millis(50);
+        t.latency = std::time::Duration::from_millis(25);
+    };
+    let alone = crossing_with(false, SafetyConfig::default(), at_20_hz)
+        .last_arrival()
+        .expect("without the layer all arrive");
+    let on = crossing_with(true, SafetyConfig::default(), at_20_hz);
+    let with = on
+        .last_arrival()
+        .unwrap_or_else(|| panic!("deadlock: not all arrived in 120 s: {:?}", on.metrics()));
+    assert!(
+        with <= 2.0 * alone,
+        "{with:.1} s with the layer, {alone:.1} s without"
+    );
+    let m = on.metrics();
+    assert_eq!(
+        m.separation_violations + m.margin_violations + m.breaches,
+        0,
+        "{m:?}"
+    );
+    // Yielding for 2 s and looking 2 s ahead instead: they jam.
+    let long = SafetyConfig {
+        yield_time: 2.0,
+        horizon: 2.0,
+        ..SafetyConfig::default()
+    };
+    let jammed = crossing_with(true, long, at_20_hz).last_arrival();
+    assert!(jammed.is_none_or(|t| t > 2.0 * alone), "{jammed:?}");
 }
 
 /// One robot driven straight at the wall at full speed for 10 s.

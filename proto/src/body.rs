@@ -446,6 +446,9 @@ pub enum NoticeCode {
     Failsafe = 5,
     /// A driver failed.
     DriverFault = 6,
+    /// The robot's fleet safety layer began limiting its commands, or was
+    /// switched on or off (at most one notice per change).
+    Safety = 7,
 }
 
 /// Error or notice, any direction, for humans and logs.

@@ -382,7 +382,7 @@ fn body() -> impl Strategy<Value = Body> {
                 formation,
             })
         });
-    let notice = (0..=3u8, 0..=6u16, text()).prop_map(|(level, code, text)| {
+    let notice = (0..=3u8, 0..=7u16, text()).prop_map(|(level, code, text)| {
         Body::Notice(Notice {
             level: [Level::Debug, Level::Info, Level::Warn, Level::Error][level as usize],
             code: [
@@ -393,6 +393,7 @@ fn body() -> impl Strategy<Value = Body> {
                 NoticeCode::Unsupported,
                 NoticeCode::Failsafe,
                 NoticeCode::DriverFault,
+                NoticeCode::Safety,
             ][code as usize],
             text,
         })

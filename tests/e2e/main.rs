@@ -11,6 +11,7 @@ mod python;
 mod radio;
 mod record;
 mod replay_tui;
+mod safety_tui;
 mod script;
 mod serve;
 mod signed;

@@ -11,18 +11,22 @@
 //! [`Demand`] is taken (at the level its mode works at, before the platform
 //! turns it into outputs), and the platform and the wheel speed loops make
 //! the outputs. The robot's [`Sensors`] are at hand there: the position
-//! estimate, and its velocity ([`Sensors::motion`]), so a limit on what the
-//! robot obeys, whoever sent it, acts on the demand in that one function.
+//! estimate, and its velocity ([`Sensors::motion`]), so the fleet safety
+//! layer ([`Safety`]) limits what the robot obeys, whoever sent it, in
+//! that one function: on the platform's outputs for the demand, before
+//! the wheel speed loops.
 
 use std::time::Duration;
 
 use mech_proto::{FailsafeState, Pose};
 
+use super::safety::Safety;
 use super::sensors::Sensors;
 use super::step::Step;
-use crate::control::{Controller, Demand, MissionRun, Mode};
+use crate::control::{Controller, MissionRun, Mode};
 use crate::failsafe::{Failsafe, FailsafeConfig};
 use crate::platform::Platform;
+use crate::safety::Vec2;
 use crate::wheels::Wheels;
 
 /// The failsafe's verdicts and the outputs of the last period.
@@ -70,31 +74,46 @@ impl Actuation {
     /// resumed on re-registering, starts motion again) or when its mode
     /// steers by a position it does not have; otherwise what the
     /// controller demands, following `mission` in waypoint mode, through
-    /// the platform and the wheel speed loops. See the module docs: every
-    /// obeyed command passes here.
+    /// the platform, limited by the fleet safety layer, and through the
+    /// wheel speed loops. See the module docs: every obeyed command passes
+    /// here.
     pub(crate) fn obey(
         &mut self,
         drive: bool,
         controller: &mut Controller,
         mission: Option<&mut MissionRun>,
         sensors: &mut Sensors,
-        now: Duration,
+        safety: &mut Safety,
+        step: &mut Step,
     ) -> &[f64] {
         if !drive {
             if !matches!(controller.mode(), Mode::Idle) {
                 controller.idle();
             }
+            safety.idle();
             return self.hold(controller.platform(), sensors);
         }
-        let pose = match sensors.estimate() {
-            Some(estimate) => estimate.pose,
+        let estimate = sensors.estimate().map(|e| e.pose);
+        let pose = match estimate {
+            Some(pose) => pose,
             None if controller.needs_position() => {
+                safety.idle();
                 return self.hold(controller.platform(), sensors);
             }
             None => Pose::default(),
         };
+        let now = step.now;
         let demand = controller.demand(&pose, now, mission);
-        self.actuate(&demand, controller.platform(), sensors.wheels_mut(), now)
+        let platform = controller.platform();
+        let velocity = sensors.motion(platform, &self.outputs, now).velocity;
+        let outputs = safety.filter(
+            platform,
+            estimate.as_ref(),
+            Vec2::new(velocity.vx, velocity.vy),
+            demand.outputs(platform),
+            step,
+        );
+        self.actuate(outputs, sensors.wheels_mut(), now)
     }
 
     /// Every output zero, and the wheel speed loops forget their
@@ -109,16 +128,15 @@ impl Actuation {
         &self.outputs
     }
 
-    /// The platform's outputs for `demand`; with wheel encoders, each asks
-    /// for a wheel speed and the speed loops deliver it.
+    /// The outputs `open_loop` (the platform's, for the demand, as the
+    /// safety layer let them through); with wheel encoders, each asks for a
+    /// wheel speed and the speed loops deliver it.
     fn actuate(
         &mut self,
-        demand: &Demand,
-        platform: &dyn Platform,
+        open_loop: Vec<f64>,
         wheels: Option<&mut Wheels>,
         now: Duration,
     ) -> &[f64] {
-        let open_loop = demand.outputs(platform);
         self.outputs = match wheels {
             Some(w) => w.close_loop(&open_loop, now),
             None => open_loop,

@@ -5,6 +5,7 @@ use std::time::Duration;
 use crate::control::Gains;
 use crate::failsafe::FailsafeConfig;
 use crate::fusion::FusionSettings;
+use crate::safety::SafetyConfig;
 use crate::wheels::WheelSettings;
 
 /// Settings of the agent core (the parts of the robot config it uses).
@@ -47,6 +48,9 @@ pub struct AgentSettings {
     /// ([`super::Agent::take_autopilot_requests`]); without one they are answered
     /// as unsupported.
     pub autopilot: bool,
+    /// The robot's footprint and braking for the fleet safety layer
+    /// (`[safety]`), which the station's arena switches on.
+    pub safety: SafetyConfig,
 }
 
 impl AgentSettings {
@@ -66,6 +70,7 @@ impl AgentSettings {
             wheels: None,
             fusion: FusionSettings::default(),
             autopilot: false,
+            safety: SafetyConfig::default(),
         }
     }
 }

@@ -4,7 +4,9 @@
 
 use std::time::Duration;
 
-use mech_proto::{Computation, ControlMode, FailsafeState, Health, MissionProgress, Telemetry};
+use mech_proto::{
+    Computation, ControlMode, FailsafeState, Health, MissionProgress, SafetyReport, Telemetry,
+};
 
 use super::sensors::Motion;
 
@@ -48,6 +50,8 @@ pub(crate) struct Snapshot<'a> {
     pub(crate) mission: Option<MissionProgress>,
     /// Messages ignored as stale.
     pub(crate) stale: u32,
+    /// The fleet safety layer's state, intervention and counts.
+    pub(crate) safety: SafetyReport,
 }
 
 impl Snapshot<'_> {
@@ -74,7 +78,7 @@ impl Snapshot<'_> {
             mission: self.mission,
             stale: self.stale,
             velocity_source: self.motion.velocity_source,
-            safety: None,
+            safety: Some(self.safety),
         }
     }
 }

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import msgpack
 
@@ -225,6 +225,27 @@ class Telemetry:
     # True when wheel encoders measured `velocity`; False when it follows
     # from the commanded outputs.
     measured: bool = False
+    # The robot's safety layer (docs/safety.md), from robots that have one.
+    safety: Optional["SafetyReport"] = None
+
+
+# What a robot's safety layer does to a command (docs/safety.md), by number.
+INTERVENTIONS = ("none", "fence", "keep_out", "separation", "stale_neighbours", "slow_zone", "returning")
+SAFETY_STATES = ("no_arena", "on", "off")
+
+
+@dataclass
+class SafetyReport:
+    """A robot's safety layer as its telemetry reports it: `state`
+    (no_arena, on, off: off is an operator's alarm), the arena id in force,
+    the `intervention` limiting the command now (none when obeyed as sent),
+    how many times each intervention began, and the robot's radius (m)."""
+
+    state: str
+    arena: int
+    intervention: str
+    counts: Dict[str, int]
+    radius: float
 
 
 @dataclass
@@ -382,8 +403,8 @@ def _f(v: Any) -> float:
 
 
 def _telemetry(b: List[Any]) -> Telemetry:
-    if len(b) not in (11, 12, 13):
-        raise ProtocolError("telemetry has 11 to 13 fields")
+    if len(b) not in (11, 12, 13, 14):
+        raise ProtocolError("telemetry has 11 to 14 fields")
     pose = Pose(*(_f(v) for v in b[0]))
     vel = Velocity(*(_f(v) for v in b[1]))
     mission = None if b[10] is None else MissionProgress(*b[10])
@@ -401,6 +422,26 @@ def _telemetry(b: List[Any]) -> Telemetry:
         mission=mission,
         stale=int(b[11]) if len(b) > 11 else 0,
         measured=len(b) > 12 and b[12] == 1,
+        safety=_safety(b[13]) if len(b) > 13 and b[13] is not None else None,
+    )
+
+
+def _safety(b: Any) -> SafetyReport:
+    if not isinstance(b, list) or len(b) != 5 or not isinstance(b[3], list) or len(b[3]) != 6:
+        raise ProtocolError("a safety report has 5 fields, its counts 6")
+    state, arena, intervention, counts, radius = b
+    if not (isinstance(state, int) and 0 <= state < len(SAFETY_STATES)):
+        raise ProtocolError(f"unknown safety state {state!r}")
+    if not (isinstance(intervention, int) and 0 <= intervention < len(INTERVENTIONS)):
+        raise ProtocolError(f"unknown intervention {intervention!r}")
+    if not all(isinstance(c, int) and not isinstance(c, bool) for c in counts + [arena]):
+        raise ProtocolError("a safety report's arena and counts are integers")
+    return SafetyReport(
+        state=SAFETY_STATES[state],
+        arena=arena,
+        intervention=INTERVENTIONS[intervention],
+        counts=dict(zip(INTERVENTIONS[1:], counts)),
+        radius=_f(radius),
     )
 
 

@@ -139,6 +139,17 @@ class Decoding(unittest.TestCase):
             self.assertEqual(t.mission, p.MissionProgress(5, 1, 3))
             self.assertEqual(t.stale, len(fields) - 11 and 2)
 
+    def test_telemetry_with_a_safety_report(self) -> None:
+        body = [[1.0, 2.0, 0.0, 0.5], [0.1, 0.0, 0.0, 0.0], 4, "ext/python", 0, 0, 0, 0.8, 1.0, [0.2, 0.2], None, 0, 1]
+        report = [1, 7, 3, [0, 0, 2, 0, 0, 0], 0.15]
+        t = p.decode(p.encode(header(p.Kind.TELEMETRY, body + [report], "robot_1", "router", ""))).body
+        self.assertEqual(t.safety, p.SafetyReport("on", 7, "separation", {
+            "fence": 0, "keep_out": 0, "separation": 2, "stale_neighbours": 0, "slow_zone": 0, "returning": 0}, 0.15))
+        self.assertIsNone(p.decode(p.encode(header(p.Kind.TELEMETRY, body, "robot_1", "router", ""))).body.safety)
+        for bad in ([9, 7, 3, [0] * 6, 0.15], [1, 7, 3, [0] * 5, 0.15], [1, 7, 12, [0] * 6, 0.15], "on"):
+            with self.assertRaises(p.ProtocolError):
+                p.decode(p.encode(header(p.Kind.TELEMETRY, body + [bad], "robot_1", "router", "")))
+
     def test_values_that_cannot_be_sent_are_refused(self) -> None:
         with self.assertRaises(p.ProtocolError):
             p.twist(float("nan"))

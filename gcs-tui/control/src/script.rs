@@ -149,6 +149,28 @@ pub fn event_json(s: &Stamped) -> Value {
             detail,
         } => json!({"count": count, "sources": sources, "by_reason": by_reason,
                     "from": from, "detail": detail}),
+        Event::Arena { arena } => match arena {
+            Some(a) => json!({
+                "arena": true, "vertices": a.boundary.len(), "keep_out": a.keep_out.len(),
+                "slow_zones": a.slow_zones.len(), "obstacles": a.obstacles.len(),
+                "margin": a.margin, "bounds": a.bounds(),
+            }),
+            None => json!({"arena": false}),
+        },
+        Event::SafetySwitched { robot, enabled, id } => {
+            json!({"robot": robot, "enabled": enabled, "id": id})
+        }
+        Event::ArenaAcked { robot, id, enabled } => {
+            json!({"robot": robot, "id": id, "enabled": enabled})
+        }
+        Event::Safety {
+            robot,
+            state,
+            intervention,
+        } => json!({
+            "robot": robot, "state": mech_core::event::safety_state_str(*state),
+            "intervention": intervention.as_str(),
+        }),
     };
     if let Value::Object(m) = &mut v {
         m.insert("type".into(), json!("event"));
@@ -222,6 +244,29 @@ fn rejected_json(r: &mech_core::counters::Rejections) -> Value {
         }
     }
     v
+}
+
+/// Fleet safety at the end of a run: whether there is an arena, the robots
+/// whose layer is off (an alarm), and how many times each intervention
+/// began, over every robot.
+fn safety_json(f: &mech_core::Fleet) -> Value {
+    let off: Vec<&str> = f
+        .local_robots()
+        .filter(|r| r.safety_alarm())
+        .map(|r| r.name.as_str())
+        .collect();
+    let mut interventions = serde_json::Map::new();
+    for i in mech_proto::Intervention::ALL {
+        let n: u64 = f
+            .local_robots()
+            .filter_map(|r| r.telemetry.safety)
+            .map(|s| u64::from(s.counts.get(i)))
+            .sum();
+        if i != mech_proto::Intervention::None {
+            interventions.insert(i.as_str().into(), json!(n));
+        }
+    }
+    json!({"arena": f.arena.is_some(), "off": off, "interventions": interventions})
 }
 
 /// A recording's file and what it lost so far.
@@ -310,14 +355,18 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         ScriptOutcome::Invalid(e) => (false, 0, Some(e.to_string())),
     };
     record_end(gcs, ok, ran, error.as_deref());
-    let (robots, remote) = gcs.with_fleet(|f| {
+    let (robots, remote, safety) = gcs.with_fleet(|f| {
         let connected = |r: &&mech_core::fleet::Robot| r.link == LinkState::Connected;
         let remote = f
             .robots
             .values()
             .filter(|r| !r.is_local())
             .filter(connected);
-        (f.local_robots().filter(connected).count(), remote.count())
+        (
+            f.local_robots().filter(connected).count(),
+            remote.count(),
+            safety_json(f),
+        )
     });
     let counters = gcs.router().counters();
     let mut summary = json!({
@@ -327,6 +376,7 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
         "bad_packets": counters.dropped.bad_packet,
         "authenticated": gcs.router().authenticated(),
         "rejected": rejected_json(&counters.rejected),
+        "safety": safety,
     });
     if let (Some(r), Value::Object(m)) = (gcs.recording(), &mut summary) {
         m.insert("recording".into(), recording_json(&r));

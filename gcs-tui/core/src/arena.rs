@@ -1,6 +1,7 @@
 //! The arena: the `[arena]` section of the station's configuration (or the
 //! file it names), checked with a message per mistake that says where it
-//! is, and turned into the [`Arena`] message each robot's safety layer
+//! is, the [`ArenaShape`] the station holds (and the map draws, and
+//! recordings carry), and the [`Arena`] message each robot's safety layer
 //! enforces (`docs/safety.md`).
 //!
 //! ```toml
@@ -8,18 +9,22 @@
 //! boundary = [[0, 0], [3.9, 0], [3.9, 2.8], [0, 2.8]]   # m, map frame
 //! keep_out = [[[1.8, 1.2], [2.1, 1.2], [2.1, 1.5], [1.8, 1.5]]]
 //! slow_zones = [{ polygon = [[0, 0], [1, 0], [1, 1], [0, 1]], max_speed = 0.1 }]
+//! obstacles = [{ x = 3.0, y = 0.5, radius = 0.2 }]       # static discs
 //! margin = 0.1                                           # m
 //! # or, instead of the above: file = "arena.toml" (same keys, top level)
 //! ```
+//!
+//! A leaf: it depends on the protocol and [`crate::config`] only, so the
+//! station's events can carry an [`ArenaShape`].
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use mech_proto::{
-    Arena, Body, MAX_BOUNDARY_VERTICES, MAX_KEEP_OUTS, MAX_POLYGON_VERTICES, MAX_SLOW_ZONES, Point,
-    SlowZone, check_polygon,
+    Arena, Body, Disc, MAX_BOUNDARY_VERTICES, MAX_EXTENT, MAX_KEEP_OUTS, MAX_OBSTACLES,
+    MAX_POLYGON_VERTICES, MAX_SLOW_ZONES, Obstacle, Point, SlowZone, check_polygon,
 };
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
 use crate::config::ConfigError;
@@ -36,6 +41,16 @@ pub struct SlowZoneToml {
     pub max_speed: Spanned<f64>,
 }
 
+/// One `obstacles` entry: a static disc robots keep clear of (a box put
+/// down for an experiment), sent to them with their neighbours.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscToml {
+    pub x: f64,
+    pub y: f64,
+    pub radius: f64,
+}
+
 /// The `[arena]` section, or an arena file's top level.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -50,6 +65,9 @@ pub struct ArenaConfig {
     pub keep_out: Vec<PolygonToml>,
     #[serde(default)]
     pub slow_zones: Vec<SlowZoneToml>,
+    /// Static discs, m.
+    #[serde(default)]
+    pub obstacles: Vec<Spanned<DiscToml>>,
     /// Clearance kept from every edge and between robots, m.
     #[serde(default = "default_margin")]
     pub margin: Spanned<f64>,
@@ -119,6 +137,7 @@ impl ArenaConfig {
             boundary: Some(Spanned::new(0..0, corners)),
             keep_out: vec![],
             slow_zones: vec![],
+            obstacles: vec![],
             margin: default_margin(),
         }
     }
@@ -151,7 +170,11 @@ impl ArenaConfig {
         let Some(file) = &self.file else {
             return Ok(self.clone());
         };
-        if self.boundary.is_some() || !self.keep_out.is_empty() || !self.slow_zones.is_empty() {
+        if self.boundary.is_some()
+            || !self.keep_out.is_empty()
+            || !self.slow_zones.is_empty()
+            || !self.obstacles.is_empty()
+        {
             return Err(ConfigError(
                 "[arena]: give either `file` or the arena itself, not both".to_string(),
             ));
@@ -221,6 +244,7 @@ impl ArenaConfig {
                 ));
             }
         }
+        self.validate_obstacles()?;
         // Whatever else the protocol checks (it never sends what it would
         // refuse).
         Body::Arena(self.to_arena("robot", 1, true))
@@ -228,14 +252,35 @@ impl ArenaConfig {
             .map_err(|e| ArenaMistake::new("arena", 0..0, plain(&e)))
     }
 
-    /// The message for `robot`: this arena, its `id` (new for every change
-    /// of the arena or of the robot's switch) and whether the robot's
-    /// safety layer is on.
-    pub fn to_arena(&self, robot: &str, id: u32, enabled: bool) -> Arena {
-        Arena {
-            robot: robot.to_string(),
-            id,
-            enabled,
+    /// The obstacle discs: how many, and each placed and sized.
+    fn validate_obstacles(&self) -> Result<(), ArenaMistake> {
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(ArenaMistake::new(
+                "arena.obstacles",
+                self.obstacles[MAX_OBSTACLES].span(),
+                format!("at most {MAX_OBSTACLES} obstacles"),
+            ));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            let d = o.get_ref();
+            let placed = [d.x, d.y]
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_EXTENT);
+            let sized = d.radius.is_finite() && (0.0..=MAX_EXTENT).contains(&d.radius);
+            if !(placed && sized) {
+                return Err(ArenaMistake::new(
+                    format!("arena.obstacles[{i}]"),
+                    o.span(),
+                    "not a disc: x, y and a radius of 0 or more, in metres",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The arena as the station holds it.
+    pub fn shape(&self) -> ArenaShape {
+        ArenaShape {
             boundary: self
                 .boundary
                 .as_ref()
@@ -249,8 +294,113 @@ impl ArenaConfig {
                     max_speed: *z.max_speed.get_ref(),
                 })
                 .collect(),
+            obstacles: self
+                .obstacles
+                .iter()
+                .map(|o| {
+                    let d = o.get_ref();
+                    Disc {
+                        x: d.x,
+                        y: d.y,
+                        radius: d.radius,
+                    }
+                })
+                .collect(),
             margin: *self.margin.get_ref(),
         }
+    }
+
+    /// The message for `robot`: this arena, its `id` (new for every change
+    /// of the arena or of the robot's switch) and whether the robot's
+    /// safety layer is on.
+    pub fn to_arena(&self, robot: &str, id: u32, enabled: bool) -> Arena {
+        self.shape().to_arena(robot, id, enabled)
+    }
+}
+
+/// An arena as the station holds it, draws it on the map and records it:
+/// polygons and discs in metres, map frame (checked when it was read).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ArenaShape {
+    /// The polygon robots stay inside.
+    pub boundary: Vec<Point>,
+    /// Polygons robots stay out of.
+    pub keep_out: Vec<Vec<Point>>,
+    /// Polygons where robots go no faster than a cap.
+    pub slow_zones: Vec<SlowZone>,
+    /// Static discs robots keep clear of (sent with the neighbours).
+    #[serde(default)]
+    pub obstacles: Vec<Disc>,
+    /// Clearance kept from every edge and between robots, m.
+    pub margin: f64,
+}
+
+impl ArenaShape {
+    /// The message for `robot` (see [`ArenaConfig::to_arena`]).
+    pub fn to_arena(&self, robot: &str, id: u32, enabled: bool) -> Arena {
+        Arena {
+            robot: robot.to_string(),
+            id,
+            enabled,
+            boundary: self.boundary.clone(),
+            keep_out: self.keep_out.clone(),
+            slow_zones: self.slow_zones.clone(),
+            margin: self.margin,
+        }
+    }
+
+    /// The message that tells `robot` there is no arena (the station has
+    /// none, or it was cleared): nothing to fence in, the default margin.
+    pub fn none_for(robot: &str, id: u32, enabled: bool) -> Arena {
+        Arena {
+            robot: robot.to_string(),
+            id,
+            enabled,
+            boundary: Vec::new(),
+            keep_out: Vec::new(),
+            slow_zones: Vec::new(),
+            margin: DEFAULT_MARGIN,
+        }
+    }
+
+    /// The static obstacles as the neighbour lists carry them.
+    pub fn obstacle_list(&self) -> Vec<Obstacle> {
+        self.obstacles.iter().copied().map(Obstacle::Disc).collect()
+    }
+
+    /// The smallest rectangle holding the boundary (`min_x, min_y, max_x,
+    /// max_y`), `None` without one.
+    pub fn bounds(&self) -> Option<[f64; 4]> {
+        let first = self.boundary.first()?;
+        let mut b = [first.x, first.y, first.x, first.y];
+        for p in &self.boundary {
+            b = [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)];
+        }
+        Some(b)
+    }
+
+    /// `4 vertices, 1 keep-out, 0 slow zones, margin 0.10 m`: what an
+    /// operator is told of it.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "{} vertices, {} keep-out{}, {} slow zone{}",
+            self.boundary.len(),
+            self.keep_out.len(),
+            if self.keep_out.len() == 1 { "" } else { "s" },
+            self.slow_zones.len(),
+            if self.slow_zones.len() == 1 { "" } else { "s" },
+        );
+        if !self.obstacles.is_empty() {
+            s += &format!(", {} obstacle discs", self.obstacles.len());
+        }
+        if let Some([x0, y0, x1, y1]) = self.bounds() {
+            s += &format!(
+                ", {:.2} m x {:.2} m from ({x0:.2}, {y0:.2})",
+                x1 - x0,
+                y1 - y0
+            );
+        }
+        s + &format!(", margin {:.2} m", self.margin)
     }
 }
 
@@ -317,6 +467,41 @@ mod tests {
         assert!(e.contains("unknown field `margins`"), "{e}");
         let e = section("[arena]\nboundary = [[0, 0], [\"x\", 0], [4, 3]]\n").unwrap_err();
         assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
+    fn obstacle_discs_are_read_checked_and_listed_for_the_neighbours() {
+        let a = section(
+            "[arena]\nboundary = [[0, 0], [4, 0], [4, 3], [0, 3]]\n\
+             obstacles = [{ x = 1, y = 2, radius = 0.25 }]\n",
+        )
+        .unwrap();
+        let shape = a.shape();
+        assert_eq!(
+            shape.obstacle_list(),
+            vec![Obstacle::Disc(Disc {
+                x: 1.0,
+                y: 2.0,
+                radius: 0.25
+            })]
+        );
+        assert_eq!(shape.bounds(), Some([0.0, 0.0, 4.0, 3.0]));
+        assert_eq!(
+            shape.summary(),
+            "4 vertices, 0 keep-outs, 0 slow zones, 1 obstacle discs, \
+             4.00 m x 3.00 m from (0.00, 0.00), margin 0.10 m"
+        );
+        let e = section(
+            "[arena]\nboundary = [[0, 0], [4, 0], [4, 3]]\n\
+             obstacles = [{ x = 1, y = 2, radius = -1 }]\n",
+        )
+        .unwrap_err();
+        assert!(e.starts_with("gcs.toml:3:14: arena.obstacles[0]:"), "{e}");
+        // As recordings carry it.
+        let json = serde_json::to_string(&shape).unwrap();
+        assert_eq!(serde_json::from_str::<ArenaShape>(&json).unwrap(), shape);
+        let none = ArenaShape::none_for("robot_1", 4, false);
+        assert!(none.is_empty() && !none.enabled && none.margin == DEFAULT_MARGIN);
     }
 
     #[test]

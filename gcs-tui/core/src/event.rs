@@ -2,16 +2,18 @@
 //! acknowledged, telemetry arrived... Each [`Event`] is stamped with router
 //! time ([`Stamped`]). The router makes them; the fleet model and every
 //! subscriber consume them through an [`EventSink`] or a subscription. This
-//! module depends on nothing else in the station, so producers and consumers
-//! never depend on each other.
+//! module depends on nothing else in the station but the leaves it names
+//! (counters, the arena's shape), so producers and consumers never depend
+//! on each other.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use mech_proto::{ClusterCommand, Hello, Notice, Telemetry, Waypoint};
+use mech_proto::{ClusterCommand, Hello, Intervention, Notice, SafetyState, Telemetry, Waypoint};
 use serde::{Deserialize, Serialize};
 
+use crate::arena::ArenaShape;
 use crate::counters::{LinkQuality, RejectReason};
 
 mech_proto::named_enum! {
@@ -228,6 +230,78 @@ pub enum Event {
         from: String,
         detail: String,
     },
+    /// The station's arena changed (configured at start, loaded, cleared):
+    /// every robot is sent it anew.
+    Arena { arena: Option<ArenaShape> },
+    /// An operator switched a robot's safety layer on or off; its arena
+    /// `id` goes out until the robot acknowledges it.
+    SafetySwitched {
+        robot: String,
+        enabled: bool,
+        id: u32,
+    },
+    /// A robot acknowledged arena `id` (its layer `enabled` or not).
+    ArenaAcked {
+        robot: String,
+        id: u32,
+        enabled: bool,
+    },
+    /// A robot's telemetry reported a new state of its safety layer or a
+    /// new intervention (one event per change, not per telemetry).
+    Safety {
+        robot: String,
+        /// Recorded as `safety_state` (a link event's `state` is another
+        /// thing).
+        #[serde(with = "safety_state_name", rename = "safety_state")]
+        state: SafetyState,
+        #[serde(with = "intervention_name")]
+        intervention: Intervention,
+    },
+}
+
+/// How events and scripts name a safety layer's state.
+pub fn safety_state_str(s: SafetyState) -> &'static str {
+    match s {
+        SafetyState::NoArena => "no-arena",
+        SafetyState::On => "on",
+        SafetyState::Off => "off",
+    }
+}
+
+/// A safety state as its name in recordings.
+mod safety_state_name {
+    use mech_proto::SafetyState;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(s: &SafetyState, ser: S) -> Result<S::Ok, S::Error> {
+        ser.serialize_str(super::safety_state_str(*s))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<SafetyState, D::Error> {
+        let name = String::deserialize(d)?;
+        [SafetyState::NoArena, SafetyState::On, SafetyState::Off]
+            .into_iter()
+            .find(|s| super::safety_state_str(*s) == name)
+            .ok_or_else(|| serde::de::Error::custom(format!("no safety state {name:?}")))
+    }
+}
+
+/// An intervention as its name in recordings (`fence`, `separation`...).
+mod intervention_name {
+    use mech_proto::Intervention;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(i: &Intervention, ser: S) -> Result<S::Ok, S::Error> {
+        ser.serialize_str(i.as_str())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Intervention, D::Error> {
+        let name = String::deserialize(d)?;
+        Intervention::ALL
+            .into_iter()
+            .find(|i| i.as_str() == name)
+            .ok_or_else(|| serde::de::Error::custom(format!("no intervention {name:?}")))
+    }
 }
 
 impl Event {
@@ -255,6 +329,10 @@ impl Event {
             Event::BadPacket { .. } => "bad_packet",
             Event::Rejected { .. } => "rejected",
             Event::Refused { .. } => "refused",
+            Event::Arena { .. } => "arena",
+            Event::SafetySwitched { .. } => "safety_switched",
+            Event::ArenaAcked { .. } => "arena_acked",
+            Event::Safety { .. } => "safety",
         }
     }
 }

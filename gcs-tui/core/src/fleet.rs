@@ -11,6 +11,7 @@
 mod config;
 mod remote;
 mod robot;
+mod safety;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::net::SocketAddr;
@@ -24,6 +25,7 @@ pub use robot::{
     MissionDelivery, PathPoint, Registration, Robot, RouteState, SentMission, WaypointList,
 };
 
+use crate::arena::ArenaShape;
 use crate::counters::{ChannelStatus, Counters};
 use crate::event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 use crate::sync::lock;
@@ -86,6 +88,9 @@ pub struct Fleet {
     /// Router endpoints once bound.
     pub udp: Option<SocketAddr>,
     pub tcp: Option<SocketAddr>,
+    /// The arena robots are sent (and the map draws), if the station has
+    /// one.
+    pub arena: Option<ArenaShape>,
     /// Router time of the last applied event.
     pub now: Duration,
     /// Sequence number of the last log line.
@@ -105,6 +110,7 @@ impl Fleet {
             stations: BTreeMap::new(),
             udp: None,
             tcp: None,
+            arena: None,
             now: Duration::ZERO,
             log_seq: 0,
             config,
@@ -245,6 +251,10 @@ impl Fleet {
                 Severity::Warn,
                 refused_text(*count, *sources, by_reason, from, detail),
             ),
+            Event::Arena { .. }
+            | Event::SafetySwitched { .. }
+            | Event::ArenaAcked { .. }
+            | Event::Safety { .. } => self.safety_event(&stamped.event),
         }
     }
 

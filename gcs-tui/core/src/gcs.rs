@@ -1,6 +1,7 @@
-//! The running station: the router and the fleet model it feeds, started
-//! together and shared by everything above them (command language,
-//! controllers, TUI, scripts).
+//! The running station: the router, the fleet model it feeds, and the
+//! neighbour broadcaster beside them (fleet safety), started together and
+//! shared by everything above them (command language, controllers, TUI,
+//! scripts).
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -8,15 +9,18 @@ use std::sync::{Arc, Mutex};
 use mech_proto::{Mission, Waypoint};
 use serde::Deserialize;
 
+use crate::arena::ArenaConfig;
 use crate::auth::{AuthConfig, AuthMode, DEFAULT_WINDOW, Keyring};
 use crate::config::ConfigError;
 use crate::fleet::{Fleet, FleetConfig};
+use crate::neighbours::NeighbourConfig;
+use crate::neighbours::broadcast::Broadcaster;
 use crate::record::{RecordConfig, RecordError, RecordTarget, Recorder, RecordingStatus};
 use crate::router::{Router, RouterConfig, RouterError, RouterHandle};
 use crate::sync::lock;
 
 /// The core's sections of the configuration: `[router]`, `[fleet]`,
-/// `[auth]` and `[record]`.
+/// `[auth]`, `[record]`, `[arena]` and `[neighbours]`.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CoreConfig {
@@ -24,6 +28,12 @@ pub struct CoreConfig {
     pub fleet: FleetConfig,
     pub auth: AuthConfig,
     pub record: RecordConfig,
+    /// The arena robots are kept inside (fleet safety); none by default.
+    /// A file it names (`file = ...`) is read before the station starts
+    /// ([`ArenaConfig::resolve`]).
+    pub arena: Option<ArenaConfig>,
+    /// How robots are told about their neighbours while there is an arena.
+    pub neighbours: NeighbourConfig,
 }
 
 impl CoreConfig {
@@ -34,6 +44,12 @@ impl CoreConfig {
         self.router.validate()?;
         self.fleet.validate()?;
         self.record.validate()?;
+        self.neighbours.validate()?;
+        if let Some(arena) = &self.arena {
+            arena
+                .validate()
+                .map_err(|m| ConfigError(format!("{}: {}", m.path, m.message)))?;
+        }
         self.auth.validate()
     }
 
@@ -58,8 +74,9 @@ impl CoreConfig {
     }
 }
 
-/// A running ground station: the router and the fleet model it feeds.
-/// Cloning is cheap; every clone sees the same fleet.
+/// A running ground station: the router, the fleet model it feeds and the
+/// neighbour broadcaster. Cloning is cheap; every clone sees the same
+/// fleet.
 #[derive(Debug, Clone)]
 pub struct Gcs {
     router: RouterHandle,
@@ -67,20 +84,36 @@ pub struct Gcs {
     config: Arc<CoreConfig>,
     running: Arc<Mutex<Option<Router>>>,
     recorder: Arc<Mutex<Option<Recorder>>>,
+    broadcaster: Arc<Broadcaster>,
 }
 
 impl Gcs {
-    /// Binds the router's endpoints and starts routing.
+    /// Binds the router's endpoints, starts routing with the configured
+    /// arena (if any), and starts the neighbour broadcaster (which sends
+    /// while there is an arena).
     pub async fn start(config: CoreConfig) -> Result<Gcs, RouterError> {
         let fleet = Arc::new(Mutex::new(Fleet::new(config.fleet.clone())));
         let keyring = config.keyring()?;
         let router = Router::start(config.router.clone(), keyring, fleet.clone()).await?;
+        let handle = router.handle();
+        if let Some(arena) = &config.arena {
+            // A file not read yet is taken from the working directory.
+            match arena.resolve(Path::new(".")) {
+                Ok(arena) => handle.set_arena(Some(arena.shape())).await,
+                Err(e) => {
+                    router.shutdown().await;
+                    return Err(e.into());
+                }
+            }
+        }
+        let broadcaster = Broadcaster::start(handle.clone(), fleet.clone(), config.neighbours);
         Ok(Gcs {
-            router: router.handle(),
+            router: handle,
             fleet,
             config: Arc::new(config),
             running: Arc::new(Mutex::new(Some(router))),
             recorder: Arc::new(Mutex::new(None)),
+            broadcaster: Arc::new(broadcaster),
         })
     }
 
@@ -194,9 +227,11 @@ impl Gcs {
         lock(&self.recorder).as_ref().map(Recorder::status)
     }
 
-    /// Stops the router, then finishes the recording (so it holds
-    /// everything the router did). Other clones then see a stopped router.
+    /// Stops the neighbour broadcaster and the router, then finishes the
+    /// recording (so it holds everything the router did). Other clones
+    /// then see a stopped router.
     pub async fn shutdown(&self) {
+        self.broadcaster.stop();
         let router = lock(&self.running).take();
         if let Some(r) = router {
             r.shutdown().await;

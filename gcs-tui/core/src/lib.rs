@@ -9,14 +9,16 @@
 //!   control plane;
 //! - [`names`]: robot names as an operator reads them (the number a name
 //!   ends with, natural order);
-//! - [`arena`]: the `[arena]` section and the arena message robots
-//!   enforce; [`neighbours`]: choosing each robot's neighbours from the
-//!   fleet's states (fleet safety, `docs/safety.md`);
+//! - [`arena`]: the `[arena]` section, the arena the station holds and
+//!   the arena message robots enforce (fleet safety, `docs/safety.md`);
 //! - [`event`]: what the station saw happen, and the [`EventSink`] the
 //!   router delivers it to;
 //! - [`counters`]: traffic counters and live channels;
 //! - [`router`]: the UDP/TCP router with live controller switching;
 //! - [`fleet`]: the fleet model, an [`EventSink`] fed by the router;
+//! - [`neighbours`]: the `[neighbours]` section, choosing each robot's
+//!   neighbours from the fleet's states, and the broadcaster that sends
+//!   them through the router;
 //! - [`record`]: recording what the router sees to MCAP;
 //! - [`replay`]: reading a recording back, as events and fleet models;
 //! - [`gcs`]: [`Gcs`], the router and fleet model started together.
@@ -40,12 +42,13 @@ pub mod replay;
 pub mod router;
 pub mod sync;
 
-pub use arena::ArenaConfig;
+pub use arena::{ArenaConfig, ArenaShape};
 pub use config::ConfigError;
 pub use counters::{ChannelStatus, Counters, DropReason, Drops, LinkQuality, Traffic};
 pub use event::{Event, EventSink, LinkAddr, LinkState, RobotLinks, Stamped};
 pub use fleet::{Fleet, FleetConfig};
 pub use gcs::{CoreConfig, Gcs};
+pub use neighbours::NeighbourConfig;
 pub use record::{RecordConfig, RecordTarget, RecordingStatus};
 pub use router::{
     Delivery, Publisher, RadioStatus, Router, RouterConfig, RouterError, RouterHandle,

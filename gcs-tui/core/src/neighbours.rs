@@ -1,16 +1,100 @@
 //! Choosing each robot's neighbours: from the fleet's latest states, the
 //! [`Neighbours`] message each robot is to receive, with the robots whose
 //! discs lie within a horizon of its own, nearest first, at most a set
-//! number, and the static obstacles. A pure function, so the station's
-//! broadcaster (10 Hz or more) only gathers states and sends.
+//! number, and the static obstacles. [`select`] is a pure function, so the
+//! station's broadcaster ([`broadcast`], 10 Hz or more) only gathers
+//! states and sends; the `[neighbours]` section ([`NeighbourConfig`]) says
+//! how often and how far.
 //!
 //! Robots are bucketed in a grid of horizon-sized cells, so a fleet of
 //! `n` robots costs about `n` times the robots near each, not `n²`.
+
+pub mod broadcast;
 
 use std::collections::HashMap;
 use std::time::Duration;
 
 use mech_proto::{MAX_NEIGHBOURS, Neighbour, Neighbours, Obstacle};
+use serde::Deserialize;
+
+use crate::config::ConfigError;
+
+/// The `[neighbours]` section: how the station's broadcaster tells each
+/// robot about the robots near it (`docs/safety.md`). It runs while the
+/// station has an arena.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NeighbourConfig {
+    /// Neighbour lists per second to each robot: at least 10 (a robot whose
+    /// newest list is older than its `stale_after`, 0.3 s by default,
+    /// crawls); 20 leaves room for a lost datagram or two.
+    pub rate_hz: f64,
+    /// Largest gap between two robots' discs for them to be neighbours, m.
+    pub horizon: f64,
+    /// Most neighbours in one list, nearest first.
+    pub max: usize,
+    /// Radius of a robot that reports none (an agent without the layer,
+    /// another station's robot), m.
+    pub default_radius: f64,
+    /// Deceleration assumed of a robot the station lost (its failsafe
+    /// stops it), m/s²: its disc is grown by the way it could have gone.
+    pub lost_deceleration: f64,
+}
+
+impl Default for NeighbourConfig {
+    fn default() -> Self {
+        NeighbourConfig {
+            rate_hz: 20.0,
+            horizon: NeighbourPolicy::default().horizon,
+            max: NeighbourPolicy::default().max,
+            default_radius: 0.3,
+            lost_deceleration: 1.0,
+        }
+    }
+}
+
+impl NeighbourConfig {
+    /// Checks every value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.rate_hz.is_finite() && (10.0..=200.0).contains(&self.rate_hz)) {
+            return Err(ConfigError(format!(
+                "neighbours.rate_hz {} must be 10 to 200: robots take lists older than 0.3 s as stale",
+                self.rate_hz
+            )));
+        }
+        for (name, v) in [
+            ("horizon", self.horizon),
+            ("default_radius", self.default_radius),
+            ("lost_deceleration", self.lost_deceleration),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= mech_proto::MAX_EXTENT) {
+                return Err(ConfigError(format!(
+                    "neighbours.{name} {v} must be a positive number"
+                )));
+            }
+        }
+        if self.max == 0 || self.max > MAX_NEIGHBOURS {
+            return Err(ConfigError(format!(
+                "neighbours.max {} must be 1 to {MAX_NEIGHBOURS}",
+                self.max
+            )));
+        }
+        Ok(())
+    }
+
+    /// Time between two lists to one robot.
+    pub fn period(&self) -> Duration {
+        Duration::from_secs_f64(1.0 / self.rate_hz)
+    }
+
+    /// Which robots count as neighbours.
+    pub fn policy(&self) -> NeighbourPolicy {
+        NeighbourPolicy {
+            horizon: self.horizon,
+            max: self.max,
+        }
+    }
+}
 
 /// A robot's state as the station last saw it.
 #[derive(Debug, Clone, PartialEq)]
@@ -137,6 +221,25 @@ mod tests {
             age: Duration::from_millis(40),
             cooperative: true,
         }
+    }
+
+    #[test]
+    fn the_section_is_checked() {
+        assert!(NeighbourConfig::default().validate().is_ok());
+        let slow = NeighbourConfig {
+            rate_hz: 5.0,
+            ..NeighbourConfig::default()
+        };
+        assert!(slow.validate().unwrap_err().0.contains("rate_hz"));
+        let none = NeighbourConfig {
+            max: 0,
+            ..NeighbourConfig::default()
+        };
+        assert!(none.validate().unwrap_err().0.contains("max"));
+        assert_eq!(
+            NeighbourConfig::default().period(),
+            Duration::from_millis(50)
+        );
     }
 
     #[test]

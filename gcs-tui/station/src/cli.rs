@@ -59,6 +59,7 @@ impl Args {
     pub fn overrides(&self) -> Overrides {
         Overrides {
             demo_without_file: self.demo.is_some() && self.config.is_none(),
+            demo: self.demo.is_some(),
             udp: self.udp,
             tcp: self.tcp,
             socket: self.socket.clone(),

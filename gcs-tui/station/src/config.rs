@@ -1,6 +1,7 @@
 //! The station's configuration file (`gcs.toml`), assembled from the
-//! sections each layer owns: `[router]`, `[fleet]`, `[auth]` and `[record]`
-//! (mech-core), `[[cluster]]` (mech-control), `[log]`, `[station]` and
+//! sections each layer owns: `[router]`, `[fleet]`, `[auth]`, `[record]`,
+//! `[arena]` and `[neighbours]` (mech-core), `[[cluster]]` (mech-control),
+//! `[log]`, `[station]` and
 //! `[foxglove]` (this crate). The sections of the programs on top of the
 //! station, `[gamepad]` (mech-gcs's TUI) and `[zenoh]` (mech-zenoh's
 //! bridge), are carried as written ([`ProgramSection`]), each read and
@@ -13,7 +14,9 @@ use std::path::{Path, PathBuf};
 
 use mech_control::ClusterSpec;
 use mech_core::auth::AuthConfig;
-use mech_core::{CoreConfig, FleetConfig, RecordConfig, RouterConfig};
+use mech_core::{
+    ArenaConfig, CoreConfig, FleetConfig, NeighbourConfig, RecordConfig, RouterConfig,
+};
 use serde::Deserialize;
 use serde::de::DeserializeOwned;
 
@@ -61,6 +64,12 @@ pub struct ConfigFile {
     pub cluster: Vec<ClusterSpec>,
     /// Recordings: directory, file size cap, rotation, queue.
     pub record: RecordConfig,
+    /// The arena robots are kept inside (fleet safety, `docs/safety.md`),
+    /// or a file holding it; none unless written (`--demo` uses the
+    /// simulator's).
+    pub arena: Option<ArenaConfig>,
+    /// How robots are told about their neighbours while there is an arena.
+    pub neighbours: NeighbourConfig,
     /// Where a served station listens for TUIs and scripts.
     pub station: StationConfig,
     /// The Foxglove live view (`--foxglove`).
@@ -101,6 +110,8 @@ pub struct Overrides {
     /// `--demo` without `--config`: the simulated fleet lives in this
     /// process, so the router is not exposed beyond this machine.
     pub demo_without_file: bool,
+    /// `--demo`: without an `[arena]`, the simulator's arena.
+    pub demo: bool,
     /// `--udp`, `--tcp`: the router's endpoints.
     pub udp: Option<std::net::SocketAddr>,
     pub tcp: Option<std::net::SocketAddr>,
@@ -113,6 +124,9 @@ impl ConfigFile {
     pub fn override_with(&mut self, o: &Overrides) {
         if o.demo_without_file {
             self.router.udp.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+        }
+        if o.demo && self.arena.is_none() {
+            self.arena = Some(ArenaConfig::demo());
         }
         if let Some(udp) = o.udp {
             self.router.udp = udp;
@@ -132,12 +146,16 @@ impl ConfigFile {
             error,
         })?;
         let mut cfg = ConfigFile::parse_at(&text, path)?;
-        // Key files are found next to the configuration that names them.
+        // Key and arena files are found next to the configuration that
+        // names them.
         let dir = path.parent().unwrap_or(Path::new("."));
         for k in &mut cfg.auth.keys {
             if k.file.is_relative() {
                 k.file = dir.join(&k.file);
             }
+        }
+        if let Some(arena) = &cfg.arena {
+            cfg.arena = Some(arena.resolve(dir)?);
         }
         Ok(cfg)
     }
@@ -152,6 +170,12 @@ impl ConfigFile {
             path: path.to_owned(),
             error: Box::new(e),
         })?;
+        // The arena's mistakes are located in the text (`file:line:col`).
+        if let Some(arena) = &cfg.arena {
+            arena
+                .validate()
+                .map_err(|m| mech_core::ConfigError(m.locate(&path.display().to_string(), text)))?;
+        }
         cfg.validate()?;
         Ok(cfg)
     }
@@ -163,6 +187,8 @@ impl ConfigFile {
             fleet: self.fleet.clone(),
             auth: self.auth.clone(),
             record: self.record.clone(),
+            arena: self.arena.clone(),
+            neighbours: self.neighbours,
         }
     }
 
@@ -301,6 +327,47 @@ mod tests {
         // Sections nobody owns are still refused.
         let e = ConfigFile::parse("[gamepda]\ndeadzone = 0.2\n").unwrap_err();
         assert!(e.to_string().contains("gamepda"), "{e}");
+    }
+
+    #[test]
+    fn the_arena_is_read_from_its_section_or_its_file_and_demo_has_one() {
+        assert!(ConfigFile::parse("").unwrap().arena.is_none());
+        let cfg = ConfigFile::parse("[arena]\nboundary = [[0, 0], [5, 0], [5, 4]]\nmargin = 0.2\n")
+            .unwrap();
+        assert_eq!(cfg.core().arena.unwrap().shape().margin, 0.2);
+        let e = ConfigFile::parse("[arena]\nboundary = [[0, 0], [5, 0]]\n").unwrap_err();
+        assert!(
+            e.to_string().starts_with("<config>:2:12: arena.boundary"),
+            "{e}"
+        );
+        let e = ConfigFile::parse("[neighbours]\nrate_hz = 2\n").unwrap_err();
+        assert!(e.to_string().contains("neighbours.rate_hz"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("lab.toml"),
+            "boundary = [[0, 0], [6, 0], [6, 6], [0, 6]]\n",
+        )
+        .unwrap();
+        let file = dir.path().join("gcs.toml");
+        std::fs::write(&file, "[arena]\nfile = \"lab.toml\"\n").unwrap();
+        let cfg = ConfigFile::load(&file).unwrap();
+        let arena = cfg.arena.as_ref().unwrap().shape();
+        assert_eq!(
+            arena.bounds(),
+            Some([0.0, 0.0, 6.0, 6.0]),
+            "next to gcs.toml"
+        );
+        // --demo: the simulator's arena unless the file has one.
+        let demo = Overrides {
+            demo: true,
+            ..Overrides::default()
+        };
+        let mut with_file = cfg.clone();
+        with_file.override_with(&demo);
+        assert_eq!(with_file.arena, cfg.arena);
+        let mut none = ConfigFile::default();
+        none.override_with(&demo);
+        assert_eq!(none.arena, Some(ArenaConfig::demo()));
     }
 
     #[test]

@@ -17,7 +17,7 @@ use tokio::sync::watch;
 
 use crate::view::{
     ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView, RouteView,
-    Security, TRAIL_SECONDS,
+    SafetyView, Security, TRAIL_SECONDS,
 };
 use crate::wire::{FromStation, LogLevel, to_line};
 
@@ -236,6 +236,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             trail: recent_path(r),
             quality: r.quality,
             remote: r.remote.clone(),
+            safety: safety_view(r),
         })
         .collect();
     FleetSnapshot {
@@ -245,6 +246,7 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
         security: Security::default(),
         rejected: 0,
         replay: None,
+        arena: fleet.arena.clone(),
         clusters: Some(
             fleet
                 .clusters
@@ -256,6 +258,27 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
                 })
                 .collect(),
         ),
+    }
+}
+
+/// A robot's safety layer as its card shows it: `None` for a robot that
+/// reports none and is not switched off.
+fn safety_view(r: &Robot) -> Option<SafetyView> {
+    let alarm = r.safety_alarm();
+    match r.telemetry.safety {
+        Some(s) => Some(SafetyView {
+            state: s.state,
+            intervention: s.intervention,
+            interventions: s.counts.total(),
+            alarm,
+        }),
+        None if alarm => Some(SafetyView {
+            state: mech_proto::SafetyState::NoArena,
+            intervention: mech_proto::Intervention::None,
+            interventions: 0,
+            alarm,
+        }),
+        None => None,
     }
 }
 

@@ -1,11 +1,13 @@
 //! The simulator behind `spawn` and `--demo`: simulated agents from
 //! `mech-agent`, plugged into the command language through its
 //! [`SimSpawner`] trait, so the station's core and control crates never
-//! depend on the simulator.
+//! depend on the simulator. Simulated robots live in the simulator's
+//! arena: spawning them in a station without an arena gives it that one,
+//! so they are kept inside it and apart (fleet safety).
 
 use mech_control::lang::SimSpawner;
-use mech_core::RouterHandle;
 use mech_core::auth::{Identity, Role};
+use mech_core::{ArenaShape, RouterHandle};
 use mech_proto::auth::Key;
 
 /// Simulated agents (`mech_agent::sim`) for `spawn` and `--demo`: the same
@@ -59,6 +61,10 @@ impl SimSpawner for SimulatedFleet {
                     options.secrets.insert(name, secret);
                 }
             }
+            if station.arena().is_none() {
+                tracing::info!("no arena: the simulator's, where its robots live");
+                station.set_arena(Some(shape(&self.arena))).await;
+            }
             let fleet = mech_agent::sim::SimFleet::spawn(count, router, self.arena, options)
                 .await
                 .map_err(|e| e.to_string())?;
@@ -87,6 +93,23 @@ pub fn simulator() -> Box<dyn SimSpawner> {
     ))
 }
 
+/// The simulator's rectangle as an arena, with the default margin.
+pub fn shape(a: &mech_agent::sim::Arena) -> ArenaShape {
+    let p = |x, y| mech_proto::Point { x, y };
+    ArenaShape {
+        boundary: vec![
+            p(a.min_x, a.min_y),
+            p(a.max_x, a.min_y),
+            p(a.max_x, a.max_y),
+            p(a.min_x, a.max_y),
+        ],
+        keep_out: Vec::new(),
+        slow_zones: Vec::new(),
+        obstacles: Vec::new(),
+        margin: mech_core::arena::DEFAULT_MARGIN,
+    }
+}
+
 /// The arena the demo's simulated fleet is spread over (the agent
 /// simulator's default, the 2017 lab's Pozyx area), for the map outline.
 pub fn demo_arena() -> crate::view::ArenaBounds {
@@ -96,5 +119,16 @@ pub fn demo_arena() -> crate::view::ArenaBounds {
         min_y: a.min_y,
         max_x: a.max_x,
         max_y: a.max_y,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_simulators_arena_is_the_demo_arena() {
+        let demo = mech_core::ArenaConfig::demo().shape();
+        assert_eq!(shape(&mech_agent::sim::Arena::default()), demo);
     }
 }

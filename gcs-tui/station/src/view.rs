@@ -7,10 +7,14 @@
 //! them from the core, so screens and tests can be built from fixed values.
 
 use mech_proto::{
-    Computation, ControlMode, FailsafeState, Health, MissionProgress, Pose, Velocity,
-    VelocitySource,
+    Computation, ControlMode, FailsafeState, Health, Intervention, MissionProgress, Pose,
+    SafetyState, Velocity, VelocitySource,
 };
 use serde::{Deserialize, Serialize};
+
+/// The arena robots are kept inside, as the map draws it (the core's
+/// type: boundary, keep-outs, slow zones, obstacle discs, margin).
+pub use mech_core::ArenaShape;
 
 /// Rates each way, loss and round trip of a robot's link, as the router
 /// measures them (the core's type, copied).
@@ -79,6 +83,22 @@ pub struct RobotView {
     /// protocol from a station that predates it.
     #[serde(default)]
     pub remote: Option<String>,
+    /// Its fleet safety layer, when it reports one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyView>,
+}
+
+/// A robot's fleet safety layer, as its card shows it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SafetyView {
+    /// What the robot reports: on, off, or no arena yet.
+    pub state: SafetyState,
+    /// What the layer limits now (`None`: nothing).
+    pub intervention: Intervention,
+    /// Interventions begun so far, every reason together.
+    pub interventions: u64,
+    /// Switched off, or asked to be: shown as an alarm.
+    pub alarm: bool,
 }
 
 impl RobotView {
@@ -120,6 +140,7 @@ impl RobotView {
             trail: Vec::new(),
             quality: LinkQuality::default(),
             remote: None,
+            safety: None,
         }
     }
 }
@@ -220,6 +241,18 @@ pub struct FleetSnapshot {
     /// Where a replayed recording is (`None` for a live station).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub replay: Option<ReplayClock>,
+    /// The station's arena, when it has one (drawn on the map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arena: Option<ArenaShape>,
+}
+
+impl FleetSnapshot {
+    /// The robots whose safety layer is off (an alarm in the status bar).
+    pub fn safety_off(&self) -> impl Iterator<Item = &RobotView> {
+        self.robots
+            .iter()
+            .filter(|r| r.safety.is_some_and(|s| s.alarm))
+    }
 }
 
 /// A replay's position, pace and span, in seconds of router time.
@@ -278,6 +311,11 @@ pub fn velocity_source_str(v: VelocitySource) -> &'static str {
         VelocitySource::Measured => "meas",
         VelocitySource::Commanded => "cmd",
     }
+}
+
+/// How a card names what the safety layer does to a robot's commands.
+pub fn intervention_str(i: Intervention) -> &'static str {
+    i.as_str()
 }
 
 pub fn health_str(h: Health) -> &'static str {

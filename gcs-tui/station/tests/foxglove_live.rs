@@ -2,7 +2,8 @@
 //! = 127.0.0.1:0`, two simulated robots), with WebSocket clients speaking
 //! `foxglove.websocket.v1` as Foxglove and Lichtblick do: the channels and
 //! schemas advertised are a recording's, a robot sent on a mission is seen
-//! moving on its pose topic and in the scene, and clients that send
+//! moving on its pose topic and in the scene (with the simulated robots'
+//! arena), and clients that send
 //! garbage, flood the server with requests or never read do not stop it;
 //! the station's log says who was cut and why. Without the `foxglove`
 //! feature, a station asked for the live view does not start, and says
@@ -153,6 +154,11 @@ mod live {
         }
         assert!(scene_ids.contains(&"robot/robot_1".to_string()));
         assert!(scene_ids.contains(&"robot/robot_2".to_string()));
+        // The simulated robots' arena, drawn as a recording draws it.
+        assert!(
+            scene_ids.contains(&"arena/boundary".to_string()),
+            "{scene_ids:?}"
+        );
         // The station still serves its operators.
         script(&station, "wait connected robot_2 20s\nstatus\n").await;
         // The log says who was cut and why.

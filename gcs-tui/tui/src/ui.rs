@@ -55,6 +55,6 @@ pub use link::StationLink;
 pub use series::Series;
 pub use terminal::{RunOptions, run};
 pub use view::{
-    ArenaBounds, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, LinkQuality,
-    LinkState, RobotView, RouteView, SlotView,
+    ArenaBounds, ArenaShape, ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot,
+    LinkQuality, LinkState, RobotView, RouteView, SafetyView, SlotView,
 };

@@ -217,6 +217,75 @@ fn fleet_table_80x24() {
     insta::assert_snapshot!(screen(&app, 80, 24));
 }
 
+/// Fleet safety on the screen: the station's arena on the map (boundary,
+/// a keep-out crossed, a slow zone dotted, an obstacle disc), robot_1
+/// limited at the fence (on its card), robot_2 with its layer switched off
+/// (an alarm on its card and in the status bar).
+#[test]
+fn arena_intervention_and_safety_alarm_120x36() {
+    use mech_gcs::ui::{ArenaShape, SafetyView};
+    use mech_proto::{Disc, Intervention, Point, SafetyState, SlowZone};
+
+    let p = |x, y| Point { x, y };
+    let mut app = populated(120, 36);
+    let mut snap = fixture::fleet(6);
+    snap.arena = Some(ArenaShape {
+        boundary: vec![p(-3.0, -3.0), p(3.0, -3.0), p(3.0, 3.0), p(-3.0, 3.0)],
+        keep_out: vec![vec![p(-0.5, -0.5), p(0.5, -0.5), p(0.5, 0.5), p(-0.5, 0.5)]],
+        slow_zones: vec![SlowZone {
+            polygon: vec![p(1.0, -3.0), p(3.0, -3.0), p(3.0, -1.0), p(1.0, -1.0)],
+            max_speed: 0.1,
+        }],
+        obstacles: vec![Disc {
+            x: -2.0,
+            y: -2.0,
+            radius: 0.3,
+        }],
+        margin: 0.1,
+    });
+    snap.robots[0].safety = Some(SafetyView {
+        state: SafetyState::On,
+        intervention: Intervention::Fence,
+        interventions: 3,
+        alarm: false,
+    });
+    snap.robots[1].safety = Some(SafetyView {
+        state: SafetyState::Off,
+        intervention: Intervention::None,
+        interventions: 0,
+        alarm: true,
+    });
+    app.update(mech_gcs::ui::Action::Fleet(snap));
+    let text = screen(&app, 120, 36);
+    assert!(text.contains(" SAFETY OFF robot_2 "), "status bar: {text}");
+    assert!(text.contains("#2 SAFETY OFF"), "robot_2's card: {text}");
+    assert!(text.contains(" ok fence"), "robot_1's card: {text}");
+    insta::assert_snapshot!(text);
+}
+
+/// The station's arena without anything else: at 80x24 the status bar
+/// still shows the alarm first.
+#[test]
+fn the_safety_alarm_fits_a_narrow_status_bar() {
+    use mech_gcs::ui::SafetyView;
+    use mech_proto::{Intervention, SafetyState};
+
+    let mut app = populated(80, 24);
+    let mut snap = fixture::fleet(6);
+    for r in &mut snap.robots[2..5] {
+        r.safety = Some(SafetyView {
+            state: SafetyState::Off,
+            intervention: Intervention::None,
+            interventions: 0,
+            alarm: true,
+        });
+    }
+    app.update(mech_gcs::ui::Action::Fleet(snap));
+    let text = screen(&app, 80, 24);
+    let bar = text.lines().next().unwrap();
+    assert!(bar.contains(" SAFETY OFF 3 robots "), "{bar}");
+}
+
 /// A robot's last minute in charts, and the fleet table's trend of the
 /// column it is sorted by: robot_1 was sent three waypoints from this TUI
 /// (its cross-track error is measured against them), then a minute of

@@ -240,6 +240,15 @@ pub fn point(s: &str) -> Option<Waypoint> {
     })
 }
 
+/// A safety layer's state as the language writes it: `on`, `off`,
+/// `no-arena`.
+pub fn safety_state(s: &str) -> Option<mech_proto::SafetyState> {
+    use mech_proto::SafetyState;
+    [SafetyState::On, SafetyState::Off, SafetyState::NoArena]
+        .into_iter()
+        .find(|st| mech_core::event::safety_state_str(*st) == s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,6 +4,7 @@
 //! [`VERBS`] that the parser and `help` read, the [`Command`] enum with its
 //! dispatch, and the poll loop of the waiting verbs.
 
+pub mod arena;
 pub mod autopilot;
 pub mod channels;
 pub mod cluster;
@@ -26,6 +27,7 @@ pub mod nav;
 pub mod nav_wait;
 pub mod record;
 pub mod route;
+pub mod safety;
 pub mod send;
 pub mod sleep;
 pub mod spawn;
@@ -128,13 +130,13 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "wait",
-        usage: "wait connected|lost|arrived TARGET [TIMEOUT] | wait robots N [TIMEOUT] | wait route TARGET CHANNEL|none [TIMEOUT] | wait near TARGET X,Y TOLERANCE [TIMEOUT] | wait moved TARGET METRES [TIMEOUT] | wait estop [TIMEOUT]",
+        usage: "wait connected|lost|arrived TARGET [TIMEOUT] | wait robots N [TIMEOUT] | wait route TARGET CHANNEL|none [TIMEOUT] | wait near TARGET X,Y TOLERANCE [TIMEOUT] | wait moved TARGET METRES [TIMEOUT] | wait estop [TIMEOUT] | wait safety TARGET on|off|no-arena [TIMEOUT]",
         help: "wait until a condition holds (default timeout 10s)",
         parse: |a| wait::Wait::parse(a).map(Command::Wait),
     },
     Verb {
         name: "expect",
-        usage: "expect near TARGET X,Y TOLERANCE | expect route TARGET CHANNEL|none | expect link TARGET connected|stale|lost | expect failsafe TARGET ok|channel-silent|router-lost|estopped|fault | expect dropped CHANNEL N",
+        usage: "expect near TARGET X,Y TOLERANCE | expect route TARGET CHANNEL|none | expect link TARGET connected|stale|lost | expect failsafe TARGET ok|channel-silent|router-lost|estopped|fault | expect safety TARGET on|off|no-arena | expect dropped CHANNEL N",
         help: "check a condition now; a script fails if it does not hold",
         parse: |a| expect::Expectation::parse(a).map(Command::Expect),
     },
@@ -243,6 +245,18 @@ pub static VERBS: &[Verb] = &[
         parse: |a| autopilot::Autopilot::parse(a).map(Command::Autopilot),
     },
     Verb {
+        name: "arena",
+        usage: "arena | arena load FILE | arena demo | arena clear",
+        help: "the arena robots are kept inside: show it, load a file (the [arena] keys), the simulator's, or none",
+        parse: |a| arena::Arena::parse(a).map(Command::Arena),
+    },
+    Verb {
+        name: "safety",
+        usage: "safety on|off TARGET",
+        help: "switch robots' fleet safety layer on or off (off shows as an alarm)",
+        parse: |a| safety::Safety::parse(a).map(Command::Safety),
+    },
+    Verb {
         name: "help",
         usage: "help",
         help: "list commands",
@@ -285,6 +299,8 @@ pub enum Command {
     NavWait(nav_wait::NavWait),
     Record(record::Record),
     Autopilot(autopilot::Autopilot),
+    Arena(arena::Arena),
+    Safety(safety::Safety),
 }
 
 impl Command {
@@ -322,6 +338,8 @@ impl Command {
             Command::NavWait(c) => c.apply(ctx, at).await,
             Command::Record(c) => c.apply(ctx, at).await,
             Command::Autopilot(c) => c.apply(ctx, at).await,
+            Command::Arena(c) => c.apply(ctx, at).await,
+            Command::Safety(c) => c.apply(ctx, at).await,
         }
     }
 }

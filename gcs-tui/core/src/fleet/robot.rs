@@ -123,6 +123,10 @@ pub struct Robot {
     pub gcs_mode: Option<CommandKind>,
     /// Id of the last e-stop or release this robot acknowledged.
     pub estop_ack: Option<(bool, u32)>,
+    /// Whether the station has this robot's safety layer on (an operator's
+    /// `safety off` clears it; the robot's report, in its telemetry, says
+    /// when it applies).
+    pub safety_enabled: bool,
     /// The station this robot belongs to when it is another station's,
     /// shown here read-only through a bridge (`mech-zenoh`); `None` for
     /// this station's own robots. Only that station routes it.
@@ -151,6 +155,7 @@ impl Robot {
             path: VecDeque::new(),
             gcs_mode: None,
             estop_ack: None,
+            safety_enabled: true,
             remote: None,
         }
     }
@@ -214,6 +219,12 @@ impl Robot {
             return Some(sent.id);
         }
         None
+    }
+
+    /// Whether the robot's safety layer is off, or asked to be: an alarm
+    /// on its card, in the status bar and in `status`.
+    pub fn safety_alarm(&self) -> bool {
+        !self.safety_enabled || self.telemetry.safety.is_some_and(|s| s.alarm())
     }
 
     /// Whether the robot obeys `kind` commands.

@@ -1,8 +1,9 @@
 //! The fleet model as events: what a replay applies first so that a file
 //! begun mid-run (`record start`, or the next file of a rotation) shows the
-//! robots, routes, missions and e-stop as they stood. Applying them to an
-//! empty [`Fleet`] gives the same robots, routes, missions, e-stop and last
-//! telemetry (trails and log lines start afresh).
+//! arena, robots, routes, safety switches, missions and e-stop as they
+//! stood. Applying them to an empty [`Fleet`] gives the same arena, robots,
+//! routes, switches, missions, e-stop and last telemetry (trails and log
+//! lines start afresh).
 
 use mech_proto::Hello;
 
@@ -16,6 +17,11 @@ pub(crate) fn events(fleet: &Fleet) -> Vec<Event> {
         out.push(Event::Listening {
             udp,
             tcp: fleet.tcp,
+        });
+    }
+    if fleet.arena.is_some() {
+        out.push(Event::Arena {
+            arena: fleet.arena.clone(),
         });
     }
     for r in fleet.robots.values() {
@@ -56,6 +62,13 @@ fn robot(r: &Robot, out: &mut Vec<Event>) {
         });
     }
     mission(r, out);
+    if !r.safety_enabled {
+        out.push(Event::SafetySwitched {
+            robot: name.clone(),
+            enabled: false,
+            id: r.telemetry.safety.map_or(0, |s| s.arena),
+        });
+    }
     if r.last_telemetry.is_some() {
         out.push(Event::Telemetry {
             robot: name.clone(),

@@ -43,6 +43,10 @@ pub struct RouterConfig {
     /// Resend period of an unacknowledged e-stop or release.
     #[serde(with = "secs")]
     pub estop_retry: Duration,
+    /// Resend period of an unacknowledged arena (a change of the arena or
+    /// of a robot's safety switch).
+    #[serde(with = "secs")]
+    pub arena_retry: Duration,
     /// Resolution of the router's timers (link state, retries).
     #[serde(with = "secs")]
     pub tick: Duration,
@@ -132,6 +136,7 @@ impl Default for RouterConfig {
             // Short: each resend is another chance through a lossy link
             // (at 50% loss, 20 tries a second miss with odds of 1e-6).
             estop_retry: Duration::from_millis(50),
+            arena_retry: Duration::from_millis(100),
             tick: Duration::from_millis(20),
             subscriber_timeout: Duration::from_secs(5),
             channel_live_for: Duration::from_secs(3),
@@ -164,6 +169,7 @@ impl RouterConfig {
             ("route_retry", self.route_retry),
             ("mission_retry", self.mission_retry),
             ("estop_retry", self.estop_retry),
+            ("arena_retry", self.arena_retry),
             ("link_timeout", self.link_timeout),
         ] {
             if d.is_zero() {

@@ -1,6 +1,7 @@
 //! [`RouterHandle`]: the API the rest of the station uses, one group of
 //! functions per job: where the router is and its time; commanding robots
-//! (routes, missions, e-stop); publishing in process (with
+//! (routes, missions, e-stop); fleet safety (the arena, each robot's
+//! switch, neighbour lists); publishing in process (with
 //! `super::publisher`); events; status; authentication; the recording
 //! tap.
 //!
@@ -13,7 +14,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use mech_proto::auth::Tag;
-use mech_proto::{Body, Envelope, Header, Mission};
+use mech_proto::{Body, Envelope, Header, Mission, Neighbours};
 use tokio::time::Instant;
 
 use super::bus::Subscription;
@@ -21,6 +22,7 @@ use super::net::RadioStatus;
 use super::tables::tap::{OperatorRecord, Tap};
 use super::tables::{Delivery, Effects, Peer};
 use super::{RouterError, Shared};
+use crate::arena::ArenaShape;
 use crate::auth::{Identity, Rejection, Role, Security};
 use crate::counters::{ChannelStatus, Counters, Rejections};
 use crate::fleet::Fleet;
@@ -114,6 +116,40 @@ impl RouterHandle {
     /// Explicitly releases the e-stop on every robot. Returns its id.
     pub async fn release(&self) -> u32 {
         self.shared.apply(|t, cx| t.start_estop(false, cx)).await
+    }
+}
+
+/// Fleet safety: the station's arena, each robot's safety switch, and the
+/// neighbour lists of the station's broadcaster (`crate::neighbours`).
+impl RouterHandle {
+    /// The station's arena, if it has one.
+    pub fn arena(&self) -> Option<ArenaShape> {
+        lock(&self.shared.tables).arena().cloned()
+    }
+
+    /// Sets the station's arena (`None` clears it) and sends it to every
+    /// robot, repeated until each acknowledges; robots registering later
+    /// get it too.
+    pub async fn set_arena(&self, arena: Option<ArenaShape>) {
+        self.shared.apply(|t, cx| t.set_arena(arena, cx)).await;
+    }
+
+    /// Switches `robot`'s safety layer on or off: the robot is sent its
+    /// arena with the switch, repeated until it acknowledges. Returns the
+    /// arena id sent (0 when the station has no arena yet: the switch goes
+    /// out with the next one).
+    pub async fn set_safety(&self, robot: &str, enabled: bool) -> Result<u32, RouterError> {
+        self.shared
+            .apply(|t, cx| t.set_safety(robot, enabled, cx))
+            .await
+            .ok_or_else(|| RouterError::UnknownRobot(robot.to_string()))
+    }
+
+    /// Sends `n` to its robot, signed for it (once: the next list follows
+    /// within the broadcaster's period). `false` if the robot is not
+    /// registered, cannot be reached, or has its layer switched off.
+    pub async fn send_neighbours(&self, n: Neighbours) -> bool {
+        self.shared.apply(|t, cx| t.send_neighbours(n, cx)).await
     }
 }
 

@@ -8,6 +8,8 @@
 //! - [`commands`]: commands, fleet and cluster commands (the hot path);
 //! - [`channels`]: live channels, their publishers and rates, discovery;
 //! - [`missions`], [`estop`], [`autopilot`];
+//! - [`safety`]: the arena and each robot's safety switch, delivered
+//!   reliably, the neighbour lists, what robots report of their layer;
 //! - [`telemetry`]: telemetry and its external subscribers, position
 //!   fixes, notices;
 //! - [`links`] (a robot's links and failover) and [`link_quality`] (each
@@ -43,6 +45,7 @@ mod missions;
 mod refusals;
 mod registration;
 mod routes;
+mod safety;
 mod sources;
 pub(crate) mod tap;
 mod telemetry;
@@ -175,6 +178,7 @@ pub(crate) struct Tables {
     subscribers: telemetry::Subscribers,
     missions: missions::Missions,
     estop: estop::EStops,
+    safety: safety::SiteSafety,
     gate: gate::Gate,
     refusals: refusals::Refusals,
     sources: sources::Sources,
@@ -211,6 +215,7 @@ impl Tables {
             subscribers: telemetry::Subscribers::default(),
             missions: missions::Missions::new(seed),
             estop: estop::EStops::new(seed),
+            safety: safety::SiteSafety::new(seed),
             gate: gate::Gate::new(auth),
             refusals: refusals::Refusals::default(),
             sources: sources::Sources::default(),
@@ -431,13 +436,13 @@ impl Tables {
             Body::Bye(bye) => self.on_bye(m, bye, cx),
             Body::TimeRequest(_) => Delivery::Consumed,
             Body::Autopilot(request) => self.on_autopilot(m, request, cx),
+            Body::ArenaAck(ack) => self.on_arena_ack(m, ack, cx),
             Body::Command(_)
             | Body::Welcome(_)
             | Body::Route(_)
             | Body::Channels(_)
             | Body::Time(_)
             | Body::Arena(_)
-            | Body::ArenaAck(_)
             | Body::Neighbours(_) => {
                 let what = format!("unexpected {} message", body.kind());
                 self.bad(what, cx)
@@ -454,6 +459,7 @@ impl Tables {
         self.retry_routes(cx);
         self.retry_estop(cx);
         self.retry_missions(cx);
+        self.retry_arenas(cx);
         self.subscribers.lapse(cx.now);
         if let Some(e) = self.refusals.due(cx.now) {
             cx.event(e);

@@ -1,7 +1,9 @@
-//! Robot cards: one four-line card per robot with identity, pose, speed
-//! (measured or commanded), heading, mode, route, computation, link,
-//! failsafe and its fault text, battery, mission and the link's quality
-//! (rates each way, loss, round trip).
+//! Robot cards: one four-line card per robot with identity (and the alarm
+//! `SAFETY OFF` when its fleet safety layer is off), pose, speed (measured
+//! or commanded), heading, mode, route, computation, link, failsafe, what
+//! the safety layer limits (`fence`, `separation`...), the fault text,
+//! battery, mission and the link's quality (rates each way, loss, round
+//! trip).
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -12,10 +14,10 @@ use super::app::{App, Focus};
 use super::layout::CARD_HEIGHT;
 use super::theme::Theme;
 use super::view::{
-    LinkQuality, LinkState, RobotView, failsafe_str, health_str, link_label, mode_str,
-    velocity_source_str,
+    LinkQuality, LinkState, RobotView, failsafe_str, health_str, intervention_str, link_label,
+    mode_str, velocity_source_str,
 };
-use mech_proto::{Computation, FailsafeState, Health};
+use mech_proto::{Computation, FailsafeState, Health, Intervention};
 
 /// The cards panel.
 #[derive(Debug)]
@@ -107,7 +109,9 @@ pub fn card<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme, out: &mut
     out.push(quality_line(&r.quality, t));
 }
 
-/// The card's first line: `●robot_1 #1 ok diff-drive` (`▶` selected).
+/// The card's first line: `●robot_1 #1 Connected diff-drive` (`▶`
+/// selected), with `SAFETY OFF` after the id while the robot's layer is
+/// off (before anything the card may cut).
 fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> Line<'a> {
     let colour = ratatui::style::Style::new().fg(t.robot(i));
     let name_style = if selected {
@@ -123,6 +127,16 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
         match r.remote {
             Some(_) => Span::styled(" remote ", t.dim()),
             None => Span::raw(format!(" #{} ", r.id)),
+        },
+        if r.safety.is_some_and(|s| s.alarm) {
+            Span::styled("SAFETY OFF", t.alarm())
+        } else {
+            Span::raw("")
+        },
+        if r.safety.is_some_and(|s| s.alarm) {
+            Span::raw(" ")
+        } else {
+            Span::raw("")
         },
         Span::styled(link_label(r.link), link_style(r.link, t)),
         Span::raw(format!(" {}", r.platform)),
@@ -149,8 +163,8 @@ fn pose_line<'a>(r: &RobotView) -> Line<'a> {
 }
 
 /// The card's third line: mode, route (✓ acknowledged, … pending),
-/// failsafe, a fault or the health, mission, battery, where the loop runs
-/// and the links.
+/// failsafe, what the safety layer limits, a fault or the health, mission,
+/// battery, where the loop runs and the links.
 fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
     let route = if r.route.channel.is_empty() {
         "none".to_string()
@@ -168,6 +182,12 @@ fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
         Span::raw(format!(" {} {} ", mode_str(r.mode), route)),
         Span::styled(failsafe_str(r.failsafe), fs_style),
     ];
+    if let Some(s) = r.safety.filter(|s| s.intervention != Intervention::None) {
+        spans.push(Span::styled(
+            format!(" {}", intervention_str(s.intervention)),
+            t.warn(),
+        ));
+    }
     if let Some(fault) = &r.fault {
         spans.push(Span::styled(format!(" {fault}"), t.alarm()));
     } else if r.health != Health::Ok {

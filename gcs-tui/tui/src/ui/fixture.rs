@@ -19,6 +19,7 @@ pub fn fleet(n: usize) -> FleetSnapshot {
         security: Security::Authenticated,
         rejected: 0,
         replay: None,
+        arena: None,
         channels: vec![
             ChannelView {
                 name: "joy/0".into(),

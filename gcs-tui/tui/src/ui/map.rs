@@ -1,5 +1,7 @@
 //! The arena map: a braille canvas in metres with grid, scale and metre
-//! ticks on the axes, arena bounds, robots with heading lines and recent
+//! ticks on the axes, the arena (the station's: its boundary, keep-outs,
+//! slow zones dotted and obstacle discs; or the bounds the TUI was given),
+//! robots with heading lines and recent
 //! paths, selection rings, clusters joined to their centre, and numbered
 //! waypoint flags; every robot marked and labelled where a label fits
 //! (see [`super::labels`]), with a count of the labels left out.
@@ -17,7 +19,7 @@ use ratatui::widgets::{Block, Widget};
 use super::app::{App, Focus};
 use super::labels::{self, Kind, MapText};
 use super::theme::Theme;
-use super::view::{ArenaBounds, ClusterControlView, ClusterOnScreen, RobotView};
+use super::view::{ArenaBounds, ArenaShape, ClusterControlView, ClusterOnScreen, RobotView};
 use super::viewport::Projection;
 
 /// The map panel.
@@ -193,8 +195,10 @@ impl Widget for MapPanel<'_> {
 fn paint(ctx: &mut Context, app: &App, proj: &Projection, step: f64, text: &MapText, t: &Theme) {
     paint_grid(ctx, proj, step, t);
     ctx.layer();
-    if let Some(a) = app.map.arena {
-        paint_arena(ctx, proj, a, t);
+    match (&app.fleet.arena, app.map.arena) {
+        (Some(shape), _) => paint_shape(ctx, proj, shape, t),
+        (None, Some(a)) => paint_arena(ctx, proj, a, t),
+        (None, None) => {}
     }
     // Paths of the last seconds.
     for (i, r) in app.fleet.robots.iter().enumerate() {
@@ -281,6 +285,62 @@ fn paint_arena(ctx: &mut Context, proj: &Projection, a: ArenaBounds, t: &Theme) 
             color: t.arena(),
             every: 1,
         });
+    }
+}
+
+/// The closed polygon through `points`, every `every`-th dot.
+fn paint_polygon(
+    ctx: &mut Context,
+    proj: &Projection,
+    points: &[mech_proto::Point],
+    color: Color,
+    every: usize,
+) {
+    for (k, a) in points.iter().enumerate() {
+        let b = points[(k + 1) % points.len()];
+        ctx.draw(&Segment {
+            proj,
+            from: (a.x, a.y),
+            to: (b.x, b.y),
+            color,
+            every,
+        });
+    }
+}
+
+/// The station's arena: the boundary solid, keep-outs solid in their
+/// colour and crossed corner to corner (the inside is out of bounds),
+/// slow zones dotted, obstacle discs as circles.
+fn paint_shape(ctx: &mut Context, proj: &Projection, a: &ArenaShape, t: &Theme) {
+    paint_polygon(ctx, proj, &a.boundary, t.arena(), 1);
+    for k in &a.keep_out {
+        paint_polygon(ctx, proj, k, t.keep_out(), 1);
+        if k.len() >= 4 {
+            for (i, j) in [(0, 2), (1, 3)] {
+                ctx.draw(&Segment {
+                    proj,
+                    from: (k[i].x, k[i].y),
+                    to: (k[j].x, k[j].y),
+                    color: t.keep_out(),
+                    every: 3,
+                });
+            }
+        }
+    }
+    for z in &a.slow_zones {
+        paint_polygon(ctx, proj, &z.polygon, t.slow_zone(), 3);
+    }
+    for d in &a.obstacles {
+        let ring: Vec<mech_proto::Point> = (0..24)
+            .map(|k| {
+                let angle = f64::from(k) * std::f64::consts::TAU / 24.0;
+                mech_proto::Point {
+                    x: d.x + d.radius * angle.cos(),
+                    y: d.y + d.radius * angle.sin(),
+                }
+            })
+            .collect();
+        paint_polygon(ctx, proj, &ring, t.keep_out(), 1);
     }
 }
 

@@ -1,5 +1,6 @@
-//! The status bar (router, counts, pads, teleop, e-stop, and whether this
-//! TUI is attached or embedded, as which operator), the bottom line
+//! The status bar (router, counts, pads, teleop, e-stop, robots with their
+//! fleet safety layer off, and whether this TUI is attached or embedded,
+//! as which operator), the bottom line
 //! (key hints or the prompt), the error box under a bad command line, and
 //! the e-stop banner.
 
@@ -54,13 +55,34 @@ pub fn session(app: &App, short: bool) -> String {
     }
 }
 
-/// The parts both bars share: e-stop, security, refusals, teleop.
-fn parts<'a>(app: &App, t: &Theme) -> (Span<'a>, Span<'a>, Span<'a>, String) {
-    let estop = if app.fleet.estop {
-        Span::styled(" E-STOP ENGAGED ", t.alarm())
-    } else {
-        Span::raw(" e-stop off ")
-    };
+/// The alarm for robots whose safety layer is off: ` SAFETY OFF robot_2 `
+/// (two names at most, then a count), or nothing.
+fn safety_alarm<'a>(app: &App, t: &Theme) -> Span<'a> {
+    let off: Vec<&str> = app
+        .fleet
+        .robots
+        .iter()
+        .filter(|r| r.safety.is_some_and(|s| s.alarm))
+        .map(|r| r.name.as_str())
+        .collect();
+    match off.len() {
+        0 => Span::raw(""),
+        1 | 2 => Span::styled(format!(" SAFETY OFF {} ", off.join(" ")), t.alarm()),
+        n => Span::styled(format!(" SAFETY OFF {n} robots "), t.alarm()),
+    }
+}
+
+/// The parts both bars share: e-stop (with the safety alarm), security,
+/// refusals, teleop.
+fn parts<'a>(app: &App, t: &Theme) -> (Vec<Span<'a>>, Span<'a>, Span<'a>, String) {
+    let estop = vec![
+        if app.fleet.estop {
+            Span::styled(" E-STOP ENGAGED ", t.alarm())
+        } else {
+            Span::raw(" e-stop off ")
+        },
+        safety_alarm(app, t),
+    ];
     // Unsigned on the network is an alarm; the loopback demo is said
     // plainly; refusals are counted.
     let security = match app.fleet.security {
@@ -85,7 +107,7 @@ fn parts<'a>(app: &App, t: &Theme) -> (Span<'a>, Span<'a>, Span<'a>, String) {
 fn wide_line<'a>(app: &App, t: &Theme) -> Line<'a> {
     let count = |l: LinkState| app.fleet.robots.iter().filter(|r| r.link == l).count();
     let (estop, security, rejected, teleop) = parts(app, t);
-    Line::from(vec![
+    let mut spans = vec![
         Span::styled(" MECH ", t.title()),
         Span::raw(format!(
             "│ {} │ robots {} ({} ok {} stale {} lost) │ sel {} │ pads {} │ {} │",
@@ -98,11 +120,14 @@ fn wide_line<'a>(app: &App, t: &Theme) -> Line<'a> {
             app.pads().len(),
             teleop,
         )),
-        estop,
+    ];
+    spans.extend(estop);
+    spans.extend([
         security,
         rejected,
         Span::raw(format!("│ {} │ ? help", session(app, false))),
-    ])
+    ]);
+    Line::from(spans)
 }
 
 /// The status bar on a narrow terminal: the e-stop first, the session in
@@ -114,9 +139,8 @@ fn narrow_line<'a>(app: &App, t: &Theme) -> Line<'a> {
         .iter()
         .filter(|r| r.link == LinkState::Connected)
         .count();
-    let (estop, security, rejected, teleop) = parts(app, t);
-    Line::from(vec![
-        estop,
+    let (mut spans, security, rejected, teleop) = parts(app, t);
+    spans.extend([
         security,
         rejected,
         Span::raw(format!(
@@ -128,7 +152,8 @@ fn narrow_line<'a>(app: &App, t: &Theme) -> Line<'a> {
             app.pads().len(),
             teleop,
         )),
-    ])
+    ]);
+    Line::from(spans)
 }
 
 /// Bottom line: prompt when typing, otherwise key hints.

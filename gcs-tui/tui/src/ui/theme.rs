@@ -43,6 +43,16 @@ impl Theme {
         self.fg(Color::Gray)
     }
 
+    /// Keep-outs and obstacle discs on the map.
+    pub fn keep_out(&self) -> Color {
+        self.fg(Color::LightRed)
+    }
+
+    /// Slow zones on the map.
+    pub fn slow_zone(&self) -> Color {
+        self.fg(Color::Yellow)
+    }
+
     pub fn waypoint(&self) -> Color {
         self.fg(Color::LightYellow)
     }

@@ -1,13 +1,14 @@
 //! `expect CHECK`: a condition on the fleet model that must hold now (a
-//! position, an acknowledged route, a link or failsafe state, a count of
-//! dropped commands); a script fails where one does not.
+//! position, an acknowledged route, a link, failsafe or safety state, a
+//! count of dropped commands); a script fails where one does not.
 
 use mech_core::LinkState;
+use mech_core::event::safety_state_str;
 use mech_core::fleet::{Fleet, Robot};
-use mech_proto::FailsafeState;
+use mech_proto::{FailsafeState, SafetyState};
 
 use super::channel_name;
-use crate::lang::args::{Args, Target};
+use crate::lang::args::{Args, Target, safety_state};
 use crate::lang::context::Context;
 use crate::lang::{LangError, Outcome, Span};
 
@@ -25,6 +26,8 @@ pub enum Expectation {
     Route(Target, Option<String>),
     Link(Target, LinkState),
     Failsafe(Target, FailsafeState),
+    /// The robot's fleet safety layer reports this state.
+    Safety(Target, SafetyState),
     /// At least `min` commands on `channel` were dropped as not routed.
     DroppedAtLeast {
         channel: String,
@@ -34,7 +37,7 @@ pub enum Expectation {
 
 impl Expectation {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Expectation, LangError> {
-        let what = a.next("check (near, route, link, failsafe, dropped)")?;
+        let what = a.next("check (near, route, link, failsafe, safety, dropped)")?;
         Ok(match what.text.as_str() {
             "near" => {
                 let target = a.target()?;
@@ -61,6 +64,10 @@ impl Expectation {
                 let state = a.named::<FailsafeState>()?;
                 Expectation::Failsafe(target, state)
             }
+            "safety" => {
+                let target = a.target()?;
+                Expectation::Safety(target, parse_safety_state(a)?)
+            }
             "dropped" => {
                 let channel = a
                     .channel()?
@@ -73,7 +80,9 @@ impl Expectation {
             other => {
                 return Err(LangError::new(
                     what.span,
-                    format!("unknown check {other:?}; use near, route, link, failsafe or dropped"),
+                    format!(
+                        "unknown check {other:?}; use near, route, link, failsafe, safety or dropped"
+                    ),
                 ));
             }
         })
@@ -137,8 +146,37 @@ impl Expectation {
                 })?;
                 Ok(format!("failsafe {}", state.as_str()))
             }
+            Expectation::Safety(target, state) => {
+                each(f, target, |name, r| safety_unmet(name, r, *state))?;
+                Ok(format!("safety {}", safety_state_str(*state)))
+            }
             Expectation::DroppedAtLeast { channel, min } => dropped_at_least(f, channel, *min),
         }
+    }
+}
+
+/// A safety state word (`on`, `off`, `no-arena`).
+pub(super) fn parse_safety_state(a: &mut Args<'_>) -> Result<SafetyState, LangError> {
+    let w = a.next("safety state")?;
+    safety_state(&w.text).ok_or_else(|| {
+        LangError::new(
+            w.span,
+            format!("unknown safety state {:?}; use on, off or no-arena", w.text),
+        )
+    })
+}
+
+/// Why `r` (named `name`) does not report its safety layer `state`, if it
+/// does not.
+pub(super) fn safety_unmet(name: &str, r: &Robot, state: SafetyState) -> Option<String> {
+    match r.telemetry.safety {
+        Some(s) if s.state == state => None,
+        Some(s) => Some(format!(
+            "{name} reports safety {}, expected {}",
+            safety_state_str(s.state),
+            safety_state_str(state)
+        )),
+        None => Some(format!("{name} reports no safety layer")),
     }
 }
 

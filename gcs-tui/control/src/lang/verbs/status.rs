@@ -1,10 +1,13 @@
 //! `status [TARGET]`: one line per robot (link, pose, speed, mode, route,
-//! failsafe, and the link's rates, loss and round trip), for every robot in
-//! natural name order when no target is given, after a summary that says
-//! whether the station authenticates and what it refused.
+//! failsafe, its fleet safety layer (on, off: an alarm, or no arena), what
+//! it limits now and how often it did, and the link's rates, loss and
+//! round trip), for every robot in natural name order when no target is
+//! given, after a summary that says whether the station authenticates,
+//! what it refused, its arena and which robots have their safety off.
 
 use mech_core::LinkQuality;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
+use mech_proto::{Intervention, SafetyState};
 
 use super::channel_name;
 use crate::lang::args::{Args, Target};
@@ -74,14 +77,34 @@ impl Status {
             .collect();
         Ok(Outcome {
             summary: format!(
-                "{} robots; station {}{refused}{}{radios}{recording}",
+                "{} robots; station {}{refused}{}{}{radios}{recording}",
                 details.len(),
                 router.security().label(),
                 ctx.gcs.with_fleet(stations),
+                ctx.gcs.with_fleet(arena),
             ),
             details,
         })
     }
+}
+
+/// The arena, and the robots whose safety layer is off (an alarm):
+/// `; arena 4 vertices, ...; SAFETY OFF robot_2`.
+fn arena(f: &Fleet) -> String {
+    let mut s = match &f.arena {
+        Some(a) => format!("; arena {}", a.summary()),
+        None => "; no arena".to_string(),
+    };
+    let mut off: Vec<&str> = f
+        .local_robots()
+        .filter(|r| r.safety_alarm())
+        .map(|r| r.name.as_str())
+        .collect();
+    off.sort_by(|a, b| mech_core::names::natural_cmp(a, b));
+    if !off.is_empty() {
+        s += &format!("; SAFETY OFF {}", off.join(", "));
+    }
+    s
 }
 
 /// Other stations seen through a bridge, with their state and how many of
@@ -124,10 +147,41 @@ fn status_line(r: &Robot) -> String {
         format!(" ignored-stale {}", r.telemetry.stale)
     } else {
         String::new()
-    } + &link_quality(&r.quality)
+    } + &safety(r)
+        + &link_quality(&r.quality)
         + &links(r)
         + &lost_mission(r)
         + &remote(r)
+}
+
+/// ` safety on limiting fence interventions fence 2 separation 1`, or
+/// ` safety OFF (alarm)`; nothing for a robot that reports no layer.
+fn safety(r: &Robot) -> String {
+    let Some(report) = r.telemetry.safety else {
+        return if r.safety_enabled {
+            String::new()
+        } else {
+            " safety OFF requested (alarm)".to_string()
+        };
+    };
+    let mut s = match (report.state, r.safety_enabled) {
+        (SafetyState::Off, _) => " safety OFF (alarm)".to_string(),
+        (_, false) => " safety OFF requested (alarm)".to_string(),
+        (SafetyState::On, true) => " safety on".to_string(),
+        (SafetyState::NoArena, true) => " safety no-arena".to_string(),
+    };
+    if report.intervention != Intervention::None {
+        s += &format!(" limiting {}", report.intervention.as_str());
+    }
+    let counts: Vec<String> = Intervention::ALL
+        .iter()
+        .filter(|i| report.counts.get(**i) > 0)
+        .map(|i| format!("{} {}", i.as_str(), report.counts.get(*i)))
+        .collect();
+    if !counts.is_empty() {
+        s += &format!(" interventions {}", counts.join(" "));
+    }
+    s
 }
 
 /// Another station's robot, shown here read-only.

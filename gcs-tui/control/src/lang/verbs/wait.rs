@@ -1,14 +1,16 @@
 //! `wait CONDITION [TIMEOUT]`: polls the fleet model until a condition
 //! holds (robots connected, lost or arrived, a route acknowledged, robots
-//! near a point or moved from where they were, the e-stop acknowledged) or
-//! the timeout passes.
+//! near a point or moved from where they were, the e-stop acknowledged,
+//! robots' safety layer in a state) or the timeout passes.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
 use mech_core::LinkState;
 use mech_core::fleet::{Fleet, MissionDelivery, Robot};
+use mech_proto::SafetyState;
 
+use super::expect::{parse_safety_state, safety_unmet};
 use super::{WAIT_TIMEOUT, channel_name, poll_until};
 use crate::lang::args::{Args, Target};
 use crate::lang::context::Context;
@@ -47,12 +49,15 @@ pub enum WaitFor {
     Moved { target: Target, metres: f64 },
     /// Every robot acknowledged the current e-stop or release.
     EStopAcked,
+    /// Every robot of the target reports its safety layer in this state.
+    Safety(Target, SafetyState),
 }
 
 impl Wait {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Wait, LangError> {
-        let what =
-            a.next("condition (connected, lost, robots, arrived, route, near, moved, estop)")?;
+        let what = a.next(
+            "condition (connected, lost, robots, arrived, route, near, moved, estop, safety)",
+        )?;
         let condition = match what.text.as_str() {
             "connected" => WaitFor::Connected(a.target()?),
             "lost" => WaitFor::Lost(a.target()?),
@@ -79,11 +84,15 @@ impl Wait {
                 WaitFor::Moved { target, metres }
             }
             "estop" => WaitFor::EStopAcked,
+            "safety" => {
+                let target = a.target()?;
+                WaitFor::Safety(target, parse_safety_state(a)?)
+            }
             other => {
                 return Err(LangError::new(
                     what.span,
                     format!(
-                        "unknown wait condition {other:?}; use connected, lost, robots, arrived, route, near, moved or estop"
+                        "unknown wait condition {other:?}; use connected, lost, robots, arrived, route, near, moved, estop or safety"
                     ),
                 ));
             }
@@ -188,6 +197,7 @@ impl WaitFor {
                 let pending: Vec<String> = f.estop.pending.iter().cloned().collect();
                 format!("waiting for {}", pending.join(", "))
             }),
+            WaitFor::Safety(t, state) => each(t, &|r| safety_unmet(&r.name, r, *state)),
         }
     }
 }

@@ -17,6 +17,7 @@ use tracing::{debug, info, warn};
 use super::link_quality::LinkMeter;
 use super::links::Links;
 use super::routes::RouteState;
+use super::safety::RobotSafety;
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::Traffic;
 use crate::event::{Event, LinkState};
@@ -47,6 +48,8 @@ pub(super) struct RobotEntry {
     /// Rates each way, loss and round trip (see `super::link_quality`).
     pub(super) meter: LinkMeter,
     pub(super) traffic: Traffic,
+    /// Its safety switch and arena delivery (see `super::safety`).
+    pub(super) safety: RobotSafety,
 }
 
 /// How recently a robot was heard, and when the router last beat to it.
@@ -199,8 +202,8 @@ impl Tables {
 
     /// Registers a robot (again, after a restart or from a new address: its
     /// id and route are kept, but it must confirm the route), welcomes it
-    /// with its id and route on the link the Hello came on, and gives it a
-    /// latched e-stop. `seq` is the Hello's sequence number: a robot numbers
+    /// with its id and route on the link the Hello came on, gives it a
+    /// latched e-stop, and sends it the station's arena. `seq` is the Hello's sequence number: a robot numbers
     /// its messages afresh when it registers again.
     pub(super) fn register(&mut self, hello: Hello, seq: u32, cx: &mut Ctx<'_>) {
         let known = self.robots.contains(&hello.name);
@@ -239,6 +242,7 @@ impl Tables {
             cx.send(cx.from, b);
         }
         self.estop_newcomer(&name, cx);
+        self.arena_newcomer(&name, cx);
     }
 
     /// A robot's first registration: its id (see [`Robots::id_for`]), and
@@ -264,6 +268,7 @@ impl Tables {
                 received: 1,
                 ..Traffic::default()
             },
+            safety: RobotSafety::new(cx.now),
         };
         self.robots.by_name.insert(hello.name.clone(), entry);
         info!(robot = %hello.name, platform = %hello.platform, from = %cx.from, id, "robot registered");

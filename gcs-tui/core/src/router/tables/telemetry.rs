@@ -1,5 +1,6 @@
 //! Telemetry and the other traffic for the station itself: telemetry fans
-//! out to external subscribers and becomes an event; subscriptions lapse
+//! out to external subscribers and becomes an event (and, when the robot's
+//! safety layer changed, a safety event, `super::safety`); subscriptions lapse
 //! unless renewed; position fixes go to their robot; notices.
 //!
 //! [`Subscribers`] holds the external telemetry subscribers (a tool over
@@ -80,6 +81,7 @@ impl Tables {
         for (peer, name) in self.subscribers.list() {
             self.pass_on(m.bytes, peer, &name, cx);
         }
+        self.safety_reported(sender, t.safety, cx);
         cx.event(Event::Telemetry {
             robot: sender.to_string(),
             telemetry: t,

@@ -2,13 +2,14 @@
 //! `robot_2` before `robot_10`), the live channels, the clusters (as the
 //! station reports them, and those made here until it does) with the one a
 //! pad in cluster mode drives, the fleet e-stop, the station's security and
-//! refusals, and a replay's clock. Taking a station's snapshot, making a
+//! refusals, its arena, and a replay's clock. Taking a station's snapshot, making a
 //! cluster from the selection and switching the selected robots'
 //! navigation are here too.
 
 use super::{App, LogLevel, Request};
 use crate::ui::view::{
-    ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView, Security,
+    ArenaBounds, ArenaShape, ChannelView, ClusterOnScreen, FleetSnapshot, ReplayClock, RobotView,
+    Security,
 };
 use mech_core::names::natural_cmp;
 
@@ -28,6 +29,9 @@ pub struct FleetState {
     pub rejected: u64,
     /// A replay's clock, when the TUI shows a recording.
     pub replay: Option<ReplayClock>,
+    /// The station's arena (boundary, keep-outs, slow zones, obstacles),
+    /// when it has one.
+    pub arena: Option<ArenaShape>,
 }
 
 impl FleetState {
@@ -48,9 +52,10 @@ impl FleetState {
     }
 
     /// Takes the station's state as it is: the e-stop, robots (sorted),
-    /// channels and (when the source keeps them) clusters.
+    /// channels, the arena and (when the source keeps them) clusters.
     pub fn apply(&mut self, s: FleetSnapshot) {
         self.estop = s.estop;
+        self.arena = s.arena;
         self.security = s.security;
         self.rejected = s.rejected;
         self.replay = s.replay;
@@ -88,6 +93,17 @@ impl App {
         };
         self.fleet.apply(s);
         self.history.record(t, &self.fleet.robots);
+        // The station's arena is the map's outline (and what it fits to).
+        if let Some([min_x, min_y, max_x, max_y]) =
+            self.fleet.arena.as_ref().and_then(|a| a.bounds())
+        {
+            self.map.arena = Some(ArenaBounds {
+                min_x,
+                min_y,
+                max_x,
+                max_y,
+            });
+        }
         let fleet = &self.fleet;
         self.cards
             .selection
