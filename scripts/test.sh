@@ -1,13 +1,95 @@
 #!/usr/bin/env bash
 # Runs every MECH test: installs missing system packages, builds both
-# binaries (the end-to-end tests run them), then the whole workspace's tests,
-# then the Foxglove live view, which is built only with mech-station's
-# `foxglove` feature (mech-gcs's forwards to it): the view in mech-station,
-# and the mech-gcs binary serving it (a second build of both).
+# binaries (the end-to-end tests run them) and every test, runs the whole
+# workspace's tests (every failing test binary, not only the first), then
+# the Foxglove live view, which is built only with mech-station's `foxglove`
+# feature (mech-gcs's forwards to it). Ends with the time each step took;
+# fails if any test failed.
+#
+# The tests run in one `cargo test --workspace`: a run of a part of the
+# workspace (`--exclude`, or only some `--test` targets) resolves other
+# features for the shared crates (dev-dependencies count only for the
+# targets built), so it builds the workspace a second time (16 min beside
+# other builds, measured).
+#
+#   bash scripts/test.sh            the suite
+#   bash scripts/test.sh --stress   the suite with a CPU hog per core beside
+#                                   it for the whole run (build included), as
+#                                   a busy machine or CI runner has; the hogs
+#                                   end with the script, failed or not
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/deps.sh
-cargo build --workspace --bins
-cargo test --workspace
-cargo test -p mech-station --features foxglove --test foxglove_live
-cargo test -p mech-gcs --features foxglove --test foxglove_live
+
+stress=false
+for arg in "$@"; do
+    case "$arg" in
+    --stress) stress=true ;;
+    *)
+        echo "usage: bash scripts/test.sh [--stress]" >&2
+        exit 2
+        ;;
+    esac
+done
+
+# The hogs each get a process group of their own (job control on while
+# they start), so that ending the script ends them.
+background=()
+spawn() {
+    set -m
+    "$@" &
+    background+=($!)
+    set +m
+}
+finish() {
+    for pid in "${background[@]}"; do
+        kill -- "-$pid" 2>/dev/null || true
+    done
+    wait 2>/dev/null || true
+}
+trap finish EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+hog() { while :; do :; done; }
+if $stress; then
+    for _ in $(seq "$(nproc)"); do
+        spawn hog
+    done
+    echo "stress: $(nproc) CPU hogs beside the suite"
+fi
+
+timings=()
+started=$SECONDS
+step() {
+    local name=$1 t0=$SECONDS rc=0
+    shift
+    "$@" || rc=$?
+    timings+=("$(printf '%5d s  %s' $((SECONDS - t0)) "$name")")
+    return "$rc"
+}
+
+step "system packages" bash scripts/deps.sh
+step "build: binaries" cargo build --workspace --bins
+step "build: tests" cargo test --workspace --no-run
+
+failed=()
+tests=0
+step "tests" cargo test --workspace --no-fail-fast || tests=$?
+[ "$tests" -eq 0 ] || failed+=(tests)
+
+# Last: this build replaces target/debug/mech-gcs, which the end-to-end
+# tests run, with the Foxglove build.
+fox=0
+step "foxglove (build and test)" cargo test --workspace \
+    --features mech-station/foxglove,mech-gcs/foxglove --test foxglove_live || fox=$?
+[ "$fox" -eq 0 ] || failed+=(foxglove)
+
+echo
+echo "time:"
+printf '  %s\n' "${timings[@]}"
+printf '%7d s  total\n' $((SECONDS - started))
+if [ ${#failed[@]} -gt 0 ]; then
+    echo "FAILED: ${failed[*]}"
+    exit 1
+fi
+echo "all tests passed"

@@ -12,7 +12,7 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::thread::JoinHandle;
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use mech_proto::Telemetry;
 use serde_json::Value;
@@ -39,8 +39,10 @@ struct Flight {
     lines: Vec<String>,
     events: Vec<Value>,
     telemetry: HashMap<String, Vec<Telemetry>>,
-    /// One second after the script logged `before-arming`.
-    arm_window_ends: f64,
+    /// When the test read the script's `before-arming` line (the script
+    /// arms 1.5 s after printing it, so reading it may be that late before
+    /// a command counts as early).
+    before_arming: f64,
     driving: f64,
     holding: f64,
     /// The station's output and the agent's log, for failure messages.
@@ -83,23 +85,34 @@ fn start_agent(dir: &Path, router: &str, mavlink_port: u16) -> Child {
 }
 
 /// The fake PX4 on `mavlink_port`, and a thread collecting the events it
-/// prints until it exits.
+/// prints until it exits; returns once the fake reported its state (it
+/// does at once), so that it runs before the agent starts: Python
+/// importing pymavlink took seconds on a loaded machine, and the script's
+/// time before arming must see the setpoints stream.
 fn start_autopilot(mavlink_port: u16) -> (Child, JoinHandle<Vec<Value>>) {
     let mut autopilot = Command::new("python3")
         .arg(root().join("tests/e2e/fake_autopilot.py"))
-        .args([&mavlink_port.to_string(), "40"])
+        .args([&mavlink_port.to_string(), "120"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("python3 runs the fake autopilot (scripts/deps.sh installs pymavlink)");
     let out = autopilot.stdout.take().unwrap();
+    let (heard, running) = std::sync::mpsc::channel();
     let events = std::thread::spawn(move || {
-        BufReader::new(out)
-            .lines()
-            .map_while(Result::ok)
-            .filter_map(|l| serde_json::from_str::<Value>(&l).ok())
-            .collect::<Vec<Value>>()
+        let mut events = Vec::new();
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            if let Ok(event) = serde_json::from_str::<Value>(&line) {
+                let _ = heard.send(());
+                events.push(event);
+            }
+        }
+        events
     });
+    assert!(
+        running.recv_timeout(Duration::from_secs(60)).is_ok(),
+        "the fake autopilot runs (it reports its state at once)"
+    );
     (autopilot, events)
 }
 
@@ -107,7 +120,7 @@ fn start_autopilot(mavlink_port: u16) -> (Child, JoinHandle<Vec<Value>>) {
 /// quiet, e-stop, try to arm again.
 fn script() -> String {
     format!(
-        "wait connected drone 20s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
+        "wait connected drone 60s\nsleep 1500ms\nstatus drone\nlog before-arming\nsleep 1500ms\n\
          autopilot drone arm\nautopilot drone offboard\nsleep 1s\n\
          route drone cmd/gcs\nwait route drone cmd/gcs 5s\nmode drone twist\nlog driving\n\
          {}log holding\nsleep 1500ms\nexpect failsafe drone channel-silent\nstatus drone\n\
@@ -122,15 +135,17 @@ fn fly() -> Flight {
     let mavlink_port = free_port();
     let mut station = Station::start(&script(), &[]);
     let dir = tempfile::tempdir().unwrap();
-    let mut agent = start_agent(dir.path(), &station.router(), mavlink_port);
+    // The agent registers first and finds the autopilot at its next
+    // heartbeat (1 Hz), so the station hears that too.
     let (mut autopilot, events) = start_autopilot(mavlink_port);
+    let mut agent = start_agent(dir.path(), &station.router(), mavlink_port);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let observer = {
         let (router, stop) = (station.router(), stop.clone());
         std::thread::spawn(move || observe_telemetry(router, stop))
     };
     station.until("\"summary\":\"before-arming\"");
-    let arm_window_ends = now() + 1.0;
+    let before_arming = now();
     station.until("\"summary\":\"driving\"");
     let driving = now();
     station.until("\"summary\":\"holding\"");
@@ -152,7 +167,7 @@ fn fly() -> Flight {
         lines,
         events,
         telemetry,
-        arm_window_ends,
+        before_arming,
         driving,
         holding,
         context,
@@ -196,13 +211,13 @@ fn nothing_before_the_operator_asked(f: &Flight) {
     let commands = f.of("command");
     let first_command = commands.first().map_or(f64::INFINITY, |c| num(c, "t"));
     assert!(
-        first_command > f.arm_window_ends,
+        first_command > f.before_arming,
         "a command came before the operator's: {commands:?}"
     );
     let setpoints = f.of("setpoint");
     let early: Vec<&&Value> = setpoints
         .iter()
-        .filter(|s| num(s, "t") < f.arm_window_ends)
+        .filter(|s| num(s, "t") < first_command)
         .collect();
     assert!(
         early.len() > 20,
@@ -312,7 +327,12 @@ fn telemetry_in_mechs_frame(f: &Flight) {
     // Telemetry back in MECH's frame: the fake's state at the end (NED)
     // against the last telemetry (ENU), battery 87 %.
     let drone = &f.telemetry["drone"];
-    let start = &drone[0];
+    // The first pose the autopilot reported (the agent registers, and
+    // sends telemetry without a position, before it hears the autopilot).
+    let start = drone
+        .iter()
+        .find(|t| t.position_quality > 0.0)
+        .expect("telemetry with the autopilot's position");
     assert!(
         (start.pose.x - 2.0).abs() < 0.01 && (start.pose.y - 1.0).abs() < 0.01,
         "1 m north, 2 m east is (2, 1): {:?}",

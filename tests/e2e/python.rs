@@ -452,6 +452,9 @@ impl Drop for Served {
 
 /// Telemetry of `robot` from `router` (unauthenticated) until it is more
 /// than `metres` from where it was first heard; panics after `timeout`.
+/// The subscription is renewed every second: it lapses after 5 s unheard
+/// (`router.subscriber_timeout`), and a client slow to start on a loaded
+/// machine may take longer than that to move the robot.
 fn wait_until_moving(router: &str, robot: &str, metres: f64, timeout: std::time::Duration) {
     let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     socket
@@ -462,11 +465,16 @@ fn wait_until_moving(router: &str, robot: &str, metres: f64, timeout: std::time:
         Body::Subscribe(Subscribe { telemetry: true }),
     ))
     .unwrap();
-    socket.send_to(&subscribe, router).unwrap();
     let start = std::time::Instant::now();
+    let mut renewed: Option<std::time::Instant> = None;
     let mut first: Option<(f64, f64)> = None;
+    let (mut heard, mut farthest) = (0, 0.0f64);
     let mut buf = vec![0; 65_536];
     while start.elapsed() < timeout {
+        if renewed.is_none_or(|t| t.elapsed() >= std::time::Duration::from_secs(1)) {
+            socket.send_to(&subscribe, router).unwrap();
+            renewed = Some(std::time::Instant::now());
+        }
         let Ok(n) = socket.recv(&mut buf) else {
             continue;
         };
@@ -480,12 +488,18 @@ fn wait_until_moving(router: &str, robot: &str, metres: f64, timeout: std::time:
                 continue;
             }
             let (x0, y0) = *first.get_or_insert((t.pose.x, t.pose.y));
-            if (t.pose.x - x0).hypot(t.pose.y - y0) > metres {
+            let d = (t.pose.x - x0).hypot(t.pose.y - y0);
+            if d > metres {
                 return;
             }
+            heard += 1;
+            farthest = farthest.max(d);
         }
     }
-    panic!("{robot} did not move {metres} m within {timeout:?}");
+    panic!(
+        "{robot} did not move {metres} m within {timeout:?} \
+         ({heard} telemetry samples heard, farthest {farthest:.3} m)"
+    );
 }
 
 /// The headless recipe of `docs/external-controllers.md`: `mech-gcs serve

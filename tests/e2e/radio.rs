@@ -2,11 +2,13 @@
 //! `[[router.serial]]` endpoint on a pseudo-terminal, two real agents on
 //! the same "radio" (a frame hub between pseudo-terminal pairs), one of
 //! them also on UDP (through a proxy that can cut it). When its UDP goes
-//! silent the station commands it over the radio, fast enough that its
-//! failsafe never trips, and back over UDP when UDP returns.
+//! silent the station commands it over the radio before its failsafe
+//! trips, and back over UDP when UDP returns.
 
 use std::path::Path;
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+use mech_proto::FailsafeState;
 
 use mech_e2e::harness::agent::{self, Agent};
 use mech_e2e::harness::controller::Controller;
@@ -15,7 +17,13 @@ use mech_e2e::harness::radio::{PtyPair, RadioHub};
 use mech_e2e::harness::station::{self, Line, Station};
 use mech_e2e::harness::unix_us;
 
-const FAILSAFE: &str = "channel_timeout = 0.5\nrouter_timeout = 2.0";
+/// The robots' failsafe: a 1 s channel timeout, twice the default. The
+/// switch to the radio takes the router's link timeout (0.3 s of silence
+/// on UDP) plus up to a telemetry and a command period (50 ms each) and
+/// the radio hop: 0.32-0.35 s measured, inside the default 0.5 s; a loaded
+/// machine (a CPU hog per core beside the suite) stretched it to 0.6 s
+/// once, and rb's failsafe tripped for 0.1 s. The switch time is printed.
+const FAILSAFE: &str = "channel_timeout = 1.0\nrouter_timeout = 2.0";
 
 /// The active link of `robot` in the last `links` event before `until_us`.
 fn active_at(lines: &[Line], robot: &str, until_us: u64) -> String {
@@ -140,7 +148,21 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
     std::thread::sleep(Duration::from_secs(3));
     let end = unix_us();
     ctl.publish(false);
-    std::thread::sleep(Duration::from_secs(1));
+    // The final silence: each robot's failsafe trips a channel timeout
+    // after the controller stopped, waited for in its telemetry.
+    for robot in ["ra", "rb"] {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while ctl
+            .first(robot, end, |s| s.failsafe == FailsafeState::ChannelSilent)
+            .is_none()
+        {
+            assert!(
+                Instant::now() < deadline,
+                "{robot}'s failsafe did not trip after the controller stopped"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
     let (ca, cb) = (a.stop(), b.stop());
     let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
 
@@ -156,7 +178,7 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
         "rb over the radio: {during:?}"
     );
     // Neither failsafe tripped before the controller stopped: the commands
-    // never paused for the channel timeout (0.5 s), not even while rb
+    // never paused for the channel timeout (1 s), not even while rb
     // moved to the radio and back. The one trip each is the final silence.
     for (name, c) in [("ra", ca), ("rb", cb)] {
         let c = c.unwrap_or_else(|| panic!("{name} printed no counters"));

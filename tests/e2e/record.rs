@@ -222,8 +222,9 @@ fn check_python_view(read: &Value) {
 /// details (`status`), up to the script's end (not the goodbyes of the
 /// robots as the station stops after it). Only two things may differ
 /// (`docs/recording.md`): a result's `t` (the run stamps it when it prints
-/// it, the recording when it records it: microseconds apart) and the
-/// summary (the replay's says what it read). No datagram reaches the
+/// it, the recording when it records it: microseconds apart), with an
+/// event that close to the result on its other side, and the summary (the
+/// replay's says what it read). No datagram reaches the
 /// robots' or the router's recorded addresses while it runs.
 fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
     let listeners = recorded_addresses(run);
@@ -241,40 +242,7 @@ fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
     assert_eq!(summary["type"], "summary");
     assert_eq!(summary["ok"], true, "{summary}");
     assert!(ran.len() > 20, "{ran:#?}");
-    let without_result_t = |lines: &[Value]| -> Vec<Value> {
-        lines
-            .iter()
-            .map(|l| {
-                let mut l = l.clone();
-                if l["type"] == "result" {
-                    if let Some(m) = l.as_object_mut() {
-                        m.remove("t");
-                    }
-                }
-                l
-            })
-            .collect()
-    };
-    let (a, b) = (without_result_t(ran), without_result_t(again));
-    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-        assert_eq!(x, y, "line {i} differs (run, replay)");
-    }
-    assert_eq!(
-        a.len(),
-        b.len(),
-        "the replay printed {} lines, the run {}",
-        b.len(),
-        a.len()
-    );
-    for (x, y) in ran.iter().zip(again) {
-        if x["type"] == "result" {
-            let (t0, t1) = (
-                x["t"].as_f64().unwrap_or(-1.0),
-                y["t"].as_f64().unwrap_or(1e9),
-            );
-            assert!((t0 - t1).abs() < 0.05, "result times {t0} {t1}: {x}");
-        }
-    }
+    same_lines_in_their_order(ran, again);
     let status = ran
         .iter()
         .find(|l| l["command"] == "status")
@@ -293,6 +261,94 @@ fn replay_prints_the_run(file: &Path, run: &[Value], dir: &Path) {
     if let Some(calls) = network_calls_of_replay(file, dir) {
         assert!(calls.is_empty(), "the replay touched the network: {calls}");
     }
+}
+
+/// The run's lines (`ran`, without the summary) and the replay's
+/// (`again`) are the same: each kind in its order, a result's `t` and its
+/// place among events close to it aside (see [`replay_prints_the_run`]).
+fn same_lines_in_their_order(ran: &[Value], again: &[Value]) {
+    let without_result_t = |lines: &[Value]| -> Vec<Value> {
+        lines
+            .iter()
+            .map(|l| {
+                let mut l = l.clone();
+                if l["type"] == "result" {
+                    if let Some(m) = l.as_object_mut() {
+                        m.remove("t");
+                    }
+                }
+                l
+            })
+            .collect()
+    };
+    let (a, b) = (without_result_t(ran), without_result_t(again));
+    assert_eq!(
+        a.len(),
+        b.len(),
+        "the replay printed {} lines, the run {}",
+        b.len(),
+        a.len()
+    );
+    // Events and results come from two tasks, the event printer and the
+    // script runner: each kind comes in its order, and the two interleave
+    // as they ran, except that an event close to a result may come on its
+    // other side. Close is RESULT_STAMP: the run stamps a result when it
+    // prints it, the recording when it records it, microseconds apart on a
+    // quiet machine; with a CPU hog per core the runner was preempted in
+    // between (an event came before a result in the run, after it in the
+    // recording), so the bound is a second.
+    const RESULT_STAMP: f64 = 1.0;
+    let of_kind = |lines: &[Value], result: bool| -> Vec<Value> {
+        lines
+            .iter()
+            .filter(|l| (l["type"] == "result") == result)
+            .cloned()
+            .collect()
+    };
+    let (run_events, replay_events) = (of_kind(&a, false), of_kind(&b, false));
+    for (i, (x, y)) in run_events.iter().zip(&replay_events).enumerate() {
+        assert_eq!(x, y, "event {i} differs (run, replay)");
+    }
+    let (run_results, replay_results) = (of_kind(ran, true), of_kind(again, true));
+    for (i, (x, y)) in of_kind(&a, true).iter().zip(&of_kind(&b, true)).enumerate() {
+        assert_eq!(x, y, "result {i} differs (run, replay)");
+    }
+    for (x, y) in run_results.iter().zip(&replay_results) {
+        let (t0, t1) = (
+            x["t"].as_f64().unwrap_or(-1.0),
+            y["t"].as_f64().unwrap_or(1e9),
+        );
+        assert!(
+            (t0 - t1).abs() < RESULT_STAMP,
+            "result times {t0} {t1}: {x}"
+        );
+    }
+    let (run_before, replay_before) = (events_before(&a), events_before(&b));
+    for (k, (&r, &p)) in run_before.iter().zip(&replay_before).enumerate() {
+        let t = replay_results[k]["t"].as_f64().unwrap_or(f64::NAN);
+        for e in &replay_events[r.min(p)..r.max(p)] {
+            let te = e["t"].as_f64().unwrap_or(f64::NAN);
+            assert!(
+                (te - t).abs() < RESULT_STAMP,
+                "event {e} on the other side of result {} (t {t})",
+                replay_results[k]
+            );
+        }
+    }
+}
+
+/// How many events came before each result of `lines`.
+fn events_before(lines: &[Value]) -> Vec<usize> {
+    let mut events = 0;
+    let mut before = Vec::new();
+    for l in lines {
+        if l["type"] == "result" {
+            before.push(events);
+        } else {
+            events += 1;
+        }
+    }
+    before
 }
 
 /// Sockets bound on the router's and robots' recorded UDP addresses (those

@@ -53,6 +53,15 @@ fn robot_config(dir: &Path, name: &str, port: u16, auth: &str) -> std::path::Pat
     )
 }
 
+/// The station's script: the robot's position before the controllers, after
+/// the intruder's and after the listed one's. The listed controller starts
+/// when the test reads `listed` (Python took seconds to start on a loaded
+/// machine), so the script waits for the robot to move, not a fixed time.
+const SCRIPT: &str = "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
+                      wait route robot_1 ext/python 5s\nsleep 500ms\nstatus robot_1\n\
+                      log intruder\nsleep 2s\nstatus robot_1\nlog listed\n\
+                      wait moved robot_1 0.3 30s\nstatus robot_1\n";
+
 #[test]
 fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
     let dir = tempfile::tempdir().unwrap();
@@ -72,16 +81,13 @@ fn the_documented_python_controller_signs_and_drives_a_simulated_robot() {
              channels = [\"ext/python\"]\n"
         ),
     );
-    let script = "spawn 1\nwait connected robot_1 10s\nroute robot_1 ext/python\n\
-                  wait route robot_1 ext/python 5s\nsleep 500ms\nstatus robot_1\nlog intruder\n\
-                  sleep 2s\nstatus robot_1\nlog listed\nsleep 4s\nstatus robot_1\n";
     let args: [&std::ffi::OsStr; 4] = [
         "--config".as_ref(),
         config.as_os_str(),
         "--script".as_ref(),
         "-".as_ref(),
     ];
-    let mut gcs = mech_e2e::spawn_mech_gcs(&args, script, dir.path());
+    let mut gcs = mech_e2e::spawn_mech_gcs(&args, SCRIPT, dir.path());
     let mut lines = BufReader::new(gcs.stdout.take().unwrap()).lines();
     let mut all = Vec::new();
     let mut next_until = |marker: &str, all: &mut Vec<String>| {

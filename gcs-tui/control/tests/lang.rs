@@ -358,3 +358,54 @@ async fn record_toggle_starts_then_stops() {
     assert!(err.message.contains("start, stop, toggle"), "{err}");
     gcs.shutdown().await;
 }
+
+/// `wait moved` measures from where each robot was as the wait began, so a
+/// script can wait for a controller to drive a robot however late the
+/// controller starts; it times out saying how far the robot got.
+#[tokio::test]
+async fn wait_moved_holds_once_the_robot_is_farther_than_the_distance() {
+    let (gcs, mut exec, mut robot) = setup().await;
+    robot
+        .send_telemetry(agent::telemetry(1.0, 2.0, "", None))
+        .await;
+    let at = |x: f64| {
+        move |f: &mech_core::fleet::Fleet| {
+            f.robot("robot_1").is_some_and(|r| r.telemetry.pose.x == x)
+        }
+    };
+    assert!(agent::eventually(Duration::from_secs(10), || gcs.with_fleet(at(1.0))).await);
+    let err = exec
+        .execute_line("wait moved robot_1 0.5 200ms")
+        .await
+        .unwrap_err();
+    assert!(
+        err.message.contains("robot_1 moved 0.000 m of 0.5 m"),
+        "{err}"
+    );
+
+    // The robot creeps on in 0.1 m steps until the wait is over: wherever
+    // it was as the wait began, it is more than 0.5 m on five steps later.
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let (waited, moved_to) = tokio::join!(
+        async {
+            let out = exec.execute_line("wait moved robot_1 0.5 30s").await;
+            done.store(true, std::sync::atomic::Ordering::SeqCst);
+            out
+        },
+        async {
+            let mut x = 1.0;
+            while !done.load(std::sync::atomic::Ordering::SeqCst) && x < 20.0 {
+                x += 0.1;
+                robot
+                    .send_telemetry(agent::telemetry(x, 2.0, "", None))
+                    .await;
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            x
+        }
+    );
+    let out = waited.unwrap();
+    assert!(out.summary.starts_with("after "), "{}", out.summary);
+    assert!(moved_to > 1.45, "the wait held at x = {moved_to:.2}");
+    gcs.shutdown().await;
+}

@@ -199,6 +199,10 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
     );
 
     // Switch: the very next joy/0 message is dropped, joy/1 is forwarded.
+    // The two pads' datagrams reach the router in either order (datagrams
+    // of two senders are not ordered among themselves), so the drop is
+    // awaited on its counter rather than assumed done once pad1's command
+    // is through.
     gcs.router()
         .set_route("robot_1", Some("joy/1"))
         .await
@@ -213,6 +217,8 @@ async fn a_route_switch_drops_the_old_channels_very_next_message() {
         ("pad1", b),
         "first command after the switch is the new channel's"
     );
+    let joy0_dropped = || gcs.router().counters().channels["joy/0"].dropped.not_routed;
+    assert!(eventually(Duration::from_secs(10), || joy0_dropped() >= 1).await);
     let c = gcs.router().counters();
     assert_eq!(c.channels["joy/0"].dropped.not_routed, 1);
     assert_eq!(c.channels["joy/0"].forwarded, 1);

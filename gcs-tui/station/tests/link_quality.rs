@@ -14,12 +14,16 @@
 //! fixed pattern. (Independent 20 % coin flips would scatter the count over
 //! the router's five-second window by about four points either way, which a
 //! check at +/- 5 points would trip on now and then.)
+//!
+//! The robot's message rate is checked against what the proxy passed in
+//! the router's window, not against the other robots' rates: simulated
+//! robots on a loaded machine each lose ticks of their own.
 
 #![allow(clippy::unwrap_used)]
 
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use mech_agent::AgentSettings;
@@ -27,16 +31,41 @@ use mech_agent::links::LinkChoice;
 use mech_agent::platform::PlatformSpec;
 use mech_agent::runtime::{self, Io, Ticker};
 use mech_agent::sim::{Arena, SimAgent, SimFleet, SimFleetOptions};
-use mech_core::{CoreConfig, Gcs, LinkQuality};
+use mech_core::{CoreConfig, Event, Gcs, LinkQuality};
 use rand::Rng;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 
 /// Datagrams the proxy passed on and dropped, robot -> router.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct ProxyCounts {
     passed: AtomicU64,
     dropped: AtomicU64,
+    /// When each passed datagram went on, in router time (since the
+    /// router started, as its events are stamped).
+    passed_at: Mutex<Vec<Duration>>,
+    /// Router time 0.
+    origin: tokio::time::Instant,
+}
+
+impl ProxyCounts {
+    fn new(origin: tokio::time::Instant) -> ProxyCounts {
+        ProxyCounts {
+            passed: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            passed_at: Mutex::new(Vec::new()),
+            origin,
+        }
+    }
+
+    /// Datagrams passed on per second in the router-time span `(from, to]`.
+    fn passed_hz(&self, from: Duration, to: Duration) -> f64 {
+        let at = self.passed_at.lock().unwrap();
+        let n = at
+            .iter()
+            .filter(|t| (from..=to).contains(*t) && **t != from);
+        n.count() as f64 / (to - from).as_secs_f64()
+    }
 }
 
 /// A UDP proxy between one robot and the router: the robot sends to
@@ -70,6 +99,7 @@ async fn lossy_proxy(
                         counts.dropped.fetch_add(1, Ordering::Relaxed);
                     } else {
                         counts.passed.fetch_add(1, Ordering::Relaxed);
+                        counts.passed_at.lock().unwrap().push(counts.origin.elapsed());
                         let _ = back.send_to(&up[..n], router).await;
                     }
                 }
@@ -105,6 +135,51 @@ fn quality(gcs: &Gcs, robot: &str) -> Option<LinkQuality> {
     gcs.with_fleet(|f| f.robot(robot).map(|r| r.quality))
 }
 
+/// `robot`'s first link-quality report whose figures cover the router's
+/// full five seconds, and the router time its window ends at (the
+/// report's stamp).
+async fn full_window(
+    gcs: &Gcs,
+    events: &mut mech_core::router::Subscription,
+    robot: &str,
+) -> (LinkQuality, Duration) {
+    tokio::time::timeout(Duration::from_secs(60), async {
+        loop {
+            let ev = events.recv().await.expect("the router runs");
+            match &ev.event {
+                Event::LinkQuality { robot: r, quality }
+                    if r == robot && quality.window >= Duration::from_secs(5) =>
+                {
+                    break (*quality, ev.at);
+                }
+                _ => {}
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| {
+        panic!(
+            "{robot}'s link measured over 5 s: {:?}",
+            quality(gcs, robot)
+        )
+    })
+}
+
+/// The robots on the router directly read no loss.
+fn direct_robots_read_no_loss(gcs: &Gcs, fleet: &SimFleet) {
+    for name in fleet.names() {
+        let q = quality(gcs, &name).expect("registered");
+        let loss = q.loss.expect("it sent in the window");
+        println!(
+            "{name} direct: loss {:.1}%, rx {:.1}/s, rtt {}",
+            loss * 100.0,
+            q.rx_hz,
+            q.rtt_text()
+        );
+        assert!(loss < 0.01, "{name} reads about 0: {q:?}");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     let mut config = CoreConfig::default();
@@ -112,6 +187,8 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     config.router.tcp = None;
     let gcs = Gcs::start(config).await.unwrap();
     let router = gcs.router().udp_addr();
+    let origin = tokio::time::Instant::now() - gcs.router().elapsed();
+    let mut events = gcs.router().subscribe(100_000, true);
     let (stop, stopped) = watch::channel(false);
 
     let options = SimFleetOptions {
@@ -121,23 +198,12 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
     let fleet = SimFleet::spawn(3, router, Arena::default(), options)
         .await
         .unwrap();
-    let counts = Arc::new(ProxyCounts::default());
+    let counts = Arc::new(ProxyCounts::new(origin));
     let proxy = lossy_proxy(router, counts.clone(), stopped.clone()).await;
     robot("robot_9", proxy, stopped.clone()).await;
 
-    // Until robot_9's figures cover the router's full five seconds.
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
-    let lossy = loop {
-        if let Some(q) = quality(&gcs, "robot_9").filter(|q| q.window >= Duration::from_secs(5)) {
-            break q;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "robot_9's link measured over 5 s: {:?}",
-            quality(&gcs, "robot_9")
-        );
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    };
+    let (lossy, at) = full_window(&gcs, &mut events, "robot_9").await;
+    assert_eq!(events.dropped(), 0, "every report seen");
     let (passed, dropped) = (
         counts.passed.load(Ordering::Relaxed),
         counts.dropped.load(Ordering::Relaxed),
@@ -156,26 +222,24 @@ async fn a_robot_behind_a_lossy_proxy_reads_its_loss_the_others_none() {
         "robot_9 reads 20 % +/- 5: {lossy:?}"
     );
     assert!(lossy.rtt.is_some(), "echoes get through: {lossy:?}");
+    // Its rate is what reached the router: four fifths of what it sent,
+    // the datagrams the proxy passed on in the same window. The router
+    // counts a datagram when it handles it, a moment after the proxy
+    // passed it: on a loaded machine one or two at each end of the window
+    // fall on the other side (counting what the robot sent instead would
+    // be a quarter more).
+    let passed_hz = counts.passed_hz(at.saturating_sub(lossy.window), at);
+    println!(
+        "robot_9: {:.2}/s through the proxy in the window, {:.2}/s read",
+        passed_hz, lossy.rx_hz
+    );
+    assert!(
+        (lossy.rx_hz - passed_hz).abs() <= 3.0 / lossy.window.as_secs_f64(),
+        "robot_9 {:.2}/s read, {passed_hz:.2}/s passed",
+        lossy.rx_hz
+    );
 
-    for name in fleet.names() {
-        let q = quality(&gcs, &name).expect("registered");
-        let loss = q.loss.expect("it sent in the window");
-        println!(
-            "{name} direct: loss {:.1}%, rx {:.1}/s, rtt {}",
-            loss * 100.0,
-            q.rx_hz,
-            q.rtt_text()
-        );
-        assert!(loss < 0.01, "{name} reads about 0: {q:?}");
-        // Telemetry at 20 Hz and a heartbeat a second, four fifths of it
-        // for the robot behind the proxy.
-        assert!(
-            (lossy.rx_hz / q.rx_hz - 0.8).abs() < 0.1,
-            "{name} {:.1}/s, robot_9 {:.1}/s",
-            q.rx_hz,
-            lossy.rx_hz
-        );
-    }
+    direct_robots_read_no_loss(&gcs, &fleet);
     let _ = stop.send(true);
     fleet.shutdown().await;
     gcs.shutdown().await;

@@ -130,7 +130,7 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "wait",
-        usage: "wait connected|lost|arrived TARGET [TIMEOUT] | wait robots N [TIMEOUT] | wait route TARGET CHANNEL|none [TIMEOUT] | wait near TARGET X,Y TOLERANCE [TIMEOUT] | wait estop [TIMEOUT] | wait safety TARGET on|off|no-arena [TIMEOUT]",
+        usage: "wait connected|lost|arrived TARGET [TIMEOUT] | wait robots N [TIMEOUT] | wait route TARGET CHANNEL|none [TIMEOUT] | wait near TARGET X,Y TOLERANCE [TIMEOUT] | wait moved TARGET METRES [TIMEOUT] | wait estop [TIMEOUT] | wait safety TARGET on|off|no-arena [TIMEOUT]",
         help: "wait until a condition holds (default timeout 10s)",
         parse: |a| wait::Wait::parse(a).map(Command::Wait),
     },

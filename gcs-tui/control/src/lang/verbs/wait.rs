@@ -1,8 +1,9 @@
 //! `wait CONDITION [TIMEOUT]`: polls the fleet model until a condition
 //! holds (robots connected, lost or arrived, a route acknowledged, robots
-//! near a point, the e-stop acknowledged, robots' safety layer in a state)
-//! or the timeout passes.
+//! near a point or moved from where they were, the e-stop acknowledged,
+//! robots' safety layer in a state) or the timeout passes.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use mech_core::LinkState;
@@ -42,6 +43,10 @@ pub enum WaitFor {
         y: f64,
         tolerance: f64,
     },
+    /// Every robot of the target is more than `metres` from where it was
+    /// when the wait began: a controller, a mission or a gamepad drove it,
+    /// however long they took to start.
+    Moved { target: Target, metres: f64 },
     /// Every robot acknowledged the current e-stop or release.
     EStopAcked,
     /// Every robot of the target reports its safety layer in this state.
@@ -50,8 +55,9 @@ pub enum WaitFor {
 
 impl Wait {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Wait, LangError> {
-        let what =
-            a.next("condition (connected, lost, robots, arrived, route, near, estop, safety)")?;
+        let what = a.next(
+            "condition (connected, lost, robots, arrived, route, near, moved, estop, safety)",
+        )?;
         let condition = match what.text.as_str() {
             "connected" => WaitFor::Connected(a.target()?),
             "lost" => WaitFor::Lost(a.target()?),
@@ -72,6 +78,11 @@ impl Wait {
                     tolerance,
                 }
             }
+            "moved" => {
+                let target = a.target()?;
+                let metres = a.number("distance in metres")?;
+                WaitFor::Moved { target, metres }
+            }
             "estop" => WaitFor::EStopAcked,
             "safety" => {
                 let target = a.target()?;
@@ -81,7 +92,7 @@ impl Wait {
                 return Err(LangError::new(
                     what.span,
                     format!(
-                        "unknown wait condition {other:?}; use connected, lost, robots, arrived, route, near, estop or safety"
+                        "unknown wait condition {other:?}; use connected, lost, robots, arrived, route, near, moved, estop or safety"
                     ),
                 ));
             }
@@ -94,10 +105,16 @@ impl Wait {
 
     pub(super) async fn apply(&self, ctx: &mut Context, at: Span) -> Result<Outcome, LangError> {
         let gcs = &ctx.gcs;
+        let mut origins = BTreeMap::new();
         let ((), took) = poll_until(self.timeout, at, || {
-            gcs.with_fleet(|f| match self.condition.unmet(f) {
-                None => Ok(()),
-                Some(reason) => Err(reason),
+            gcs.with_fleet(|f| {
+                for (name, at) in self.condition.origins(f) {
+                    origins.entry(name).or_insert(at);
+                }
+                match self.condition.unmet(f, &origins) {
+                    None => Ok(()),
+                    Some(reason) => Err(reason),
+                }
             })
         })
         .await?;
@@ -106,8 +123,26 @@ impl Wait {
 }
 
 impl WaitFor {
-    /// `None` if the condition holds, else why not.
-    fn unmet(&self, f: &Fleet) -> Option<String> {
+    /// Where each registered robot of a `moved` target is now: the wait
+    /// keeps the first of these for each robot, so one that registers
+    /// during the wait is measured from where it was first seen.
+    fn origins(&self, f: &Fleet) -> BTreeMap<String, (f64, f64)> {
+        let WaitFor::Moved { target, .. } = self else {
+            return BTreeMap::new();
+        };
+        f.resolve(&target.name)
+            .unwrap_or_else(|| vec![target.name.clone()])
+            .into_iter()
+            .filter_map(|name| {
+                let p = f.robot(&name)?.telemetry.pose;
+                Some((name, (p.x, p.y)))
+            })
+            .collect()
+    }
+
+    /// `None` if the condition holds, else why not; `origins` are where a
+    /// `moved` target's robots were as the wait began.
+    fn unmet(&self, f: &Fleet, origins: &BTreeMap<String, (f64, f64)>) -> Option<String> {
         // Waiting for a robot that has not registered yet is allowed.
         let each = |t: &Target, ok: &dyn Fn(&Robot) -> Option<String>| {
             let members = f.resolve(&t.name).unwrap_or_else(|| vec![t.name.clone()]);
@@ -150,6 +185,13 @@ impl WaitFor {
             } => each(target, &|r| {
                 let d = r.distance_to(*x, *y);
                 (d > *tolerance).then(|| format!("{} is {d:.3} m from ({x}, {y})", r.name))
+            }),
+            WaitFor::Moved { target, metres } => each(target, &|r| {
+                let Some(&(x, y)) = origins.get(&r.name) else {
+                    return Some(format!("{} has no starting point", r.name));
+                };
+                let d = r.distance_to(x, y);
+                (d <= *metres).then(|| format!("{} moved {d:.3} m of {metres} m", r.name))
             }),
             WaitFor::EStopAcked => (!f.estop.pending.is_empty()).then(|| {
                 let pending: Vec<String> = f.estop.pending.iter().cloned().collect();

@@ -32,15 +32,11 @@ pub(in crate::router) async fn bind(config: &RouterConfig) -> Result<Bound, Rout
     // port 0, the kernel would hand a socket of a new group a port an
     // existing group of the same user holds (such ports count as free to
     // share), so the port is picked by a plain socket too.
-    let addr = {
-        let probe = std::net::UdpSocket::bind(config.udp).map_err(|e| bind_err(config.udp, e))?;
-        probe.local_addr().map_err(|e| bind_err(config.udp, e))?
+    let probe = || {
+        let probe = std::net::UdpSocket::bind(config.udp)?;
+        probe.local_addr()
     };
-    let mut udp = Vec::with_capacity(config.udp_workers.max(1));
-    for _ in 0..config.udp_workers.max(1) {
-        let s = bind_udp(addr, config.socket_buffer).map_err(|e| bind_err(addr, e))?;
-        udp.push(Arc::new(s));
-    }
+    let udp = bind_group(config, probe).map_err(|(addr, e)| bind_err(addr, e))?;
     let udp_addr = local_addr("UDP", config.udp, udp[0].local_addr())?;
     let tcp = match config.tcp {
         Some(addr) => Some(
@@ -64,6 +60,49 @@ pub(in crate::router) async fn bind(config: &RouterConfig) -> Result<Bound, Rout
         tcp,
         tcp_addr,
     })
+}
+
+/// Attempts at a free port when any port will do (see [`bind_group`]).
+const PICKS: usize = 8;
+
+/// Binds the UDP group on the address `pick` returns: the configured
+/// address, or, asked for port 0, a port a plain socket found free. That
+/// socket is closed before the group binds, and on a busy host another
+/// program may bind the port in between; the group then picks again (up to
+/// [`PICKS`] times) rather than fail a station that asked for any port.
+fn bind_group(
+    config: &RouterConfig,
+    mut pick: impl FnMut() -> std::io::Result<SocketAddr>,
+) -> Result<Vec<Arc<std::net::UdpSocket>>, (SocketAddr, std::io::Error)> {
+    let any_port = config.udp.port() == 0;
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        let addr = pick().map_err(|e| (config.udp, e))?;
+        let mut udp = Vec::with_capacity(config.udp_workers.max(1));
+        let mut taken = None;
+        for _ in 0..config.udp_workers.max(1) {
+            match bind_udp(addr, config.socket_buffer) {
+                Ok(s) => udp.push(Arc::new(s)),
+                Err(e) => {
+                    taken = Some(e);
+                    break;
+                }
+            }
+        }
+        match taken {
+            None => return Ok(udp),
+            Some(e)
+                if any_port
+                    && udp.is_empty()
+                    && e.kind() == std::io::ErrorKind::AddrInUse
+                    && attempt < PICKS =>
+            {
+                tracing::debug!(%addr, attempt, "the picked port was taken before the router bound it; picking again");
+            }
+            Some(e) => return Err((addr, e)),
+        }
+    }
 }
 
 /// The address an endpoint was bound to (the port, when 0 was asked for).
@@ -124,5 +163,47 @@ mod tests {
             assert!(ports.insert(port), "port {port} given to two stations");
             held.push(bound.udp);
         }
+    }
+
+    /// A port another program binds between the pick and the group's bind
+    /// (a suite on a busy host: the pick's socket is closed first) makes the
+    /// group pick again; a configured port that is taken is an error.
+    #[test]
+    fn a_picked_port_taken_before_the_bind_is_picked_again() {
+        let thief = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let taken = thief.local_addr().unwrap();
+        let config = RouterConfig {
+            udp: "127.0.0.1:0".parse().unwrap(),
+            tcp: None,
+            udp_workers: 2,
+            socket_buffer: 4096,
+            ..RouterConfig::default()
+        };
+        let mut picks = 0;
+        let udp = bind_group(&config, || {
+            picks += 1;
+            if picks == 1 {
+                Ok(taken)
+            } else {
+                let probe = std::net::UdpSocket::bind("127.0.0.1:0")?;
+                probe.local_addr()
+            }
+        })
+        .unwrap();
+        assert_eq!(picks, 2);
+        assert_eq!(udp.len(), 2);
+        assert_ne!(udp[0].local_addr().unwrap(), taken);
+        assert_eq!(
+            udp[0].local_addr().unwrap(),
+            udp[1].local_addr().unwrap(),
+            "one group"
+        );
+
+        let fixed = RouterConfig {
+            udp: taken,
+            ..config
+        };
+        let (addr, e) = bind_group(&fixed, || Ok(taken)).unwrap_err();
+        assert_eq!((addr, e.kind()), (taken, std::io::ErrorKind::AddrInUse));
     }
 }
