@@ -338,14 +338,27 @@ mod tests {
     impl EventSink for TablesProbe {
         fn apply(&self, _: &Stamped) {
             if let Some(router) = self.router.get() {
-                match router.shared().tables.try_lock() {
-                    Ok(tables) => {
-                        drop(tables);
-                        // Would wait for ever if this thread held them.
-                        router.counters();
-                    }
-                    Err(_) => {
-                        self.under_lock.fetch_add(1, Ordering::Relaxed);
+                // The lock may be held by another thread (a worker or the
+                // timers deciding meanwhile), which lets it go within
+                // microseconds; held by this thread, it never comes free.
+                // Two seconds is far beyond any other holder's turn, even
+                // preempted on a loaded machine.
+                let started = Instant::now();
+                loop {
+                    match router.shared().tables.try_lock() {
+                        Ok(tables) => {
+                            drop(tables);
+                            // Would wait for ever if this thread held them.
+                            router.counters();
+                            break;
+                        }
+                        Err(_) if started.elapsed() < Duration::from_secs(2) => {
+                            std::thread::yield_now();
+                        }
+                        Err(_) => {
+                            self.under_lock.fetch_add(1, Ordering::Relaxed);
+                            break;
+                        }
                     }
                 }
             }
