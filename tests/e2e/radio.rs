@@ -67,6 +67,22 @@ fn start_robots(
     (a, b)
 }
 
+/// The last `n` telemetry samples of `robot` the controller received.
+fn last_samples(
+    ctl: &Controller,
+    robot: &str,
+    n: usize,
+) -> Vec<mech_e2e::harness::controller::Sample> {
+    let mut s: Vec<_> = ctl
+        .samples()
+        .into_iter()
+        .filter(|s| s.robot == robot)
+        .collect();
+    let keep = s.len().saturating_sub(n);
+    s.drain(..keep);
+    s
+}
+
 /// The station saw rb on UDP until `cut`, then on the radio only until
 /// `back`, then on UDP again by `end`; ra on the radio, with a budget.
 fn the_station_followed_rbs_links(gcs: &Station, cut: u64, back: u64, end: u64) {
@@ -158,7 +174,10 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
         {
             assert!(
                 Instant::now() < deadline,
-                "{robot}'s failsafe did not trip after the controller stopped"
+                "{robot}'s failsafe did not trip after the controller stopped (end {end}); \
+                 its last samples: {:#?}\nstation: {:#?}",
+                last_samples(&ctl, robot, 8),
+                gcs.tail()
             );
             std::thread::sleep(Duration::from_millis(50));
         }
