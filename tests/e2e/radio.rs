@@ -67,6 +67,25 @@ fn start_robots(
     (a, b)
 }
 
+/// Waits (30 s at most) for a telemetry sample of `robot` stamped after
+/// `end` whose failsafe holds for a silent channel.
+fn wait_failsafe_tripped(ctl: &Controller, gcs: &Station, robot: &str, end: u64) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while ctl
+        .first(robot, end, |s| s.failsafe == FailsafeState::ChannelSilent)
+        .is_none()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "{robot}'s failsafe did not trip after the controller stopped (end {end}); \
+             its last samples: {:#?}\nstation: {:#?}",
+            last_samples(ctl, robot, 8),
+            gcs.tail()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// The last `n` telemetry samples of `robot` the controller received.
 fn last_samples(
     ctl: &Controller,
@@ -167,20 +186,7 @@ fn two_robots_share_a_radio_and_one_fails_over_from_udp_to_the_radio_and_back() 
     // The final silence: each robot's failsafe trips a channel timeout
     // after the controller stopped, waited for in its telemetry.
     for robot in ["ra", "rb"] {
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while ctl
-            .first(robot, end, |s| s.failsafe == FailsafeState::ChannelSilent)
-            .is_none()
-        {
-            assert!(
-                Instant::now() < deadline,
-                "{robot}'s failsafe did not trip after the controller stopped (end {end}); \
-                 its last samples: {:#?}\nstation: {:#?}",
-                last_samples(&ctl, robot, 8),
-                gcs.tail()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        wait_failsafe_tripped(&ctl, &gcs, robot, end);
     }
     let (ca, cb) = (a.stop(), b.stop());
     let logs = format!("ra:\n{}\nrb:\n{}", a.log(), b.log());
