@@ -237,7 +237,7 @@ impl Agent {
         let estopped = self.estop.engaged();
         let mut step = Step::new(now, &mut self.wire, &mut self.counters, &mut out);
         match env.body {
-            Body::Welcome(w) => self.welcomed(w.route, now, &mut out),
+            Body::Welcome(w) => self.welcomed(w.robot_id, w.route, now, &mut out),
             Body::Route(r) if self.intake.fresh_route(&r, &mut step) => {
                 self.apply_route(r, now, &mut out);
             }
@@ -373,14 +373,14 @@ impl Agent {
     /// Registered (again): the Welcome's route is applied whatever its
     /// epoch, since a (possibly restarted) router numbers e-stops, route
     /// epochs and missions afresh.
-    fn welcomed(&mut self, route: Route, now: Duration, out: &mut Vec<Envelope>) {
+    fn welcomed(&mut self, id: u16, route: Route, now: Duration, out: &mut Vec<Envelope>) {
         if self
             .registration
             .welcomed(&self.settings.name, &route.channel, now)
         {
             self.estop.forget_ids();
             self.intake.forget_senders();
-            self.safety.registered();
+            self.safety.registered(id);
         }
         self.apply_route(route, now, out);
     }

@@ -76,6 +76,11 @@ pub struct SafetyConfig {
     /// How far ahead, s, a robot looks for neighbours its command would
     /// meet, to swerve right in time (0: never).
     pub horizon: f64,
+    /// How long a robot may want to move without moving among its
+    /// neighbours before it backs off from them, s (0: never).
+    pub stuck_after: f64,
+    /// How long it backs off, s.
+    pub back_off_time: f64,
 }
 
 impl Default for SafetyConfig {
@@ -90,6 +95,8 @@ impl Default for SafetyConfig {
             yield_time: 0.4,
             yield_angle: std::f64::consts::FRAC_PI_2,
             horizon: 1.5,
+            stuck_after: 1.0,
+            back_off_time: 1.0,
         }
     }
 }
@@ -121,6 +128,8 @@ impl SafetyConfig {
         nonnegative(self.yield_turn_rate, "yield_turn_rate")?;
         nonnegative(self.yield_time, "yield_time")?;
         nonnegative(self.horizon, "horizon")?;
+        nonnegative(self.stuck_after, "stuck_after")?;
+        nonnegative(self.back_off_time, "back_off_time")?;
         if !(0.0..=std::f64::consts::FRAC_PI_2).contains(&self.yield_angle) {
             return Err(format!(
                 "`safety.yield_angle` must be between 0 and pi/2, got {}",
@@ -137,6 +146,12 @@ impl SafetyConfig {
         }
     }
 }
+
+/// Speed below which a robot that wants to move counts as stuck, m/s.
+const STILL: f64 = 0.02;
+
+/// Fastest back-off of a stuck robot, m/s.
+const BACK_OFF_SPEED: f64 = 0.2;
 
 /// Clearance kept between two robots' discs, m, until an [`Arena`] says
 /// otherwise (its `margin`): the station's default.
@@ -179,6 +194,11 @@ pub struct SafetyLayer {
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
     yielding: Option<Yield>,
+    /// Since when the robot wanted to move but did not.
+    stuck_since: Option<Duration>,
+    /// This robot's id at the station (its Welcome's): it staggers when
+    /// robots stuck together back off.
+    id: Option<u16>,
     /// Registered with a router since the last arena: the next arena and
     /// neighbour list apply whatever their id and stamp.
     fresh_station: bool,
@@ -193,6 +213,8 @@ impl SafetyLayer {
             arena: None,
             neighbours: None,
             yielding: None,
+            stuck_since: None,
+            id: None,
             fresh_station: false,
             intervention: Intervention::None,
             counts: InterventionCounts::default(),
@@ -254,8 +276,9 @@ impl SafetyLayer {
     /// its id, and so does any neighbour list until then. Until it comes,
     /// the arena and neighbours held stay in force (the robot is no less
     /// safe for a station restart).
-    pub fn registered(&mut self) {
+    pub fn registered(&mut self, id: u16) {
         self.fresh_station = true;
+        self.id = Some(id);
     }
 
     /// Whether the layer enforces anything.
@@ -387,6 +410,9 @@ impl SafetyLayer {
             return filter::steer(c, y.target, mobility);
         }
         self.yielding = None;
+        if let Some(back_off) = self.unstick(c, mobility, wants_motion, margin, now) {
+            return back_off;
+        }
         let look_ahead = self.config.horizon > 0.0;
         let swerve = self
             .neighbours
@@ -422,6 +448,42 @@ impl SafetyLayer {
             return filter::steer(c, target, mobility);
         }
         decision
+    }
+
+    /// Deadlock breaking: a robot that has wanted to move for
+    /// `stuck_after` s (plus 0.3 s per its id modulo 5, so robots jammed
+    /// together do not all move at once) without moving backs off from the
+    /// neighbours near it for `back_off_time` s, at up to
+    /// [`BACK_OFF_SPEED`], within the constraints as always. `None`: it is
+    /// not stuck (or nobody is near to back off from).
+    fn unstick(
+        &mut self,
+        c: &Constraints,
+        mobility: &Mobility,
+        wants_motion: bool,
+        margin: f64,
+        now: Duration,
+    ) -> Option<Decision> {
+        if self.config.stuck_after <= 0.0 || !wants_motion || mobility.velocity.norm() >= STILL {
+            self.stuck_since = None;
+            return None;
+        }
+        let since = *self.stuck_since.get_or_insert(now);
+        let wait = self.config.stuck_after + 0.3 * f64::from(self.id.unwrap_or(0) % 5);
+        if now.saturating_sub(since).as_secs_f64() <= wait {
+            return None;
+        }
+        let away = self
+            .neighbours
+            .as_ref()?
+            .away(c.position, self.config.radius, margin, now)?;
+        self.stuck_since = None;
+        let target = away * BACK_OFF_SPEED;
+        self.yielding = Some(Yield {
+            target,
+            until: now + Duration::from_secs_f64(self.config.back_off_time),
+        });
+        Some(filter::steer(c, target, mobility))
     }
 
     /// Records this period's intervention (counting each one that begins).
@@ -511,7 +573,7 @@ mod tests {
         l.apply_arena(&arena(40, true)).unwrap();
         l.apply_neighbours(&neighbours(5_000, vec![]), Duration::ZERO);
         assert_eq!(l.apply_arena(&arena(1, false)), None, "older, same station");
-        l.registered();
+        l.registered(1);
         assert_eq!(l.state(), SafetyState::On, "the old arena holds meanwhile");
         assert!(l.apply_neighbours(&neighbours(10, vec![]), Duration::ZERO));
         assert_eq!(l.apply_arena(&arena(1, false)).unwrap().id, 1);
@@ -639,6 +701,54 @@ mod tests {
         assert!(!l.enforcing());
         let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &away, later);
         assert_eq!((f.outputs, f.intervention), (away, Intervention::None));
+    }
+
+    #[test]
+    fn a_robot_stuck_against_a_neighbour_backs_off_from_it() {
+        // A kiwi told to drive into a neighbour pressed against it: the
+        // look-ahead turns it aside, but it does not move (its velocity
+        // stays zero here). After `stuck_after` (plus 0.3 s for id 1) it
+        // backs off, away from the neighbour, and the command has its way
+        // again after `back_off_time`.
+        let kiwi = PlatformSpec::kiwi().build();
+        let me = Pose {
+            x: 2.0,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let into = forward(kiwi.as_ref(), 0.3);
+        let run = |config: SafetyConfig| {
+            let mut l = SafetyLayer::new(config);
+            l.registered(1);
+            l.apply_arena(&arena(1, true));
+            let mut motions = Vec::new();
+            for k in 0..150u64 {
+                let now = Duration::from_millis(20 * k);
+                l.apply_neighbours(&neighbours(k + 1, vec![neighbour_at(2.4, 1.5)]), now);
+                let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &into, now);
+                let t = kiwi.motion(&f.outputs);
+                motions.push((now.as_secs_f64(), Vec2::new(t.vx, t.vy)));
+            }
+            motions
+        };
+        let motions = run(SafetyConfig::default());
+        let backing = |m: &&(f64, Vec2)| m.1.x < -0.1;
+        let first = motions.iter().find(backing).expect("it backs off");
+        assert!(
+            (1.3..1.4).contains(&first.0),
+            "after 1.3 s still: {first:?}"
+        );
+        assert!(first.1.y.abs() < 1e-6, "straight away: {first:?}");
+        let after = motions.iter().filter(|m| m.0 > first.0 + 1.05);
+        assert!(
+            after.clone().count() > 0 && after.clone().all(|m| !backing(&m)),
+            "then the command again"
+        );
+        let never = run(SafetyConfig {
+            stuck_after: 0.0,
+            ..SafetyConfig::default()
+        });
+        assert!(!never.iter().any(|m| backing(&m)), "0: never");
     }
 
     #[test]

@@ -228,6 +228,57 @@ fn eight_robots_crossing_with_states_at_20_hz_all_arrive_within_twice_the_time()
     assert!(jammed.is_none_or(|t| t > 2.0 * alone), "{jammed:?}");
 }
 
+/// Deadlock breaking: the crossing with neighbour states at eight rates
+/// and ages: every robot arrives, apart, within twice the time without the
+/// layer; without backing off (`stuck_after = 0`) robots stay jammed in
+/// the middle in some.
+#[test]
+fn jammed_robots_back_off_and_every_crossing_completes() {
+    let timings = [
+        (50, 25),
+        (50, 50),
+        (50, 75),
+        (50, 100),
+        (100, 20),
+        (100, 50),
+        (100, 100),
+        (100, 150),
+    ];
+    let never = SafetyConfig {
+        stuck_after: 0.0,
+        ..SafetyConfig::default()
+    };
+    let mut jammed_without = 0;
+    for (period, latency) in timings {
+        let timing = |t: &mut SafetyTrial| {
+            t.neighbour_period = std::time::Duration::from_millis(period);
+            t.latency = std::time::Duration::from_millis(latency);
+        };
+        let alone = crossing_with(false, SafetyConfig::default(), timing)
+            .last_arrival()
+            .expect("without the layer all arrive");
+        let on = crossing_with(true, SafetyConfig::default(), timing);
+        let case = format!("states every {period} ms, {latency} ms old");
+        let with = on
+            .last_arrival()
+            .unwrap_or_else(|| panic!("{case}: not all arrived in 120 s"));
+        assert!(
+            with <= 2.0 * alone,
+            "{case}: {with:.1} s, {alone:.1} s without the layer"
+        );
+        let m = on.metrics();
+        assert_eq!(
+            m.separation_violations + m.margin_violations + m.breaches,
+            0,
+            "{case}: {m:?}"
+        );
+        let stuck = crossing_with(true, never, timing).last_arrival();
+        jammed_without += usize::from(stuck.is_none_or(|t| t > 2.0 * alone));
+    }
+    println!("without backing off, {jammed_without} of 8 jammed");
+    assert!(jammed_without > 0, "without backing off some jam");
+}
+
 /// One robot driven straight at the wall at full speed for 10 s.
 fn at_the_wall(spec: &PlatformSpec, layer_on: bool) -> SafetyTrial {
     let mut t = trial(layer_on);

@@ -64,8 +64,8 @@ impl Safety {
 
     /// The robot registered (again): a restarted station's next arena
     /// applies whatever its id.
-    pub(crate) fn registered(&mut self) {
-        self.layer.registered();
+    pub(crate) fn registered(&mut self, id: u16) {
+        self.layer.registered(id);
     }
 
     /// The outputs to write instead of `outputs` (the controller's) for a

@@ -194,13 +194,16 @@ impl NeighbourSet {
         if desired.norm() < 1e-9 || soonest(desired).is_infinite() {
             return None;
         }
-        // Turn right until clear; if no turn up to half a circle clears,
-        // the one that puts contact off longest (robots jammed together
-        // back away from each other).
+        // Turn right until clear; if no turn to the right up to half a
+        // circle clears, to the left; if none clears at all, the turn that
+        // puts contact off longest (robots jammed together back away from
+        // each other).
         let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
+        let right = (1..=ANTICIPATION_STEPS).map(|k| -(k as f64) * step);
+        let left = (1..ANTICIPATION_STEPS).map(|k| k as f64 * step);
         let mut best = (soonest(desired), desired);
-        for k in 1..=ANTICIPATION_STEPS {
-            let u = desired.rotated(-(k as f64) * step);
+        for a in right.chain(left) {
+            let u = desired.rotated(a);
             let t = soonest(u);
             if t.is_infinite() {
                 return Some(u);
@@ -210,6 +213,28 @@ impl NeighbourSet {
             }
         }
         (best.1 != desired).then_some(best.1)
+    }
+}
+
+/// How far beyond the distance it must keep a neighbour counts as near
+/// for [`NeighbourSet::away`], m.
+const CROWD: f64 = 0.3;
+
+impl NeighbourSet {
+    /// The way out of a crowd: away from the neighbours near a robot at
+    /// `p`, the nearest weighing most. `None` with nobody near.
+    pub fn away(&self, p: Vec2, radius: f64, margin: f64, now: Duration) -> Option<Vec2> {
+        let mut sum = Vec2::ZERO;
+        for n in &self.robots {
+            let (q, _) = self.predict(n, now);
+            let d = p - q;
+            let need = radius + n.radius + margin;
+            let dist = d.norm();
+            if dist < need + CROWD && dist > 1e-9 {
+                sum = sum + d * (1.0 / (dist * dist));
+            }
+        }
+        sum.unit()
     }
 }
 
@@ -346,6 +371,20 @@ mod tests {
             Duration::ZERO,
         );
         assert_eq!(far, None);
+    }
+
+    #[test]
+    fn the_way_out_of_a_crowd_leads_away_from_the_nearest() {
+        let s = set(vec![
+            neighbour(0.4, 0.0, 0.0, true),
+            neighbour(0.0, 0.6, 0.0, true),
+            neighbour(-3.0, 0.0, 0.0, true),
+        ]);
+        let out = s.away(Vec2::ZERO, 0.15, 0.1, Duration::ZERO).unwrap();
+        assert!(out.x < -0.8 && out.y < 0.0, "{out:?}");
+        assert!((out.norm() - 1.0).abs() < 1e-9);
+        let alone = set(vec![neighbour(-3.0, 0.0, 0.0, true)]);
+        assert_eq!(alone.away(Vec2::ZERO, 0.15, 0.1, Duration::ZERO), None);
     }
 
     #[test]

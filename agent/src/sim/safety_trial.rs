@@ -135,6 +135,7 @@ impl SafetyTrial {
     /// Adds a robot of `platform` at `pose`; returns its index.
     pub fn add(&mut self, platform: &PlatformSpec, pose: Pose) -> usize {
         let mut layer = SafetyLayer::new(self.safety);
+        layer.registered(self.robots.len() as u16 + 1);
         layer.apply_arena(&self.arena);
         self.robots.push(TrialRobot {
             sim: SimRobot::new(platform, pose),
