@@ -162,10 +162,14 @@ where
                             break;
                         }
                     }
-                    let ended = read_frames(SerialLink::new(reader), &in_tx, &reader_side);
-                    lock(&reader_side).link = None;
-                    match ended {
-                        Some(e) => e,
+                    match read_frames(SerialLink::new(reader), &in_tx, &reader_side) {
+                        Some(e) => {
+                            lock(&reader_side).link = None;
+                            e
+                        }
+                        // The agent stopped: the port stays with the
+                        // writer thread, which writes what it was given
+                        // last (the agent's Bye) and then ends.
                         None => break,
                     }
                 }
@@ -369,10 +373,131 @@ mod tests {
         (openings, writes)
     }
 
+    /// A reading side that says when it is first read (the port is open)
+    /// and when it is dropped.
+    struct Dropped {
+        reading: Arc<std::sync::atomic::AtomicBool>,
+        dropped: Arc<std::sync::atomic::AtomicBool>,
+    }
+
+    impl Read for Dropped {
+        fn read(&mut self, _: &mut [u8]) -> std::io::Result<usize> {
+            self.reading
+                .store(true, std::sync::atomic::Ordering::SeqCst);
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            Err(std::io::ErrorKind::TimedOut.into())
+        }
+    }
+
+    impl Drop for Dropped {
+        fn drop(&mut self) {
+            self.dropped
+                .store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+
+    /// A writing side whose first write waits until `gate` opens.
+    struct Gated {
+        gate: std::sync::mpsc::Receiver<()>,
+        got: Arc<Mutex<Vec<u8>>>,
+        first: bool,
+    }
+
+    impl Write for Gated {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            if std::mem::take(&mut self.first) {
+                let _ = self.gate.recv();
+            }
+            lock(&self.got).extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn what_the_agent_sent_before_it_stopped_is_written_after() {
+        // The writer is still busy with one message, a second (the
+        // agent's Bye) waits behind it, and the agent stops: the reader
+        // thread ends at once, and the port stays with the writer until
+        // both are written (a slow writer thread on a busy machine lost
+        // the Bye when the reader closed the port under it).
+        let dropped = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let reading = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (open_gate, gate) = std::sync::mpsc::channel();
+        let got: Arc<Mutex<Vec<u8>>> = Arc::default();
+        let mut port = Some((
+            Box::new(Dropped {
+                reading: reading.clone(),
+                dropped: dropped.clone(),
+            }) as Box<dyn Read + Send>,
+            Box::new(Gated {
+                gate,
+                got: got.clone(),
+                first: true,
+            }) as Box<dyn Write + Send>,
+        ));
+        // Owned by the reader thread (in its `open`): dropped as it ends.
+        let ended = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let thread_ends = Dropped {
+            reading: Arc::default(),
+            dropped: ended.clone(),
+        };
+        let Io::Frames { incoming, outgoing } = spawn("/dev/fake", move || {
+            let _ = &thread_ends;
+            port.take()
+                .ok_or_else(|| std::io::ErrorKind::NotFound.into())
+        }) else {
+            panic!("a framed link");
+        };
+        let deadline = || std::time::Instant::now() + std::time::Duration::from_secs(10);
+        let written = || {
+            let mut d = SerialDecoder::new();
+            d.push(&lock(&got));
+            std::iter::from_fn(|| d.next_bytes()).count()
+        };
+        let until = deadline();
+        while !reading.load(std::sync::atomic::Ordering::SeqCst) {
+            assert!(std::time::Instant::now() < until, "the port never opened");
+            std::thread::yield_now();
+        }
+        outgoing.send(vec![0x91, 0x01]).unwrap();
+        outgoing.send(vec![0x91, 0x02]).unwrap();
+        // The agent stops (as dropping its end does): the reader thread
+        // ends while the writer is still held up.
+        drop((incoming, outgoing));
+        let until = deadline();
+        while !ended.load(std::sync::atomic::Ordering::SeqCst) {
+            assert!(
+                std::time::Instant::now() < until,
+                "the reader thread waited for the writer"
+            );
+            std::thread::yield_now();
+        }
+        assert!(dropped.load(std::sync::atomic::Ordering::SeqCst));
+        open_gate.send(()).unwrap();
+        let until = deadline();
+        while written() < 2 {
+            assert!(
+                std::time::Instant::now() < until,
+                "{} of 2 messages written",
+                written()
+            );
+            std::thread::yield_now();
+        }
+    }
+
     #[test]
     fn a_port_that_fails_is_reopened_and_each_outage_reported_once() {
         let gone = || Err(std::io::Error::from(std::io::ErrorKind::NotFound));
         let (mut openings, writes) = openings();
+        // Owned by the reader thread (in its `open`): dropped as it ends.
+        let ended = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let thread_ends = Dropped {
+            reading: Arc::default(),
+            dropped: ended.clone(),
+        };
         let Io::Frames {
             mut incoming,
             outgoing,
