@@ -445,7 +445,7 @@ mod tests {
             dropped: ended.clone(),
         };
         let Io::Frames { incoming, outgoing } = spawn("/dev/fake", move || {
-            let _ = &thread_ends;
+            std::hint::black_box(&thread_ends);
             port.take()
                 .ok_or_else(|| std::io::ErrorKind::NotFound.into())
         }) else {
@@ -492,12 +492,6 @@ mod tests {
     fn a_port_that_fails_is_reopened_and_each_outage_reported_once() {
         let gone = || Err(std::io::Error::from(std::io::ErrorKind::NotFound));
         let (mut openings, writes) = openings();
-        // Owned by the reader thread (in its `open`): dropped as it ends.
-        let ended = Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let thread_ends = Dropped {
-            reading: Arc::default(),
-            dropped: ended.clone(),
-        };
         let Io::Frames {
             mut incoming,
             outgoing,
