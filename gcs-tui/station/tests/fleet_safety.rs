@@ -151,10 +151,20 @@ async fn crossing(layer_on: bool) -> (Option<f64>, fleet::Metrics) {
         let a = angle(i);
         rig.mission(i, (cx - r * a.cos(), cy - r * a.sin())).await;
     }
-    rig.run_until_arrived(120.0).await;
+    for k in 0..60 {
+        if rig.run_until_arrived(2.0).await {
+            break;
+        }
+        if layer_on && (6..12).contains(&k) {
+            println!("at {:?}:\n{}", rig.time() - start, rig.describe());
+        }
+    }
     let took = rig
         .last_arrival()
         .map(|t| t.saturating_sub(start).as_secs_f64());
+    if layer_on {
+        println!("the robots at the end:\n{}", rig.describe());
+    }
     let m = rig.metrics();
     rig.shutdown().await;
     (took, m)

@@ -349,6 +349,28 @@ impl Rig {
         self.robots[i].sim.agent.safety()
     }
 
+    /// Each robot as it is now: where, heading, speed, whether it
+    /// arrived, and what its layer does (for a failure's message).
+    pub fn describe(&self) -> String {
+        self.robots
+            .iter()
+            .map(|r| {
+                let (p, v) = (r.sim.robot.pose(), r.velocity());
+                format!(
+                    "{} at ({:.2}, {:.2}) heading {:.2}, {:.3} m/s, arrived {:?}, {:?}",
+                    r.name,
+                    p.x,
+                    p.y,
+                    p.heading,
+                    v.norm(),
+                    r.arrived,
+                    r.sim.agent.safety().intervention
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
     /// The robots' true positions.
     pub fn positions(&self) -> Vec<Vec2> {
         self.robots.iter().map(Robot::position).collect()
