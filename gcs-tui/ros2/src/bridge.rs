@@ -25,6 +25,7 @@ use crate::msgs::std::{Header, TriggerResponse};
 use crate::msgs::visualization::MarkerArray;
 use crate::outbound::{self, Frames, diagnostics, odom};
 use crate::ros::{CmdVel, FromRos, RosNode};
+use crate::station::{AttachTo, StationView};
 use crate::stats::{Stats, StatsSnapshot, worth_logging};
 
 /// Subscriptions are renewed this often (the router drops a subscriber
@@ -85,6 +86,8 @@ pub struct Bridge {
     estop_until: Option<Instant>,
     /// Names refused as not ROS 2 names (each logged once).
     bad_names: std::collections::BTreeSet<String>,
+    /// The station's own view, when the bridge attaches to it.
+    station: Option<tokio::sync::watch::Receiver<StationView>>,
 }
 
 impl Bridge {
@@ -137,6 +140,17 @@ impl Bridge {
                  or set ROS_DOMAIN_ID"
             );
         }
+        let attach_key = config.attach_key.as_deref().map(read_key).transpose()?;
+        let station = config.attach.as_deref().map(|address| {
+            crate::station::follow(AttachTo {
+                address: mech_station::client::Address::parse(address),
+                key: attach_key.map(|k| mech_station::client::KeyFileRef {
+                    name: k.name,
+                    key: k.key,
+                }),
+                operator: format!("{name}-bridge"),
+            })
+        });
         let first_id = (local_us() / 1_000_000).wrapping_mul(16) as u32;
         info!(
             router = %config.router, name, domain,
@@ -155,6 +169,7 @@ impl Bridge {
             next_mission_id: first_id,
             estop_until: None,
             bad_names: Default::default(),
+            station,
         })
     }
 
@@ -415,7 +430,12 @@ impl Bridge {
     fn every_second(&mut self) {
         let now = Instant::now();
         let stamp = Time::from_micros(local_us());
-        let out = outbound::periodic(&self.fleet, &self.config, now, stamp);
+        let view = self
+            .station
+            .as_ref()
+            .map(|s| s.borrow().clone())
+            .unwrap_or_default();
+        let out = outbound::periodic(&self.fleet, &view, &self.config, now, stamp);
         for (robot, b) in out.batteries {
             self.ros.battery(&robot, b);
         }
@@ -424,6 +444,7 @@ impl Bridge {
         status.push(diagnostics::bridge_status(
             self.link_name(),
             self.fleet.len(),
+            self.station.as_ref().map(|_| view.attached),
             &snapshot,
         ));
         let header = Header {

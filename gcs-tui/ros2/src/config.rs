@@ -75,6 +75,12 @@ pub struct Ros2Config {
     pub stale_after: f64,
     /// s between the summary lines in the log (0: none).
     pub summary_every: f64,
+    /// The station to attach to for what the protocol does not carry
+    /// (each robot's link quality, the arena): its control socket (a path)
+    /// or `tcp:HOST:PORT` (with `attach_key`). None: not attached.
+    pub attach: Option<String>,
+    /// Operator key file for a station's TCP attach port.
+    pub attach_key: Option<PathBuf>,
 }
 
 impl Default for Ros2Config {
@@ -97,6 +103,8 @@ impl Default for Ros2Config {
             estop_service: EStopService::Enhanced,
             stale_after: 1.0,
             summary_every: 10.0,
+            attach: None,
+            attach_key: None,
         }
     }
 }
@@ -117,9 +125,13 @@ impl Ros2Config {
         let mut config =
             Ros2Config::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        for key in [&mut config.key, &mut config.estop_key]
-            .into_iter()
-            .flatten()
+        for key in [
+            &mut config.key,
+            &mut config.estop_key,
+            &mut config.attach_key,
+        ]
+        .into_iter()
+        .flatten()
         {
             if key.is_relative() {
                 *key = dir.join(&*key);
@@ -164,6 +176,21 @@ impl Ros2Config {
         }
         if self.map_frame.is_empty() {
             return Err("ros2.map_frame must not be empty".into());
+        }
+        if self.attach.as_deref().is_some_and(str::is_empty) {
+            return Err("ros2.attach must name the station's socket or tcp:HOST:PORT".into());
+        }
+        let tcp = self.attach.as_deref().is_some_and(|a| {
+            matches!(
+                mech_station::client::Address::parse(a),
+                mech_station::client::Address::Tcp(_)
+            )
+        });
+        if tcp && self.attach_key.is_none() {
+            return Err(
+                "ros2.attach over TCP needs an operator key: set ros2.attach_key (mech-gcs keygen NAME --operator)"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -225,6 +252,19 @@ mod tests {
         assert!(e("[ros2]\ncmd_vel = \"twist_stamped\"\n").contains("unknown variant"));
         let c = Ros2Config::parse("[ros2]\nestop_service = \"cyclone\"\n").unwrap();
         assert_eq!(c.estop_service, EStopService::Cyclone);
+    }
+
+    #[test]
+    fn attaching_over_tcp_needs_an_operator_key() {
+        let c = Ros2Config::parse("[ros2]\nattach = \"/run/mech/gcs.sock\"\n").unwrap();
+        assert_eq!(c.attach.as_deref(), Some("/run/mech/gcs.sock"));
+        let e = Ros2Config::parse("[ros2]\nattach = \"tcp:10.0.0.2:7401\"\n").unwrap_err();
+        assert!(e.contains("attach_key"), "{e}");
+        let c =
+            Ros2Config::parse("[ros2]\nattach = \"tcp:10.0.0.2:7401\"\nattach_key = \"ops.key\"\n")
+                .unwrap();
+        assert_eq!(c.attach_key.as_deref(), Some(Path::new("ops.key")));
+        assert!(Ros2Config::parse("[ros2]\nattach = \"\"\n").is_err());
     }
 
     #[test]

@@ -12,7 +12,9 @@
 //! `docs/ros2.md`.
 //!
 //! [`bridge`] runs it; [`inbound`] and [`outbound`] are the pure
-//! conversions, [`link`] the station side, [`ros`] the DDS side.
+//! conversions, [`link`] the station side, [`ros`] the DDS side, and
+//! [`station`] the optional attach to the station for what the protocol
+//! does not carry (each robot's link quality, the arena).
 
 pub mod bridge;
 pub mod config;
@@ -22,6 +24,7 @@ pub mod link;
 pub mod msgs;
 pub mod outbound;
 pub mod ros;
+pub mod station;
 pub mod stats;
 
 pub use bridge::Bridge;

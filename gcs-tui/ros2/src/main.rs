@@ -47,6 +47,15 @@ struct Cli {
     /// Seconds between summary lines in the log (0: none).
     #[arg(long, value_name = "S")]
     summary_every: Option<f64>,
+    /// Attach to the station (its control socket, or tcp:HOST:PORT with
+    /// --attach-key) for each robot's link quality and the arena
+    /// (overrides ros2.attach).
+    #[arg(long, value_name = "ADDR")]
+    attach: Option<String>,
+    /// Operator key file for attaching over TCP (overrides
+    /// ros2.attach_key).
+    #[arg(long, value_name = "FILE")]
+    attach_key: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -105,6 +114,12 @@ fn config(cli: &Cli) -> anyhow::Result<Ros2Config> {
     }
     if let Some(s) = cli.summary_every {
         c.summary_every = s;
+    }
+    if let Some(a) = &cli.attach {
+        c.attach = Some(a.clone());
+    }
+    if let Some(k) = &cli.attach_key {
+        c.attach_key = Some(k.clone());
     }
     c.check().map_err(anyhow::Error::msg)?;
     Ok(c)

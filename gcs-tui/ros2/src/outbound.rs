@@ -16,6 +16,7 @@ use crate::msgs::builtin::Time;
 use crate::msgs::diagnostic::DiagnosticStatus;
 use crate::msgs::sensor::BatteryState;
 use crate::msgs::visualization::Marker;
+use crate::station::StationView;
 use diagnostics::RobotContext;
 
 /// What goes out once a second for the robots (the bridge adds its own
@@ -33,10 +34,20 @@ pub struct Periodic {
 /// markers). A robot the station no longer reports (no telemetry for
 /// `stale_after`) keeps its STALE status, but its battery is not repeated
 /// and its markers are not renewed, so rviz2 drops them.
-pub fn periodic(fleet: &Fleet, config: &Ros2Config, now: Instant, stamp: Time) -> Periodic {
+pub fn periodic(
+    fleet: &Fleet,
+    station: &StationView,
+    config: &Ros2Config,
+    now: Instant,
+    stamp: Time,
+) -> Periodic {
     let stale_after = Duration::from_secs_f64(config.stale_after);
     let map = config.map_frame.as_str();
     let mut out = Periodic::default();
+    if let Some(arena) = &station.arena {
+        out.markers
+            .extend(markers::arena_markers(arena, map, stamp));
+    }
     for (i, (name, r)) in fleet.iter().enumerate() {
         let (cmd, goal) = (config.cmd_channel(name), config.goal_channel(name));
         let cx = RobotContext {
@@ -44,6 +55,7 @@ pub fn periodic(fleet: &Fleet, config: &Ros2Config, now: Instant, stamp: Time) -
             goal_channel: &goal,
             now,
             stale_after,
+            link: station.robots.get(name),
         };
         out.status.push(diagnostics::robot_status(name, r, cx));
         if r.stale(now, stale_after) {
@@ -99,7 +111,13 @@ mod tests {
         let later = t0 + Duration::from_millis(1500);
         fleet.update("robot_2", telemetry(1.1, 0.0), 1_700_000_001_500_000, later);
         let config = Ros2Config::default();
-        let out = periodic(&fleet, &config, later, Time::default());
+        let out = periodic(
+            &fleet,
+            &StationView::default(),
+            &config,
+            later,
+            Time::default(),
+        );
         assert_eq!(out.status.len(), 2);
         assert_eq!(out.status[0].level, crate::msgs::diagnostic::STALE);
         let robots: Vec<&str> = out.batteries.iter().map(|(r, _)| r.as_str()).collect();

@@ -9,7 +9,9 @@
 //! channel; goal_pose gets a robot to the goal; NaN, out-of-range,
 //! wrong-frame and unknown-robot input refused and counted on
 //! `/diagnostics` and in the bridge's last line; an e-stop engaged from
-//! ROS 2 stops every robot.
+//! ROS 2 stops every robot; attached to the station, each robot's link as
+//! the station measures it on `/diagnostics` and the arena on
+//! `/mech/markers`.
 
 #![allow(clippy::unwrap_used)]
 
@@ -132,15 +134,39 @@ fn bad_cmd_vel_refused_and_counted(rig: &mut Rig) {
     rig.node.ask(json!({"op": "halt", "robot": "robot_9"}));
 }
 
+/// Attached to the station (`--attach` its control socket): each robot's
+/// link as the station's router measures it on `/diagnostics`, and the
+/// demo's arena on `/mech/markers`.
+fn the_stations_link_figures_and_arena_through_attaching(rig: &mut Rig, robots: [&str; 3]) {
+    let s = eventually(rig, "link quality on /diagnostics and the arena", |s| {
+        let linked = robots.iter().all(|r| {
+            diag(s, r, "station_link") == Some("connected")
+                && diag(s, r, "station_loss").is_some()
+                && diag(s, r, "station_rx_hz")
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|hz| hz > 1.0)
+        });
+        let arena = s["markers"]["mech/arena/0"]["type"] == 4;
+        (linked && arena).then(|| s.clone())
+    });
+    assert_eq!(
+        s["diagnostics"]["mech: ros2 bridge"]["values"]["station_attached"], "yes",
+        "{}",
+        s["diagnostics"]
+    );
+    assert_eq!(s["markers"]["mech/arena/0"]["frame_id"], "map");
+}
+
 #[test]
 fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
     if rig::skip_unless_available() {
         return;
     }
-    let mut rig = Rig::start(3, &[], false);
+    let mut rig = Rig::start(3, &["--attach", "@DIR@/gcs.sock"], false);
     let robots = ["robot_1", "robot_2", "robot_3"];
 
     let s = every_robot_in_the_ros2_layout(&mut rig, robots);
+    the_stations_link_figures_and_arena_through_attaching(&mut rig, robots);
 
     // cmd_vel for robot_1 while it is routed to none: forwarded by the
     // bridge, dropped by the router; the robot holds still.

@@ -1,23 +1,32 @@
 //! Markers for rviz2 on `/mech/markers` (visualization_msgs/MarkerArray):
 //! each robot's name over it, and each goal the bridge sent, with a line
-//! from the robot to it while it is being approached.
+//! from the robot to it while it is being approached; with the bridge
+//! attached to the station, the arena (boundary, keep-outs, slow zones,
+//! obstacles: [`arena_markers`]).
 //!
 //! Waypoints of missions other controllers sent (the station's `wp/gcs`)
-//! and the arena are not in the telemetry an external client receives, so
-//! they are not drawn.
+//! are not in the telemetry an external client receives, so they are not
+//! drawn.
 
+use mech_core::arena::ArenaShape;
 use mech_proto::Telemetry;
 
 use crate::fleet::Goal;
 use crate::msgs::builtin::{Duration, Time};
 use crate::msgs::geometry::{Point, Pose, Vector3};
 use crate::msgs::std::{ColorRgba, Header};
-use crate::msgs::visualization::{ADD, DELETE, LINE_STRIP, Marker, SPHERE, TEXT_VIEW_FACING};
+use crate::msgs::visualization::{
+    ADD, CYLINDER, DELETE, LINE_STRIP, Marker, SPHERE, TEXT_VIEW_FACING,
+};
 
 /// Marker namespaces: rviz2 lists and toggles them.
 pub const NS_NAMES: &str = "mech/names";
 pub const NS_GOALS: &str = "mech/goals";
 pub const NS_GOAL_LINES: &str = "mech/goal_lines";
+pub const NS_ARENA: &str = "mech/arena";
+pub const NS_KEEP_OUT: &str = "mech/keep_out";
+pub const NS_SLOW_ZONES: &str = "mech/slow_zones";
+pub const NS_OBSTACLES: &str = "mech/obstacles";
 
 /// Markers live this long without an update (they are sent every second),
 /// so a bridge that stops leaves nothing behind.
@@ -40,6 +49,18 @@ const GREEN: ColorRgba = ColorRgba {
     g: 0.9,
     b: 0.3,
     a: 0.9,
+};
+const RED: ColorRgba = ColorRgba {
+    r: 0.95,
+    g: 0.2,
+    b: 0.15,
+    a: 0.9,
+};
+const YELLOW: ColorRgba = ColorRgba {
+    r: 0.95,
+    g: 0.85,
+    b: 0.1,
+    a: 0.8,
 };
 const GREY: ColorRgba = ColorRgba {
     r: 0.6,
@@ -156,6 +177,49 @@ pub fn robot_markers(
     out
 }
 
+/// The arena: its boundary (white), keep-outs (red), slow zones (yellow)
+/// as closed lines on the floor, static obstacles as red cylinders.
+pub fn arena_markers(arena: &ArenaShape, map: &str, stamp: Time) -> Vec<Marker> {
+    let outline = |ns: &str, id: usize, polygon: &[mech_proto::Point], color: ColorRgba| {
+        let mut m = marker(ns, id as i32, LINE_STRIP, map, stamp);
+        m.scale.x = 0.02;
+        m.color = color;
+        m.points = polygon
+            .iter()
+            .chain(polygon.first())
+            .map(|p| Point {
+                x: p.x,
+                y: p.y,
+                z: 0.0,
+            })
+            .collect();
+        m
+    };
+    let mut out = vec![outline(NS_ARENA, 0, &arena.boundary, WHITE)];
+    for (i, k) in arena.keep_out.iter().enumerate() {
+        out.push(outline(NS_KEEP_OUT, i, k, RED));
+    }
+    for (i, z) in arena.slow_zones.iter().enumerate() {
+        out.push(outline(NS_SLOW_ZONES, i, &z.polygon, YELLOW));
+    }
+    for (i, d) in arena.obstacles.iter().enumerate() {
+        let mut m = marker(NS_OBSTACLES, i as i32, CYLINDER, map, stamp);
+        m.pose.position = Point {
+            x: d.x,
+            y: d.y,
+            z: 0.1,
+        };
+        m.scale = Vector3 {
+            x: 2.0 * d.radius,
+            y: 2.0 * d.radius,
+            z: 0.2,
+        };
+        m.color = RED;
+        out.push(m);
+    }
+    out
+}
+
 fn deleted(ns: &str, id: i32, map: &str, stamp: Time) -> Marker {
     Marker {
         action: DELETE,
@@ -226,6 +290,46 @@ mod tests {
         t.channel = "joy/0".into();
         t.mission = None;
         assert_eq!(goal_state(&g, &t), GoalState::Waiting, "routed elsewhere");
+    }
+
+    #[test]
+    fn the_arena_is_drawn_closed_with_its_keep_outs_zones_and_obstacles() {
+        let mut arena = mech_core::ArenaConfig::demo().shape();
+        let square = |x: f64| {
+            [(x, 1.0), (x + 0.5, 1.0), (x + 0.5, 1.5), (x, 1.5)]
+                .map(|(x, y)| mech_proto::Point { x, y })
+                .to_vec()
+        };
+        arena.keep_out = vec![square(1.0)];
+        arena.slow_zones = vec![mech_proto::SlowZone {
+            polygon: square(2.0),
+            max_speed: 0.1,
+        }];
+        arena.obstacles = vec![mech_proto::Disc {
+            x: 3.0,
+            y: 2.0,
+            radius: 0.2,
+        }];
+        let m = arena_markers(&arena, "map", Time::default());
+        let kinds: Vec<(&str, i32, usize)> = m
+            .iter()
+            .map(|m| (m.ns.as_str(), m.r#type, m.points.len()))
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                (NS_ARENA, LINE_STRIP, arena.boundary.len() + 1),
+                (NS_KEEP_OUT, LINE_STRIP, 5),
+                (NS_SLOW_ZONES, LINE_STRIP, 5),
+                (NS_OBSTACLES, CYLINDER, 0),
+            ]
+        );
+        assert_eq!(m[0].points.first(), m[0].points.last(), "closed");
+        assert_eq!((m[3].pose.position.x, m[3].scale.x), (3.0, 0.4));
+        assert!(
+            m.iter()
+                .all(|m| m.header.frame_id == "map" && m.action == ADD)
+        );
     }
 
     #[test]

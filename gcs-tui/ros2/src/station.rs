@@ -1,0 +1,162 @@
+//! The station's own view of the fleet, for what the protocol gives no
+//! external controller: each robot's link as the router measures it (state,
+//! loss, round trip, rates, which links are live) and the arena. The bridge
+//! reads it by attaching to the station as the TUI does (`--attach`, the
+//! station's control socket or its TCP attach port with an operator key),
+//! asking for fleet snapshots only; it sends the station no command. It
+//! attaches again (every [`RETRY`]) whenever the station goes away, and
+//! meanwhile the view is empty, so `/diagnostics` says the bridge is not
+//! attached instead of showing old figures.
+
+use std::collections::HashMap;
+use std::time::Duration;
+
+use mech_core::arena::ArenaShape;
+use mech_core::counters::LinkQuality;
+use mech_core::event::LinkState;
+use mech_station::client::{Address, AttachOptions, KeyFileRef, attach};
+use mech_station::view::FleetSnapshot;
+use mech_station::wire::{FromStation, Streams};
+use tokio::sync::watch;
+use tracing::{info, warn};
+
+/// How long the bridge waits before attaching again.
+pub const RETRY: Duration = Duration::from_secs(2);
+
+/// One robot's link as the station's router measures it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotLink {
+    pub state: LinkState,
+    pub quality: LinkQuality,
+    /// Live links and radio budget of a robot with several
+    /// (`wifi*+radio 14Hz`); empty for a robot on one.
+    pub links: String,
+}
+
+/// What the bridge knows from the station itself.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StationView {
+    /// Attached, and a snapshot arrived.
+    pub attached: bool,
+    pub robots: HashMap<String, RobotLink>,
+    /// The station's arena, when it has one.
+    pub arena: Option<ArenaShape>,
+}
+
+impl StationView {
+    /// The view in one of the station's snapshots (its own robots only:
+    /// robots another station shares through a bridge are not routed
+    /// here).
+    pub fn from_snapshot(fleet: &FleetSnapshot) -> StationView {
+        let robots = fleet
+            .robots
+            .iter()
+            .filter(|r| r.remote.is_none())
+            .map(|r| {
+                let link = RobotLink {
+                    state: r.link,
+                    quality: r.quality,
+                    links: r.links.clone(),
+                };
+                (r.name.clone(), link)
+            })
+            .collect();
+        StationView {
+            attached: true,
+            robots,
+            arena: fleet.arena.clone(),
+        }
+    }
+}
+
+/// Where and how to attach.
+#[derive(Debug, Clone)]
+pub struct AttachTo {
+    pub address: Address,
+    /// An operator key, for a station's TCP attach port.
+    pub key: Option<KeyFileRef>,
+    /// The name the station logs the bridge's session under.
+    pub operator: String,
+}
+
+/// Follows the station's view from now on (a task of its own); the
+/// receiver always holds the latest.
+pub fn follow(to: AttachTo) -> watch::Receiver<StationView> {
+    let (tx, rx) = watch::channel(StationView::default());
+    tokio::spawn(async move {
+        let mut last_error = None;
+        while !tx.is_closed() {
+            let opts = AttachOptions {
+                operator: Some(to.operator.clone()),
+                key: to.key.clone(),
+                stream: Streams {
+                    snapshots: true,
+                    ..Streams::default()
+                },
+            };
+            match attach(&to.address, opts).await {
+                Ok(mut attached) => {
+                    info!(station = %to.address, "attached to the station: link quality and the arena on /diagnostics and /mech/markers");
+                    last_error = None;
+                    while let Some(m) = attached.from.recv().await {
+                        match m {
+                            FromStation::Snapshot { fleet, .. }
+                                if tx.send(StationView::from_snapshot(&fleet)).is_err() =>
+                            {
+                                return;
+                            }
+                            FromStation::Bye { reason } => {
+                                warn!(station = %to.address, "the station closed the session: {reason}");
+                            }
+                            _ => {}
+                        }
+                    }
+                    let _ = tx.send(StationView::default());
+                    warn!(station = %to.address, "detached from the station; attaching again");
+                }
+                Err(e) => {
+                    let text = e.to_string();
+                    if last_error.as_ref() != Some(&text) {
+                        warn!(station = %to.address, "cannot attach to the station: {text}; trying again every {RETRY:?}");
+                        last_error = Some(text);
+                    }
+                }
+            }
+            tokio::time::sleep(RETRY).await;
+        }
+    });
+    rx
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_station::view::RobotView;
+
+    #[test]
+    fn a_snapshot_gives_each_own_robots_link_and_the_arena() {
+        let robot = |name: &str, remote: Option<&str>| {
+            let mut r = RobotView::at(name, 1, "diff-drive", 0.0, 0.0, 0.0);
+            r.link = LinkState::Stale;
+            r.links = "wifi*+radio 14Hz".into();
+            r.remote = remote.map(str::to_string);
+            r.quality.loss = Some(0.25);
+            r
+        };
+        let fleet = FleetSnapshot {
+            robots: vec![robot("robot_1", None), robot("far_1", Some("lab2"))],
+            arena: Some(mech_core::ArenaConfig::demo().shape()),
+            ..FleetSnapshot::default()
+        };
+        let v = StationView::from_snapshot(&fleet);
+        assert!(v.attached);
+        assert_eq!(v.robots.len(), 1, "a remote robot is not this station's");
+        let l = &v.robots["robot_1"];
+        assert_eq!(
+            (l.state, l.quality.loss, l.links.as_str()),
+            (LinkState::Stale, Some(0.25), "wifi*+radio 14Hz")
+        );
+        assert_eq!(v.arena.as_ref().map(|a| a.boundary.len()), Some(4));
+        assert!(!StationView::default().attached);
+    }
+}
