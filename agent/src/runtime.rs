@@ -130,6 +130,51 @@ impl Vehicle for HardwareVehicle {
     }
 }
 
+/// How long a stopping agent waits for a link's writer thread to write
+/// what was queued (its Bye) before it may exit.
+pub const FLUSH_WAIT: Duration = Duration::from_secs(2);
+
+/// The sending side of a link framed elsewhere (a serial link's writer
+/// thread): messages queue to the thread. Dropped (the agent stops), it
+/// ends the queue and waits up to [`FLUSH_WAIT`] for the thread to write
+/// what was in it, so the agent's Bye is on the wire before the process
+/// exits.
+#[derive(Debug)]
+pub struct FramesOut {
+    queue: Option<std::sync::mpsc::Sender<Vec<u8>>>,
+    /// Disconnected when the writer thread ends.
+    done: std::sync::mpsc::Receiver<()>,
+}
+
+impl FramesOut {
+    /// `queue` to the writer thread, which holds `done`'s sender until it
+    /// ends.
+    pub fn new(
+        queue: std::sync::mpsc::Sender<Vec<u8>>,
+        done: std::sync::mpsc::Receiver<()>,
+    ) -> FramesOut {
+        FramesOut {
+            queue: Some(queue),
+            done,
+        }
+    }
+
+    /// Queues `bytes` for the writer; `Err` once the writer has ended.
+    pub fn send(&self, bytes: Vec<u8>) -> Result<(), std::sync::mpsc::SendError<Vec<u8>>> {
+        match &self.queue {
+            Some(q) => q.send(bytes),
+            None => Err(std::sync::mpsc::SendError(bytes)),
+        }
+    }
+}
+
+impl Drop for FramesOut {
+    fn drop(&mut self) {
+        drop(self.queue.take());
+        let _ = self.done.recv_timeout(FLUSH_WAIT);
+    }
+}
+
 /// The link to the router.
 #[derive(Debug)]
 pub enum Io {
@@ -142,7 +187,7 @@ pub enum Io {
     /// as encoded bytes, with news of the port failing and returning.
     Frames {
         incoming: mpsc::Receiver<FramesIn>,
-        outgoing: std::sync::mpsc::Sender<Vec<u8>>,
+        outgoing: FramesOut,
     },
     /// Several links (each `Udp` or `Frames`), in order of preference,
     /// with failover between them ([`LinkChoice`]).

@@ -79,7 +79,8 @@ pub struct SafetyConfig {
     /// How long a robot may want to move without moving among its
     /// neighbours before it backs off from them, s (0: never).
     pub stuck_after: f64,
-    /// How long it backs off, s.
+    /// How long it backs off, s (a diff-drive turns towards the way out at
+    /// `yield_turn_rate` first, which may take longer than this).
     pub back_off_time: f64,
 }
 
@@ -194,8 +195,9 @@ pub struct SafetyLayer {
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
     yielding: Option<Yield>,
-    /// Since when the robot wanted to move but did not.
-    stuck_since: Option<Duration>,
+    /// Since when the robot wanted to move but did not, and whether it
+    /// asked to go somewhere meanwhile (not only to turn on the spot).
+    stuck_since: Option<(Duration, bool)>,
     /// This robot's id at the station (its Welcome's): it staggers when
     /// robots stuck together back off.
     id: Option<u16>,
@@ -410,7 +412,7 @@ impl SafetyLayer {
             return filter::steer(c, y.target, mobility);
         }
         self.yielding = None;
-        if let Some(back_off) = self.unstick(c, mobility, wants_motion, margin, now) {
+        if let Some(back_off) = self.unstick(c, desired, mobility, wants_motion, margin, now) {
             return back_off;
         }
         let look_ahead = self.config.horizon > 0.0;
@@ -452,13 +454,16 @@ impl SafetyLayer {
 
     /// Deadlock breaking: a robot that has wanted to move for
     /// `stuck_after` s (plus 0.3 s per its id modulo 5, so robots jammed
-    /// together do not all move at once) without moving backs off from the
+    /// together do not all move at once) without moving, and asked to go
+    /// somewhere meanwhile (a turn on the spot or a crawl slower than
+    /// [`STILL`] is not being stuck), backs off from the
     /// neighbours near it for `back_off_time` s, at up to
     /// [`BACK_OFF_SPEED`], within the constraints as always. `None`: it is
     /// not stuck (or nobody is near to back off from).
     fn unstick(
         &mut self,
         c: &Constraints,
+        desired: Vec2,
         mobility: &Mobility,
         wants_motion: bool,
         margin: f64,
@@ -468,9 +473,11 @@ impl SafetyLayer {
             self.stuck_since = None;
             return None;
         }
-        let since = *self.stuck_since.get_or_insert(now);
+        let (since, going) = self.stuck_since.get_or_insert((now, false));
+        *going |= desired.norm() >= STILL;
+        let (since, going) = (*since, *going);
         let wait = self.config.stuck_after + 0.3 * f64::from(self.id.unwrap_or(0) % 5);
-        if now.saturating_sub(since).as_secs_f64() <= wait {
+        if !going || now.saturating_sub(since).as_secs_f64() <= wait {
             return None;
         }
         let away = self
@@ -749,6 +756,24 @@ mod tests {
             ..SafetyConfig::default()
         });
         assert!(!never.iter().any(|m| backing(&m)), "0: never");
+        // Told only to turn on the spot beside it: never moved.
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.registered(1);
+        l.apply_arena(&arena(1, true));
+        let turn = kiwi.mix(&Twist {
+            wz: 1.0,
+            ..Twist::default()
+        });
+        for k in 0..150u64 {
+            let now = Duration::from_millis(20 * k);
+            l.apply_neighbours(&neighbours(k + 1, vec![neighbour_at(2.4, 1.5)]), now);
+            let f = l.filter(kiwi.as_ref(), &me, Vec2::ZERO, &turn, now);
+            let t = kiwi.motion(&f.outputs);
+            assert!(
+                t.vx.hypot(t.vy) < 1e-9,
+                "a turn on the spot is not stuck: {t:?}"
+            );
+        }
     }
 
     #[test]

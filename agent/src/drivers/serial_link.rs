@@ -16,7 +16,7 @@ use mech_proto::Envelope;
 use mech_proto::framing::{Reopen, SerialDecoder, SerialRead, write_serial_message};
 use tokio::sync::mpsc;
 
-use crate::runtime::{FramesIn, Io};
+use crate::runtime::{FramesIn, FramesOut, Io};
 
 /// Framing over a byte stream.
 #[derive(Debug)]
@@ -125,22 +125,26 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// Runs a serial link named `port` on two threads and returns the agent
-/// loop's [`Io`]. The reader thread owns the port: it opens it with
-/// `open`, reads frames until the port fails, and opens it again on the
+/// loop's [`Io`]. The reader thread opens the port with `open`, reads
+/// frames until the port fails (and then closes it), and opens it again on the
 /// schedule of [`Reopen`] (a radio unplugged and plugged back, a
 /// pseudo-terminal recreated) for as long as the agent runs, also when the
 /// port cannot be opened at first. The loop hears of an outage once, when
 /// it begins ([`FramesIn::Down`]), and once when it ends
 /// ([`FramesIn::Up`]); meanwhile what it sends is dropped. The writer
 /// thread writes each message while the port is open; a failed write ends
-/// that opening too. A port must return from `read` periodically (its read
-/// timeout) so the reader notices a failed write and the agent stopping.
+/// that opening too. When the agent stops, the reader thread ends and
+/// leaves the port to the writer thread, which writes what was queued
+/// (the agent's Bye; [`FramesOut`] waits for it) and closes the port as it
+/// ends. A port must return from `read` periodically (its read timeout) so
+/// the reader notices a failed write and the agent stopping.
 pub fn spawn<F>(port: &str, mut open: F) -> Io
 where
     F: FnMut() -> std::io::Result<OpenedPort> + Send + 'static,
 {
     let (in_tx, incoming) = mpsc::channel(64);
-    let (outgoing, out_rx) = std::sync::mpsc::channel::<Vec<u8>>();
+    let (queue, out_rx) = std::sync::mpsc::channel::<Vec<u8>>();
+    let (done, writer_done) = std::sync::mpsc::channel::<()>();
     let side = Arc::new(Mutex::new(WriteSide::default()));
     let (reader_side, name) = (side.clone(), port.to_string());
     std::thread::spawn(move || {
@@ -187,6 +191,8 @@ where
         }
     });
     std::thread::spawn(move || {
+        // Held until the thread ends: `FramesOut` waits for that.
+        let _done = done;
         while let Ok(bytes) = out_rx.recv() {
             let mut w = lock(&side);
             let Some(link) = w.link.as_mut() else {
@@ -200,7 +206,10 @@ where
             }
         }
     });
-    Io::Frames { incoming, outgoing }
+    Io::Frames {
+        incoming,
+        outgoing: FramesOut::new(queue, writer_done),
+    }
 }
 
 /// Reads frames from one opening of the port into `to` until the port
@@ -418,11 +427,12 @@ mod tests {
 
     #[test]
     fn what_the_agent_sent_before_it_stopped_is_written_after() {
-        // The writer is still busy with one message, a second (the
-        // agent's Bye) waits behind it, and the agent stops: the reader
-        // thread ends at once, and the port stays with the writer until
-        // both are written (a slow writer thread on a busy machine lost
-        // the Bye when the reader closed the port under it).
+        // The agent stops: the reader thread ends at once (its end of
+        // the link dropped), and what was queued for the writer (the
+        // agent's Bye), held up behind a slow write, is still written, by
+        // the time the sending end is dropped (the agent may exit then). A
+        // reader that closed the port as it ended lost the Bye whenever
+        // the writer thread had not yet run (a busy machine).
         let dropped = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let reading = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let (open_gate, gate) = std::sync::mpsc::channel();
@@ -462,30 +472,25 @@ mod tests {
             assert!(std::time::Instant::now() < until, "the port never opened");
             std::thread::yield_now();
         }
-        outgoing.send(vec![0x91, 0x01]).unwrap();
-        outgoing.send(vec![0x91, 0x02]).unwrap();
-        // The agent stops (as dropping its end does): the reader thread
-        // ends while the writer is still held up.
-        drop((incoming, outgoing));
+        drop(incoming);
         let until = deadline();
         while !ended.load(std::sync::atomic::Ordering::SeqCst) {
             assert!(
                 std::time::Instant::now() < until,
-                "the reader thread waited for the writer"
+                "the reader thread did not end"
             );
             std::thread::yield_now();
         }
         assert!(dropped.load(std::sync::atomic::Ordering::SeqCst));
-        open_gate.send(()).unwrap();
-        let until = deadline();
-        while written() < 2 {
-            assert!(
-                std::time::Instant::now() < until,
-                "{} of 2 messages written",
-                written()
-            );
-            std::thread::yield_now();
-        }
+        outgoing.send(vec![0x91, 0x01]).unwrap();
+        outgoing.send(vec![0x91, 0x02]).unwrap();
+        let opener = std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            open_gate.send(()).unwrap();
+        });
+        drop(outgoing);
+        assert_eq!(written(), 2, "both written before the sending end is gone");
+        opener.join().unwrap();
     }
 
     #[test]

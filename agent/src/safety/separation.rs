@@ -150,8 +150,8 @@ impl NeighbourSet {
     }
 }
 
-/// Steps of the right turn tried by [`NeighbourSet::anticipate`], over
-/// half a circle.
+/// Steps of the turns tried by [`NeighbourSet::anticipate`] on each side,
+/// over half a circle.
 const ANTICIPATION_STEPS: usize = 36;
 
 impl NeighbourSet {
@@ -159,11 +159,13 @@ impl NeighbourSet {
     /// `desired` would bring this robot (at `p`, of `radius`) within
     /// `radius + r_j + margin` of a neighbour moving on at its own velocity
     /// within `horizon` seconds, the same velocity turned right by the
-    /// smallest angle that avoids every such contact, or if none up to half
-    /// a circle does, the one that puts the first contact off longest.
-    /// `None` when `desired` is clear (or nothing better is found). Every robot turning right, two meeting head-on
-    /// or crossing pass each other with a small swerve each, well before
-    /// their braking paths meet; the constraints never rely on it.
+    /// smallest angle that avoids every such contact; if no turn to the
+    /// right up to half a circle does, turned left by the smallest that
+    /// does; if none does, the turn that puts the first contact off
+    /// longest. `None` when `desired` is clear (or nothing better is
+    /// found). Every robot turning right, two meeting head-on or crossing
+    /// pass each other with a small swerve each, well before their braking
+    /// paths meet; the constraints never rely on it.
     pub fn anticipate(
         &self,
         p: Vec2,

@@ -140,17 +140,24 @@ impl Bridge {
                  or set ROS_DOMAIN_ID"
             );
         }
-        let attach_key = config.attach_key.as_deref().map(read_key).transpose()?;
-        let station = config.attach.as_deref().map(|address| {
-            crate::station::follow(AttachTo {
-                address: mech_station::client::Address::parse(address),
-                key: attach_key.map(|k| mech_station::client::KeyFileRef {
-                    name: k.name,
-                    key: k.key,
-                }),
-                operator: format!("{name}-bridge"),
-            })
-        });
+        let station = match config.attach.as_deref() {
+            Some(address) => {
+                let key = config.attach_key.as_deref().map(read_key).transpose()?;
+                // Over TCP the station takes the key's name as the operator.
+                let operator = key
+                    .as_ref()
+                    .map_or_else(|| Ros2Config::attach_operator(&name), |k| k.name.clone());
+                Some(crate::station::follow(AttachTo {
+                    address: mech_station::client::Address::parse(address),
+                    key: key.map(|k| mech_station::client::KeyFileRef {
+                        name: k.name,
+                        key: k.key,
+                    }),
+                    operator,
+                }))
+            }
+            None => None,
+        };
         let first_id = (local_us() / 1_000_000).wrapping_mul(16) as u32;
         info!(
             router = %config.router, name, domain,

@@ -140,6 +140,12 @@ impl Ros2Config {
         Ok(config)
     }
 
+    /// The operator a bridge named `name` attaches to the station as (over
+    /// its control socket; over TCP the operator key's name is used).
+    pub fn attach_operator(name: &str) -> String {
+        format!("{name}-bridge")
+    }
+
     /// Reads `[ros2]` from TOML text and checks it.
     pub fn parse(text: &str) -> Result<Ros2Config, String> {
         let file: File = toml::from_str(text).map_err(|e| e.to_string())?;
@@ -186,9 +192,16 @@ impl Ros2Config {
                 mech_station::client::Address::Tcp(_)
             )
         });
+        if self.attach.is_none() && self.attach_key.is_some() {
+            return Err("ros2.attach_key is for ros2.attach, which is not set".into());
+        }
+        if self.attach.is_some() && !tcp {
+            mech_station::check_operator(&Ros2Config::attach_operator(&self.name))
+                .map_err(|e| format!("ros2.name, as the station's operator when attached: {e}"))?;
+        }
         if tcp && self.attach_key.is_none() {
             return Err(
-                "ros2.attach over TCP needs an operator key: set ros2.attach_key (mech-gcs keygen NAME --operator)"
+                "ros2.attach over TCP needs an operator key: set ros2.attach_key (a key the station lists as an operator)"
                     .into(),
             );
         }
@@ -265,6 +278,13 @@ mod tests {
                 .unwrap();
         assert_eq!(c.attach_key.as_deref(), Some(Path::new("ops.key")));
         assert!(Ros2Config::parse("[ros2]\nattach = \"\"\n").is_err());
+        let e = Ros2Config::parse("[ros2]\nattach_key = \"ops.key\"\n").unwrap_err();
+        assert!(e.contains("not set"), "{e}");
+        let long = format!(
+            "[ros2]\nname = \"{}\"\nattach = \"/run/gcs.sock\"\n",
+            "r".repeat(30)
+        );
+        assert!(Ros2Config::parse(&long).unwrap_err().contains("operator"));
     }
 
     #[test]

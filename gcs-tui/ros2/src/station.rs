@@ -79,53 +79,101 @@ pub struct AttachTo {
     pub operator: String,
 }
 
-/// Follows the station's view from now on (a task of its own); the
-/// receiver always holds the latest.
+/// Follows the station's view from now on (a task of its own, which
+/// ends when the receiver is dropped); the receiver always holds the
+/// latest.
 pub fn follow(to: AttachTo) -> watch::Receiver<StationView> {
     let (tx, rx) = watch::channel(StationView::default());
     tokio::spawn(async move {
-        let mut last_error = None;
-        while !tx.is_closed() {
-            let opts = AttachOptions {
-                operator: Some(to.operator.clone()),
-                key: to.key.clone(),
-                stream: Streams {
-                    snapshots: true,
-                    ..Streams::default()
-                },
-            };
-            match attach(&to.address, opts).await {
-                Ok(mut attached) => {
-                    info!(station = %to.address, "attached to the station: link quality and the arena on /diagnostics and /mech/markers");
-                    last_error = None;
-                    while let Some(m) = attached.from.recv().await {
-                        match m {
-                            FromStation::Snapshot { fleet, .. }
-                                if tx.send(StationView::from_snapshot(&fleet)).is_err() =>
-                            {
-                                return;
-                            }
-                            FromStation::Bye { reason } => {
-                                warn!(station = %to.address, "the station closed the session: {reason}");
-                            }
-                            _ => {}
-                        }
-                    }
-                    let _ = tx.send(StationView::default());
-                    warn!(station = %to.address, "detached from the station; attaching again");
-                }
-                Err(e) => {
-                    let text = e.to_string();
-                    if last_error.as_ref() != Some(&text) {
-                        warn!(station = %to.address, "cannot attach to the station: {text}; trying again every {RETRY:?}");
-                        last_error = Some(text);
-                    }
-                }
-            }
-            tokio::time::sleep(RETRY).await;
+        tokio::select! {
+            _ = tx.closed() => {}
+            _ = keep_attached(&to, &tx) => {}
         }
     });
     rx
+}
+
+/// A station that sends no snapshot for this long is taken as gone (it
+/// sends several a second): a cable pulled, a station stopped without
+/// closing the connection.
+pub const SILENT: Duration = Duration::from_secs(5);
+
+/// Longest wait for a connection and the handshake.
+const CONNECT: Duration = Duration::from_secs(10);
+
+/// A session shorter than this is a flap: after the first, attaching and
+/// detaching are logged again only once a session lasts.
+const FLAP: Duration = Duration::from_secs(10);
+
+/// Attaches, follows the snapshots until the station goes, and again,
+/// for as long as anyone reads `tx`.
+async fn keep_attached(to: &AttachTo, tx: &watch::Sender<StationView>) {
+    let mut last_error = None;
+    let mut flaps = 0u32;
+    loop {
+        let opts = AttachOptions {
+            operator: Some(to.operator.clone()),
+            key: to.key.clone(),
+            stream: Streams {
+                snapshots: true,
+                ..Streams::default()
+            },
+        };
+        match tokio::time::timeout(CONNECT, attach(&to.address, opts)).await {
+            Ok(Ok(mut attached)) => {
+                last_error = None;
+                if flaps == 0 {
+                    info!(station = %to.address, "attached to the station: link quality and the arena on /diagnostics and /mech/markers");
+                }
+                let since = std::time::Instant::now();
+                let why = follow_snapshots(&mut attached.from, tx).await;
+                if tx.send(StationView::default()).is_err() {
+                    return;
+                }
+                flaps = if since.elapsed() < FLAP { flaps + 1 } else { 0 };
+                match flaps {
+                    0 | 1 => {
+                        warn!(station = %to.address, "detached from the station ({why}); attaching again")
+                    }
+                    2 => {
+                        warn!(station = %to.address, "the station keeps ending the session ({why}); attaching again every {RETRY:?}, quietly until a session lasts")
+                    }
+                    _ => {}
+                }
+            }
+            result => {
+                let text = match result {
+                    Ok(Err(e)) => e.to_string(),
+                    _ => format!("no answer within {CONNECT:?}"),
+                };
+                if last_error.as_ref() != Some(&text) {
+                    warn!(station = %to.address, "cannot attach to the station: {text}; trying again every {RETRY:?}");
+                    last_error = Some(text);
+                }
+            }
+        }
+        tokio::time::sleep(RETRY).await;
+    }
+}
+
+/// Passes each snapshot on until the session ends; why it ended.
+async fn follow_snapshots(
+    from: &mut tokio::sync::mpsc::Receiver<FromStation>,
+    tx: &watch::Sender<StationView>,
+) -> String {
+    loop {
+        match tokio::time::timeout(SILENT, from.recv()).await {
+            Ok(Some(FromStation::Snapshot { fleet, .. })) => {
+                if tx.send(StationView::from_snapshot(&fleet)).is_err() {
+                    return "the bridge stops".into();
+                }
+            }
+            Ok(Some(FromStation::Bye { reason })) => return format!("the station said: {reason}"),
+            Ok(Some(_)) => {}
+            Ok(None) => return "the connection closed".into(),
+            Err(_) => return format!("no snapshot for {SILENT:?}"),
+        }
+    }
 }
 
 #[cfg(test)]
