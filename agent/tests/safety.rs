@@ -166,6 +166,27 @@ fn crossing_with(
     t
 }
 
+/// Every robot of `on` arrived within twice `alone` (s) and no
+/// separation, margin or fence was violated; `case` names the run.
+fn arrived_apart_within_twice(on: &SafetyTrial, alone: f64, case: &str) {
+    let with = on.last_arrival().unwrap_or_else(|| {
+        panic!(
+            "{case}: deadlock, not all arrived in 120 s: {:?}",
+            on.metrics()
+        )
+    });
+    assert!(
+        with <= 2.0 * alone,
+        "{case}: {with:.1} s with the layer, {alone:.1} s without"
+    );
+    let m = on.metrics();
+    assert_eq!(
+        m.separation_violations + m.margin_violations + m.breaches,
+        0,
+        "{case}: {m:?}"
+    );
+}
+
 #[test]
 fn eight_robots_crossing_on_missions_all_arrive_apart_within_twice_the_time() {
     let off = crossing(false, SafetyConfig::default());
@@ -176,19 +197,7 @@ fn eight_robots_crossing_on_missions_all_arrive_apart_within_twice_the_time() {
         off.metrics()
     );
     let on = crossing(true, SafetyConfig::default());
-    let with = on
-        .last_arrival()
-        .unwrap_or_else(|| panic!("deadlock: not all arrived in 120 s: {:?}", on.metrics()));
-    assert!(
-        with <= 2.0 * alone,
-        "{with:.1} s with the layer, {alone:.1} s without"
-    );
-    let m = on.metrics();
-    assert_eq!(
-        m.separation_violations + m.margin_violations + m.breaches,
-        0,
-        "{m:?}"
-    );
+    arrived_apart_within_twice(&on, alone, "the crossing");
 }
 
 /// The crossing with neighbour states as the station's broadcaster sends
@@ -205,19 +214,7 @@ fn eight_robots_crossing_with_states_at_20_hz_all_arrive_within_twice_the_time()
         .last_arrival()
         .expect("without the layer all arrive");
     let on = crossing_with(true, SafetyConfig::default(), at_20_hz);
-    let with = on
-        .last_arrival()
-        .unwrap_or_else(|| panic!("deadlock: not all arrived in 120 s: {:?}", on.metrics()));
-    assert!(
-        with <= 2.0 * alone,
-        "{with:.1} s with the layer, {alone:.1} s without"
-    );
-    let m = on.metrics();
-    assert_eq!(
-        m.separation_violations + m.margin_violations + m.breaches,
-        0,
-        "{m:?}"
-    );
+    arrived_apart_within_twice(&on, alone, "states at 20 Hz");
     // Yielding for 2 s and looking 2 s ahead instead: they jam.
     let long = SafetyConfig {
         yield_time: 2.0,
@@ -259,19 +256,7 @@ fn jammed_robots_back_off_and_every_crossing_completes() {
             .expect("without the layer all arrive");
         let on = crossing_with(true, SafetyConfig::default(), timing);
         let case = format!("states every {period} ms, {latency} ms old");
-        let with = on
-            .last_arrival()
-            .unwrap_or_else(|| panic!("{case}: not all arrived in 120 s"));
-        assert!(
-            with <= 2.0 * alone,
-            "{case}: {with:.1} s, {alone:.1} s without the layer"
-        );
-        let m = on.metrics();
-        assert_eq!(
-            m.separation_violations + m.margin_violations + m.breaches,
-            0,
-            "{case}: {m:?}"
-        );
+        arrived_apart_within_twice(&on, alone, &case);
         let stuck = crossing_with(true, never, timing).last_arrival();
         jammed_without += usize::from(stuck.is_none_or(|t| t > 2.0 * alone));
     }
