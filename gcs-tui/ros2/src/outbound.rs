@@ -67,6 +67,15 @@ pub fn periodic(
             name.clone(),
             battery::battery(name, &r.telemetry, sampled, &frames),
         ));
+        if let Some(m) = station.missions.get(name) {
+            out.markers.extend(markers::mission_markers(
+                i as i32,
+                m,
+                &r.telemetry,
+                map,
+                stamp,
+            ));
+        }
         out.markers.extend(markers::robot_markers(
             i as i32,
             name,

@@ -1,6 +1,7 @@
 //! The station's own view of the fleet, for what the protocol gives no
 //! external controller: each robot's link as the router measures it (state,
-//! loss, round trip, rates, which links are live) and the arena. The bridge
+//! loss, round trip, rates, which links are live), the missions the station
+//! sent, and the arena. The bridge
 //! reads it by attaching to the station as the TUI does (`--attach`, the
 //! station's control socket or its TCP attach port with an operator key),
 //! asking for fleet snapshots only; it sends the station no command. It
@@ -15,7 +16,7 @@ use mech_core::arena::ArenaShape;
 use mech_core::counters::LinkQuality;
 use mech_core::event::LinkState;
 use mech_station::client::{Address, AttachOptions, KeyFileRef, attach};
-use mech_station::view::FleetSnapshot;
+use mech_station::view::{FleetSnapshot, MissionView};
 use mech_station::wire::{FromStation, Streams};
 use tokio::sync::watch;
 use tracing::{info, warn};
@@ -39,6 +40,9 @@ pub struct StationView {
     /// Attached, and a snapshot arrived.
     pub attached: bool,
     pub robots: HashMap<String, RobotLink>,
+    /// The mission the station itself last sent each robot (an operator's
+    /// waypoints, a script's).
+    pub missions: HashMap<String, MissionView>,
     /// The station's arena, when it has one.
     pub arena: Option<ArenaShape>,
 }
@@ -61,9 +65,16 @@ impl StationView {
                 (r.name.clone(), link)
             })
             .collect();
+        let missions = fleet
+            .robots
+            .iter()
+            .filter(|r| r.remote.is_none())
+            .filter_map(|r| Some((r.name.clone(), r.sent_mission.clone()?)))
+            .collect();
         StationView {
             attached: true,
             robots,
+            missions,
             arena: fleet.arena.clone(),
         }
     }
@@ -188,6 +199,12 @@ mod tests {
             r.link = LinkState::Stale;
             r.links = "wifi*+radio 14Hz".into();
             r.remote = remote.map(str::to_string);
+            r.sent_mission = Some(MissionView {
+                id: 4,
+                channel: "wp/gcs".into(),
+                waypoints: vec![],
+                looped: false,
+            });
             r.quality.loss = Some(0.25);
             r
         };
@@ -205,6 +222,8 @@ mod tests {
             (LinkState::Stale, Some(0.25), "wifi*+radio 14Hz")
         );
         assert_eq!(v.arena.as_ref().map(|a| a.boundary.len()), Some(4));
+        assert_eq!(v.missions.len(), 1);
+        assert_eq!(v.missions["robot_1"].id, 4);
         assert!(!StationView::default().attached);
     }
 }

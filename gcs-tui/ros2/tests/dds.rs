@@ -135,8 +135,8 @@ fn bad_cmd_vel_refused_and_counted(rig: &mut Rig) {
 }
 
 /// Attached to the station (`--attach` its control socket): each robot's
-/// link as the station's router measures it on `/diagnostics`, and the
-/// demo's arena on `/mech/markers`.
+/// link as the station's router measures it on `/diagnostics`, the demo's
+/// arena and a mission the station sent on `/mech/markers`.
 fn the_stations_link_figures_and_arena_through_attaching(rig: &mut Rig, robots: [&str; 3]) {
     let s = eventually(rig, "link quality on /diagnostics and the arena", |s| {
         let linked = robots.iter().all(|r| {
@@ -155,6 +155,16 @@ fn the_stations_link_figures_and_arena_through_attaching(rig: &mut Rig, robots: 
         s["diagnostics"]
     );
     assert_eq!(s["markers"]["mech/arena/0"]["frame_id"], "map");
+    // A mission the station sends (an operator's waypoints): its path and
+    // next waypoint are drawn while the robot runs it.
+    rig.script(
+        "waypoint robot_3 1.2,0.7\nwaypoint robot_3 2.6,0.7\nsend robot_3\nroute robot_3 wp/gcs\n",
+    );
+    eventually(rig, "robot_3's mission from the station drawn", |s| {
+        let path = &s["markers"]["mech/missions/2"];
+        let next = &s["markers"]["mech/mission_next/2"];
+        (path["type"] == 4 && path["action"] == 0 && next["type"] == 2).then_some(())
+    });
 }
 
 #[test]

@@ -16,8 +16,8 @@ use mech_core::fleet::{Fleet, LogEntry, Robot, Severity};
 use tokio::sync::watch;
 
 use crate::view::{
-    ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, RobotView, RouteView,
-    SafetyView, Security, TRAIL_SECONDS,
+    ChannelView, ClusterControlView, ClusterOnScreen, FleetSnapshot, MissionView, RobotView,
+    RouteView, SafetyView, Security, TRAIL_SECONDS,
 };
 use crate::wire::{FromStation, LogLevel, to_line};
 
@@ -239,6 +239,12 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             stale_for: r.stale_for(fleet.now).map(|age| age.as_secs_f64()),
             autopilot: r.autopilot.clone(),
             safety: safety_view(r),
+            sent_mission: r.waypoints.sent.as_ref().map(|m| MissionView {
+                id: m.id,
+                channel: m.channel.clone(),
+                waypoints: m.waypoints.clone(),
+                looped: m.looped,
+            }),
         })
         .collect();
     FleetSnapshot {

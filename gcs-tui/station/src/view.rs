@@ -99,6 +99,22 @@ pub struct RobotView {
     /// Its fleet safety layer, when it reports one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyView>,
+    /// The mission the station itself last sent it (an operator's
+    /// waypoints, a script's), for tools attached to the station; `None`
+    /// when it sent none (missions of external controllers go from their
+    /// sender to the robot).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sent_mission: Option<MissionView>,
+}
+
+/// A mission the station sent a robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MissionView {
+    pub id: u32,
+    /// The channel it was sent on (`wp/gcs`).
+    pub channel: String,
+    pub waypoints: Vec<mech_proto::Waypoint>,
+    pub looped: bool,
 }
 
 /// A robot's fleet safety layer, as its card shows it.
@@ -156,6 +172,7 @@ impl RobotView {
             stale_for: None,
             autopilot: None,
             safety: None,
+            sent_mission: None,
         }
     }
 }

@@ -2,14 +2,16 @@
 //! each robot's name over it, and each goal the bridge sent, with a line
 //! from the robot to it while it is being approached; with the bridge
 //! attached to the station, the arena (boundary, keep-outs, slow zones,
-//! obstacles: [`arena_markers`]).
+//! obstacles: [`arena_markers`]) and the missions the station sent
+//! ([`mission_markers`]).
 //!
-//! Waypoints of missions other controllers sent (the station's `wp/gcs`)
-//! are not in the telemetry an external client receives, so they are not
-//! drawn.
+//! Waypoints of missions other external controllers sent go from their
+//! sender to the robot and are in nothing the bridge receives, so they are
+//! not drawn.
 
 use mech_core::arena::ArenaShape;
 use mech_proto::Telemetry;
+use mech_station::view::MissionView;
 
 use crate::fleet::Goal;
 use crate::msgs::builtin::{Duration, Time};
@@ -27,6 +29,8 @@ pub const NS_ARENA: &str = "mech/arena";
 pub const NS_KEEP_OUT: &str = "mech/keep_out";
 pub const NS_SLOW_ZONES: &str = "mech/slow_zones";
 pub const NS_OBSTACLES: &str = "mech/obstacles";
+pub const NS_MISSIONS: &str = "mech/missions";
+pub const NS_MISSION_NEXT: &str = "mech/mission_next";
 
 /// Markers live this long without an update (they are sent every second),
 /// so a bridge that stops leaves nothing behind.
@@ -61,6 +65,12 @@ const YELLOW: ColorRgba = ColorRgba {
     g: 0.85,
     b: 0.1,
     a: 0.8,
+};
+const BLUE: ColorRgba = ColorRgba {
+    r: 0.2,
+    g: 0.5,
+    b: 1.0,
+    a: 0.9,
 };
 const GREY: ColorRgba = ColorRgba {
     r: 0.6,
@@ -220,6 +230,56 @@ pub fn arena_markers(arena: &ArenaShape, map: &str, stamp: Time) -> Vec<Marker> 
     out
 }
 
+/// The mission the station sent robot number `index`, while the robot
+/// runs it (its telemetry reports that mission, not finished): its path
+/// through every waypoint (closed when looped) and a sphere on the next.
+/// Otherwise both markers are deleted.
+pub fn mission_markers(
+    index: i32,
+    mission: &MissionView,
+    t: &Telemetry,
+    map: &str,
+    stamp: Time,
+) -> Vec<Marker> {
+    let next = match t.mission {
+        Some(m) if m.id == mission.id && m.next < m.total => m.next as usize,
+        _ => {
+            return vec![
+                deleted(NS_MISSIONS, index, map, stamp),
+                deleted(NS_MISSION_NEXT, index, map, stamp),
+            ];
+        }
+    };
+    let at = |w: &mech_proto::Waypoint| Point {
+        x: w.x,
+        y: w.y,
+        z: w.z,
+    };
+    let mut path = marker(NS_MISSIONS, index, LINE_STRIP, map, stamp);
+    path.scale.x = 0.02;
+    path.color = BLUE;
+    path.points = mission.waypoints.iter().map(at).collect();
+    if mission.looped {
+        path.points.extend(mission.waypoints.first().map(at));
+    }
+    let mut out = vec![path];
+    match mission.waypoints.get(next) {
+        Some(w) => {
+            let mut sphere = marker(NS_MISSION_NEXT, index, SPHERE, map, stamp);
+            sphere.pose.position = at(w);
+            sphere.scale = Vector3 {
+                x: 0.1,
+                y: 0.1,
+                z: 0.1,
+            };
+            sphere.color = BLUE;
+            out.push(sphere);
+        }
+        None => out.push(deleted(NS_MISSION_NEXT, index, map, stamp)),
+    }
+    out
+}
+
 fn deleted(ns: &str, id: i32, map: &str, stamp: Time) -> Marker {
     Marker {
         action: DELETE,
@@ -330,6 +390,53 @@ mod tests {
             m.iter()
                 .all(|m| m.header.frame_id == "map" && m.action == ADD)
         );
+    }
+
+    #[test]
+    fn a_mission_the_station_sent_is_drawn_while_the_robot_runs_it() {
+        let w = |x: f64| Waypoint {
+            x,
+            y: 1.0,
+            z: 0.0,
+            time: None,
+        };
+        let mission = MissionView {
+            id: 9,
+            channel: "wp/gcs".into(),
+            waypoints: vec![w(1.0), w(2.0), w(3.0)],
+            looped: true,
+        };
+        let mut t = telemetry(0.5, 0.0);
+        t.mission = Some(MissionProgress {
+            id: 9,
+            next: 1,
+            total: 3,
+        });
+        let m = mission_markers(2, &mission, &t, "map", Time::default());
+        assert_eq!(
+            (m[0].ns.as_str(), m[0].r#type, m[0].id),
+            (NS_MISSIONS, LINE_STRIP, 2)
+        );
+        assert_eq!(
+            m[0].points.len(),
+            4,
+            "closed: the loop goes back to the first"
+        );
+        assert_eq!(
+            (m[1].ns.as_str(), m[1].pose.position.x),
+            (NS_MISSION_NEXT, 2.0)
+        );
+        // Finished, or another mission: deleted.
+        t.mission = Some(MissionProgress {
+            id: 9,
+            next: 3,
+            total: 3,
+        });
+        let m = mission_markers(2, &mission, &t, "map", Time::default());
+        assert!(m.iter().all(|m| m.action == DELETE));
+        t.mission = None;
+        let m = mission_markers(2, &mission, &t, "map", Time::default());
+        assert!(m.iter().all(|m| m.action == DELETE));
     }
 
     #[test]
