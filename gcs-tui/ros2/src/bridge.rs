@@ -140,24 +140,7 @@ impl Bridge {
                  or set ROS_DOMAIN_ID"
             );
         }
-        let station = match config.attach.as_deref() {
-            Some(address) => {
-                let key = config.attach_key.as_deref().map(read_key).transpose()?;
-                // Over TCP the station takes the key's name as the operator.
-                let operator = key
-                    .as_ref()
-                    .map_or_else(|| Ros2Config::attach_operator(&name), |k| k.name.clone());
-                Some(crate::station::follow(AttachTo {
-                    address: mech_station::client::Address::parse(address),
-                    key: key.map(|k| mech_station::client::KeyFileRef {
-                        name: k.name,
-                        key: k.key,
-                    }),
-                    operator,
-                }))
-            }
-            None => None,
-        };
+        let station = follow_station(&config, &name)?;
         let first_id = (local_us() / 1_000_000).wrapping_mul(16) as u32;
         info!(
             router = %config.router, name, domain,
@@ -479,6 +462,29 @@ impl Bridge {
     fn link_name(&self) -> &str {
         &self.config.name
     }
+}
+
+/// The station's own view, followed when `ros2.attach` names the station
+/// (as operator `<name>-bridge`, or over TCP as the operator key's name).
+fn follow_station(
+    config: &Ros2Config,
+    name: &str,
+) -> Result<Option<tokio::sync::watch::Receiver<StationView>>, StartError> {
+    let Some(address) = config.attach.as_deref() else {
+        return Ok(None);
+    };
+    let key = config.attach_key.as_deref().map(read_key).transpose()?;
+    let operator = key
+        .as_ref()
+        .map_or_else(|| Ros2Config::attach_operator(name), |k| k.name.clone());
+    Ok(Some(crate::station::follow(AttachTo {
+        address: mech_station::client::Address::parse(address),
+        key: key.map(|k| mech_station::client::KeyFileRef {
+            name: k.name,
+            key: k.key,
+        }),
+        operator,
+    })))
 }
 
 /// Whether UDP port `port` is one the DDS domain `domain` uses on this
