@@ -311,13 +311,16 @@ pub fn cluster_centre(app: &App, c: &super::view::ClusterOnScreen) -> Option<(f6
     if let Some((x, y, _)) = c.control.as_ref().and_then(|k| k.measured) {
         return Some((x, y));
     }
-    let pos: Vec<(f64, f64)> = c
-        .members
-        .iter()
-        .filter_map(|n| app.robot(n))
+    centre_of(c, &member_positions(app, c))
+}
+
+/// Where the members of cluster `c` that are in the fleet are, in member
+/// order.
+pub fn member_positions(app: &App, c: &super::view::ClusterOnScreen) -> Vec<(f64, f64)> {
+    app.fleet
+        .robots_named(&c.members)
         .map(|r| (r.pose.x, r.pose.y))
-        .collect();
-    centre_of(c, &pos)
+        .collect()
 }
 
 /// [`cluster_centre`] of a cluster whose members on the map are at `pos`

@@ -6,8 +6,6 @@
 //! waypoint flags; every robot marked and labelled where a label fits
 //! (see [`super::labels`]), with a count of the labels left out.
 
-use std::collections::HashMap;
-
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
 use ratatui::style::{Color, Style, Stylize};
@@ -19,7 +17,7 @@ use ratatui::widgets::{Block, Widget};
 use super::app::{App, Focus};
 use super::labels::{self, Kind, MapText};
 use super::theme::Theme;
-use super::view::{ArenaBounds, ArenaShape, ClusterControlView, ClusterOnScreen, RobotView};
+use super::view::{ArenaBounds, ArenaShape, ClusterControlView, ClusterOnScreen};
 use super::viewport::Projection;
 
 /// The map panel.
@@ -347,41 +345,21 @@ fn paint_shape(ctx: &mut Context, proj: &Projection, a: &ArenaShape, t: &Theme) 
 /// Clusters: members joined to the centre, and what the controller
 /// reports when it runs the cluster.
 fn paint_clusters(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
-    if app.fleet.clusters.is_empty() {
-        return;
-    }
-    let by_name: HashMap<&str, &RobotView> = app
-        .fleet
-        .robots
-        .iter()
-        .map(|r| (r.name.as_str(), r))
-        .collect();
     for c in &app.fleet.clusters {
-        paint_cluster(ctx, c, &by_name, proj, t);
+        paint_cluster(ctx, app, c, proj, t);
     }
 }
 
 /// A cluster's members joined to its centre (the controller's measured
 /// pose, or the members' centroid: [`labels::cluster_centre`]), and what
 /// its controller reports.
-fn paint_cluster(
-    ctx: &mut Context,
-    c: &ClusterOnScreen,
-    by_name: &HashMap<&str, &RobotView>,
-    proj: &Projection,
-    t: &Theme,
-) {
-    let pos: Vec<(f64, f64)> = c
-        .members
-        .iter()
-        .filter_map(|n| by_name.get(n.as_str()))
-        .map(|r| (r.pose.x, r.pose.y))
-        .collect();
+fn paint_cluster(ctx: &mut Context, app: &App, c: &ClusterOnScreen, proj: &Projection, t: &Theme) {
+    let pos = labels::member_positions(app, c);
     let Some((cx, cy)) = labels::centre_of(c, &pos) else {
         return;
     };
     if let Some(k) = c.control.as_ref() {
-        paint_cluster_control(ctx, k, by_name, proj, t);
+        paint_cluster_control(ctx, app, k, proj, t);
     }
     for p in &pos {
         ctx.draw(&Segment {
@@ -398,13 +376,13 @@ fn paint_cluster(
 /// desired and measured cluster poses with their headings.
 fn paint_cluster_control(
     ctx: &mut Context,
+    app: &App,
     k: &ClusterControlView,
-    by_name: &HashMap<&str, &RobotView>,
     proj: &Projection,
     t: &Theme,
 ) {
     for s in &k.slots {
-        if let Some(r) = by_name.get(s.robot.as_str()) {
+        if let Some(r) = app.robot(&s.robot) {
             ctx.draw(&Segment {
                 proj,
                 from: (r.pose.x, r.pose.y),

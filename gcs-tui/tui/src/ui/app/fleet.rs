@@ -51,6 +51,28 @@ impl FleetState {
         }
     }
 
+    /// The robots named `names`, in that order (names not in the fleet
+    /// left out). Each name is tried first just after the robot found
+    /// before it: a cluster made from a selection lists its members in
+    /// fleet order, so a thousand members cost a thousand comparisons,
+    /// not a thousand searches (the map draws every cluster each frame).
+    /// Any other order falls back to [`FleetState::index_of`].
+    pub fn robots_named<'a, I>(&'a self, names: I) -> impl Iterator<Item = &'a RobotView> + 'a
+    where
+        I: IntoIterator<Item = &'a String>,
+        I::IntoIter: 'a,
+    {
+        let mut next = 0;
+        names.into_iter().filter_map(move |name| {
+            let i = match self.robots.get(next) {
+                Some(r) if r.name == *name => next,
+                _ => self.index_of(name)?,
+            };
+            next = i + 1;
+            Some(&self.robots[i])
+        })
+    }
+
     /// Takes the station's state as it is: the e-stop, robots (sorted),
     /// channels, the arena and (when the source keeps them) clusters.
     pub fn apply(&mut self, s: FleetSnapshot) {
@@ -218,5 +240,32 @@ mod tests {
         assert_eq!(f.index_of("robot_1"), Some(299));
         assert_eq!(f.index_of("robot_150"), Some(150));
         assert_eq!(f.index_of("robot_301"), None);
+    }
+
+    #[test]
+    fn cluster_members_are_found_in_their_order_whatever_it_is() {
+        let mut f = FleetState::default();
+        let names: Vec<String> = (1..=12).map(|i| format!("robot_{i}")).collect();
+        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        f.apply(snapshot(&refs));
+        let found = |members: &[&str]| -> Vec<String> {
+            let members: Vec<String> = members.iter().map(|m| m.to_string()).collect();
+            f.robots_named(&members).map(|r| r.name.clone()).collect()
+        };
+        // In fleet order, with gaps, out of order, repeated, and missing.
+        let cases: [&[&str]; 4] = [
+            &["robot_1", "robot_2", "robot_3"],
+            &["robot_2", "robot_9", "robot_10", "robot_12"],
+            &["robot_12", "robot_1", "robot_7", "robot_7", "robot_3"],
+            &["robot_5", "robot_13", "robot_01", "robot_6"],
+        ];
+        for members in cases {
+            let expected: Vec<&str> = members
+                .iter()
+                .copied()
+                .filter(|m| names.iter().any(|n| n == m))
+                .collect();
+            assert_eq!(found(members), expected);
+        }
     }
 }
