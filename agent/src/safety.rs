@@ -24,6 +24,7 @@
 //!
 //! The guarantees and their assumptions are in `docs/safety.md`.
 
+pub mod circulation;
 pub mod constraints;
 pub mod filter;
 pub mod geofence;
@@ -195,6 +196,10 @@ pub struct SafetyLayer {
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
     yielding: Option<Yield>,
+    /// The speed the robot was heading for when the right-hand rule took
+    /// its way over, while it still does: a diff-drive whose command turns
+    /// it on the spot back towards its goal still circulates at that speed.
+    circling: Option<f64>,
     /// Since when the robot wanted to move but did not, and whether it
     /// asked to go somewhere meanwhile (not only to turn on the spot).
     stuck_since: Option<(Duration, bool)>,
@@ -215,6 +220,7 @@ impl SafetyLayer {
             arena: None,
             neighbours: None,
             yielding: None,
+            circling: None,
             stuck_since: None,
             id: None,
             fresh_station: false,
@@ -245,6 +251,7 @@ impl SafetyLayer {
         if arena.is_empty() {
             self.neighbours = None;
             self.yielding = None;
+            self.circling = None;
         }
         self.arena = Some(ArenaInForce {
             id: arena.id,
@@ -390,9 +397,11 @@ impl SafetyLayer {
         self.noted(Vec::new(), Intervention::None);
     }
 
-    /// The decision, yielding to the right for `yield_time` once a
-    /// neighbour blocks the way (while the command asks for any motion:
-    /// a stop ends it).
+    /// The decision: a robot backing off keeps at it; otherwise the
+    /// right-hand rule ([`circulation`]) turns the way its command heads
+    /// for to the right of every neighbour it would meet, recomputed every
+    /// period from where the robots are (no timers), and the constraints
+    /// judge the result.
     fn decide(
         &mut self,
         c: &Constraints,
@@ -407,12 +416,15 @@ impl SafetyLayer {
             .any(|v| v.abs() > 1e-9);
         if !wants_motion {
             self.yielding = None;
+            self.circling = None;
         }
         if let Some(y) = self.yielding.filter(|y| now < y.until) {
             return filter::steer(c, y.target, mobility);
         }
         self.yielding = None;
-        if let Some(back_off) = self.unstick(c, desired, mobility, wants_motion, margin, now) {
+        let intent = circulation::intent(desired, twist, mobility, self.circling);
+        if let Some(back_off) = self.unstick(c, intent, mobility, wants_motion, margin, now) {
+            self.circling = None;
             return back_off;
         }
         let look_ahead = self.config.horizon > 0.0;
@@ -423,33 +435,23 @@ impl SafetyLayer {
             .and_then(|n| {
                 n.anticipate(
                     c.position,
-                    desired,
+                    intent,
                     self.config.radius,
                     margin,
                     self.config.horizon,
                     now,
                 )
             });
-        if let Some(target) = swerve {
-            if !mobility.holonomic && self.config.yield_time > 0.0 {
-                // A diff-drive needs time to turn: the swerve is held.
-                self.yielding = Some(Yield {
-                    target,
-                    until: now + Duration::from_secs_f64(self.config.yield_time),
-                });
+        match swerve {
+            Some(target) => {
+                self.circling = Some(intent.norm());
+                filter::steer(c, target, mobility)
             }
-            return filter::steer(c, target, mobility);
+            None => {
+                self.circling = None;
+                decide(c, desired, mobility)
+            }
         }
-        let decision = decide(c, desired, mobility);
-        if decision.blocked && self.config.yield_time > 0.0 {
-            let target = desired.rotated(-self.config.yield_angle);
-            self.yielding = Some(Yield {
-                target,
-                until: now + Duration::from_secs_f64(self.config.yield_time),
-            });
-            return filter::steer(c, target, mobility);
-        }
-        decision
     }
 
     /// Deadlock breaking: a robot that has wanted to move for

@@ -128,13 +128,16 @@ pub fn decide(c: &Constraints, desired: Vec2, mobility: &Mobility) -> Decision {
 }
 
 /// A stop when the robot's present motion already goes beyond what the
-/// constraints allow.
+/// constraints allow. Without turning: the robot's actuators lag, so it
+/// keeps moving for a while after the stop, and a turn meanwhile would
+/// bend that motion off the straight braking path (towards the neighbour
+/// or the wall it is pressed against).
 fn overrun(c: &Constraints, mobility: &Mobility) -> Option<Decision> {
     let moving = mobility.velocity.unit()?;
     let (fits, why) = swept_limit(c, moving, mobility.sweep(mobility.yaw_rate));
     (mobility.velocity.norm() > fits + AT_REST).then_some(Decision {
         velocity: Vec2::ZERO,
-        yaw_rate: None,
+        yaw_rate: Some(0.0),
         intervention: why,
         blocked: false,
     })
@@ -323,8 +326,8 @@ mod tests {
         };
         let d = decide(&c, Vec2::new(0.01, 0.0), &moving);
         assert_eq!(
-            (d.velocity, d.intervention),
-            (Vec2::ZERO, Intervention::Fence)
+            (d.velocity, d.yaw_rate, d.intervention),
+            (Vec2::ZERO, Some(0.0), Intervention::Fence)
         );
         // At rest (an actuator's tail), it may move away.
         let resting = Mobility {
