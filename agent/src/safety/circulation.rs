@@ -79,7 +79,10 @@ mod tests {
         let u = intent(Vec2::ZERO, &spin, &diff_drive(0.0), Some(0.3));
         assert!((u.norm() - 0.3).abs() < 1e-9 && (u.angle() - 1.0).abs() < 1e-9);
         // Only turning, nothing taken over: nowhere.
-        assert_eq!(intent(Vec2::ZERO, &spin, &diff_drive(0.0), None), Vec2::ZERO);
+        assert_eq!(
+            intent(Vec2::ZERO, &spin, &diff_drive(0.0), None),
+            Vec2::ZERO
+        );
         // A holonomic robot heads where it moves.
         let kiwi = Mobility {
             holonomic: true,

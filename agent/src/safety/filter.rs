@@ -168,7 +168,7 @@ pub fn steer(c: &Constraints, target: Vec2, mobility: &Mobility) -> Decision {
     let turn = mobility.yield_turn_rate.abs();
     let wz = (3.0 * err).clamp(-turn, turn);
     let heading = Vec2::from_angle(mobility.heading);
-    let forward = if err.abs() < TURN_FIRST {
+    let forward = if !turns_first(target, mobility) {
         target.norm() * err.cos()
     } else {
         0.0
@@ -180,6 +180,14 @@ pub fn steer(c: &Constraints, target: Vec2, mobility: &Mobility) -> Decision {
 /// Heading error, rad, beyond which a yielding diff-drive turns on the
 /// spot before driving.
 pub const TURN_FIRST: f64 = 0.6;
+
+/// Whether a diff-drive [`steer`]ed towards `target` turns on the spot
+/// first (its heading is more than [`TURN_FIRST`] off).
+pub fn turns_first(target: Vec2, mobility: &Mobility) -> bool {
+    target.unit().is_some_and(|dir| {
+        mech_proto::wrap_angle(dir.angle() - mobility.heading).abs() >= TURN_FIRST
+    })
+}
 
 /// The allowed velocity closest to `target` among directions within 90°
 /// of it (each at the speed nearest the target's projection on it).
