@@ -16,13 +16,12 @@
 //! allow (its actuators lag the commands, a neighbour came closer than
 //! predicted) is told to stop: braking is always within what it promised.
 //!
-//! When a neighbour blocks the way (less than half the desired speed is
-//! allowed), the decision says so, and the layer has the robot yield to
-//! the right for a while ([`steer`] towards a direction to the right of
-//! the desired one), as ships and Zhou et al.'s buffered Voronoi cells do.
-//! Two robots meeting head-on both do and pass; robots jammed in a ring
-//! all move the same way round it, as at a roundabout, until their own
-//! ways open.
+//! When a neighbour is in the way, the layer chooses another desired
+//! velocity (the right-hand rule: [`crate::safety::circulation`] and
+//! `SafetyLayer::filter`) and [`steer`]s the robot towards it, within the
+//! same constraints: two robots meeting head-on both turn right and pass;
+//! robots crowding a place all move the same way round it, as at a
+//! roundabout.
 
 use mech_proto::Intervention;
 
@@ -44,7 +43,7 @@ pub struct Decision {
     /// it does not).
     pub intervention: Intervention,
     /// A neighbour blocks the way (less than half the desired speed is
-    /// allowed): the robot should yield ([`steer`]).
+    /// allowed).
     pub blocked: bool,
 }
 
@@ -143,7 +142,7 @@ fn overrun(c: &Constraints, mobility: &Mobility) -> Option<Decision> {
     })
 }
 
-/// Yield: move towards `target` (map frame) as far as the constraints
+/// Steer: move towards `target` (map frame) as far as the constraints
 /// allow, whatever the command. A holonomic robot takes the allowed
 /// velocity closest to it; a diff-drive turns towards it and drives along
 /// its heading once within [`TURN_FIRST`] of it.
