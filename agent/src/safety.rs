@@ -8,6 +8,8 @@
 //! - [`geofence`]: the arena's constraints ([`Fence`]);
 //! - [`separation`]: the neighbours' constraints ([`NeighbourSet`]);
 //! - [`filter`]: the pure decision from constraints and a desired velocity;
+//! - [`circulation`]: where a command heads, for the right-hand rule that
+//!   steers robots round each other (in [`SafetyLayer::filter`]);
 //! - [`mapping`]: actuator outputs to world velocity and back, per platform.
 //!
 //! # The seam
@@ -459,8 +461,7 @@ impl SafetyLayer {
     /// without moving, and headed somewhere meanwhile (`intent`, see
     /// [`circulation::intent`]: a turn on the spot the rule did not take
     /// over, or a crawl slower than [`STILL`], is not being stuck), backs
-    /// off from the
-    /// neighbours near it for `back_off_time` s, at up to
+    /// off from the neighbours near it for `back_off_time` s, at up to
     /// [`BACK_OFF_SPEED`], within the constraints as always. `None`: it is
     /// not stuck (or nobody is near to back off from).
     fn unstick(
