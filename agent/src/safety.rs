@@ -8,6 +8,8 @@
 //! - [`geofence`]: the arena's constraints ([`Fence`]);
 //! - [`separation`]: the neighbours' constraints ([`NeighbourSet`]);
 //! - [`filter`]: the pure decision from constraints and a desired velocity;
+//! - [`circulation`]: where a command heads, for the right-hand rule that
+//!   steers robots round each other (in [`SafetyLayer::filter`]);
 //! - [`mapping`]: actuator outputs to world velocity and back, per platform.
 //!
 //! # The seam
@@ -24,6 +26,7 @@
 //!
 //! The guarantees and their assumptions are in `docs/safety.md`.
 
+pub mod circulation;
 pub mod constraints;
 pub mod filter;
 pub mod geofence;
@@ -65,14 +68,9 @@ pub struct SafetyConfig {
     pub stale_after: f64,
     /// The crawl, m/s.
     pub crawl_speed: f64,
-    /// Fastest turn of a diff-drive while it yields, rad/s.
+    /// Fastest turn of a diff-drive while the layer steers it (round a
+    /// neighbour, or backing off), rad/s.
     pub yield_turn_rate: f64,
-    /// How long a robot blocked by a neighbour yields to the right before
-    /// its command has its way again, s.
-    pub yield_time: f64,
-    /// How far to the right of the blocked direction it heads meanwhile,
-    /// rad.
-    pub yield_angle: f64,
     /// How far ahead, s, a robot looks for neighbours its command would
     /// meet, to swerve right in time (0: never).
     pub horizon: f64,
@@ -93,8 +91,6 @@ impl Default for SafetyConfig {
             stale_after: 0.3,
             crawl_speed: 0.05,
             yield_turn_rate: 1.0,
-            yield_time: 0.4,
-            yield_angle: std::f64::consts::FRAC_PI_2,
             horizon: 1.5,
             stuck_after: 1.0,
             back_off_time: 1.0,
@@ -127,16 +123,9 @@ impl SafetyConfig {
         positive(self.stale_after, "stale_after")?;
         nonnegative(self.crawl_speed, "crawl_speed")?;
         nonnegative(self.yield_turn_rate, "yield_turn_rate")?;
-        nonnegative(self.yield_time, "yield_time")?;
         nonnegative(self.horizon, "horizon")?;
         nonnegative(self.stuck_after, "stuck_after")?;
         nonnegative(self.back_off_time, "back_off_time")?;
-        if !(0.0..=std::f64::consts::FRAC_PI_2).contains(&self.yield_angle) {
-            return Err(format!(
-                "`safety.yield_angle` must be between 0 and pi/2, got {}",
-                self.yield_angle
-            ));
-        }
         Ok(())
     }
 
@@ -170,10 +159,10 @@ struct ArenaInForce {
     margin: f64,
 }
 
-/// A robot blocked by a neighbour yields: it heads to the right of where
-/// it wanted to go, for a while.
+/// A stuck robot backs off: it heads away from its neighbours for a
+/// while.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Yield {
+struct BackOff {
     /// Where it heads, m/s, map frame.
     target: Vec2,
     until: Duration,
@@ -194,7 +183,11 @@ pub struct SafetyLayer {
     config: SafetyConfig,
     arena: Option<ArenaInForce>,
     neighbours: Option<NeighbourSet>,
-    yielding: Option<Yield>,
+    backing_off: Option<BackOff>,
+    /// The speed the robot was heading for when the right-hand rule took
+    /// its way over, while it still does: a diff-drive whose command turns
+    /// it on the spot back towards its goal still circulates at that speed.
+    circling: Option<f64>,
     /// Since when the robot wanted to move but did not, and whether it
     /// asked to go somewhere meanwhile (not only to turn on the spot).
     stuck_since: Option<(Duration, bool)>,
@@ -214,7 +207,8 @@ impl SafetyLayer {
             config,
             arena: None,
             neighbours: None,
-            yielding: None,
+            backing_off: None,
+            circling: None,
             stuck_since: None,
             id: None,
             fresh_station: false,
@@ -244,7 +238,8 @@ impl SafetyLayer {
         self.fresh_station = false;
         if arena.is_empty() {
             self.neighbours = None;
-            self.yielding = None;
+            self.backing_off = None;
+            self.circling = None;
         }
         self.arena = Some(ArenaInForce {
             id: arena.id,
@@ -390,9 +385,11 @@ impl SafetyLayer {
         self.noted(Vec::new(), Intervention::None);
     }
 
-    /// The decision, yielding to the right for `yield_time` once a
-    /// neighbour blocks the way (while the command asks for any motion:
-    /// a stop ends it).
+    /// The decision: a robot backing off keeps at it; otherwise the
+    /// right-hand rule ([`circulation`]) turns the way its command heads
+    /// for to the right of every neighbour it would meet, recomputed every
+    /// period from where the robots are (no timers), and the constraints
+    /// judge the result.
     fn decide(
         &mut self,
         c: &Constraints,
@@ -406,64 +403,71 @@ impl SafetyLayer {
             .iter()
             .any(|v| v.abs() > 1e-9);
         if !wants_motion {
-            self.yielding = None;
+            self.backing_off = None;
+            self.circling = None;
         }
-        if let Some(y) = self.yielding.filter(|y| now < y.until) {
+        if let Some(y) = self.backing_off.filter(|y| now < y.until) {
             return filter::steer(c, y.target, mobility);
         }
-        self.yielding = None;
-        if let Some(back_off) = self.unstick(c, desired, mobility, wants_motion, margin, now) {
+        self.backing_off = None;
+        let intent = circulation::intent(desired, twist, mobility, self.circling);
+        let swerve = self.swerve(c, intent, margin, now);
+        // A diff-drive turning on the spot towards its swerve is under
+        // way, not stuck.
+        let turning =
+            swerve.is_some_and(|t| !mobility.holonomic && filter::turns_first(t, mobility));
+        if turning {
+            self.stuck_since = None;
+        } else if let Some(back_off) = self.unstick(c, intent, mobility, wants_motion, margin, now)
+        {
+            self.circling = None;
             return back_off;
         }
-        let look_ahead = self.config.horizon > 0.0;
-        let swerve = self
-            .neighbours
-            .as_ref()
-            .filter(|_| look_ahead)
-            .and_then(|n| {
-                n.anticipate(
-                    c.position,
-                    desired,
-                    self.config.radius,
-                    margin,
-                    self.config.horizon,
-                    now,
-                )
-            });
-        if let Some(target) = swerve {
-            if !mobility.holonomic && self.config.yield_time > 0.0 {
-                // A diff-drive needs time to turn: the swerve is held.
-                self.yielding = Some(Yield {
-                    target,
-                    until: now + Duration::from_secs_f64(self.config.yield_time),
-                });
+        match swerve {
+            Some(target) => {
+                self.circling = Some(intent.norm());
+                filter::steer(c, target, mobility)
             }
-            return filter::steer(c, target, mobility);
+            None => {
+                self.circling = None;
+                decide(c, desired, mobility)
+            }
         }
-        let decision = decide(c, desired, mobility);
-        if decision.blocked && self.config.yield_time > 0.0 {
-            let target = desired.rotated(-self.config.yield_angle);
-            self.yielding = Some(Yield {
-                target,
-                until: now + Duration::from_secs_f64(self.config.yield_time),
-            });
-            return filter::steer(c, target, mobility);
-        }
-        decision
     }
 
-    /// Deadlock breaking: a robot that has wanted to move for
-    /// `stuck_after` s (plus 0.3 s per its id modulo 5, so robots jammed
-    /// together do not all move at once) without moving, and asked to go
-    /// somewhere meanwhile (a turn on the spot or a crawl slower than
-    /// [`STILL`] is not being stuck), backs off from the
-    /// neighbours near it for `back_off_time` s, at up to
+    /// The right-hand rule: `intent` turned right by the smallest angle
+    /// that meets no neighbour within `horizon`
+    /// ([`NeighbourSet::anticipate`]). `None`: the way is clear (or the
+    /// look-ahead is off).
+    fn swerve(&self, c: &Constraints, intent: Vec2, margin: f64, now: Duration) -> Option<Vec2> {
+        let n = self
+            .neighbours
+            .as_ref()
+            .filter(|_| self.config.horizon > 0.0)?;
+        let target = n.anticipate(
+            c.position,
+            intent,
+            self.config.radius,
+            margin,
+            self.config.horizon,
+            now,
+        )?;
+        Some(along_cell_edge(c, target))
+    }
+
+    /// Deadlock breaking, the last resort behind the right-hand rule: a
+    /// robot that has wanted to move for `stuck_after` s (plus 0.3 s per
+    /// its id modulo 5, so robots jammed together do not all move at once)
+    /// without moving, and headed somewhere meanwhile (`intent`, see
+    /// [`circulation::intent`]: a turn on the spot the rule did not take
+    /// over, or a crawl slower than [`STILL`], is not being stuck), backs
+    /// off from the neighbours near it for `back_off_time` s, at up to
     /// [`BACK_OFF_SPEED`], within the constraints as always. `None`: it is
     /// not stuck (or nobody is near to back off from).
     fn unstick(
         &mut self,
         c: &Constraints,
-        desired: Vec2,
+        intent: Vec2,
         mobility: &Mobility,
         wants_motion: bool,
         margin: f64,
@@ -474,7 +478,7 @@ impl SafetyLayer {
             return None;
         }
         let (since, going) = self.stuck_since.get_or_insert((now, false));
-        *going |= desired.norm() >= STILL;
+        *going |= intent.norm() >= STILL;
         let (since, going) = (*since, *going);
         let wait = self.config.stuck_after + 0.3 * f64::from(self.id.unwrap_or(0) % 5);
         if !going || now.saturating_sub(since).as_secs_f64() <= wait {
@@ -486,7 +490,7 @@ impl SafetyLayer {
             .away(c.position, self.config.radius, margin, now)?;
         self.stuck_since = None;
         let target = away * BACK_OFF_SPEED;
-        self.yielding = Some(Yield {
+        self.backing_off = Some(BackOff {
             target,
             until: now + Duration::from_secs_f64(self.config.back_off_time),
         });
@@ -515,6 +519,30 @@ impl SafetyLayer {
             radius: self.config.radius,
         }
     }
+}
+
+/// How far outwards of its cell's edge a robot pressed against it heads,
+/// rad.
+const EDGE_OUT: f64 = 0.15;
+
+/// Zhou et al.'s rule for a robot at the edge of its buffered Voronoi
+/// cell: a swerve `target` that the neighbour's constraint does not allow
+/// at half its speed becomes the way along that edge to the right, a
+/// little outwards (by [`EDGE_OUT`]), at the same speed. The swerve turns
+/// right of the neighbour's disc; pressed at exactly the distance it must
+/// keep, that tangent still leads into the cell's edge, and a diff-drive
+/// aimed along it would not move at all.
+fn along_cell_edge(c: &Constraints, target: Vec2) -> Vec2 {
+    let Some(dir) = target.unit() else {
+        return target;
+    };
+    let (speed, why) = c.limit(dir);
+    if why != Intervention::Separation || speed >= 0.5 * target.norm() {
+        return target;
+    }
+    c.binding_neighbour(dir).map_or(target, |normal| {
+        normal.rotated(-(std::f64::consts::FRAC_PI_2 + EDGE_OUT)) * target.norm()
+    })
 }
 
 #[cfg(test)]
@@ -774,6 +802,44 @@ mod tests {
                 "a turn on the spot is not stuck: {t:?}"
             );
         }
+    }
+
+    #[test]
+    fn pressed_against_a_neighbour_a_swerve_follows_the_cell_edge_to_the_right() {
+        use crate::safety::constraints::{Plane, Wall};
+        use crate::safety::geometry::Segment;
+        // The cell's edge 1 mm ahead (a neighbour straight ahead, at the
+        // distance to keep); the swerve, right of its disc, leads a little
+        // into the edge.
+        let mut c = Constraints::new(Vec2::ZERO, SafetyConfig::default().braking());
+        c.planes.push(Plane {
+            normal: Vec2::new(1.0, 0.0),
+            offset: 0.001,
+            reason: Intervention::Separation,
+        });
+        let swerve = Vec2::new(0.3, 0.0).rotated(-1.45);
+        assert!(c.limit(swerve.unit().unwrap()).0 < 0.15, "blocked");
+        let edge = along_cell_edge(&c, swerve);
+        assert!(
+            edge.x < 0.0 && edge.y < -0.25,
+            "right, a little out: {edge:?}"
+        );
+        assert!((edge.norm() - 0.3).abs() < 1e-9);
+        assert!(
+            c.limit(edge.unit().unwrap()).0.is_infinite(),
+            "free along it"
+        );
+        // A swerve the neighbour allows is kept.
+        let free = Vec2::new(0.0, -0.3);
+        assert_eq!(along_cell_edge(&c, free), free);
+        // So is one a wall, not a neighbour, blocks.
+        let mut walled = Constraints::new(Vec2::ZERO, SafetyConfig::default().braking());
+        walled.walls.push(Wall {
+            segment: Segment::new(Vec2::new(0.05, -5.0), Vec2::new(0.05, 5.0)),
+            radius: 0.0,
+            reason: Intervention::Fence,
+        });
+        assert_eq!(along_cell_edge(&walled, swerve), swerve);
     }
 
     #[test]

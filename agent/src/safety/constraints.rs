@@ -135,6 +135,41 @@ impl Constraints {
     }
 }
 
+impl Constraints {
+    /// The direction towards the neighbour whose constraint (its share of
+    /// the gap, or moving apart when too close) sets the speed along the
+    /// unit vector `dir`, if one does: the normal of the robot's cell
+    /// edge there.
+    pub fn binding_neighbour(&self, dir: Vec2) -> Option<Vec2> {
+        let mut best: Option<(f64, Vec2)> = None;
+        let mut keep = |s: f64, normal: Vec2| {
+            if best.is_none_or(|(b, _)| s < b) {
+                best = Some((s, normal));
+            }
+        };
+        for a in self
+            .away
+            .iter()
+            .filter(|a| a.reason == Intervention::Separation)
+        {
+            if dir.dot(a.toward) < a.min_dot - 1e-12 {
+                keep(0.0, -a.toward);
+            }
+        }
+        for p in self
+            .planes
+            .iter()
+            .filter(|p| p.reason == Intervention::Separation)
+        {
+            let along = dir.dot(p.normal);
+            if along > 1e-12 {
+                keep(self.braking.speed_for(p.offset / along), p.normal);
+            }
+        }
+        best.map(|(_, normal)| normal)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

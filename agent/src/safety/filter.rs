@@ -16,13 +16,12 @@
 //! allow (its actuators lag the commands, a neighbour came closer than
 //! predicted) is told to stop: braking is always within what it promised.
 //!
-//! When a neighbour blocks the way (less than half the desired speed is
-//! allowed), the decision says so, and the layer has the robot yield to
-//! the right for a while ([`steer`] towards a direction to the right of
-//! the desired one), as ships and Zhou et al.'s buffered Voronoi cells do.
-//! Two robots meeting head-on both do and pass; robots jammed in a ring
-//! all move the same way round it, as at a roundabout, until their own
-//! ways open.
+//! When a neighbour is in the way, the layer chooses another desired
+//! velocity (the right-hand rule: [`crate::safety::circulation`] and
+//! `SafetyLayer::filter`) and [`steer`]s the robot towards it, within the
+//! same constraints: two robots meeting head-on both turn right and pass;
+//! robots crowding a place all move the same way round it, as at a
+//! roundabout.
 
 use mech_proto::Intervention;
 
@@ -44,7 +43,7 @@ pub struct Decision {
     /// it does not).
     pub intervention: Intervention,
     /// A neighbour blocks the way (less than half the desired speed is
-    /// allowed): the robot should yield ([`steer`]).
+    /// allowed).
     pub blocked: bool,
 }
 
@@ -128,19 +127,22 @@ pub fn decide(c: &Constraints, desired: Vec2, mobility: &Mobility) -> Decision {
 }
 
 /// A stop when the robot's present motion already goes beyond what the
-/// constraints allow.
+/// constraints allow. Without turning: the robot's actuators lag, so it
+/// keeps moving for a while after the stop, and a turn meanwhile would
+/// bend that motion off the straight braking path (towards the neighbour
+/// or the wall it is pressed against).
 fn overrun(c: &Constraints, mobility: &Mobility) -> Option<Decision> {
     let moving = mobility.velocity.unit()?;
     let (fits, why) = swept_limit(c, moving, mobility.sweep(mobility.yaw_rate));
     (mobility.velocity.norm() > fits + AT_REST).then_some(Decision {
         velocity: Vec2::ZERO,
-        yaw_rate: None,
+        yaw_rate: Some(0.0),
         intervention: why,
         blocked: false,
     })
 }
 
-/// Yield: move towards `target` (map frame) as far as the constraints
+/// Steer: move towards `target` (map frame) as far as the constraints
 /// allow, whatever the command. A holonomic robot takes the allowed
 /// velocity closest to it; a diff-drive turns towards it and drives along
 /// its heading once within [`TURN_FIRST`] of it.
@@ -165,7 +167,7 @@ pub fn steer(c: &Constraints, target: Vec2, mobility: &Mobility) -> Decision {
     let turn = mobility.yield_turn_rate.abs();
     let wz = (3.0 * err).clamp(-turn, turn);
     let heading = Vec2::from_angle(mobility.heading);
-    let forward = if err.abs() < TURN_FIRST {
+    let forward = if !turns_first(target, mobility) {
         target.norm() * err.cos()
     } else {
         0.0
@@ -177,6 +179,14 @@ pub fn steer(c: &Constraints, target: Vec2, mobility: &Mobility) -> Decision {
 /// Heading error, rad, beyond which a yielding diff-drive turns on the
 /// spot before driving.
 pub const TURN_FIRST: f64 = 0.6;
+
+/// Whether a diff-drive [`steer`]ed towards `target` turns on the spot
+/// first (its heading is more than [`TURN_FIRST`] off).
+pub fn turns_first(target: Vec2, mobility: &Mobility) -> bool {
+    target.unit().is_some_and(|dir| {
+        mech_proto::wrap_angle(dir.angle() - mobility.heading).abs() >= TURN_FIRST
+    })
+}
 
 /// The allowed velocity closest to `target` among directions within 90°
 /// of it (each at the speed nearest the target's projection on it).
@@ -323,8 +333,8 @@ mod tests {
         };
         let d = decide(&c, Vec2::new(0.01, 0.0), &moving);
         assert_eq!(
-            (d.velocity, d.intervention),
-            (Vec2::ZERO, Intervention::Fence)
+            (d.velocity, d.yaw_rate, d.intervention),
+            (Vec2::ZERO, Some(0.0), Intervention::Fence)
         );
         // At rest (an actuator's tail), it may move away.
         let resting = Mobility {
