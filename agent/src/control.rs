@@ -155,6 +155,16 @@ impl Controller {
         &self.capabilities
     }
 
+    /// The yaw rate per radian of heading error with which the command in
+    /// force turns the robot towards a bearing (a mission,
+    /// velocity-heading: the heading gain), or `None` when the yaw rate is
+    /// the sender's own (twist, actuators, steering-throttle). Fleet safety
+    /// reads where a command heads from it.
+    pub fn bearing_gain(&self) -> Option<f64> {
+        matches!(self.mode, Mode::Waypoints | Mode::VelocityHeading(_))
+            .then_some(self.gains.heading)
+    }
+
     pub fn mode(&self) -> &Mode {
         &self.mode
     }

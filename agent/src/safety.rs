@@ -185,9 +185,14 @@ pub struct SafetyLayer {
     neighbours: Option<NeighbourSet>,
     backing_off: Option<BackOff>,
     /// The speed the robot was heading for when the right-hand rule took
-    /// its way over, while it still does: a diff-drive whose command turns
+    /// its way over, while it still does: a diff-drive whose mission turns
     /// it on the spot back towards its goal still circulates at that speed.
     circling: Option<f64>,
+    /// The yaw rate per radian of heading error of the command in force,
+    /// when it turns the robot towards a bearing (a mission,
+    /// velocity-heading); `None` when its yaw rate is the operator's own
+    /// ([`SafetyLayer::steered_by`]).
+    bearing_gain: Option<f64>,
     /// Since when the robot wanted to move but did not, and whether it
     /// asked to go somewhere meanwhile (not only to turn on the spot).
     stuck_since: Option<(Duration, bool)>,
@@ -209,6 +214,7 @@ impl SafetyLayer {
             neighbours: None,
             backing_off: None,
             circling: None,
+            bearing_gain: None,
             stuck_since: None,
             id: None,
             fresh_station: false,
@@ -278,6 +284,19 @@ impl SafetyLayer {
         self.id = Some(id);
     }
 
+    /// How the command about to be filtered turns the robot: towards a
+    /// bearing at `gain` rad/s per radian of heading error (a mission,
+    /// velocity-heading: the controller's heading gain), or, `None`, as
+    /// its sender says (twist, actuators, steering-throttle). The
+    /// right-hand rule reads where a command heads from it
+    /// ([`circulation::intent`]). Until told, `None`.
+    pub fn steered_by(&mut self, gain: Option<f64>) {
+        if gain != self.bearing_gain {
+            self.circling = None;
+        }
+        self.bearing_gain = gain;
+    }
+
     /// Whether the layer enforces anything.
     pub fn state(&self) -> SafetyState {
         match &self.arena {
@@ -318,6 +337,7 @@ impl SafetyLayer {
         now: Duration,
     ) -> Filtered {
         if !self.enforcing() {
+            self.forget_manoeuvre();
             return self.noted(outputs.to_vec(), Intervention::None);
         }
         let (fence, margin) = match &self.arena {
@@ -370,6 +390,7 @@ impl SafetyLayer {
     /// the only command known to keep it inside and apart. Counted as a
     /// fence intervention when there is a fence, else as separation.
     pub fn hold(&mut self, motors: usize) -> Filtered {
+        self.forget_manoeuvre();
         let fenced = matches!(self.arena, Some(ArenaInForce { fence: Some(_), .. }));
         let why = if fenced {
             Intervention::Fence
@@ -382,7 +403,19 @@ impl SafetyLayer {
     /// Nothing was commanded this period (the robot's outputs are held at
     /// zero for another reason: failsafe, e-stop, idle): no intervention.
     pub fn idle(&mut self) {
+        self.forget_manoeuvre();
         self.noted(Vec::new(), Intervention::None);
+    }
+
+    /// Ends whatever the layer was doing on its own (backing off, carrying
+    /// a swerve's speed, timing a jam): a robot held still for another
+    /// reason (e-stop, failsafe, no position) or no longer limited starts
+    /// afresh from its next command, and a turn on the spot then never
+    /// moves it.
+    fn forget_manoeuvre(&mut self) {
+        self.backing_off = None;
+        self.circling = None;
+        self.stuck_since = None;
     }
 
     /// The decision: a robot backing off keeps at it; otherwise the
@@ -410,7 +443,8 @@ impl SafetyLayer {
             return filter::steer(c, y.target, mobility);
         }
         self.backing_off = None;
-        let intent = circulation::intent(desired, twist, mobility, self.circling);
+        let intent =
+            circulation::intent(desired, twist, mobility, self.bearing_gain, self.circling);
         let swerve = self.swerve(c, intent, margin, now);
         // A diff-drive turning on the spot towards its swerve is under
         // way, not stuck.
@@ -425,7 +459,11 @@ impl SafetyLayer {
         }
         match swerve {
             Some(target) => {
-                self.circling = Some(intent.norm());
+                // The speed when the rule took over, kept while it holds
+                // (for a command that steers towards a bearing only).
+                if self.bearing_gain.is_some() {
+                    self.circling.get_or_insert(intent.norm());
+                }
                 filter::steer(c, target, mobility)
             }
             None => {
@@ -801,6 +839,50 @@ mod tests {
                 t.vx.hypot(t.vy) < 1e-9,
                 "a turn on the spot is not stuck: {t:?}"
             );
+        }
+    }
+
+    #[test]
+    fn a_turn_on_the_spot_never_moves_a_robot_the_layer_steered_before() {
+        // A diff-drive driving at a neighbour standing ahead, swerving round
+        // it; then told only to turn on the spot: after an e-stop (idle), or
+        // at once when the turn is the operator's own (a twist).
+        let dd = PlatformSpec::diff_drive().build();
+        let me = Pose {
+            x: 2.0,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let ahead = forward(dd.as_ref(), 0.4);
+        let spin = dd.mix(&Twist {
+            wz: 0.5,
+            ..Twist::default()
+        });
+        let moved = |l: &mut SafetyLayer, outputs: &[f64], k: u64| {
+            let now = Duration::from_millis(20 * k);
+            l.apply_neighbours(&neighbours(k + 1, vec![neighbour_at(2.8, 1.5)]), now);
+            let f = l.filter(dd.as_ref(), &me, Vec2::new(0.4, 0.0), outputs, now);
+            let t = dd.motion(&f.outputs);
+            (t.vx.hypot(t.vy), f.intervention)
+        };
+        for (gain, stop) in [(Some(3.0), true), (None, false)] {
+            let mut l = SafetyLayer::new(SafetyConfig::default());
+            l.registered(1);
+            l.apply_arena(&arena(1, true));
+            l.steered_by(gain);
+            let swerved =
+                (0..50u64).any(|k| moved(&mut l, &ahead, k).1 == Intervention::Separation);
+            assert!(swerved, "{gain:?}: the rule took over");
+            if stop {
+                l.idle();
+            }
+            for k in 50..100u64 {
+                let (speed, _) = moved(&mut l, &spin, k);
+                assert!(
+                    speed < 1e-9,
+                    "{gain:?}: turned on the spot, moved at {speed}"
+                );
+            }
         }
     }
 

@@ -125,6 +125,7 @@ impl Actuation {
         let demand = controller.demand(&pose, now, mission);
         let platform = controller.platform();
         let velocity = sensors.motion(platform, &self.outputs, now).velocity;
+        safety.steered_by(controller.bearing_gain());
         let outputs = safety.filter(
             platform,
             estimate.as_ref(),

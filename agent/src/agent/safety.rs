@@ -91,6 +91,12 @@ impl Safety {
         filtered.outputs
     }
 
+    /// How the command about to be filtered turns the robot
+    /// ([`SafetyLayer::steered_by`]).
+    pub(crate) fn steered_by(&mut self, gain: Option<f64>) {
+        self.layer.steered_by(gain);
+    }
+
     /// The outputs are held at zero this period for another reason
     /// (failsafe, e-stop, no position for the mode): the layer limits
     /// nothing.

@@ -14,7 +14,8 @@
 //!
 //! A robot whose present motion already goes beyond what the constraints
 //! allow (its actuators lag the commands, a neighbour came closer than
-//! predicted) is told to stop: braking is always within what it promised.
+//! predicted) is told to stop, and to stop turning (whatever the
+//! platform): braking is always within what it promised.
 //!
 //! When a neighbour is in the way, the layer chooses another desired
 //! velocity (the right-hand rule: [`crate::safety::circulation`] and

@@ -9,12 +9,13 @@
 //!
 //! Back from the filter's velocity to outputs:
 //! - holonomic platforms (kiwi, quadcopter) take the safe velocity as it is,
-//!   turned into the body frame, with the commanded yaw rate and climb rate
+//!   turned into the body frame, with the commanded yaw rate (unless the
+//!   filter sets one: a stop for an overrun stops the turn) and climb rate
 //!   (the filter works in the horizontal plane);
 //! - a diff-drive cannot move sideways: it drives the safe velocity's
 //!   component along its heading (the filter keeps that along the heading
-//!   for it) and keeps the commanded yaw rate, unless the filter turns it to
-//!   yield. Its mixing then scales both wheels down together if needed,
+//!   for it) and keeps the commanded yaw rate, unless the filter sets one
+//!   (steering it round a neighbour, or a stop that stops the turn too). Its mixing then scales both wheels down together if needed,
 //!   which only slows it further along the same arc.
 
 use mech_proto::Twist;

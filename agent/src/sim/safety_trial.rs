@@ -210,6 +210,7 @@ impl SafetyTrial {
             let velocity = r.velocity();
             let outputs = r.controller.update(&pose, now, r.mission.as_mut()).to_vec();
             let platform: &dyn Platform = r.controller.platform();
+            r.layer.steered_by(r.controller.bearing_gain());
             let filtered = r.layer.filter(platform, &pose, velocity, &outputs, now);
             let settled = now.checked_sub(Duration::from_millis(250));
             if settled.is_some_and(|t| r.layer.stale(t)) {
