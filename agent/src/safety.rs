@@ -887,6 +887,58 @@ mod tests {
     }
 
     #[test]
+    fn a_diff_drive_turning_on_the_spot_towards_its_swerve_is_not_stuck() {
+        // On a mission (its command heads along its heading) at
+        // neighbours standing ahead and to its right: the swerve is far to
+        // the right,
+        // and at 1 rad/s the turn takes longer than `stuck_after`; the
+        // robot (its motion integrated ideally) turns, then drives, and
+        // never backs off meanwhile.
+        let dd = PlatformSpec::diff_drive().build();
+        let mut l = SafetyLayer::new(SafetyConfig::default());
+        l.registered(1);
+        l.apply_arena(&arena(1, true));
+        l.steered_by(Some(3.0));
+        let ahead = forward(dd.as_ref(), 0.3);
+        let (mut x, mut y, mut heading, mut speed) = (2.0, 1.5, 0.0f64, 0.0);
+        let mut drove = None;
+        for k in 0..150u64 {
+            let now = Duration::from_millis(20 * k);
+            let around = vec![
+                neighbour_at(2.5, 1.5),
+                neighbour_at(2.35, 1.1),
+                neighbour_at(1.95, 1.0),
+            ];
+            l.apply_neighbours(&neighbours(k + 1, around), now);
+            let me = Pose {
+                x,
+                y,
+                heading,
+                ..Pose::default()
+            };
+            let velocity = Vec2::from_angle(heading) * speed;
+            let f = l.filter(dd.as_ref(), &me, velocity, &ahead, now);
+            assert!(l.backing_off.is_none(), "backed off at {now:?}");
+            let t = dd.motion(&f.outputs);
+            heading += t.wz * 0.02;
+            speed = t.vx;
+            (x, y) = (
+                x + speed * heading.cos() * 0.02,
+                y + speed * heading.sin() * 0.02,
+            );
+            if speed > 0.05 && drove.is_none() {
+                drove = Some(now);
+            }
+        }
+        let drove = drove.expect("it drives once turned");
+        assert!(
+            drove > Duration::from_millis(1300),
+            "the turn took a while: {drove:?}"
+        );
+        assert!(heading < -0.6, "it turned right: {heading}");
+    }
+
+    #[test]
     fn pressed_against_a_neighbour_a_swerve_follows_the_cell_edge_to_the_right() {
         use crate::safety::constraints::{Plane, Wall};
         use crate::safety::geometry::Segment;
