@@ -436,8 +436,7 @@ impl SafetyLayer {
             .iter()
             .any(|v| v.abs() > 1e-9);
         if !wants_motion {
-            self.backing_off = None;
-            self.circling = None;
+            self.forget_manoeuvre();
         }
         if let Some(y) = self.backing_off.filter(|y| now < y.until) {
             return filter::steer(c, y.target, mobility);
@@ -609,6 +608,22 @@ mod tests {
             robots,
             obstacles: vec![],
         }
+    }
+
+    /// A layer registered as robot 1 with [`arena`] 1 in force.
+    fn enforcing(config: SafetyConfig) -> SafetyLayer {
+        let mut l = SafetyLayer::new(config);
+        l.registered(1);
+        l.apply_arena(&arena(1, true));
+        l
+    }
+
+    /// The outputs that turn `platform` on the spot at `wz`.
+    fn turning(platform: &dyn Platform, wz: f64) -> Vec<f64> {
+        platform.mix(&Twist {
+            wz,
+            ..Twist::default()
+        })
     }
 
     fn forward(platform: &dyn Platform, speed: f64) -> Vec<f64> {
@@ -791,9 +806,7 @@ mod tests {
         };
         let into = forward(kiwi.as_ref(), 0.3);
         let run = |config: SafetyConfig| {
-            let mut l = SafetyLayer::new(config);
-            l.registered(1);
-            l.apply_arena(&arena(1, true));
+            let mut l = enforcing(config);
             let mut motions = Vec::new();
             for k in 0..150u64 {
                 let now = Duration::from_millis(20 * k);
@@ -823,13 +836,8 @@ mod tests {
         });
         assert!(!never.iter().any(|m| backing(&m)), "0: never");
         // Told only to turn on the spot beside it: never moved.
-        let mut l = SafetyLayer::new(SafetyConfig::default());
-        l.registered(1);
-        l.apply_arena(&arena(1, true));
-        let turn = kiwi.mix(&Twist {
-            wz: 1.0,
-            ..Twist::default()
-        });
+        let mut l = enforcing(SafetyConfig::default());
+        let turn = turning(kiwi.as_ref(), 1.0);
         for k in 0..150u64 {
             let now = Duration::from_millis(20 * k);
             l.apply_neighbours(&neighbours(k + 1, vec![neighbour_at(2.4, 1.5)]), now);
@@ -854,10 +862,7 @@ mod tests {
             ..Pose::default()
         };
         let ahead = forward(dd.as_ref(), 0.4);
-        let spin = dd.mix(&Twist {
-            wz: 0.5,
-            ..Twist::default()
-        });
+        let spin = turning(dd.as_ref(), 0.5);
         let moved = |l: &mut SafetyLayer, outputs: &[f64], k: u64| {
             let now = Duration::from_millis(20 * k);
             l.apply_neighbours(&neighbours(k + 1, vec![neighbour_at(2.8, 1.5)]), now);
@@ -866,9 +871,7 @@ mod tests {
             (t.vx.hypot(t.vy), f.intervention)
         };
         for (gain, stop) in [(Some(3.0), true), (None, false)] {
-            let mut l = SafetyLayer::new(SafetyConfig::default());
-            l.registered(1);
-            l.apply_arena(&arena(1, true));
+            let mut l = enforcing(SafetyConfig::default());
             l.steered_by(gain);
             let swerved =
                 (0..50u64).any(|k| moved(&mut l, &ahead, k).1 == Intervention::Separation);
@@ -895,9 +898,7 @@ mod tests {
         // robot (its motion integrated ideally) turns, then drives, and
         // never backs off meanwhile.
         let dd = PlatformSpec::diff_drive().build();
-        let mut l = SafetyLayer::new(SafetyConfig::default());
-        l.registered(1);
-        l.apply_arena(&arena(1, true));
+        let mut l = enforcing(SafetyConfig::default());
         l.steered_by(Some(3.0));
         let ahead = forward(dd.as_ref(), 0.3);
         let (mut x, mut y, mut heading, mut speed) = (2.0, 1.5, 0.0f64, 0.0);

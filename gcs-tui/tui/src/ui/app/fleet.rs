@@ -219,12 +219,18 @@ mod tests {
         assert_eq!(f.next_cluster_name(), "c1");
     }
 
-    #[test]
-    fn a_robot_is_found_by_name_in_order_or_out_of_it() {
+    /// A fleet of `robot_1`..`robot_n`, and their names in fleet order.
+    fn fleet_of(n: usize) -> (FleetState, Vec<String>) {
         let mut f = FleetState::default();
-        let names: Vec<String> = (1..=300).map(|i| format!("robot_{i}")).collect();
+        let names: Vec<String> = (1..=n).map(|i| format!("robot_{i}")).collect();
         let refs: Vec<&str> = names.iter().map(String::as_str).collect();
         f.apply(snapshot(&refs));
+        (f, names)
+    }
+
+    #[test]
+    fn a_robot_is_found_by_name_in_order_or_out_of_it() {
+        let (mut f, names) = fleet_of(300);
         for (i, n) in names.iter().enumerate() {
             assert_eq!(f.index_of(n), Some(i));
             assert_eq!(f.robot(n).map(|r| r.name.as_str()), Some(n.as_str()));
@@ -244,10 +250,7 @@ mod tests {
 
     #[test]
     fn cluster_members_are_found_in_their_order_whatever_it_is() {
-        let mut f = FleetState::default();
-        let names: Vec<String> = (1..=12).map(|i| format!("robot_{i}")).collect();
-        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-        f.apply(snapshot(&refs));
+        let (f, names) = fleet_of(12);
         let found = |members: &[&str]| -> Vec<String> {
             let members: Vec<String> = members.iter().map(|m| m.to_string()).collect();
             f.robots_named(&members).map(|r| r.name.clone()).collect()
