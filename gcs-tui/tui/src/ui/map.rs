@@ -134,22 +134,22 @@ impl<'a> Segment<'a> {
 }
 
 impl Shape for Segment<'_> {
+    /// `n + 1` points evenly spaced from end to end, `n` the length in
+    /// dots rounded up, stepped in dot units (projecting the two ends
+    /// only).
     fn draw(&self, painter: &mut Painter) {
-        let m = self.proj.metres_per_dot;
-        let (x0, y0) = self.from;
-        let (x1, y1) = self.to;
-        let len_dots = ((x1 - x0).hypot(y1 - y0) / m).ceil();
+        let (i0, j0) = self.proj.world_to_dots(self.from.0, self.from.1);
+        let (i1, j1) = self.proj.world_to_dots(self.to.0, self.to.1);
+        let (di, dj) = (i1 - i0, j1 - j0);
+        let len_dots = (di * di + dj * dj).sqrt().ceil();
         if !len_dots.is_finite() {
             return;
         }
         let n = (len_dots as usize).clamp(1, 4096);
-        let every = self.every.max(1);
-        for k in (0..=n).step_by(every) {
-            let f = k as f64 / n as f64;
-            if let Some((i, j)) = self
-                .proj
-                .world_to_dot(x0 + (x1 - x0) * f, y0 + (y1 - y0) * f)
-            {
+        let (si, sj) = (di / n as f64, dj / n as f64);
+        for k in (0..=n).step_by(self.every.max(1)) {
+            let k = k as f64;
+            if let Some((i, j)) = self.proj.dot_at(i0 + si * k, j0 + sj * k) {
                 painter.paint(i, j, self.color);
             }
         }
@@ -486,5 +486,49 @@ mod tests {
     fn lengths_read_naturally() {
         assert_eq!(format_length(2.0), "2 m");
         assert_eq!(format_length(0.5), "50 cm");
+    }
+
+    /// `shape` drawn alone on a braille canvas over `proj`.
+    fn canvas(proj: &Projection, shape: &dyn Fn(&mut Context)) -> Buffer {
+        let area = Rect::new(0, 0, proj.width, proj.height);
+        let mut buf = Buffer::empty(area);
+        Canvas::default()
+            .marker(Marker::Braille)
+            .x_bounds(proj.x_bounds())
+            .y_bounds(proj.y_bounds())
+            .paint(|ctx| shape(ctx))
+            .render(area, &mut buf);
+        buf
+    }
+
+    proptest::proptest! {
+        /// A segment stepped in dot units paints the dots of its evenly
+        /// spaced world points, every `every`-th, on the map or partly
+        /// off it.
+        #[test]
+        fn a_segment_paints_the_dots_of_its_points(
+            scale in 0.005f64..0.5, w in 4u16..120, h in 2u16..40,
+            x0 in -30.0f64..30.0, y0 in -30.0f64..30.0,
+            x1 in -30.0f64..30.0, y1 in -30.0f64..30.0, every in 1usize..4,
+        ) {
+            let proj = super::super::viewport::Viewport::new(0.3, -0.1, scale).project(w, h);
+            let len = ((x1 - x0).hypot(y1 - y0) / scale).ceil() as usize;
+            let n = len.clamp(1, 4096);
+            let points: Vec<(f64, f64)> = (0..=n)
+                .step_by(every)
+                .map(|k| {
+                    let f = k as f64 / n as f64;
+                    (x0 + (x1 - x0) * f, y0 + (y1 - y0) * f)
+                })
+                .collect();
+            let color = Color::Cyan;
+            let stepped = canvas(&proj, &|ctx| {
+                ctx.draw(&Segment { proj: &proj, from: (x0, y0), to: (x1, y1), color, every })
+            });
+            let projected = canvas(&proj, &|ctx| {
+                ctx.draw(&Dots { proj: &proj, points: &points, color })
+            });
+            proptest::prop_assert_eq!(stepped, projected);
+        }
     }
 }

@@ -148,8 +148,22 @@ impl Projection {
     /// `floor` call per point (the map projects every point of every path,
     /// every frame).
     pub fn world_to_dot(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let i = (x - self.left) / self.metres_per_dot;
-        let j = (self.top - y) / self.metres_per_dot;
+        let (i, j) = self.world_to_dots(x, y);
+        self.dot_at(i, j)
+    }
+
+    /// A world point in dot units, not cut to a dot: `(x - left) / m`,
+    /// `(top - y) / m`.
+    pub fn world_to_dots(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            (x - self.left) / self.metres_per_dot,
+            (self.top - y) / self.metres_per_dot,
+        )
+    }
+
+    /// The dot containing the point `(i, j)` in dot units, if it is on
+    /// screen.
+    pub fn dot_at(&self, i: f64, j: f64) -> Option<(usize, usize)> {
         let (w, h) = self.dots();
         (i >= 0.0 && j >= 0.0 && i < w as f64 && j < h as f64).then_some((i as usize, j as usize))
     }
