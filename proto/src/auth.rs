@@ -217,7 +217,10 @@ pub const REORDER_SPAN_US: u64 = 1_000_000;
 pub struct Stream {
     start_us: u64,
     newest_us: u64,
+    /// The stamps remembered, oldest first from `head` round the ring: a
+    /// stamp newer than all takes the oldest's place in one step.
     recent: [u64; REORDER_WINDOW],
+    head: usize,
     len: usize,
 }
 
@@ -230,6 +233,7 @@ impl Stream {
             start_us: stamp_us,
             newest_us: stamp_us,
             recent,
+            head: 0,
             len: 1,
         }
     }
@@ -238,43 +242,63 @@ impl Stream {
     pub fn accept(&mut self, stamp_us: u64) -> Result<(), AuthError> {
         if stamp_us > self.newest_us {
             // The usual case, a stamp newer than all: neither a repeat nor
-            // too old, so it takes the oldest stamp's place (one pass over
-            // the window instead of three).
-            self.remember(stamp_us);
+            // too old, so it is remembered last, in place of the oldest
+            // once the window is full.
+            if self.len < REORDER_WINDOW {
+                self.recent[self.slot(self.len)] = stamp_us;
+                self.len += 1;
+            } else {
+                self.recent[self.head] = stamp_us;
+                self.head = self.slot(1);
+            }
             self.newest_us = stamp_us;
             return Ok(());
         }
         self.accept_late(stamp_us)
     }
 
-    /// A stamp newer than all, remembered in place of the oldest once the
-    /// window is full.
-    fn remember(&mut self, stamp_us: u64) {
-        if self.len < REORDER_WINDOW {
-            self.recent[self.len] = stamp_us;
-            self.len += 1;
-        } else if let Some(oldest) = (0..REORDER_WINDOW).min_by_key(|&i| self.recent[i]) {
-            self.recent[oldest] = stamp_us;
-        }
+    /// Where the `k`-th oldest stamp remembered is kept.
+    fn slot(&self, k: usize) -> usize {
+        (self.head + k) % REORDER_WINDOW
     }
 
-    /// [`Stream::accept`] for a stamp no newer than the newest accepted.
+    /// The `k`-th oldest stamp remembered.
+    fn nth(&self, k: usize) -> u64 {
+        self.recent[self.slot(k)]
+    }
+
+    /// [`Stream::accept`] for a stamp no newer than the newest accepted:
+    /// found among the stamps remembered by bisection, and put in its
+    /// place (the oldest forgotten when the window is full).
     fn accept_late(&mut self, stamp_us: u64) -> Result<(), AuthError> {
-        let recent = &self.recent[..self.len];
-        let oldest = recent.iter().copied().min().unwrap_or(self.start_us);
+        let oldest = self.nth(0);
         let too_old = stamp_us < self.start_us
             || stamp_us.saturating_add(REORDER_SPAN_US) < self.newest_us
             || (self.len == REORDER_WINDOW && stamp_us <= oldest);
-        if too_old || recent.contains(&stamp_us) {
+        let (mut lo, mut hi) = (0, self.len);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if self.nth(mid) < stamp_us {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        if too_old || (lo < self.len && self.nth(lo) == stamp_us) {
             return Err(AuthError::Replay);
         }
-        if self.len < REORDER_WINDOW {
-            self.recent[self.len] = stamp_us;
-            self.len += 1;
-        } else if let Some(slot) = self.recent.iter_mut().find(|s| **s == oldest) {
-            *slot = stamp_us;
+        let mut at = lo;
+        if self.len == REORDER_WINDOW {
+            // Older than `stamp_us` (not too old), so `at >= 1`.
+            self.head = self.slot(1);
+            self.len -= 1;
+            at -= 1;
         }
-        self.newest_us = self.newest_us.max(stamp_us);
+        for k in (at..self.len).rev() {
+            self.recent[self.slot(k + 1)] = self.nth(k);
+        }
+        self.recent[self.slot(at)] = stamp_us;
+        self.len += 1;
         Ok(())
     }
 

@@ -330,18 +330,25 @@ fn reason_of(e: AuthError) -> RejectReason {
 /// A sender's stream under one key (its id) on one of its links.
 type StreamId = (u32, u8);
 
+/// The keyring's maps hash with foldhash, seeded per process: every
+/// message looks a key up three to five times, and only keys the station
+/// lists (and streams of messages whose tag checked) are ever inserted, so
+/// a peer cannot choose what fills them.
+type Map<K, V> = HashMap<K, V, foldhash::fast::RandomState>;
+
 /// The keys the router holds and the freshness of every stream: the gate
 /// of the authenticated control plane.
 #[derive(Debug)]
 pub struct Keyring {
-    by_id: HashMap<u32, Identity>,
+    by_id: Map<u32, Identity>,
     /// The key each name last signed with (or, before that, the one listed
     /// last): the router signs what it sends a peer with it, so a key
     /// rotation works whichever key the peer holds.
-    by_name: HashMap<String, u32>,
-    /// Every stream, by sender name, then key and link: found from the
-    /// name as received, without making a key of it.
-    streams: HashMap<String, HashMap<StreamId, Stream>>,
+    by_name: Map<String, u32>,
+    /// Every stream, by key and link. A key is one name's (a message
+    /// signed with it from another name is refused before its stamp is
+    /// read), so the key's id names the sender too.
+    streams: Map<StreamId, Stream>,
     freshness: Freshness,
 }
 
@@ -357,9 +364,9 @@ impl Keyring {
     /// not from before `started_us` (the router's start).
     pub fn new(keys: Vec<Identity>, window: Duration, started_us: u64) -> Keyring {
         let mut ring = Keyring {
-            by_id: HashMap::new(),
-            by_name: HashMap::new(),
-            streams: HashMap::new(),
+            by_id: Map::default(),
+            by_name: Map::default(),
+            streams: Map::default(),
             freshness: Freshness {
                 window_us: window.as_micros() as u64,
                 not_before_us: started_us,
@@ -499,7 +506,7 @@ impl Keyring {
             detail,
         };
         let id = (tag.key_id, tag.link);
-        if let Some(stream) = self.streams.get_mut(sender).and_then(|s| s.get_mut(&id)) {
+        if let Some(stream) = self.streams.get_mut(&id) {
             let last = stream.last_us();
             return stream.accept(tag.stamp_us).map_err(|_| {
                 replay(format!(
@@ -515,10 +522,7 @@ impl Keyring {
                 (tag.stamp_us as f64 - now_us as f64) / 1e6
             )));
         }
-        self.streams
-            .entry(sender.to_string())
-            .or_default()
-            .insert(id, Stream::starting_at(tag.stamp_us));
+        self.streams.insert(id, Stream::starting_at(tag.stamp_us));
         Ok(())
     }
 }

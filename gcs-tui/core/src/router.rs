@@ -133,13 +133,14 @@ impl Shared {
             return None;
         }
         let now = Instant::from_std(now);
+        let station_us = mech_proto::unix_micros();
         let mut ticket = None;
         let mut tables = lock(&self.tables);
         tables.order_batch(n, |i| message(i).1, behind, now);
         for k in 0..n {
             let (i, treatment) = tables.batch_item(k);
             let (bytes, from) = message(i);
-            let cx = &mut Ctx::new(now, from, fx);
+            let cx = &mut Ctx::at(now, station_us, from, fx);
             match treatment {
                 Treatment::Decide => tables.handle(bytes, cx),
                 Treatment::Shed => tables.shed(bytes, cx),

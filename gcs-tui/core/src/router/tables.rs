@@ -121,6 +121,9 @@ pub(crate) struct Effects {
 #[derive(Debug)]
 pub(crate) struct Ctx<'a> {
     pub(crate) now: Instant,
+    /// The station's clock (µs since the Unix epoch) at `now`: what
+    /// freshness is judged by and what the router stamps.
+    pub(crate) station_us: u64,
     /// Where the message being decided came from; [`Peer::Local`] for the
     /// station's own requests and timers.
     pub(crate) from: Peer,
@@ -128,8 +131,20 @@ pub(crate) struct Ctx<'a> {
 }
 
 impl<'a> Ctx<'a> {
+    /// A context at `now`, reading the station's clock.
     pub(crate) fn new(now: Instant, from: Peer, fx: &'a mut Effects) -> Ctx<'a> {
-        Ctx { now, from, fx }
+        Ctx::at(now, mech_proto::unix_micros(), from, fx)
+    }
+
+    /// A context at `now` and station time `station_us`, read once for a
+    /// batch of messages.
+    pub(crate) fn at(now: Instant, station_us: u64, from: Peer, fx: &'a mut Effects) -> Ctx<'a> {
+        Ctx {
+            now,
+            station_us,
+            from,
+            fx,
+        }
     }
 
     /// Sends the received message on to `to`, bytes unchanged.
@@ -229,9 +244,10 @@ impl Tables {
     /// `destination` when that is a robot.
     fn make(&mut self, destination: &str, body: Body) -> Option<Vec<u8>> {
         self.seq = self.seq.wrapping_add(1);
+        let station_us = mech_proto::unix_micros();
         let header = Header {
             seq: self.seq,
-            stamp_us: mech_proto::unix_micros(),
+            stamp_us: station_us,
             sender: self.config.name.clone(),
             destination: destination.to_string(),
             channel: String::new(),
@@ -239,7 +255,7 @@ impl Tables {
         match mech_proto::encode(&Envelope::new(header, body)) {
             Ok(mut b) => {
                 b.pop(); // the nil auth element: signed for the receiver
-                let sealed = self.gate.seal(&b, destination);
+                let sealed = self.gate.seal(&b, destination, station_us);
                 if sealed.is_some() {
                     self.count_sent(destination);
                 }

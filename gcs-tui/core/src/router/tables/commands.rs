@@ -53,7 +53,7 @@ impl Tables {
             match mech_proto::encode(&Envelope::new(header, Body::Command(part.command))) {
                 Ok(mut b) => {
                     b.pop(); // the nil auth element: signed for the robot
-                    if let Some(b) = self.gate.seal(&b, &part.robot) {
+                    if let Some(b) = self.gate.seal(&b, &part.robot, cx.station_us) {
                         cx.send(target, b);
                         delivered += 1;
                     }

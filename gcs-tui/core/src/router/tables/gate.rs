@@ -79,9 +79,10 @@ impl Gate {
     }
 
     /// `region` (a message without its `auth` element) with a tag for
-    /// `name`, or with a nil tag when authentication is off. `None` if the
-    /// router holds no key for `name`.
-    pub(super) fn seal(&mut self, region: &[u8], name: &str) -> Option<Vec<u8>> {
+    /// `name`, stamped at station time `station_us` or later, or with a nil
+    /// tag when authentication is off. `None` if the router holds no key
+    /// for `name`.
+    pub(super) fn seal(&mut self, region: &[u8], name: &str, station_us: u64) -> Option<Vec<u8>> {
         let mut bytes = Vec::with_capacity(region.len() + mech_proto::auth::TAG_LEN + 2);
         bytes.extend_from_slice(region);
         bytes.push(0xc0);
@@ -92,7 +93,7 @@ impl Gate {
             warn!(to = name, "no key to sign for this receiver; not sent");
             return None;
         };
-        let stamp = self.stamper.next(mech_proto::unix_micros());
+        let stamp = self.stamper.next(station_us);
         if let Err(e) = key.seal(&mut bytes, FROM_ROUTER, stamp) {
             warn!(error = %e, "cannot sign");
             return None;
@@ -138,7 +139,7 @@ impl Tables {
         let Some(keys) = self.gate.keys.as_mut().filter(|_| cx.from != Peer::Local) else {
             return Ok((None, None));
         };
-        let now_us = mech_proto::unix_micros();
+        let now_us = cx.station_us;
         let checked = match split(bytes) {
             Err(e) => Err(Rejection {
                 reason: RejectReason::BadTag,
@@ -326,7 +327,7 @@ impl Tables {
         }
         match split(bytes) {
             Ok((region, _)) => {
-                if let Some(b) = self.gate.seal(region, name) {
+                if let Some(b) = self.gate.seal(region, name, cx.station_us) {
                     cx.send(to, b);
                 }
             }

@@ -117,7 +117,7 @@ impl Tables {
             Ok((region, _)) => region.to_vec(),
             Err(e) => return self.bad(e.to_string(), cx),
         };
-        if let (Some(b), Some(to)) = (self.gate.seal(&region, &robot), to) {
+        if let (Some(b), Some(to)) = (self.gate.seal(&region, &robot, cx.station_us), to) {
             cx.send(to, b);
             self.count_sent(&robot);
         }
@@ -191,7 +191,7 @@ impl Tables {
             let Some(to) = self.target(&robot, cx.now) else {
                 continue;
             };
-            if let Some(b) = self.gate.seal(&region, &robot) {
+            if let Some(b) = self.gate.seal(&region, &robot, cx.station_us) {
                 cx.send(to, b);
                 self.count_sent(&robot);
             }
