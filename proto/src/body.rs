@@ -237,6 +237,10 @@ pub struct Telemetry {
     pub safety: Option<SafetyReport>,
 }
 
+/// Latest arrival time a [`Waypoint`] may ask for, s after the mission
+/// starts: a day.
+pub const MAX_WAYPOINT_TIME: f64 = 86_400.0;
+
 /// One point of a [`Mission`]: position in metres and an optional arrival time
 /// in seconds after the mission starts (the robot chooses its speed to meet
 /// it). `z` is ignored by ground robots.
@@ -739,6 +743,11 @@ impl Waypoint {
             finite(t, "waypoint time")?;
             if t < 0.0 {
                 return Err(Error::invalid(format!("waypoint time {t} is negative")));
+            }
+            if t > MAX_WAYPOINT_TIME {
+                return Err(Error::invalid(format!(
+                    "waypoint time {t} s is more than {MAX_WAYPOINT_TIME} s (a day)"
+                )));
             }
         }
         Ok(())

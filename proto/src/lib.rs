@@ -34,9 +34,9 @@ pub use body::{
     AutopilotAction, AutopilotRequest, Bye, Channel as ChannelInfo, Channels, ChannelsRequest,
     ClusterCommand, ClusterGoal, ClusterPose, ClusterVelocity, Computation, ControlMode, EStop,
     EStopAck, Echo, FailsafeState, FleetCommand, Formation, FormationKind, Health, Heartbeat,
-    Hello, Level, Mission, MissionAck, MissionProgress, Notice, NoticeCode, Offset, Pose,
-    PositionFix, RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time, TimeRequest, Velocity,
-    VelocitySource, Waypoint, Welcome,
+    Hello, Level, MAX_WAYPOINT_TIME, Mission, MissionAck, MissionProgress, Notice, NoticeCode,
+    Offset, Pose, PositionFix, RobotCommand, Route, RouteAck, Subscribe, Telemetry, Time,
+    TimeRequest, Velocity, VelocitySource, Waypoint, Welcome,
 };
 pub use command::{
     Actuators, Command, CommandKind, SteeringThrottle, Stop, Twist, VelocityHeading,

@@ -181,6 +181,33 @@ fn non_finite_and_out_of_range_values_are_rejected_both_ways() {
     );
 }
 
+/// A waypoint may be due a day after its mission starts at most: a later
+/// (finite) arrival time is refused, sent or received, so no robot counts
+/// time it cannot hold.
+#[test]
+fn a_waypoint_due_more_than_a_day_later_is_rejected_both_ways() {
+    let mission = |time| {
+        let mut env = samples()[1].clone();
+        let Body::Mission(m) = &mut env.body else {
+            panic!("sample 1 is a mission");
+        };
+        m.waypoints[1].time = Some(time);
+        env
+    };
+    assert!(encode(&mission(mech_proto::MAX_WAYPOINT_TIME)).is_ok());
+    let late = mission(1e20);
+    let e = encode(&late).unwrap_err();
+    assert!(e.to_string().contains("more than"), "{e}");
+    // A peer that sends it anyway: the 15 s of the sample patched to 1e20.
+    let mut bytes = encode(&mission(15.0)).unwrap();
+    let at = bytes
+        .windows(8)
+        .position(|w| w == 15.0f64.to_be_bytes())
+        .unwrap();
+    bytes[at..at + 8].copy_from_slice(&1e20f64.to_be_bytes());
+    assert!(matches!(decode(&bytes), Err(Error::Invalid(_))));
+}
+
 #[test]
 fn unknown_command_kind_is_malformed_not_a_panic() {
     let mut bytes = encode(&samples()[0]).unwrap();

@@ -147,8 +147,8 @@ fn leg_speed(
     let cruise = limits.max_speed * gains.cruise_fraction;
     let speed = match wp.time {
         Some(t) => {
-            let due = started + Duration::from_secs_f64(t);
-            let left = due.saturating_sub(now).as_secs_f64();
+            // In seconds, not `Duration`s: any finite time is counted.
+            let left = started.as_secs_f64() + t - now.as_secs_f64();
             if left > 1e-3 {
                 dist / left
             } else {
@@ -235,5 +235,24 @@ mod tests {
             (late.vx - p.limits().max_speed).abs() < 1e-9,
             "late: as fast as allowed"
         );
+    }
+
+    /// An arrival time longer than a `Duration` holds (the message layer
+    /// refuses it, but a mission may come from elsewhere) only slows the
+    /// robot down to nearly nothing; it never stops the agent.
+    #[test]
+    fn an_arrival_time_beyond_any_clock_is_only_slow() {
+        let p = PlatformSpec::kiwi().build();
+        let g = Gains {
+            position: 100.0,
+            ..Gains::default()
+        };
+        for t in [1e20, f64::MAX] {
+            let mut m = mission(&[(2.0, 0.0)], false);
+            m.waypoints[0].time = Some(t);
+            let mut run = MissionRun::new(m);
+            let twist = run.step(&Pose::default(), Duration::from_secs(5), p.as_ref(), &g);
+            assert!(twist.vx >= 0.0 && twist.vx < 1e-9, "{t}: {twist:?}");
+        }
     }
 }

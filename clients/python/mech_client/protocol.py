@@ -138,6 +138,17 @@ def _real(value: float, what: str) -> float:
     return v
 
 
+MAX_WAYPOINT_TIME = 86_400.0
+"""Latest arrival time a waypoint may ask for, s after its mission starts."""
+
+
+def _arrival(value: float) -> float:
+    v = _real(value, "waypoint time")
+    if not 0.0 <= v <= MAX_WAYPOINT_TIME:
+        raise ProtocolError(f"waypoint time {v} s is not within 0..{MAX_WAYPOINT_TIME:.0f} s")
+    return v
+
+
 def twist(vx: float = 0.0, vy: float = 0.0, vz: float = 0.0, wz: float = 0.0) -> Command:
     """Body-frame velocity (REP 103: x forward, y left, z up), m/s, and yaw
     rate ``wz`` in rad/s, counter-clockwise positive."""
@@ -386,7 +397,7 @@ def mission_body(
             _real(w.x, "waypoint x"),
             _real(w.y, "waypoint y"),
             _real(w.z, "waypoint z"),
-            None if w.time is None else _real(w.time, "waypoint time"),
+            None if w.time is None else _arrival(w.time),
         ]
         for w in waypoints
     ]

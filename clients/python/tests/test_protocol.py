@@ -159,6 +159,10 @@ class Decoding(unittest.TestCase):
             p.envelope(p.Kind.COMMAND, [], seq=1, stamp_us=0, sender="has space")
         with self.assertRaises(p.ProtocolError):
             p.mission_body(1, [p.Waypoint(0, 0)], arrival_radius=0)
+        for late in (-1.0, 1e20):
+            with self.assertRaises(p.ProtocolError):
+                p.mission_body(1, [p.Waypoint(0, 0, time=late)])
+        p.mission_body(1, [p.Waypoint(0, 0, time=p.MAX_WAYPOINT_TIME)])
 
 
 if __name__ == "__main__":
