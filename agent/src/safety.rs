@@ -117,6 +117,14 @@ impl SafetyConfig {
                 Err(format!("`safety.{what}` must be zero or more, got {v}"))
             }
         };
+        // Times are seconds a robot waits or looks ahead: an hour at most.
+        let at_most_an_hour = |v: f64, what: &str| {
+            if v <= 3600.0 {
+                Ok(())
+            } else {
+                Err(format!("`safety.{what}` must be 3600 s or less, got {v}"))
+            }
+        };
         positive(self.radius, "radius")?;
         positive(self.max_deceleration, "max_deceleration")?;
         nonnegative(self.reaction_time, "reaction_time")?;
@@ -126,6 +134,15 @@ impl SafetyConfig {
         nonnegative(self.horizon, "horizon")?;
         nonnegative(self.stuck_after, "stuck_after")?;
         nonnegative(self.back_off_time, "back_off_time")?;
+        for (v, what) in [
+            (self.reaction_time, "reaction_time"),
+            (self.stale_after, "stale_after"),
+            (self.horizon, "horizon"),
+            (self.stuck_after, "stuck_after"),
+            (self.back_off_time, "back_off_time"),
+        ] {
+            at_most_an_hour(v, what)?;
+        }
         Ok(())
     }
 
@@ -1010,5 +1027,17 @@ mod tests {
             ..SafetyConfig::default()
         };
         assert!(bad.validate().unwrap_err().contains("radius"));
+        // A finite time no clock holds (it would end the agent when a
+        // robot backs off) is refused with the rest.
+        let bad = SafetyConfig {
+            back_off_time: 1e20,
+            ..SafetyConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("back_off_time"));
+        let bad = SafetyConfig {
+            stale_after: 3600.5,
+            ..SafetyConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("stale_after"));
     }
 }
