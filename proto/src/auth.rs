@@ -432,6 +432,9 @@ pub fn private_mode(mode: u32) -> Result<(), String> {
 /// whitespace ignored).
 pub fn parse_secret(hex: &str) -> Result<[u8; KEY_LEN], String> {
     let hex = hex.trim();
+    if let Some((at, c)) = hex.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
+        return Err(format!("{c:?} at byte {} is not hex", at + 1));
+    }
     if hex.len() != 2 * KEY_LEN {
         return Err(format!(
             "a key is {} hex digits, found {}",
@@ -454,6 +457,19 @@ mod tests {
 
     fn key(b: u8) -> Key {
         Key::new(&[b; KEY_LEN])
+    }
+
+    /// A secret of 64 bytes that are not all hex digits (a multi-byte
+    /// character among them) is refused with the place of the first.
+    #[test]
+    fn a_secret_that_is_not_hex_is_refused_not_cut() {
+        let good = "ab".repeat(KEY_LEN);
+        assert_eq!(parse_secret(&good), Ok([0xab; KEY_LEN]));
+        let accented = format!("a\u{e9}{}", &good[..61]);
+        assert_eq!(accented.len(), 2 * KEY_LEN);
+        let e = parse_secret(&accented).unwrap_err();
+        assert!(e.contains("at byte 2"), "{e}");
+        assert!(parse_secret(&format!("g{}", &good[1..])).is_err());
     }
 
     #[test]

@@ -279,7 +279,8 @@ impl OffboardNavigator {
             Some(t) => {
                 let remaining = t - elapsed;
                 if remaining > 1e-3 {
-                    (distance / remaining).clamp(cfg.min_speed, max_speed)
+                    // A platform slower than the least speed: its top speed.
+                    (distance / remaining).max(cfg.min_speed).min(max_speed)
                 } else {
                     max_speed
                 }

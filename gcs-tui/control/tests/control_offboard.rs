@@ -143,6 +143,33 @@ fn arrival_times_set_the_speed() {
     );
 }
 
+/// A platform slower than the navigator's least speed (0.05 m/s) on a
+/// timed leg is driven at its own top speed: the speed is clamped to the
+/// platform, never the other way round (that panicked the control hub).
+#[test]
+fn a_platform_slower_than_the_least_speed_meets_no_panic_on_a_timed_leg() {
+    let mut mission = square_mission(1);
+    mission.waypoints.truncate(1);
+    mission.waypoints[0].time = Some(5.0);
+    let slow = PlatformSpec::Kiwi {
+        radius: 0.1,
+        max_wheel_speed: 0.03,
+    };
+    let mut world = one_robot(slow, 0.0, OFFBOARD);
+    let mut nav = OffboardNavigator::new("robot_1", mission, NavConfig::default());
+    let mut commanded = 0;
+    for _ in 0..ticks(2.0) {
+        let out = nav.step(world.now_s(), world.state("robot_1").as_ref());
+        if let Some(Command::Twist(t)) = &out.command {
+            commanded += 1;
+            let speed = t.vx.hypot(t.vy);
+            assert!(speed < 0.05, "the platform's top speed: {speed}");
+        }
+        world.advance(period());
+    }
+    assert!(commanded > 0, "the robot was driven");
+}
+
 /// Index of the waypoint whose arrival circle the true position is in.
 fn inside(mission: &Mission, world: &Bench) -> Option<usize> {
     let p = world.true_pose("robot_1");

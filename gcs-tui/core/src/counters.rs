@@ -204,10 +204,13 @@ mod seconds {
     }
 
     impl Form {
-        fn duration(self) -> Duration {
+        /// `None` for a `secs`/`nanos` pair no `Duration` holds.
+        fn duration(self) -> Option<Duration> {
             match self {
-                Form::Seconds(s) => Duration::try_from_secs_f64(s).unwrap_or_default(),
-                Form::Serde { secs, nanos } => Duration::new(secs, nanos),
+                Form::Seconds(s) => Some(Duration::try_from_secs_f64(s).unwrap_or_default()),
+                Form::Serde { secs, nanos } => {
+                    Duration::from_secs(secs).checked_add(Duration::from_nanos(u64::from(nanos)))
+                }
             }
         }
     }
@@ -217,7 +220,9 @@ mod seconds {
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
-        Form::deserialize(d).map(Form::duration)
+        Form::deserialize(d)?
+            .duration()
+            .ok_or_else(|| serde::de::Error::custom("a duration longer than any clock holds"))
     }
 
     pub mod optional {
@@ -231,7 +236,13 @@ mod seconds {
         }
 
         pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Duration>, D::Error> {
-            Ok(Option::<Form>::deserialize(d)?.map(Form::duration))
+            Option::<Form>::deserialize(d)?
+                .map(|f| {
+                    f.duration().ok_or_else(|| {
+                        serde::de::Error::custom("a duration longer than any clock holds")
+                    })
+                })
+                .transpose()
         }
     }
 }
@@ -307,5 +318,13 @@ mod tests {
         let old = serde_json::json!({"rx_hz": 20.0, "rtt": {"secs": 0, "nanos": 420_000},
                                      "window": {"secs": 5, "nanos": 0}});
         assert_eq!(serde_json::from_value::<LinkQuality>(old).unwrap(), q);
+        // A pair no `Duration` holds (from a damaged recording or a hostile
+        // station) is an error, not a panic.
+        for field in ["window", "rtt"] {
+            let mut bad = serde_json::to_value(q).unwrap();
+            bad[field] = serde_json::json!({"secs": u64::MAX, "nanos": 1_000_000_000u32});
+            let e = serde_json::from_value::<LinkQuality>(bad).unwrap_err();
+            assert!(e.to_string().contains("longer than any clock"), "{e}");
+        }
     }
 }

@@ -171,6 +171,15 @@ impl Ros2Config {
         if !(self.summary_every.is_finite() && self.summary_every >= 0.0) {
             return Err("ros2.summary_every must be 0 or more seconds".into());
         }
+        // Seconds the bridge waits: an hour at most.
+        for (what, v) in [
+            ("stale_after", self.stale_after),
+            ("summary_every", self.summary_every),
+        ] {
+            if v > 3600.0 {
+                return Err(format!("ros2.{what} must be 3600 s or less, not {v}"));
+            }
+        }
         if self.channel_prefix.is_empty() || self.goal_prefix.is_empty() {
             return Err("ros2.channel_prefix and ros2.goal_prefix must not be empty".into());
         }
@@ -260,6 +269,8 @@ mod tests {
         let e = |t: &str| Ros2Config::parse(t).unwrap_err();
         assert!(e("[ros2]\nmax_speed = -1.0\n").contains("max_speed"));
         assert!(e("[ros2]\nmax_yaw_rate = nan\n").contains("max_yaw_rate"));
+        assert!(e("[ros2]\nstale_after = 1e20\n").contains("stale_after"));
+        assert!(e("[ros2]\nsummary_every = 1e20\n").contains("summary_every"));
         assert!(e("[ros2]\ngoal_prefix = \"ros2/\"\n").contains("must differ"));
         assert!(e("[ros2]\nspeed = 1.0\n").contains("unknown field"));
         assert!(e("[ros2]\ncmd_vel = \"twist_stamped\"\n").contains("unknown variant"));

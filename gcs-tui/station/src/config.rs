@@ -279,6 +279,12 @@ mod tests {
             "tcp_max_peers = 0",
             "tcp_peers_per_address = 0",
             "tcp_idle = 0",
+            // Durations the router adds to its clock: an hour at most (a
+            // finite 1e19 s ended every TCP peer's task, and the router on
+            // the first subscription).
+            "tcp_idle = 1e19",
+            "subscriber_timeout = 1e19",
+            "subscriber_timeout = 3601",
         ] {
             assert!(
                 ConfigFile::parse(&format!("[router]\n{bad}\n")).is_err(),

@@ -190,7 +190,7 @@ impl<'a> Args<'a> {
                 LangError::new(
                     w.span,
                     format!(
-                        "expected a point like 1.0,2.0 or 1,2@15s, found {:?}",
+                        "expected a point like 1.0,2.0 or 1,2@15s (due within a day), found {:?}",
                         w.text
                     ),
                 )
@@ -234,7 +234,12 @@ pub fn point_z(s: &str) -> Option<(Waypoint, bool)> {
             c,
             Some(
                 duration(t)
-                    .or_else(|| number(t).filter(|v| *v >= 0.0).map(Duration::from_secs_f64))?,
+                    .or_else(|| {
+                        number(t)
+                            .filter(|v| *v >= 0.0)
+                            .and_then(|v| Duration::try_from_secs_f64(v).ok())
+                    })
+                    .filter(|d| d.as_secs_f64() <= mech_proto::MAX_WAYPOINT_TIME)?,
             ),
         ),
         None => (s, None),
@@ -278,5 +283,10 @@ mod tests {
         assert_eq!((p.x, p.y, p.z, p.time), (1.0, -2.5, 3.0, Some(2.0)));
         assert!(point("1").is_none());
         assert!(point("1,nan").is_none());
+        // Due a day after the start at most, like every waypoint sent; a
+        // time no clock holds is no point (it used to end the session).
+        assert_eq!(point("1,2@86400").unwrap().time, Some(86_400.0));
+        assert!(point("1,2@86401").is_none());
+        assert!(point("1,2@1e20").is_none());
     }
 }

@@ -184,6 +184,18 @@ impl RouterConfig {
         if self.tcp_idle.is_zero() {
             return Err(ConfigError::new("router.tcp_idle must be positive"));
         }
+        // Added to the clock as the router runs: an hour at most.
+        for (name, d) in [
+            ("tcp_idle", self.tcp_idle),
+            ("subscriber_timeout", self.subscriber_timeout),
+        ] {
+            if d > Duration::from_secs(3600) {
+                return Err(ConfigError(format!(
+                    "router.{name} ({} s) must be at most 3600 s",
+                    d.as_secs_f64()
+                )));
+            }
+        }
         if self.subscriber_queue == 0 {
             return Err(ConfigError::new(
                 "router.subscriber_queue must be at least 1",
