@@ -224,19 +224,32 @@ const CROWD: f64 = 0.3;
 
 impl NeighbourSet {
     /// The way out of a crowd: away from the neighbours near a robot at
-    /// `p`, the nearest weighing most. `None` with nobody near.
+    /// `p`, the nearest weighing most. Where they pull evenly from opposite
+    /// sides (a robot pressed between two), the way out is across the line
+    /// between them: to the robot's right as it faces the nearest. `None`
+    /// with nobody near.
     pub fn away(&self, p: Vec2, radius: f64, margin: f64, now: Duration) -> Option<Vec2> {
         let mut sum = Vec2::ZERO;
+        let mut nearest: Option<(f64, Vec2)> = None;
         for n in &self.robots {
             let (q, _) = self.predict(n, now);
             let d = p - q;
             let need = radius + n.radius + margin;
             let dist = d.norm();
             if dist < need + CROWD && dist > 1e-9 {
-                sum = sum + d * (1.0 / (dist * dist));
+                let pull = d * (1.0 / (dist * dist));
+                sum = sum + pull;
+                if nearest.is_none_or(|(m, _)| pull.norm() > m) {
+                    nearest = Some((pull.norm(), pull));
+                }
             }
         }
-        sum.unit()
+        let (strongest, towards) = nearest?;
+        if sum.norm() > 1e-3 * strongest {
+            return sum.unit();
+        }
+        // Facing the nearest (`-towards`), its right is (-towards.y, towards.x).
+        Vec2::new(-towards.y, towards.x).unit()
     }
 }
 
@@ -387,6 +400,30 @@ mod tests {
         assert!((out.norm() - 1.0).abs() < 1e-9);
         let alone = set(vec![neighbour(-3.0, 0.0, 0.0, true)]);
         assert_eq!(alone.away(Vec2::ZERO, 0.15, 0.1, Duration::ZERO), None);
+    }
+
+    /// Pressed evenly between two neighbours, a robot still has a way out:
+    /// across the line between them, to its right as it faces the nearest.
+    #[test]
+    fn a_robot_pressed_between_two_backs_off_across_them() {
+        let s = set(vec![
+            neighbour(0.4, 0.0, 0.0, true),
+            neighbour(-0.4, 0.0, 0.0, true),
+        ]);
+        let out = s.away(Vec2::ZERO, 0.15, 0.1, Duration::ZERO).unwrap();
+        assert!(
+            out.x.abs() < 1e-9 && (out.y.abs() - 1.0).abs() < 1e-9,
+            "{out:?}"
+        );
+        // Four round it evenly: still one way out, at right angles to one.
+        let ring = set(vec![
+            neighbour(0.4, 0.0, 0.0, true),
+            neighbour(-0.4, 0.0, 0.0, true),
+            neighbour(0.0, 0.4, 0.0, true),
+            neighbour(0.0, -0.4, 0.0, true),
+        ]);
+        let out = ring.away(Vec2::ZERO, 0.15, 0.1, Duration::ZERO).unwrap();
+        assert!((out.norm() - 1.0).abs() < 1e-9, "{out:?}");
     }
 
     #[test]
