@@ -3,8 +3,8 @@
 //! `[arena]` and `[neighbours]` (mech-core), `[[cluster]]` (mech-control),
 //! `[log]`, `[station]` and
 //! `[foxglove]` (this crate). The sections of the programs on top of the
-//! station, `[gamepad]` (mech-gcs's TUI) and `[zenoh]` (mech-zenoh's
-//! bridge), are carried as written ([`ProgramSection`]), each read and
+//! station, `[gamepad]` (mech-gcs's TUI), `[zenoh]` (mech-zenoh's bridge)
+//! and `[ros2]` (mech-ros2's bridge), are carried as written ([`ProgramSection`]), each read and
 //! checked by the program that uses it, so one file serves every program
 //! of a site.
 //! Every field has a default, so an empty file (or none) gives a working
@@ -39,7 +39,7 @@ pub enum ConfigError {
         path: PathBuf,
         error: Box<toml::de::Error>,
     },
-    /// A program's section (`[gamepad]`, `[zenoh]`) that its program
+    /// A program's section (`[gamepad]`, `[zenoh]`, `[ros2]`) that its program
     /// cannot read.
     #[error("[{name}]: {error}")]
     Section {
@@ -79,10 +79,12 @@ pub struct ConfigFile {
     pub gamepad: ProgramSection,
     /// The bridge to other stations: read by mech-zenoh.
     pub zenoh: ProgramSection,
+    /// The ROS 2 bridge: read by mech-ros2.
+    pub ros2: ProgramSection,
 }
 
 /// A section that a program on top of the station reads (`[gamepad]`,
-/// `[zenoh]`), kept as the file wrote it: the station neither uses nor
+/// `[zenoh]`, `[ros2]`), kept as the file wrote it: the station neither uses nor
 /// checks it, the program does, with [`ProgramSection::read`].
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(transparent)]
@@ -316,8 +318,12 @@ mod tests {
 
     #[test]
     fn the_programs_sections_are_carried_for_them_to_read() {
-        let cfg =
-            ConfigFile::parse("[gamepad]\ndeadzone = 0.2\n[zenoh]\nstation = \"a\"\n").unwrap();
+        let cfg = ConfigFile::parse(
+            "[gamepad]\ndeadzone = 0.2\n[zenoh]\nstation = \"a\"\n[ros2]\nmax_speed = 0.5\n",
+        )
+        .unwrap();
+        let ros2: toml::Table = cfg.ros2.read("ros2").unwrap();
+        assert_eq!(ros2["max_speed"].as_float(), Some(0.5));
         assert_eq!(cfg.gamepad.read::<Pads>("gamepad").unwrap().deadzone, 0.2);
         let zenoh: toml::Table = cfg.zenoh.read("zenoh").unwrap();
         assert_eq!(zenoh["station"].as_str(), Some("a"));

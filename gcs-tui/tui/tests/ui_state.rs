@@ -672,3 +672,42 @@ fn waypoints_for_a_robot_not_routed_to_them_say_so_and_offer_the_route() {
     assert!(added.iter().all(|l| !l.contains("routed to")), "{added:#?}");
     assert_eq!(app.prompt.history, history);
 }
+
+/// Backspace, Delete and Enter edit and send the waypoints from the map
+/// (the panel focused at start) and the cards too, not only in waypoint
+/// mode or the waypoint list: after typing one with `e`, Enter sends it.
+#[test]
+fn waypoint_keys_work_from_the_map_and_the_cards() {
+    let mut app = fixture::app(4, 160, 48);
+    app.update(Action::Select(Select::Only("robot_1".into())));
+    let press = |app: &mut App, code| {
+        for a in on_key(app, &key(code)) {
+            app.update(a);
+        }
+    };
+    let wp = |x| Waypoint {
+        x,
+        y: 0.0,
+        z: 0.0,
+        time: None,
+    };
+    for x in [1.0, 2.0, 3.0] {
+        app.update(Action::AddWaypoint(wp(x)));
+    }
+    assert!(!app.waypoints.placing);
+    press(&mut app, KeyCode::Backspace);
+    assert_eq!(app.waypoints.list.len(), 2, "Backspace on the map");
+    app.take_requests();
+    press(&mut app, KeyCode::Enter);
+    assert_eq!(
+        app.take_requests(),
+        vec![Request::Mission {
+            robots: vec!["robot_1".into()],
+            waypoints: vec![wp(1.0), wp(2.0)],
+        }],
+        "Enter on the map sends"
+    );
+    press(&mut app, KeyCode::Tab);
+    press(&mut app, KeyCode::Delete);
+    assert!(app.waypoints.list.is_empty(), "Delete on the cards");
+}

@@ -140,7 +140,7 @@ fn table_key(app: &App, key: &KeyEvent) -> Option<Action> {
 }
 
 /// Keys of the focused panel: the routing-table cursor, the card
-/// selection, the waypoint list.
+/// selection, the waypoint list (its keys also on the map and the cards).
 fn panel_key(app: &App, code: KeyCode) -> Option<Action> {
     match (app.screen.focus, code) {
         (Focus::Routes, KeyCode::Up) => Some(Action::RouteCursor(-1, 0)),
@@ -150,9 +150,17 @@ fn panel_key(app: &App, code: KeyCode) -> Option<Action> {
         (Focus::Routes, KeyCode::Enter) => Some(Action::ApplyRouteCursor),
         (Focus::Cards, KeyCode::Up) => Some(Action::Select(Select::Prev)),
         (Focus::Cards, KeyCode::Down) => Some(Action::Select(Select::Next)),
-        (Focus::Waypoints, KeyCode::Backspace) => Some(Action::RemoveLastWaypoint),
-        (Focus::Waypoints, KeyCode::Delete) => Some(Action::ClearWaypoints),
-        (Focus::Waypoints, KeyCode::Enter) => Some(Action::SendWaypoints),
+        // The waypoint keys, wherever they mean nothing else (the routing
+        // table takes Enter for itself).
+        (Focus::Map | Focus::Cards | Focus::Waypoints, KeyCode::Backspace) => {
+            Some(Action::RemoveLastWaypoint)
+        }
+        (Focus::Map | Focus::Cards | Focus::Waypoints, KeyCode::Delete) => {
+            Some(Action::ClearWaypoints)
+        }
+        (Focus::Map | Focus::Cards | Focus::Waypoints, KeyCode::Enter) => {
+            Some(Action::SendWaypoints)
+        }
         _ => None,
     }
 }
