@@ -424,9 +424,15 @@ impl Agent {
         let cannot_follow = missions::cannot_follow(&self.controller, self.settings.has_position);
         let mut step = Step::new(now, &mut self.wire, &mut self.counters, out);
         let estopped = self.estop.engaged();
-        let start = self
-            .missions
-            .receive(channel, mission, cannot_follow, estopped, &mut step);
+        let routed = self.intake.channel().to_string();
+        let start = self.missions.receive(
+            channel,
+            mission,
+            cannot_follow,
+            estopped,
+            &routed,
+            &mut step,
+        );
         if start && channel == self.intake.channel() && self.controller.follow_mission().is_ok() {
             self.intake.channel_heard(now);
         }

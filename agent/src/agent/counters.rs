@@ -19,6 +19,9 @@ pub struct Counters {
     pub stale_routes: u64,
     /// Missions with an id older than the one held for their channel.
     pub stale_missions: u64,
+    /// Stored missions forgotten to make room for another channel's (the
+    /// robot keeps [`super::missions::MISSION_CHANNELS`]).
+    pub missions_forgotten: u64,
     /// Messages addressed to another robot.
     pub not_for_me: u64,
     /// Bytes that did not decode as a message.

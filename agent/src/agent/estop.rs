@@ -168,7 +168,14 @@ mod latch_tests {
 
     fn one_mission(missions: &mut Missions, bench: &mut Bench) {
         let mission = mission_to(1, 2.0);
-        assert!(missions.receive("wp/gcs", mission, None, false, &mut bench.step(ms(0))));
+        assert!(missions.receive(
+            "wp/gcs",
+            mission,
+            None,
+            false,
+            "wp/gcs",
+            &mut bench.step(ms(0))
+        ));
     }
 
     #[test]

@@ -12,10 +12,17 @@ use super::step::Step;
 use crate::control::{Controller, MissionRun};
 use crate::order::is_older;
 
+/// Most channels a robot keeps a mission for. A mission for one more
+/// forgets the one uploaded longest ago on a channel the robot is not
+/// routed to (counted, and logged).
+pub const MISSION_CHANNELS: usize = 16;
+
 /// The stored missions, by the channel that sent them.
 #[derive(Debug, Default)]
 pub(crate) struct Missions {
     runs: HashMap<String, MissionRun>,
+    /// The channels of `runs`, the one uploaded to longest ago first.
+    uploads: Vec<String>,
 }
 
 impl Missions {
@@ -53,6 +60,26 @@ impl Missions {
         }
     }
 
+    /// Room for a mission on `channel`: with [`MISSION_CHANNELS`] held and
+    /// none for `channel`, the one uploaded longest ago, not `routed`'s, is
+    /// forgotten.
+    fn make_room(&mut self, channel: &str, routed: &str, step: &mut Step) {
+        if self.runs.contains_key(channel) || self.runs.len() < MISSION_CHANNELS {
+            return;
+        }
+        let Some(i) = self.uploads.iter().position(|c| c != routed) else {
+            return;
+        };
+        let forgotten = self.uploads.remove(i);
+        self.runs.remove(&forgotten);
+        step.counters.missions_forgotten += 1;
+        tracing::warn!(
+            robot = %step.robot(),
+            channel = %forgotten,
+            "mission forgotten: missions held for {MISSION_CHANNELS} channels"
+        );
+    }
+
     /// An e-stop pauses every mission.
     pub(crate) fn pause_all(&mut self) {
         self.runs.values_mut().for_each(|m| m.paused = true);
@@ -68,13 +95,15 @@ impl Missions {
     /// A mission upload on `channel`: refused with the reason
     /// `cannot_follow` gives when the robot cannot follow waypoints, stored
     /// (paused while `estopped`) and acknowledged otherwise. Returns whether
-    /// the stored mission may start now (it is not paused).
+    /// the stored mission may start now (it is not paused). The mission of
+    /// `routed`, the channel the robot obeys, is never forgotten for room.
     pub(crate) fn receive(
         &mut self,
         channel: &str,
         mission: Mission,
         cannot_follow: Option<&str>,
         estopped: bool,
+        routed: &str,
         step: &mut Step,
     ) -> bool {
         let id = mission.id;
@@ -113,7 +142,10 @@ impl Missions {
             _ => {
                 let mut run = MissionRun::new(mission);
                 run.paused = estopped;
+                self.make_room(channel, routed, step);
                 self.runs.insert(channel.to_string(), run);
+                self.uploads.retain(|c| c != channel);
+                self.uploads.push(channel.to_string());
                 estopped
             }
         };
@@ -180,6 +212,36 @@ mod tests {
             Some((1, 0, 1))
         );
         assert_eq!(tel.mode, mech_proto::ControlMode::Waypoints);
+    }
+
+    /// Missions on ever more channels do not pile up at the robot: past
+    /// `MISSION_CHANNELS` the one uploaded longest ago is forgotten
+    /// (counted), never the routed channel's, which still runs.
+    #[test]
+    fn missions_on_many_channels_forget_the_oldest_but_never_the_routed_one() {
+        let mut a = routed("wp/gcs");
+        a.handle(msg("wp/gcs", Body::Mission(mission_to(1, 5.0))), ms(10));
+        let extra = super::MISSION_CHANNELS + 20;
+        for k in 0..extra {
+            let channel = format!("ext/{k}");
+            let out = a.handle(msg(&channel, Body::Mission(mission_to(1, 1.0))), ms(20));
+            assert!(
+                matches!(&out[0].body, Body::MissionAck(m) if m.accepted),
+                "{channel} stored and acknowledged"
+            );
+        }
+        assert!(a.missions.runs.len() <= super::MISSION_CHANNELS);
+        assert_eq!(a.missions.uploads.len(), a.missions.runs.len());
+        assert_eq!(
+            a.counters().missions_forgotten,
+            (extra + 1 - super::MISSION_CHANNELS) as u64
+        );
+        let newest = format!("ext/{}", extra - 1);
+        assert!(a.missions.get(&newest).is_some(), "the newest is held");
+        assert!(a.missions.get("ext/0").is_none(), "the oldest is forgotten");
+        assert!(a.missions.runnable("wp/gcs"), "the routed one is kept");
+        a.tick(ms(30));
+        assert_eq!(*a.mode(), Mode::Waypoints);
     }
 
     #[test]

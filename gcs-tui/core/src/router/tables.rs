@@ -861,6 +861,60 @@ mod tests {
         );
     }
 
+    /// A sender outrunning a robot that never answers keeps at most
+    /// `PENDING_PER_ROBOT` missions waiting (bytes held, resent every
+    /// 200 ms): each past that gives up the oldest at once, reported like
+    /// a timeout.
+    #[test]
+    fn missions_waiting_for_one_robot_are_capped_and_the_oldest_given_up() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let n = missions::PENDING_PER_ROBOT as u32 + 40;
+        for id in 1..=n {
+            let mission = Body::Mission(Mission {
+                id,
+                waypoints: vec![Waypoint {
+                    x: 1.0,
+                    y: 0.0,
+                    z: 0.0,
+                    time: None,
+                }],
+                looped: false,
+                arrival_radius: 0.1,
+                start_index: 0,
+            });
+            t.handle_at(
+                &bytes("gcs", "robot_1", "wp/gcs", mission),
+                Peer::Local,
+                t0,
+                &mut out,
+                &mut ev,
+            );
+        }
+        let failed: Vec<u32> = ev
+            .iter()
+            .filter_map(|e| match e {
+                Event::MissionFailed { id, .. } => Some(*id),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(failed, (1..=40).collect::<Vec<_>>(), "the oldest, in order");
+        // Only the newest are resent.
+        let mut out = Outbox::default();
+        t.tick_at(t0 + Duration::from_millis(200), &mut out, &mut ev);
+        let resent: Vec<u32> = out
+            .owned
+            .iter()
+            .filter(|(p, _)| *p == robot)
+            .filter_map(|(_, b)| match mech_proto::decode(b).unwrap().body {
+                Body::Mission(m) => Some(m.id),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(resent, (41..=n).collect::<Vec<_>>());
+    }
+
     #[test]
     fn a_robot_on_wifi_and_a_radio_is_commanded_on_the_live_link_and_estopped_on_both() {
         let t0 = Instant::now();

@@ -3,8 +3,10 @@
 //! back to whoever sent the mission.
 //!
 //! [`Missions`] holds the pending ones: at most one per robot and id (a
-//! mission sent again replaces the pending one), each removed by its
-//! acknowledgement or when given up.
+//! mission sent again replaces the pending one), at most
+//! [`PENDING_PER_ROBOT`] per robot (a new one past that gives up the
+//! robot's oldest at once), each removed by its acknowledgement or when
+//! given up.
 
 use std::time::Duration;
 
@@ -15,6 +17,13 @@ use tracing::{info, warn};
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::DropReason;
 use crate::event::Event;
+
+/// Most missions waiting for one robot's acknowledgement. A robot keeps
+/// one mission per channel, and a controller waits for each answer, so
+/// more pending than this is a sender outrunning a robot that does not
+/// answer (off, or out of reach): each would hold its bytes and be resent
+/// every `mission_retry` until given up.
+pub(super) const PENDING_PER_ROBOT: usize = 16;
 
 /// Missions waiting for their acknowledgement, and the ids handed out.
 #[derive(Debug)]
@@ -62,11 +71,23 @@ impl Missions {
     }
 
     /// Adds a mission to wait for, in place of one with the same robot and
-    /// id.
-    fn add(&mut self, mission: PendingMission) {
+    /// id. When the robot already has [`PENDING_PER_ROBOT`] pending, its
+    /// oldest is no longer waited for: returned, to be reported given up.
+    fn add(&mut self, mission: PendingMission) -> Option<(String, u32)> {
         self.pending
             .retain(|p| !(p.robot == mission.robot && p.id == mission.id));
+        let mut theirs = self
+            .pending
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.robot == mission.robot);
+        let oldest = theirs.next().map(|(i, _)| i);
+        let dropped = (theirs.count() + 1 >= PENDING_PER_ROBOT)
+            .then(|| oldest.map(|i| self.pending.remove(i)))
+            .flatten()
+            .map(|p| (p.robot, p.id));
         self.pending.push(mission);
+        dropped
     }
 
     /// The pending mission `id` of `robot`, acknowledged: no longer pending.
@@ -121,7 +142,7 @@ impl Tables {
             cx.send(to, b);
             self.count_sent(&robot);
         }
-        self.missions.add(PendingMission {
+        let dropped = self.missions.add(PendingMission {
             robot: robot.clone(),
             id: mission.id,
             region,
@@ -130,6 +151,14 @@ impl Tables {
             first: cx.now,
             last: cx.now,
         });
+        if let Some((robot, id)) = dropped {
+            warn!(%robot, id, "mission given up: {PENDING_PER_ROBOT} newer ones pending");
+            cx.event(Event::MissionFailed {
+                robot,
+                id,
+                reason: format!("{PENDING_PER_ROBOT} newer missions pending for the robot"),
+            });
+        }
         info!(%robot, id = mission.id, waypoints = mission.waypoints.len(), channel = %h.channel, "mission sent");
         cx.event(Event::MissionSent {
             robot,
