@@ -986,4 +986,69 @@ mod tests {
         assert!(!t.subscribers.contains(tool), "lapsed");
         let _ = robot;
     }
+
+    /// Channel names are the publishers' to choose: the table keeps
+    /// `CHANNELS`, a new one taking the place of the one silent longest.
+    #[test]
+    fn the_channel_table_keeps_the_channels_heard_from_last() {
+        let t0 = Instant::now();
+        let (mut t, _) = registered(t0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let tool = Peer::Udp(SocketAddr::from(([127, 0, 0, 1], 9200)));
+        let n = channels::CHANNELS + 10;
+        for k in 0..n {
+            let twist = Body::Command(mech_proto::Command::Twist(mech_proto::Twist::default()));
+            let at = t0 + Duration::from_millis(k as u64);
+            let b = bytes("tool", "robot_1", &format!("ext/{k}"), twist);
+            t.handle_at(&b, tool, at, &mut out, &mut ev);
+        }
+        assert_eq!(t.channels.len(), channels::CHANNELS);
+        assert!(!t.channels.contains("ext/0") && !t.channels.contains("ext/9"));
+        assert!(t.channels.contains("ext/10") && t.channels.contains(&format!("ext/{}", n - 1)));
+    }
+
+    /// Every telemetry message goes to each subscriber, so one name cannot
+    /// subscribe from more than `SUBSCRIBERS_PER_NAME` addresses, nor
+    /// everyone together more than `SUBSCRIBERS`; a renewal always passes,
+    /// and a refusal is counted as not permitted.
+    #[test]
+    fn telemetry_subscriptions_are_capped_per_name_and_in_all() {
+        use super::telemetry::{SUBSCRIBERS, SUBSCRIBERS_PER_NAME};
+        let t0 = Instant::now();
+        let (mut t, _) = registered(t0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let sub = |name: &str| {
+            bytes(
+                name,
+                "router",
+                "",
+                Body::Subscribe(mech_proto::Subscribe { telemetry: true }),
+            )
+        };
+        let at = |port: u16| Peer::Udp(SocketAddr::from(([127, 0, 0, 1], port)));
+        for port in 0..SUBSCRIBERS_PER_NAME as u16 + 3 {
+            t.handle_at(&sub("plotter"), at(10_000 + port), t0, &mut out, &mut ev);
+        }
+        let theirs = (0..SUBSCRIBERS_PER_NAME as u16 + 3)
+            .filter(|p| t.subscribers.contains(at(10_000 + p)))
+            .count();
+        assert_eq!(theirs, SUBSCRIBERS_PER_NAME);
+        assert_eq!(t.gate.rejections().not_permitted, 3);
+        // A renewal from an address already subscribed passes.
+        let d = t.handle_at(&sub("plotter"), at(10_000), t0, &mut out, &mut ev);
+        assert_eq!(d, Delivery::Consumed);
+        for k in 0..SUBSCRIBERS as u16 {
+            t.handle_at(
+                &sub(&format!("tool{k}")),
+                at(20_000 + k),
+                t0,
+                &mut out,
+                &mut ev,
+            );
+        }
+        let all = (0..SUBSCRIBERS as u16)
+            .filter(|k| t.subscribers.contains(at(20_000 + k)))
+            .count();
+        assert_eq!(all + SUBSCRIBERS_PER_NAME, SUBSCRIBERS);
+    }
 }

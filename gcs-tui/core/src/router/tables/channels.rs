@@ -1,7 +1,8 @@
 //! Live channels: every channel something was published on, its last
 //! publisher, its rate and traffic; the listing for `channels()` and for
 //! channel discovery (`ChannelsRequest`). A channel is live while it was
-//! published on within `channel_live_for`.
+//! published on within `channel_live_for`. At most [`CHANNELS`] are kept:
+//! a new one past that takes the place of the one silent longest.
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -13,6 +14,11 @@ use super::{Ctx, Delivery, Incoming, Tables};
 use crate::counters::{ChannelStatus, Traffic};
 use crate::event::Event;
 use crate::router::rate::RateMeter;
+
+/// Most channels kept. Channels are names publishers choose, so the table
+/// would otherwise grow with every name ever used (and each listing and
+/// counters read copies it whole).
+pub(super) const CHANNELS: usize = 1024;
 
 /// Every channel published on, by name.
 #[derive(Debug, Default)]
@@ -56,6 +62,12 @@ impl Channels {
                         ..Traffic::default()
                     },
                 };
+                if self.by_name.len() >= CHANNELS {
+                    let silent = self.by_name.iter().min_by_key(|(_, c)| c.last);
+                    if let Some(name) = silent.map(|(n, _)| n.clone()) {
+                        self.by_name.remove(&name);
+                    }
+                }
                 self.by_name.insert(channel.to_string(), entry);
                 true
             }
@@ -65,6 +77,16 @@ impl Channels {
     /// The traffic counters of `channel`, if anything was published on it.
     pub(super) fn traffic_mut(&mut self, channel: &str) -> Option<&mut Traffic> {
         self.by_name.get_mut(channel).map(|c| &mut c.traffic)
+    }
+
+    #[cfg(test)]
+    pub(super) fn len(&self) -> usize {
+        self.by_name.len()
+    }
+
+    #[cfg(test)]
+    pub(super) fn contains(&self, channel: &str) -> bool {
+        self.by_name.contains_key(channel)
     }
 
     /// Each channel's traffic counters.

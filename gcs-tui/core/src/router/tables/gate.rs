@@ -187,7 +187,7 @@ impl Tables {
 
     /// Counts a rejection of the message from `cx.from` and reports it
     /// (summarized: see `super::refusals`).
-    fn reject(&mut self, r: Rejection, cx: &mut Ctx<'_>) -> Delivery {
+    pub(super) fn reject(&mut self, r: Rejection, cx: &mut Ctx<'_>) -> Delivery {
         self.reject_from(Source::Peer(cx.from), r, cx);
         Delivery::Dropped(DropReason::Rejected)
     }

@@ -5,7 +5,10 @@
 //! go to the station's log (its file), at their own level.
 //!
 //! [`Subscribers`] holds the external telemetry subscribers (a tool over
-//! UDP or TCP), each until its subscription lapses.
+//! UDP or TCP), each until its subscription lapses: at most
+//! [`SUBSCRIBERS`], and [`SUBSCRIBERS_PER_NAME`] for one sender name, since
+//! every telemetry message is sent to each (a name's key is not tied to an
+//! address, so one sender could otherwise subscribe from many).
 
 use std::collections::HashMap;
 
@@ -15,6 +18,12 @@ use tokio::time::Instant;
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::DropReason;
 use crate::event::Event;
+
+/// Most telemetry subscribers at once.
+pub(super) const SUBSCRIBERS: usize = 64;
+
+/// Most subscriptions of one sender name (from as many addresses).
+pub(super) const SUBSCRIBERS_PER_NAME: usize = 4;
 
 /// External telemetry subscribers, by where they are.
 #[derive(Debug, Default)]
@@ -31,7 +40,20 @@ struct Subscriber {
 }
 
 impl Subscribers {
-    fn subscribe(&mut self, peer: Peer, name: &str, until: Instant) {
+    /// Subscribes (or renews) `peer` as `name` until `until`; a new one
+    /// past the limits is refused: `Err` says which.
+    fn subscribe(&mut self, peer: Peer, name: &str, until: Instant) -> Result<(), String> {
+        if !self.by_peer.contains_key(&peer) {
+            if self.by_peer.len() >= SUBSCRIBERS {
+                return Err(format!("{SUBSCRIBERS} telemetry subscribers already"));
+            }
+            let theirs = self.by_peer.values().filter(|s| s.name == name).count();
+            if theirs >= SUBSCRIBERS_PER_NAME {
+                return Err(format!(
+                    "{name:?} has {SUBSCRIBERS_PER_NAME} telemetry subscriptions already"
+                ));
+            }
+        }
         self.by_peer.insert(
             peer,
             Subscriber {
@@ -39,6 +61,7 @@ impl Subscribers {
                 name: name.to_string(),
             },
         );
+        Ok(())
     }
 
     pub(super) fn remove(&mut self, peer: Peer) {
@@ -98,7 +121,13 @@ impl Tables {
     ) -> Delivery {
         if s.telemetry {
             let until = cx.now + self.config.subscriber_timeout;
-            self.subscribers.subscribe(cx.from, &m.header.sender, until);
+            if let Err(detail) = self.subscribers.subscribe(cx.from, &m.header.sender, until) {
+                let r = crate::auth::Rejection {
+                    reason: crate::counters::RejectReason::NotPermitted,
+                    detail,
+                };
+                return self.reject(r, cx);
+            }
         } else {
             self.subscribers.remove(cx.from);
         }
