@@ -92,10 +92,20 @@ where
             false,
         )),
     };
-    let (hello, _seat) = match attempt.and_then(|h| seated(place, h)) {
-        Ok(attached) => attached,
+    let hello = match attempt {
+        Ok(hello) => hello,
         Err((reason, pause)) => {
-            refuse_attach(&station, &via, &mut wr, &reason, pause).await;
+            // The place is kept through the pause, so a client paying for
+            // a failed handshake still counts among those attaching (and
+            // one attaching after it may take its place, ending the pause).
+            refuse_attach(&station, &via, &mut wr, &reason, pause.then_some(&place)).await;
+            return;
+        }
+    };
+    let (hello, _seat) = match seated(place, hello) {
+        Ok(attached) => attached,
+        Err((reason, _)) => {
+            refuse_attach(&station, &via, &mut wr, &reason, None).await;
             return;
         }
     };
@@ -239,14 +249,16 @@ fn welcome(station: &Station, operator: &str, via: &Via) -> Welcome {
 }
 
 /// Logs (a few a second; the rest counted, see `crate::admission`) and
-/// answers a failed attach; with `pause`, a failed handshake over TCP
-/// (a wrong key) costs the client a second, so guessing is slow.
+/// answers a failed attach; with `pause`, the client's place among those
+/// attaching, a failed handshake over TCP (a wrong key) costs the client a
+/// second, so guessing is slow, unless another client takes the place
+/// meanwhile: the connections held for the pause are bounded by the places.
 async fn refuse_attach<W: AsyncWrite + Unpin>(
     station: &Station,
     via: &Via,
     wr: &mut W,
     reason: &str,
-    pause: bool,
+    pause: Option<&Attaching>,
 ) {
     if station
         .inner
@@ -256,8 +268,11 @@ async fn refuse_attach<W: AsyncWrite + Unpin>(
         station.log(Severity::Warn, format!("attach refused ({via}): {reason}"));
         tracing::warn!(%via, %reason, "attach refused");
     }
-    if pause && matches!(via, Via::Tcp { .. }) {
-        tokio::time::sleep(Duration::from_secs(1)).await;
+    if let (Some(place), Via::Tcp { .. }) = (pause, via) {
+        tokio::select! {
+            () = tokio::time::sleep(Duration::from_secs(1)) => {}
+            () = place.evicted() => {}
+        }
     }
     bye(wr, reason).await;
 }

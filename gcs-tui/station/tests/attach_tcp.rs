@@ -337,3 +337,44 @@ async fn idle_connections_to_the_attach_port_keep_no_operator_out() {
     drop(idle);
     k.station.shutdown().await;
 }
+
+/// A client that fails its handshake is answered a second later (guessing
+/// keys is slow), but keeps its place among those attaching meanwhile: a
+/// newer client from the same address takes the place and ends the wait.
+/// So a flood of failing clients holds no more connections open than the
+/// address's places (4), where each used to be held for a whole second.
+#[tokio::test]
+async fn failing_clients_wait_for_their_answer_only_while_they_hold_a_place() {
+    let k = Keyed::start().await;
+    let n = 20;
+    let mut waits = Vec::new();
+    for _ in 0..n {
+        let mut c = tokio::net::TcpStream::connect(k.addr)
+            .await
+            .expect("connects");
+        c.write_all(b"garbage\n").await.expect("sent");
+        let started = tokio::time::Instant::now();
+        waits.push(tokio::spawn(async move {
+            let mut rest = Vec::new();
+            let read = tokio::io::AsyncReadExt::read_to_end(&mut c, &mut rest);
+            let _ = tokio::time::timeout(Duration::from_secs(5), read).await;
+            (
+                started.elapsed(),
+                String::from_utf8_lossy(&rest).into_owned(),
+            )
+        }));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let mut answered_early = 0;
+    for w in waits {
+        let (waited, said) = w.await.expect("reader");
+        assert!(said.contains("bye"), "{said:?}");
+        if waited < Duration::from_millis(500) {
+            answered_early += 1;
+        }
+    }
+    // All but the newest 4 were answered when a newer client took their
+    // place, long before their second was up.
+    assert!(answered_early >= n - 4, "{answered_early} of {n}");
+    k.station.shutdown().await;
+}
