@@ -114,6 +114,11 @@ impl Outbox {
 pub(crate) struct Effects {
     pub(crate) out: Outbox,
     pub(crate) events: Vec<Event>,
+    /// The last message decided passed the gate without its freshness
+    /// being judged (a time request from a robot that has no clock yet):
+    /// anyone may have captured and sent it again, so it proves nothing
+    /// about where it came from.
+    pub(crate) unproven: bool,
 }
 
 /// One decision's context: when it is made, who asked, and where what it
@@ -302,6 +307,7 @@ impl Tables {
     /// decision to the recorder's tap when recording.
     pub(crate) fn handle(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
         self.totals.received += 1;
+        cx.fx.unproven = false;
         let delivery = self.decide(bytes, cx);
         if let Peer::Udp(addr) = cx.from {
             match delivery {
@@ -309,6 +315,7 @@ impl Tables {
                     self.sources.refused(addr.ip(), cx.now);
                 }
                 Delivery::Dropped(DropReason::Stopped | DropReason::Shed) => {}
+                _ if cx.fx.unproven => {}
                 _ => self.sources.vouch(addr, cx.now),
             }
         }
@@ -571,6 +578,7 @@ mod tests {
         let mut fx = Effects {
             out: std::mem::take(out),
             events: std::mem::take(ev),
+            unproven: false,
         };
         let r = f(&mut Ctx::new(now, from, &mut fx));
         (*out, *ev) = (fx.out, fx.events);

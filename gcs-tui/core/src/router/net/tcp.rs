@@ -235,7 +235,8 @@ pub(super) async fn accept(shared: Arc<Shared>, listener: TcpListener, limits: T
 }
 
 /// Whether a decision shows the message was valid (it passed the gate and
-/// could be read), so its peer is no longer a stranger.
+/// could be read), so its peer is no longer a stranger (unless its
+/// freshness could not be judged: `Effects::unproven`).
 fn was_valid(d: Delivery) -> bool {
     !matches!(
         d,
@@ -301,7 +302,7 @@ async fn peer(
                     break 'read "stream out of step";
                 }
             };
-            if was_valid(shared.dispatch(&frame, from, &mut fx).await) {
+            if was_valid(shared.dispatch(&frame, from, &mut fx).await) && !fx.unproven {
                 proven.store(true, Ordering::Relaxed);
             }
         }

@@ -151,6 +151,7 @@ impl Tables {
                     (Fresh::NearClock, Some(t)) => keys.near_clock(t.stamp_us, now_us),
                     (Fresh::NearClock, None) => false,
                 };
+                cx.fx.unproven = !fresh;
                 keys.verify(region, tag, sender, now_us, fresh)
                     .map(|v| (Some(v.tag.key_id), Some(v.tag)))
             }
@@ -441,6 +442,31 @@ mod tests {
         );
         let later = later + Duration::from_secs(1);
         assert_eq!(decide(&mut restarted, &captured, attacker, later), []);
+    }
+
+    /// A time request whose freshness could not be judged (from a robot
+    /// with no clock yet) is answered, but proves nothing about where it
+    /// came from: anyone may have captured it. Its address is not vouched
+    /// for (a flood from it is shed like a stranger's), and over TCP it
+    /// does not prove the connection. One near the clock does.
+    #[test]
+    fn a_time_request_without_a_clock_vouches_for_no_address() {
+        let (t0, attacker, robot) = (Instant::now(), peer(6666), peer(9000));
+        let mut t = tables();
+        let mut fx = Effects::default();
+        let copy = request(1, 5 * SECOND);
+        t.handle(&copy, &mut Ctx::new(t0, attacker, &mut fx));
+        assert!(fx.unproven, "answered, unproven");
+        let Peer::Udp(a) = attacker else {
+            unreachable!()
+        };
+        assert!(!t.sources.known(a, t0), "a copy vouches for no address");
+        let mut fx = Effects::default();
+        let fresh = request(2, mech_proto::unix_micros() + 1000);
+        t.handle(&fresh, &mut Ctx::new(t0, robot, &mut fx));
+        assert!(!fx.unproven);
+        let Peer::Udp(r) = robot else { unreachable!() };
+        assert!(t.sources.known(r, t0), "a fresh request does");
     }
 
     /// A request whose stamp is near the station's clock comes from a

@@ -95,6 +95,11 @@ impl TimeAnswers {
             if self.answered_at.len() >= SOURCES {
                 self.answered_at
                     .retain(|_, t| now.saturating_duration_since(*t) < ANSWER_GAP);
+                if self.answered_at.len() >= SOURCES {
+                    // All recent: a flood of copies from as many addresses.
+                    // Forgetting them only lets each source one more answer.
+                    self.answered_at.clear();
+                }
             }
             self.answered_at.insert(source, now);
         }
