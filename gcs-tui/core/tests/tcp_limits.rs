@@ -131,3 +131,61 @@ async fn a_new_peer_takes_the_place_of_the_oldest_stranger() {
     }
     gcs.shutdown().await;
 }
+
+/// A peer that asks and does not read holds at most the router's byte cap
+/// of answers queued (4 MiB), however few frames that is: 800 channel
+/// listings of about 30 KB each (24 MB, far below the queue's 4,096
+/// frames) are refused past it, counted, and the peer is still served.
+#[tokio::test]
+async fn a_peer_that_asks_without_reading_is_queued_a_bounded_number_of_bytes() {
+    let gcs = gcs(16, 16, Duration::from_secs(60)).await;
+    let router = gcs.router().clone();
+    // 400 live channels with long names make each listing about 30 KB.
+    let udp = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    for k in 0..400 {
+        let channel = format!("ext/{k:0>40}");
+        let twist = Body::Command(mech_proto::Command::Twist(mech_proto::Twist::default()));
+        let m = envelope("tool", "robot_1", &channel, k, twist);
+        udp.send_to(&mech_proto::encode(&m).unwrap(), router.udp_addr())
+            .unwrap();
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut stream = connect(6, router.tcp_addr().unwrap()).await;
+    let mut frames = Vec::new();
+    for seq in 0..800 {
+        let request = envelope(
+            "tool",
+            mech_proto::ROUTER,
+            "",
+            seq,
+            Body::ChannelsRequest(ChannelsRequest {}),
+        );
+        write_stream_frame(&request, &mut frames).unwrap();
+    }
+    stream.write_all(&frames).await.unwrap();
+    // Wait (a bound, not the condition) until the router has answered or
+    // refused all 800.
+    let mut dropped = 0;
+    for _ in 0..100 {
+        dropped = router.counters().fanout_dropped;
+        if dropped > 0 && router.counters().received >= 1200 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(dropped > 0, "answers past 4 MiB are refused and counted");
+    // Reading now: what was queued arrives, and the peer is still served.
+    let mut buf = vec![0u8; 1 << 20];
+    let mut got = 0usize;
+    while let Ok(Ok(n)) =
+        tokio::time::timeout(Duration::from_millis(500), stream.read(&mut buf)).await
+    {
+        if n == 0 {
+            break;
+        }
+        got += n;
+    }
+    assert!(got > 0 && got < 24 << 20, "{got} bytes");
+    prove(&mut stream).await;
+    gcs.shutdown().await;
+}

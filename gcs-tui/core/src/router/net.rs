@@ -19,7 +19,7 @@ mod udp;
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::os::fd::AsRawFd;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -55,7 +55,7 @@ pub(super) struct Net {
     udp_addr: SocketAddr,
     tcp_addr: Option<SocketAddr>,
     /// Outgoing frame queues of the TCP peers, by connection number.
-    tcp_peers: Mutex<HashMap<u64, mpsc::Sender<Vec<u8>>>>,
+    tcp_peers: Mutex<HashMap<u64, PeerQueue>>,
     next_conn: AtomicU64,
     /// Length of each TCP peer's queue.
     peer_queue: usize,
@@ -192,13 +192,23 @@ impl Net {
             return;
         }
         let Peer::Tcp(conn) = peer else { return };
-        let tx = lock(&self.tcp_peers).get(&conn).cloned();
-        let Some(tx) = tx else { return };
-        let mut frame = Vec::with_capacity(bytes.len() + 4);
+        let q = lock(&self.tcp_peers).get(&conn).cloned();
+        let Some(q) = q else { return };
+        let len = bytes.len() + 4;
+        if q.queued.load(Ordering::Relaxed) + len > PEER_QUEUE_BYTES {
+            self.fanout_dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        let mut frame = Vec::with_capacity(len);
         frame.extend_from_slice(&(bytes.len() as u32).to_be_bytes());
         frame.extend_from_slice(bytes);
-        if tx.try_send(frame).is_err() {
-            self.fanout_dropped.fetch_add(1, Ordering::Relaxed);
+        match q.tx.try_send(frame) {
+            Ok(()) => {
+                q.queued.fetch_add(len, Ordering::Relaxed);
+            }
+            Err(_) => {
+                self.fanout_dropped.fetch_add(1, Ordering::Relaxed);
+            }
         }
     }
 
@@ -206,6 +216,20 @@ impl Net {
     fn count_send_failures(&self, n: usize) {
         self.send_failed.fetch_add(n as u64, Ordering::Relaxed);
     }
+}
+
+/// Most bytes queued for one TCP peer. Its queue is also `peer_queue`
+/// frames long, but frames run up to 60 KB (a channel listing of a busy
+/// site), and a peer that asks and does not read must not hold more.
+pub(super) const PEER_QUEUE_BYTES: usize = 4 << 20;
+
+/// A TCP peer's outgoing frames, and how many bytes of them wait.
+#[derive(Debug, Clone)]
+pub(super) struct PeerQueue {
+    pub(super) tx: mpsc::Sender<Vec<u8>>,
+    /// Bytes queued and not yet written (the writer takes off what it
+    /// wrote).
+    pub(super) queued: Arc<AtomicUsize>,
 }
 
 /// The router's running tasks: the UDP workers' threads (with their

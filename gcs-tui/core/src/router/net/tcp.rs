@@ -16,7 +16,7 @@
 use std::collections::BTreeMap;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use mech_proto::framing::StreamDecoder;
@@ -29,6 +29,7 @@ use tracing::{info, warn};
 
 use crate::counters::DropReason;
 use crate::router::Shared;
+use crate::router::net::PeerQueue;
 use crate::router::tables::{Delivery, Effects, Peer};
 use crate::sync::lock;
 
@@ -259,10 +260,17 @@ async fn peer(
     let _ = stream.set_nodelay(true);
     let (mut rd, mut wr) = stream.into_split();
     let (tx, mut rx) = mpsc::channel::<Vec<u8>>(shared.net.peer_queue);
-    lock(&shared.net.tcp_peers).insert(conn, tx);
+    let queued = Arc::new(AtomicUsize::new(0));
+    let queue = PeerQueue {
+        tx,
+        queued: queued.clone(),
+    };
+    lock(&shared.net.tcp_peers).insert(conn, queue);
     let writer = tokio::spawn(async move {
         while let Some(frame) = rx.recv().await {
-            if wr.write_all(&frame).await.is_err() {
+            let written = wr.write_all(&frame).await;
+            queued.fetch_sub(frame.len(), Ordering::Relaxed);
+            if written.is_err() {
                 break;
             }
         }
