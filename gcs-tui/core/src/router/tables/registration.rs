@@ -108,10 +108,15 @@ impl Robots {
     /// holds (65535, 65534...), which stays clear of the small numbers names
     /// carry.
     fn id_for(&self, name: &str) -> u16 {
-        let taken = |id: u16| self.by_name.values().any(|r| r.id == id);
+        // The ids held, gathered once: asking each robot for every id tried
+        // made a fleet of names without numbers cost cubic time to register.
+        let taken: std::collections::HashSet<u16> = self.by_name.values().map(|r| r.id).collect();
         match crate::names::trailing_number(name) {
-            Some(n) if !taken(n) => n,
-            _ => (1..=u16::MAX).rev().find(|&id| !taken(id)).unwrap_or(0),
+            Some(n) if !taken.contains(&n) => n,
+            _ => (1..=u16::MAX)
+                .rev()
+                .find(|id| !taken.contains(id))
+                .unwrap_or(0),
         }
     }
 
