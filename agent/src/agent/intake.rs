@@ -31,6 +31,10 @@ pub(crate) struct Intake {
     /// Answer a rejected command with `Notice{NotRouted}`.
     notify_not_routed: bool,
     last_not_routed_notice: Option<Duration>,
+    /// When a command was last refused with a notice (at most one a
+    /// second: a controller repeating a command the robot cannot take
+    /// must not flood the station's log).
+    last_refusal_notice: Option<Duration>,
 }
 
 impl Intake {
@@ -46,6 +50,7 @@ impl Intake {
             channel: Watchdog::new(settings.failsafe.channel_timeout),
             notify_not_routed: settings.notify_not_routed,
             last_not_routed_notice: None,
+            last_refusal_notice: None,
         }
     }
 
@@ -149,8 +154,10 @@ impl Intake {
             }
             Err(e) => {
                 step.counters.refused += 1;
-                let text = e.to_string();
-                step.notice(&header.sender, Level::Warn, NoticeCode::Unsupported, &text);
+                if once_a_second(&mut self.last_refusal_notice, step.now) {
+                    let text = e.to_string();
+                    step.notice(&header.sender, Level::Warn, NoticeCode::Unsupported, &text);
+                }
             }
         }
     }
@@ -184,14 +191,9 @@ impl Intake {
 
     /// Tells a controller its command was rejected, at most once a second.
     fn tell_not_routed(&mut self, channel: &str, sender: &str, step: &mut Step) {
-        let now = step.now;
-        let quiet = self
-            .last_not_routed_notice
-            .is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1));
-        if !self.notify_not_routed || quiet {
+        if !self.notify_not_routed || !once_a_second(&mut self.last_not_routed_notice, step.now) {
             return;
         }
-        self.last_not_routed_notice = Some(now);
         let text = format!(
             "{} obeys channel {:?}; command on {channel:?} rejected",
             step.robot(),
@@ -201,9 +203,44 @@ impl Intake {
     }
 }
 
+/// Whether a notice last sent at `last` may be sent again at `now` (a
+/// second later or more); notes it sent when it may.
+fn once_a_second(last: &mut Option<Duration>, now: Duration) -> bool {
+    if last.is_some_and(|t| now.saturating_sub(t) < Duration::from_secs(1)) {
+        return false;
+    }
+    *last = Some(now);
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::testing::*;
+
+    /// A controller repeating a command the robot cannot take (50 Hz for
+    /// 2.5 s) has each one refused and counted, but is told so once a
+    /// second: the notices go to the station's log.
+    #[test]
+    fn refusals_are_counted_each_and_told_once_a_second() {
+        let mut a = routed("joy/0");
+        let mut notices = 0;
+        for k in 0..125u32 {
+            let mut m = msg(
+                "joy/0",
+                Body::Command(mech_proto::Command::Actuators(mech_proto::Actuators {
+                    outputs: vec![0.5],
+                })),
+            );
+            m.header.seq = k + 1;
+            let out = a.handle(m, ms(10 + u64::from(k) * 20));
+            notices += out
+                .iter()
+                .filter(|e| matches!(&e.body, Body::Notice(n) if n.code == NoticeCode::Unsupported))
+                .count();
+        }
+        assert_eq!(a.counters().refused, 125);
+        assert_eq!(notices, 3, "at 0 s, 1 s and 2 s");
+    }
 
     #[test]
     fn obeys_the_routed_channel_and_rejects_others() {
