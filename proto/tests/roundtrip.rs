@@ -285,7 +285,12 @@ fn body() -> impl Strategy<Value = Body> {
                 })
             },
         );
-    let waypoint = (real(), real(), real(), proptest::option::of(0.0..1.0e5f64))
+    let waypoint = (
+        real(),
+        real(),
+        real(),
+        proptest::option::of(0.0..=mech_proto::MAX_WAYPOINT_TIME),
+    )
         .prop_map(|(x, y, z, time)| Waypoint { x, y, z, time });
     let mission = (
         any::<u32>(),

@@ -92,7 +92,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ("R", "record to the recording directory on/off"),
     (
         "teleop: arrows WASD",
-        "drive / turn; q e strafe; r f climb; Space stop; t or Esc leaves",
+        "drive/turn; q e strafe; r f climb; Space stop; t Esc off",
     ),
     (
         "gamepad",

@@ -504,7 +504,9 @@ mod tests {
     proptest::proptest! {
         /// A segment stepped in dot units paints the dots of its evenly
         /// spaced world points, every `every`-th, on the map or partly
-        /// off it.
+        /// off it. (A point exactly on a dot's edge, as on an axis at round
+        /// coordinates, may fall on either side: the two ways round
+        /// differently. Random ends never put one there.)
         #[test]
         fn a_segment_paints_the_dots_of_its_points(
             scale in 0.005f64..0.5, w in 4u16..120, h in 2u16..40,
