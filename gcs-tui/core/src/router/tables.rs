@@ -196,6 +196,7 @@ pub(crate) struct Tables {
     robots: registration::Robots,
     channels: channels::Channels,
     subscribers: telemetry::Subscribers,
+    notices: telemetry::Notices,
     missions: missions::Missions,
     estop: estop::EStops,
     safety: safety::SiteSafety,
@@ -233,6 +234,7 @@ impl Tables {
             robots: registration::Robots::new(now),
             channels: channels::Channels::default(),
             subscribers: telemetry::Subscribers::default(),
+            notices: telemetry::Notices::default(),
             missions: missions::Missions::new(seed),
             estop: estop::EStops::new(seed),
             safety: safety::SiteSafety::new(seed),
@@ -484,6 +486,7 @@ impl Tables {
         self.retry_missions(cx);
         self.retry_arenas(cx);
         self.subscribers.lapse(cx.now);
+        self.report_held_notices(cx);
         if let Some(e) = self.refusals.due(cx.now) {
             cx.event(e);
         }
@@ -993,6 +996,54 @@ mod tests {
         t.tick_at(t0 + Duration::from_millis(5_001), &mut out, &mut ev);
         assert!(!t.subscribers.contains(tool), "lapsed");
         let _ = robot;
+    }
+
+    /// A peer's notices reach the log and the operators twenty a second;
+    /// the rest are counted and said in one line once the second is over,
+    /// and the next second shows them again.
+    #[test]
+    fn a_peer_flooding_notices_shows_twenty_a_second_and_the_count_of_the_rest() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let (mut out, mut ev) = (Outbox::default(), Vec::new());
+        let notice = |k: u32| {
+            bytes(
+                "robot_1",
+                "router",
+                "",
+                Body::Notice(mech_proto::Notice {
+                    level: mech_proto::Level::Error,
+                    code: mech_proto::NoticeCode::Text,
+                    text: format!("n{k}"),
+                }),
+            )
+        };
+        let shown = |ev: &[Event]| -> Vec<String> {
+            ev.iter()
+                .filter_map(|e| match e {
+                    Event::Notice { notice, .. } => Some(notice.text.clone()),
+                    _ => None,
+                })
+                .collect()
+        };
+        for k in 0..100 {
+            let at = t0 + Duration::from_millis(5 * u64::from(k));
+            t.handle_at(&notice(k), robot, at, &mut out, &mut ev);
+        }
+        let first: Vec<String> = (0..20).map(|k| format!("n{k}")).collect();
+        assert_eq!(shown(&ev), first);
+        ev.clear();
+        t.tick_at(t0 + Duration::from_millis(999), &mut out, &mut ev);
+        assert!(shown(&ev).is_empty(), "the second is not over");
+        t.tick_at(t0 + Duration::from_millis(1_000), &mut out, &mut ev);
+        assert_eq!(
+            shown(&ev),
+            ["80 more notices from robot_1 in a second were not shown"]
+        );
+        ev.clear();
+        let later = t0 + Duration::from_millis(1_100);
+        t.handle_at(&notice(100), robot, later, &mut out, &mut ev);
+        assert_eq!(shown(&ev), ["n100"]);
     }
 
     /// Channel names are the publishers' to choose: the table keeps

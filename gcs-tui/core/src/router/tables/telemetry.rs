@@ -4,6 +4,10 @@
 //! unless renewed; position fixes go to their robot; notices, which also
 //! go to the station's log (its file), at their own level.
 //!
+//! A peer's notices reach the log and the operators at most
+//! [`NOTICES_PER_SECOND`] a second ([`Notices`]); the rest are counted and
+//! said in one line once the second is over.
+//!
 //! [`Subscribers`] holds the external telemetry subscribers (a tool over
 //! UDP or TCP), each until its subscription lapses: at most
 //! [`SUBSCRIBERS`], and [`SUBSCRIBERS_PER_NAME`] for one sender name, since
@@ -18,6 +22,69 @@ use tokio::time::Instant;
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::DropReason;
 use crate::event::Event;
+
+/// Most notices of one sender shown (logged, and sent to the operators)
+/// in a second.
+pub(super) const NOTICES_PER_SECOND: u32 = 20;
+
+/// Most senders whose notices are counted at once (a new one past that
+/// starts the count afresh for all).
+const NOTICE_SENDERS: usize = 4096;
+
+/// How many notices each sender had shown and held back in its current
+/// second.
+#[derive(Debug, Default)]
+pub(super) struct Notices {
+    by_sender: HashMap<String, NoticeCount>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct NoticeCount {
+    since: Instant,
+    shown: u32,
+    held: u32,
+}
+
+impl Notices {
+    /// Whether a notice from `sender` at `now` is shown (else it is
+    /// counted, for [`Notices::due`]).
+    fn admit(&mut self, sender: &str, now: Instant) -> bool {
+        if !self.by_sender.contains_key(sender) && self.by_sender.len() >= NOTICE_SENDERS {
+            self.by_sender.clear();
+        }
+        let c = self
+            .by_sender
+            .entry(sender.to_string())
+            .or_insert(NoticeCount {
+                since: now,
+                shown: 0,
+                held: 0,
+            });
+        if c.shown < NOTICES_PER_SECOND {
+            c.shown += 1;
+            true
+        } else {
+            c.held += 1;
+            false
+        }
+    }
+
+    /// The senders whose second ended by `now` with notices held back, and
+    /// how many; every sender whose second ended starts afresh.
+    fn due(&mut self, now: Instant) -> Vec<(String, u32)> {
+        let mut held = Vec::new();
+        self.by_sender.retain(|sender, c| {
+            if now.saturating_duration_since(c.since) < std::time::Duration::from_secs(1) {
+                return true;
+            }
+            if c.held > 0 {
+                held.push((sender.clone(), c.held));
+            }
+            false
+        });
+        held
+    }
+}
 
 /// Most telemetry subscribers at once.
 pub(super) const SUBSCRIBERS: usize = 64;
@@ -160,6 +227,9 @@ impl Tables {
         cx: &mut Ctx<'_>,
     ) -> Delivery {
         let (from, text, code) = (&m.header.sender, &notice.text, notice.code);
+        if !self.notices.admit(from, cx.now) {
+            return Delivery::Consumed;
+        }
         match notice.level {
             Level::Debug => tracing::debug!(%from, ?code, "notice: {text}"),
             Level::Info => tracing::info!(%from, ?code, "notice: {text}"),
@@ -171,5 +241,22 @@ impl Tables {
             notice,
         });
         Delivery::Consumed
+    }
+}
+
+impl Tables {
+    /// Says, for each peer whose second of notices is over, how many were
+    /// not shown.
+    pub(super) fn report_held_notices(&mut self, cx: &mut Ctx<'_>) {
+        for (from, held) in self.notices.due(cx.now) {
+            let text = format!("{held} more notices from {from} in a second were not shown");
+            tracing::warn!(%from, held, "{text}");
+            let notice = Notice {
+                level: Level::Warn,
+                code: mech_proto::NoticeCode::Text,
+                text,
+            };
+            cx.event(Event::Notice { from, notice });
+        }
     }
 }
