@@ -825,12 +825,10 @@ mod tests {
         assert_eq!(q.rtt, Some(Duration::from_millis(50)));
     }
 
-    #[test]
-    fn a_mission_is_resent_every_200_ms_and_given_up_after_5_s() {
-        let t0 = Instant::now();
-        let (mut t, robot) = registered(t0);
-        let mission = Body::Mission(Mission {
-            id: 7,
+    /// Mission `id`: one waypoint, 1 m along x.
+    fn one_waypoint_mission(id: u32) -> Body {
+        Body::Mission(Mission {
+            id,
             waypoints: vec![Waypoint {
                 x: 1.0,
                 y: 0.0,
@@ -840,7 +838,14 @@ mod tests {
             looped: false,
             arrival_radius: 0.1,
             start_index: 0,
-        });
+        })
+    }
+
+    #[test]
+    fn a_mission_is_resent_every_200_ms_and_given_up_after_5_s() {
+        let t0 = Instant::now();
+        let (mut t, robot) = registered(t0);
+        let mission = one_waypoint_mission(7);
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
         t.handle_at(
             &bytes("gcs", "robot_1", "wp/gcs", mission),
@@ -883,18 +888,7 @@ mod tests {
         let (mut out, mut ev) = (Outbox::default(), Vec::new());
         let n = missions::PENDING_PER_ROBOT as u32 + 40;
         for id in 1..=n {
-            let mission = Body::Mission(Mission {
-                id,
-                waypoints: vec![Waypoint {
-                    x: 1.0,
-                    y: 0.0,
-                    z: 0.0,
-                    time: None,
-                }],
-                looped: false,
-                arrival_radius: 0.1,
-                start_index: 0,
-            });
+            let mission = one_waypoint_mission(id);
             t.handle_at(
                 &bytes("gcs", "robot_1", "wp/gcs", mission),
                 Peer::Local,

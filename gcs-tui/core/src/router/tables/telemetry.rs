@@ -52,14 +52,17 @@ impl Notices {
         if !self.by_sender.contains_key(sender) && self.by_sender.len() >= NOTICE_SENDERS {
             self.by_sender.clear();
         }
-        let c = self
-            .by_sender
-            .entry(sender.to_string())
-            .or_insert(NoticeCount {
+        if !self.by_sender.contains_key(sender) {
+            let fresh = NoticeCount {
                 since: now,
                 shown: 0,
                 held: 0,
-            });
+            };
+            self.by_sender.insert(sender.to_string(), fresh);
+        }
+        let Some(c) = self.by_sender.get_mut(sender) else {
+            return false;
+        };
         if c.shown < NOTICES_PER_SECOND {
             c.shown += 1;
             true
