@@ -20,6 +20,10 @@
 //! - Refused attaches reach the event log at most [`LOGGED_PER_SECOND`] a
 //!   second; the rest are counted into one line a second.
 //!
+//! The Foxglove live view keeps an [`Admission`] of its own for its
+//! connections' WebSocket handshakes: the same attaching places, and the
+//! same few log lines a second.
+//!
 //! [`Admission`] owns the places; [`Attaching`] and [`Seat`] hold one each
 //! and give it back when dropped.
 

@@ -5,7 +5,9 @@
 //! moving on its pose topic and in the scene (with the simulated robots'
 //! arena), and clients that send
 //! garbage, flood the server with requests or never read do not stop it;
-//! the station's log says who was cut and why. Without the `foxglove`
+//! the station's log says who was cut and why; connections that never
+//! finish their handshake are closed as newer ones come, so they pile up
+//! neither in the station nor in the way of a viewer. Without the `foxglove`
 //! feature, a station asked for the live view does not start, and says
 //! which feature it lacks. Loopback only.
 
@@ -166,6 +168,44 @@ mod live {
         assert!(text.contains("Foxglove live view listening"), "{text}");
         assert!(text.contains("too many bad requests"), "{text}");
         assert!(text.contains("Foxglove handshake refused"), "{text}");
+        launched.shutdown().await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn connections_that_never_finish_their_handshake_are_closed_as_newer_ones_come() {
+        use futures::future::join_all;
+        use tokio::io::AsyncReadExt;
+        use tokio::net::TcpStream;
+
+        let launched = Launched::start(&super::config(), Recording::Off)
+            .await
+            .unwrap();
+        let ws = launched.live_view().expect("the live view runs");
+        // A stranger's connections that say nothing, well within the
+        // handshake's 5 s.
+        let mut idle = Vec::new();
+        for _ in 0..100 {
+            idle.push(TcpStream::connect(ws).await.unwrap());
+        }
+        let closed = join_all(idle.iter_mut().map(|s| async move {
+            let mut b = [0u8; 64];
+            matches!(
+                tokio::time::timeout(Duration::from_millis(1500), s.read(&mut b)).await,
+                Ok(Ok(0) | Err(_))
+            )
+        }))
+        .await;
+        let open = closed.iter().filter(|c| !**c).count();
+        // 16 places for handshakes, 4 of them for one address.
+        assert!(open <= 16, "{open} of 100 idle connections still open");
+        assert!(
+            closed[..closed.len() - 16].iter().all(|c| *c),
+            "the oldest are closed first"
+        );
+        // A viewer still gets in, and is shown the fleet's channels.
+        let mut viewer = super::foxglove::Client::connect(ws).await;
+        let scene = viewer.channel(schema::SCENE).await;
+        assert_eq!(scene["schemaName"], schema::SCENE_UPDATE);
         launched.shutdown().await;
     }
 }

@@ -4,6 +4,15 @@
 //! batches; subscribe and unsubscribe in; anything else refused with a
 //! status message, and a client that keeps at it, or sends frames larger
 //! than a request can be, is cut.
+//!
+//! Connections still in their handshake hold places of their own, as the
+//! station's attach port's do (`crate::admission`): 16, at most 4 from one
+//! address; a newcomer closes the one waiting longest. So connections that
+//! never finish their handshake cost a stranger a descriptor each only
+//! until the next connection comes, never the station's descriptors. What
+//! the server says of each connection (refused, timed out, closed, came
+//! and went) reaches the log a few lines a second; the rest is counted into
+//! one line a second.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -16,6 +25,7 @@ use mech_core::Gcs;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
+use tokio::time::Instant;
 use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
@@ -26,6 +36,7 @@ use super::FoxgloveConfig;
 use super::hub::{Hub, Out};
 use super::protocol::{self, Request as ClientRequest, SUBPROTOCOL};
 use super::source::{Counts, Source};
+use crate::admission::{Admission, Attaching, Door};
 
 /// Time a connection has to complete the WebSocket handshake.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
@@ -63,9 +74,11 @@ impl LiveView {
         let hub = Arc::new(Hub::new(config.client_queue, config.max_clients));
         let (source, sub) = Source::new(gcs, hub.clone(), config.queue, config.scene_hz);
         let counts = source.counts.clone();
+        let places = Arc::new(Admission::default());
         let tasks = vec![
             tokio::spawn(source.run(sub)),
-            tokio::spawn(accept(listener, hub.clone())),
+            tokio::spawn(accept(listener, hub.clone(), places.clone())),
+            tokio::spawn(log_held(places)),
         ];
         tracing::info!(%addr, "Foxglove live view listening (ws://{addr})");
         Ok(LiveView {
@@ -110,11 +123,13 @@ impl Drop for LiveView {
     }
 }
 
-async fn accept(listener: TcpListener, hub: Arc<Hub>) {
+async fn accept(listener: TcpListener, hub: Arc<Hub>, places: Arc<Admission>) {
     loop {
         match listener.accept().await {
             Ok((stream, peer)) => {
-                tokio::spawn(connection(stream, peer, hub.clone()));
+                let place = places.attaching(Door::Tcp(peer.ip()));
+                let logged = places.clone();
+                tokio::spawn(connection(stream, peer, hub.clone(), place, logged));
             }
             Err(e) => {
                 // Out of descriptors, say: wait rather than spin.
@@ -151,26 +166,70 @@ fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, Err
     Ok(resp)
 }
 
-async fn connection(stream: TcpStream, peer: SocketAddr, hub: Arc<Hub>) {
+/// Whether a line about a connection goes to the log now (a few a second;
+/// the rest are counted, for [`log_held`]).
+fn loggable(places: &Admission) -> bool {
+    places.log_refusal(Instant::now())
+}
+
+/// Once a second, how many lines about connections were not logged one by
+/// one, as one line.
+async fn log_held(places: Arc<Admission>) {
+    let mut every = tokio::time::interval(Duration::from_secs(1));
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    loop {
+        every.tick().await;
+        let n = places.held_refusals();
+        if n > 0 {
+            tracing::warn!(
+                "Foxglove live view: {n} more connections refused, cut or gone (not logged one by one)"
+            );
+        }
+    }
+}
+
+async fn connection(
+    stream: TcpStream,
+    peer: SocketAddr,
+    hub: Arc<Hub>,
+    place: Attaching,
+    places: Arc<Admission>,
+) {
     let _ = stream.set_nodelay(true);
     let config = WebSocketConfig::default()
         .max_message_size(Some(MAX_REQUEST))
         .max_frame_size(Some(MAX_REQUEST));
     let handshake =
         tokio_tungstenite::accept_hdr_async_with_config(stream, choose_subprotocol, Some(config));
-    let mut ws = match tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await {
+    let handshake = tokio::select! {
+        done = tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake) => done,
+        () = place.evicted() => {
+            if loggable(&places) {
+                tracing::info!(%peer, "Foxglove handshake cut: newer connections took its place");
+            }
+            return;
+        }
+    };
+    drop(place);
+    let mut ws = match handshake {
         Ok(Ok(ws)) => ws,
         Ok(Err(e)) => {
-            tracing::info!(%peer, error = %e, "Foxglove handshake refused");
+            if loggable(&places) {
+                tracing::info!(%peer, error = %e, "Foxglove handshake refused");
+            }
             return;
         }
         Err(_) => {
-            tracing::info!(%peer, "Foxglove handshake timed out");
+            if loggable(&places) {
+                tracing::info!(%peer, "Foxglove handshake timed out");
+            }
             return;
         }
     };
     let Some((id, rx)) = hub.connect() else {
-        tracing::warn!(%peer, "Foxglove client refused: too many clients ([foxglove] max_clients)");
+        if loggable(&places) {
+            tracing::warn!(%peer, "Foxglove client refused: too many clients ([foxglove] max_clients)");
+        }
         let _ = ws
             .send(Message::Text(
                 protocol::status(protocol::Level::Error, "too many clients").into(),
@@ -179,11 +238,17 @@ async fn connection(stream: TcpStream, peer: SocketAddr, hub: Arc<Hub>) {
         let _ = ws.close(None).await;
         return;
     };
-    tracing::info!(%peer, client = id, "Foxglove client connected");
+    let said_hello = loggable(&places);
+    if said_hello {
+        tracing::info!(%peer, client = id, "Foxglove client connected");
+    }
     let why = serve(&mut ws, rx, &hub, id).await;
     let dropped = hub.disconnect(id);
     let _ = ws.close(None).await;
-    tracing::info!(%peer, client = id, dropped, "Foxglove client left: {why}");
+    // A client whose coming was logged has its leaving logged too.
+    if said_hello || loggable(&places) {
+        tracing::info!(%peer, client = id, dropped, "Foxglove client left: {why}");
+    }
 }
 
 /// Runs a connection until it ends; says why.
