@@ -462,10 +462,16 @@ impl SafetyLayer {
         let intent =
             circulation::intent(desired, twist, mobility, self.bearing_gain, self.circling);
         let swerve = self.swerve(c, intent, margin, now);
+        // A diff-drive driven backwards swerves backwards.
+        let steering = if !mobility.holonomic && twist.vx < 0.0 {
+            mobility.rear_first()
+        } else {
+            *mobility
+        };
         // A diff-drive turning on the spot towards its swerve is under
         // way, not stuck.
         let turning =
-            swerve.is_some_and(|t| !mobility.holonomic && filter::turns_first(t, mobility));
+            swerve.is_some_and(|t| !mobility.holonomic && filter::turns_first(t, &steering));
         if turning {
             self.stuck_since = None;
         } else if let Some(back_off) = self.unstick(c, intent, mobility, wants_motion, margin, now)
@@ -480,7 +486,7 @@ impl SafetyLayer {
                 if self.bearing_gain.is_some() {
                     self.circling.get_or_insert(intent.norm());
                 }
-                filter::steer(c, target, mobility)
+                filter::steer(c, target, &steering)
             }
             None => {
                 self.circling = None;
@@ -954,6 +960,58 @@ mod tests {
             "the turn took a while: {drove:?}"
         );
         assert!(heading < -0.6, "it turned right: {heading}");
+    }
+
+    #[test]
+    fn a_diff_drive_reversing_towards_a_neighbour_swerves_to_the_right_of_its_travel() {
+        // Driven backwards by a gamepad (a twist: the yaw rate is the
+        // sender's) at a neighbour standing behind it, westwards: its rear
+        // turns right (north) and it passes the neighbour backwards, never
+        // within the distance to keep, never driven forwards. Its motion
+        // integrated ideally.
+        let dd = PlatformSpec::diff_drive().build();
+        let mut l = enforcing(SafetyConfig::default());
+        l.steered_by(None);
+        let back = forward(dd.as_ref(), -0.3);
+        let behind = (1.3, 1.5);
+        let (mut x, mut y, mut heading, mut speed) = (2.0, 1.5, 0.0f64, 0.0f64);
+        let (mut nearest, mut fastest_forwards) = (f64::INFINITY, 0.0f64);
+        for k in 0..250u64 {
+            let now = Duration::from_millis(20 * k);
+            let around = vec![neighbour_at(behind.0, behind.1)];
+            l.apply_neighbours(&neighbours(k + 1, around), now);
+            let me = Pose {
+                x,
+                y,
+                heading,
+                ..Pose::default()
+            };
+            let velocity = Vec2::from_angle(heading) * speed;
+            let f = l.filter(dd.as_ref(), &me, velocity, &back, now);
+            let t = dd.motion(&f.outputs);
+            heading += t.wz * 0.02;
+            speed = t.vx;
+            (x, y) = (
+                x + speed * heading.cos() * 0.02,
+                y + speed * heading.sin() * 0.02,
+            );
+            nearest = nearest.min((x - behind.0).hypot(y - behind.1));
+            fastest_forwards = fastest_forwards.max(speed);
+        }
+        // Two radii apart at least (0.15 m each).
+        assert!(nearest >= 0.3, "came within {nearest:.3} m");
+        assert!(
+            fastest_forwards <= 0.0,
+            "driven forwards at {fastest_forwards}"
+        );
+        assert!(
+            heading < -0.3,
+            "its rear turned right: heading {heading:.2}"
+        );
+        assert!(
+            x < behind.0 - 0.2 && y > behind.1 + 0.3,
+            "passed the neighbour on its right: ({x:.2}, {y:.2})"
+        );
     }
 
     #[test]

@@ -80,6 +80,19 @@ impl Mobility {
     fn sweep(&self, wz: f64) -> f64 {
         wz * self.reaction_time
     }
+
+    /// The same robot taken from its rear: a diff-drive whose command
+    /// drives it backwards is [`steer`]ed rear first, its rear turned
+    /// towards the swerve and driven backwards along it, so the right-hand
+    /// rule holds in the direction it travels. (Turning round to face the
+    /// swerve would swing its rear the other way first, for most of a
+    /// second, and leave it driving forwards against its command.)
+    pub fn rear_first(&self) -> Mobility {
+        Mobility {
+            heading: mech_proto::wrap_angle(self.heading + std::f64::consts::PI),
+            ..*self
+        }
+    }
 }
 
 /// The fastest speed along `dir` that is allowed now and after turning
