@@ -575,3 +575,30 @@ mod properties {
         }
     }
 }
+
+/// A diff-drive driven backwards at full speed towards one standing behind
+/// it, on one line.
+fn reversing_into_a_neighbour(layer_on: bool) -> SafetyTrial {
+    let spec = PlatformSpec::diff_drive();
+    let mut t = trial(layer_on);
+    let reversing = t.add(&spec, pose(2.6, 1.4, 0.0));
+    t.add(&spec, pose(1.4, 1.4, 0.0));
+    t.command(reversing, &twist(spec.build().as_ref(), -1.0, 0.0, 0.0));
+    t.run_for(4.0);
+    t
+}
+
+#[test]
+fn a_diff_drive_reversing_into_a_neighbour_passes_it_backwards_on_the_right_of_its_travel() {
+    let t = reversing_into_a_neighbour(true);
+    let on = t.metrics();
+    assert!(on.min_gap >= MARGIN - TOLERANCE, "{on:?}");
+    assert_eq!(on.separation_violations + on.breaches, 0, "{on:?}");
+    // Travelling west, its right is north: it passed the other robot
+    // there, still reversing (facing east, give or take its swerve).
+    let p = t.robots[0].sim.pose();
+    assert!(p.x < 1.4 && p.y > 1.4 + 0.2, "passed on the right: {p:?}");
+    assert!(p.heading.cos() > 0.5, "still facing east: {p:?}");
+    let off = reversing_into_a_neighbour(false).metrics();
+    assert!(off.min_gap < 0.0, "without the layer they collide: {off:?}");
+}
