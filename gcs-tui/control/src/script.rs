@@ -274,7 +274,8 @@ fn safety_json(f: &mech_core::Fleet) -> Value {
 fn recording_json(r: &mech_core::RecordingStatus) -> Value {
     json!({
         "file": r.file.display().to_string(), "messages": r.messages,
-        "queued": r.queued, "dropped": r.dropped, "error": r.error,
+        "queued": r.queued, "dropped": r.dropped,
+        "refused_unrecorded": r.refused_unrecorded, "error": r.error,
     })
 }
 

@@ -38,7 +38,7 @@ pub use file::{METADATA, METADATA_END, PROFILE};
 
 use crate::config::ConfigError;
 use crate::fleet::Fleet;
-use crate::router::{RouterHandle, Tap, Tapped};
+use crate::router::{RouterHandle, Tap, TapCounts, Tapped};
 use crate::sync::lock;
 
 /// The `[record]` section: where and how `serve` (and `record start`
@@ -140,6 +140,10 @@ pub struct RecordingStatus {
     /// Records lost: the queue was full (the writer fell behind), or
     /// writing had failed.
     pub dropped: u64,
+    /// Refused messages (unreadable, rejected, shed) past the 100 a second
+    /// recorded whole: the recording holds them only in the `refused`
+    /// events' counts.
+    pub refused_unrecorded: u64,
     /// Why writing stopped, if it failed.
     pub error: Option<String>,
     /// Still recording.
@@ -201,8 +205,7 @@ impl Recorder {
                 active: true,
                 ..RecordingStatus::default()
             }),
-            dropped: Arc::new(AtomicU64::new(0)),
-            queued: Arc::new(AtomicU64::new(0)),
+            taps: TapCounts::default(),
             messages: AtomicU64::new(0),
             events: AtomicU64::new(0),
             written: AtomicU64::new(0),
@@ -235,12 +238,7 @@ impl Recorder {
     /// the first record).
     pub(crate) fn attach(&self, router: &RouterHandle, fleet: &Mutex<Fleet>) {
         let Some(tx) = &self.tx else { return };
-        let tap = Tap::new(
-            tx.clone(),
-            router.started(),
-            self.shared.dropped.clone(),
-            self.shared.queued.clone(),
-        );
+        let tap = Tap::new(tx.clone(), router.started(), &self.shared.taps);
         drop(router.put_tap(tap, || lock(fleet).clone()));
     }
 
@@ -248,8 +246,9 @@ impl Recorder {
     pub fn status(&self) -> RecordingStatus {
         let mut s = lock(&self.shared.status).clone();
         let count = |c: &AtomicU64| c.load(Ordering::Relaxed);
-        s.dropped = count(&self.shared.dropped);
-        s.queued = count(&self.shared.queued);
+        s.dropped = count(&self.shared.taps.dropped);
+        s.queued = count(&self.shared.taps.queued);
+        s.refused_unrecorded = count(&self.shared.taps.unrecorded);
         s.messages = count(&self.shared.messages);
         s.events = count(&self.shared.events);
         s.written = count(&self.shared.written);

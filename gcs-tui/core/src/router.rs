@@ -43,7 +43,7 @@ pub use net::RadioStatus;
 pub use publisher::{Publisher, Publishers};
 pub use tables::Delivery;
 pub use tables::tap::OperatorRecord;
-pub(crate) use tables::tap::{Tap, Tapped, TappedMessage};
+pub(crate) use tables::tap::{Tap, TapCounts, Tapped, TappedMessage};
 pub(crate) use tables::{Peer, Treatment};
 
 use crate::auth::Keyring;
@@ -527,8 +527,7 @@ mod tests {
         let mut fx = Effects::default();
         let (before, _) = estop(&mut fx);
         let (tx, rx) = std::sync::mpsc::sync_channel(16);
-        let counts = (Arc::default(), Arc::default());
-        let tap = Tap::new(tx, handle.started(), counts.0, counts.1);
+        let tap = Tap::new(tx, handle.started(), &TapCounts::default());
         let mut during = None;
         handle.put_tap(tap, || {
             assert_eq!(*lock(&sink.0), [before], "applied before the fleet is read");

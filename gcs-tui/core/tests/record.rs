@@ -483,3 +483,51 @@ async fn a_recording_begun_mid_run_starts_from_the_fleet_as_it_stood() {
     c.seek(replay.start());
     assert_eq!(c.fleet().robot("robot_1").unwrap().telemetry.pose.x, 1.5);
 }
+
+/// A stranger's flood of garbage while recording: the first refused
+/// messages of each second are recorded whole, the rest only counted, and
+/// the fleet's own traffic is all there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_strangers_flood_is_counted_not_recorded_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("flood.mcap");
+    let gcs = gcs().await;
+    gcs.start_recording(RecordTarget::File(file.clone()))
+        .unwrap();
+    let mut r1 = registered(&gcs, "robot_1").await;
+    let stranger = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let started = std::time::Instant::now();
+    for i in 0..3000u32 {
+        let _ = stranger.send_to(&i.to_be_bytes(), gcs.router().udp_addr());
+        if i % 300 == 0 {
+            r1.send_telemetry(telemetry(f64::from(i), 1.0, "", None))
+                .await;
+        }
+    }
+    let seconds = started.elapsed().as_secs() + 1;
+    let counted = |g: &Gcs| g.router().counters().received;
+    let settled = eventually(Duration::from_secs(10), || {
+        let s = gcs.recording().unwrap();
+        s.messages + s.refused_unrecorded + s.dropped == counted(&gcs)
+    })
+    .await;
+    assert!(settled, "{:?} vs {}", gcs.recording(), counted(&gcs));
+    let status = gcs.stop_recording().await.unwrap();
+    let refused = gcs.router().counters().dropped.total();
+    gcs.shutdown().await;
+
+    // Every second may begin again: 100 whole per second begun.
+    let whole = refused - status.refused_unrecorded;
+    assert!(
+        whole <= 100 * (seconds + 1),
+        "{whole} refused recorded in {seconds} s: {status:?}"
+    );
+    assert!(status.refused_unrecorded > 0, "{status:?}");
+    let replay = Replay::open(&file).unwrap();
+    assert_eq!(replay.counts()["/robots/robot_1/pose"], 10);
+    let end = replay.end_metadata().unwrap();
+    assert_eq!(
+        end["refused_unrecorded"],
+        status.refused_unrecorded.to_string()
+    );
+}

@@ -17,6 +17,7 @@ use super::file::McapFile;
 use super::{RecordError, RecordTarget, RecordingStatus, encode, rotate, scene, schema, snapshot};
 use crate::event::{Event, Stamped};
 use crate::fleet::Fleet;
+use crate::router::TapCounts;
 use crate::router::{OperatorRecord, Tapped, TappedMessage};
 use crate::sync::lock;
 
@@ -35,11 +36,10 @@ const BATCH_EVERY: Duration = Duration::from_millis(5);
 #[derive(Debug)]
 pub(super) struct Shared {
     pub(super) status: Mutex<RecordingStatus>,
-    /// Records the tap could not queue (full or closed queue) and records
-    /// queued but not written because writing had failed.
-    pub(super) dropped: Arc<AtomicU64>,
-    /// Records the tap queued.
-    pub(super) queued: Arc<AtomicU64>,
+    /// The taps' counts: records the tap could not queue (full or closed
+    /// queue) and records queued but not written because writing had
+    /// failed (`dropped`), records queued, refused messages not recorded.
+    pub(super) taps: TapCounts,
     /// Router messages, events and MCAP messages written so far.
     pub(super) messages: AtomicU64,
     pub(super) events: AtomicU64,
@@ -365,7 +365,11 @@ impl Writer {
         let mut end = BTreeMap::new();
         end.insert("router_messages".into(), count(&self.shared.messages));
         end.insert("events".into(), count(&self.shared.events));
-        end.insert("dropped".into(), count(&self.shared.dropped));
+        end.insert("dropped".into(), count(&self.shared.taps.dropped));
+        end.insert(
+            "refused_unrecorded".into(),
+            count(&self.shared.taps.unrecorded),
+        );
         if let Some(received) = self.received_end {
             let during = received.saturating_sub(self.received_before);
             end.insert("router_received".into(), during.to_string());
@@ -406,7 +410,7 @@ pub(super) fn run(mut w: Writer, rx: Receiver<Tapped>) {
     let mut failed: Option<String> = None;
     let take = |w: &mut Writer, t: Tapped, failed: &mut Option<String>| {
         if failed.is_some() {
-            w.shared.dropped.fetch_add(1, Ordering::Relaxed);
+            w.shared.taps.dropped.fetch_add(1, Ordering::Relaxed);
         } else if let Err(e) = w.take(t) {
             *failed = Some(fail(w, e));
         }

@@ -371,7 +371,7 @@ impl Tables {
     /// Offers a decided message to the recording, when recording.
     fn offer(&mut self, bytes: &[u8], delivery: Delivery, cx: &mut Ctx<'_>) {
         let detail = self.tap.take_refusal();
-        if let Some(tap) = self.tap.get() {
+        if let Some(tap) = self.tap.for_message(delivery, cx.now) {
             tap.message(MessageTap {
                 now: cx.now,
                 number: self.totals.received,

@@ -99,6 +99,12 @@ pub fn describe(s: &RecordingStatus) -> String {
         s.events,
         s.dropped
     );
+    if s.refused_unrecorded > 0 {
+        line.push_str(&format!(
+            ", {} refused messages counted, not recorded",
+            s.refused_unrecorded
+        ));
+    }
     if s.files.len() > 1 {
         line.push_str(&format!(", file {} of a rotation", s.files.len()));
     }

@@ -6,6 +6,13 @@
 //!
 //! The tap only copies and queues; the writer (`crate::record`) encodes and
 //! writes on a thread of its own.
+//!
+//! Refused messages (unreadable, rejected, shed) are copied whole up to
+//! [`REFUSED_RECORDED_PER_SECOND`] a second; past that they are counted
+//! ([`crate::RecordingStatus::refused_unrecorded`]) and the recording holds
+//! them only in the `refused` events' counts. So a stranger's flood can
+//! neither fill the station's disk nor push the fleet's own traffic out of
+//! a rotating recording.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -15,7 +22,11 @@ use std::time::Duration;
 use tokio::time::Instant;
 
 use super::{Delivery, Peer};
+use crate::counters::DropReason;
 use crate::event::Stamped;
+
+/// Refused messages recorded whole in a second.
+pub(crate) const REFUSED_RECORDED_PER_SECOND: u32 = 100;
 
 /// One message as the router decided it.
 #[derive(Debug, Clone)]
@@ -75,6 +86,9 @@ pub(crate) enum Tapped {
 pub(crate) struct TapSlot {
     tap: Option<Tap>,
     refusal: Option<String>,
+    /// When the current second of refused messages began, and how many of
+    /// them were recorded in it.
+    refused: Option<(Instant, u32)>,
 }
 
 impl TapSlot {
@@ -98,6 +112,40 @@ impl TapSlot {
     pub(crate) fn take_refusal(&mut self) -> Option<String> {
         self.refusal.take()
     }
+
+    /// The tap, if a message decided `delivery` at `now` is recorded: a
+    /// refused one only within the second's [`REFUSED_RECORDED_PER_SECOND`]
+    /// (the rest are counted).
+    pub(crate) fn for_message(&mut self, delivery: Delivery, now: Instant) -> Option<&Tap> {
+        let tap = self.tap.as_ref()?;
+        let refused = matches!(
+            delivery,
+            Delivery::Dropped(DropReason::BadPacket | DropReason::Rejected | DropReason::Shed)
+        );
+        if refused {
+            let (since, n) = self
+                .refused
+                .filter(|(since, _)| now.saturating_duration_since(*since) < Duration::from_secs(1))
+                .unwrap_or((now, 0));
+            if n >= REFUSED_RECORDED_PER_SECOND {
+                tap.unrecorded.fetch_add(1, Ordering::Relaxed);
+                return None;
+            }
+            self.refused = Some((since, n + 1));
+        }
+        Some(tap)
+    }
+}
+
+/// What a recording's taps count, shared with the recorder.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct TapCounts {
+    /// Records the queue could not take.
+    pub(crate) dropped: Arc<AtomicU64>,
+    /// Records queued.
+    pub(crate) queued: Arc<AtomicU64>,
+    /// Refused messages not recorded.
+    pub(crate) unrecorded: Arc<AtomicU64>,
 }
 
 /// The sending end, held by the router's tables while recording.
@@ -108,20 +156,20 @@ pub(crate) struct Tap {
     start: Instant,
     dropped: Arc<AtomicU64>,
     queued: Arc<AtomicU64>,
+    /// Refused messages not recorded (see the module docs).
+    unrecorded: Arc<AtomicU64>,
 }
 
 impl Tap {
-    pub(crate) fn new(
-        tx: SyncSender<Tapped>,
-        start: Instant,
-        dropped: Arc<AtomicU64>,
-        queued: Arc<AtomicU64>,
-    ) -> Tap {
+    /// A tap onto `tx`, counting into `counts`: records dropped, queued,
+    /// and refused messages not recorded.
+    pub(crate) fn new(tx: SyncSender<Tapped>, start: Instant, counts: &TapCounts) -> Tap {
         Tap {
             tx,
             start,
-            dropped,
-            queued,
+            dropped: counts.dropped.clone(),
+            queued: counts.queued.clone(),
+            unrecorded: counts.unrecorded.clone(),
         }
     }
 
