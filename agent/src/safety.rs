@@ -213,6 +213,9 @@ pub struct SafetyLayer {
     /// Since when the robot wanted to move but did not, and whether it
     /// asked to go somewhere meanwhile (not only to turn on the spot).
     stuck_since: Option<(Duration, bool)>,
+    /// Since when a diff-drive has been turning on the spot towards its
+    /// swerve, without a break.
+    turning_since: Option<Duration>,
     /// This robot's id at the station (its Welcome's): it staggers when
     /// robots stuck together back off.
     id: Option<u16>,
@@ -233,6 +236,7 @@ impl SafetyLayer {
             circling: None,
             bearing_gain: None,
             stuck_since: None,
+            turning_since: None,
             id: None,
             fresh_station: false,
             intervention: Intervention::None,
@@ -433,6 +437,7 @@ impl SafetyLayer {
         self.backing_off = None;
         self.circling = None;
         self.stuck_since = None;
+        self.turning_since = None;
     }
 
     /// The decision: a robot backing off keeps at it; otherwise the
@@ -469,10 +474,10 @@ impl SafetyLayer {
             *mobility
         };
         // A diff-drive turning on the spot towards its swerve is under
-        // way, not stuck.
+        // way, not stuck: for as long as half a turn takes.
         let turning =
             swerve.is_some_and(|t| !mobility.holonomic && filter::turns_first(t, &steering));
-        if turning {
+        if self.turning_excused(turning, now) {
             self.stuck_since = None;
         } else if let Some(back_off) = self.unstick(c, intent, mobility, wants_motion, margin, now)
         {
@@ -493,6 +498,22 @@ impl SafetyLayer {
                 decide(c, desired, mobility)
             }
         }
+    }
+
+    /// Whether a diff-drive `turning` on the spot towards its swerve at
+    /// `now` is excused from being stuck: only until it has turned without
+    /// a break for as long as half a turn takes at `yield_turn_rate`, the
+    /// most any swerve needs. A robot still turning after that is not
+    /// getting round (its wheels slip, or the swerve keeps moving round
+    /// it), and the stuck timer judges it as any other.
+    fn turning_excused(&mut self, turning: bool, now: Duration) -> bool {
+        if !turning {
+            self.turning_since = None;
+            return false;
+        }
+        let since = *self.turning_since.get_or_insert(now);
+        let half_turn = std::f64::consts::PI / self.config.yield_turn_rate.abs();
+        now.saturating_sub(since).as_secs_f64() <= half_turn
     }
 
     /// The right-hand rule: `intent` turned right by the smallest angle
@@ -960,6 +981,46 @@ mod tests {
             "the turn took a while: {drove:?}"
         );
         assert!(heading < -0.6, "it turned right: {heading}");
+    }
+
+    #[test]
+    fn a_diff_drive_that_turns_on_the_spot_without_getting_round_backs_off() {
+        // As in the test above, but its wheels slip: it is told to turn
+        // and never does. Turning is an excuse for not moving only as long
+        // as half a turn takes (3.1 s at 1 rad/s); then it is stuck like
+        // any robot, and backs off after `stuck_after` (plus its stagger).
+        let dd = PlatformSpec::diff_drive().build();
+        let mut l = enforcing(SafetyConfig::default());
+        l.steered_by(Some(3.0));
+        let ahead = forward(dd.as_ref(), 0.3);
+        let me = Pose {
+            x: 2.0,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let backed_off = (0..500u64)
+            .map(|k| Duration::from_millis(20 * k))
+            .find(|&now| {
+                let around = vec![
+                    neighbour_at(2.5, 1.5),
+                    neighbour_at(2.35, 1.1),
+                    neighbour_at(1.95, 1.0),
+                ];
+                l.apply_neighbours(&neighbours(now.as_millis() as u64 + 1, around), now);
+                let f = l.filter(dd.as_ref(), &me, Vec2::ZERO, &ahead, now);
+                assert!(
+                    dd.motion(&f.outputs).wz.abs() > 0.0 || l.backing_off.is_some(),
+                    "told to turn at {now:?}"
+                );
+                l.backing_off.is_some()
+            });
+        let backed_off = backed_off.expect("it backs off");
+        let (half_turn, stuck_after) = (std::f64::consts::PI, 1.0 + 0.3);
+        assert!(
+            backed_off.as_secs_f64() > half_turn
+                && backed_off.as_secs_f64() <= half_turn + stuck_after + 0.1,
+            "backed off at {backed_off:?}"
+        );
     }
 
     #[test]
