@@ -130,7 +130,7 @@ impl SafetyConfig {
         nonnegative(self.reaction_time, "reaction_time")?;
         positive(self.stale_after, "stale_after")?;
         nonnegative(self.crawl_speed, "crawl_speed")?;
-        nonnegative(self.yield_turn_rate, "yield_turn_rate")?;
+        positive(self.yield_turn_rate, "yield_turn_rate")?;
         nonnegative(self.horizon, "horizon")?;
         nonnegative(self.stuck_after, "stuck_after")?;
         nonnegative(self.back_off_time, "back_off_time")?;
@@ -214,7 +214,8 @@ pub struct SafetyLayer {
     /// asked to go somewhere meanwhile (not only to turn on the spot).
     stuck_since: Option<(Duration, bool)>,
     /// Since when a diff-drive has been turning on the spot towards its
-    /// swerve, without a break.
+    /// swerve without moving in between (turns with breaks add up until it
+    /// moves, backs off or stops wanting to).
     turning_since: Option<Duration>,
     /// This robot's id at the station (its Welcome's): it staggers when
     /// robots stuck together back off.
@@ -477,7 +478,8 @@ impl SafetyLayer {
         // way, not stuck: for as long as half a turn takes.
         let turning =
             swerve.is_some_and(|t| !mobility.holonomic && filter::turns_first(t, &steering));
-        if self.turning_excused(turning, now) {
+        let moving = mobility.velocity.norm() >= STILL;
+        if self.turning_excused(turning, moving, now) {
             self.stuck_since = None;
         } else if let Some(back_off) = self.unstick(c, intent, mobility, wants_motion, margin, now)
         {
@@ -501,18 +503,23 @@ impl SafetyLayer {
     }
 
     /// Whether a diff-drive `turning` on the spot towards its swerve at
-    /// `now` is excused from being stuck: only until it has turned without
-    /// a break for as long as half a turn takes at `yield_turn_rate`, the
-    /// most any swerve needs. A robot still turning after that is not
-    /// getting round (its wheels slip, or the swerve keeps moving round
-    /// it), and the stuck timer judges it as any other.
-    fn turning_excused(&mut self, turning: bool, now: Duration) -> bool {
-        if !turning {
+    /// `now` is excused from being stuck: only until it has turned, since
+    /// it last moved, for as long as half a turn takes at
+    /// `yield_turn_rate`, the most any swerve needs. Turns with breaks in
+    /// between add up (a controller that stops driving to turn whenever it
+    /// is off its heading flips between turning and not every period). A
+    /// robot still turning after that is not getting round (its wheels
+    /// slip, or the swerve keeps moving round it), and the stuck timer
+    /// judges it as any other.
+    fn turning_excused(&mut self, turning: bool, moving: bool, now: Duration) -> bool {
+        if moving {
             self.turning_since = None;
+        }
+        if !turning {
             return false;
         }
         let since = *self.turning_since.get_or_insert(now);
-        let half_turn = std::f64::consts::PI / self.config.yield_turn_rate.abs();
+        let half_turn = std::f64::consts::PI / self.config.yield_turn_rate;
         now.saturating_sub(since).as_secs_f64() <= half_turn
     }
 
@@ -570,6 +577,7 @@ impl SafetyLayer {
             .as_ref()?
             .away(c.position, self.config.radius, margin, now)?;
         self.stuck_since = None;
+        self.turning_since = None;
         let target = away * BACK_OFF_SPEED;
         self.backing_off = Some(BackOff {
             target,
@@ -983,44 +991,84 @@ mod tests {
         assert!(heading < -0.6, "it turned right: {heading}");
     }
 
-    #[test]
-    fn a_diff_drive_that_turns_on_the_spot_without_getting_round_backs_off() {
-        // As in the test above, but its wheels slip: it is told to turn
-        // and never does. Turning is an excuse for not moving only as long
-        // as half a turn takes (3.1 s at 1 rad/s); then it is stuck like
-        // any robot, and backs off after `stuck_after` (plus its stagger).
+    /// When a diff-drive standing still at (2, 1.5), facing east, among
+    /// `around`, told `command(k)` in period `k` (20 ms), starts backing
+    /// off, over `steps` periods. Its pose never changes: its wheels slip.
+    fn back_offs_while_slipping(
+        around: &[(f64, f64)],
+        command: impl Fn(u64) -> Vec<f64>,
+        steps: u64,
+    ) -> Vec<Duration> {
         let dd = PlatformSpec::diff_drive().build();
         let mut l = enforcing(SafetyConfig::default());
         l.steered_by(Some(3.0));
-        let ahead = forward(dd.as_ref(), 0.3);
         let me = Pose {
             x: 2.0,
             y: 1.5,
             ..Pose::default()
         };
-        let backed_off = (0..500u64)
-            .map(|k| Duration::from_millis(20 * k))
-            .find(|&now| {
-                let around = vec![
-                    neighbour_at(2.5, 1.5),
-                    neighbour_at(2.35, 1.1),
-                    neighbour_at(1.95, 1.0),
-                ];
-                l.apply_neighbours(&neighbours(now.as_millis() as u64 + 1, around), now);
-                let f = l.filter(dd.as_ref(), &me, Vec2::ZERO, &ahead, now);
-                assert!(
-                    dd.motion(&f.outputs).wz.abs() > 0.0 || l.backing_off.is_some(),
-                    "told to turn at {now:?}"
-                );
-                l.backing_off.is_some()
-            });
-        let backed_off = backed_off.expect("it backs off");
-        let (half_turn, stuck_after) = (std::f64::consts::PI, 1.0 + 0.3);
+        let mut starts = Vec::new();
+        let mut was_backing_off = false;
+        for k in 0..steps {
+            let now = Duration::from_millis(20 * k);
+            let robots = around.iter().map(|&(x, y)| neighbour_at(x, y)).collect();
+            l.apply_neighbours(&neighbours(k + 1, robots), now);
+            l.filter(dd.as_ref(), &me, Vec2::ZERO, &command(k), now);
+            let backing_off = l.backing_off.is_some_and(|b| now < b.until);
+            if backing_off && !was_backing_off {
+                starts.push(now);
+            }
+            was_backing_off = backing_off;
+        }
+        starts
+    }
+
+    #[test]
+    fn a_diff_drive_that_turns_on_the_spot_without_getting_round_backs_off() {
+        // As in the test above, but its wheels slip: it is told to turn
+        // and never does. Turning is an excuse for not moving only as long
+        // as half a turn takes (3.1 s at 1 rad/s); then it is stuck like
+        // any robot, and backs off after `stuck_after` (plus its stagger,
+        // 0.3 s for id 1). After backing off (1 s) it may turn as long
+        // again before the next.
+        let dd = PlatformSpec::diff_drive().build();
+        let ahead = forward(dd.as_ref(), 0.3);
+        let around = [(2.5, 1.5), (2.35, 1.1), (1.95, 1.0)];
+        let starts = back_offs_while_slipping(&around, |_| ahead.clone(), 600);
+        let (half_turn, stuck_after, back_off) = (std::f64::consts::PI, 1.0 + 0.3, 1.0);
+        let first = starts.first().expect("it backs off").as_secs_f64();
         assert!(
-            backed_off.as_secs_f64() > half_turn
-                && backed_off.as_secs_f64() <= half_turn + stuck_after + 0.1,
-            "backed off at {backed_off:?}"
+            first > half_turn && first <= half_turn + stuck_after + 0.1,
+            "backed off at {starts:?}"
         );
+        let second = starts.get(1).expect("and again").as_secs_f64();
+        assert!(
+            second - first > back_off + half_turn,
+            "a fresh half turn between back-offs: {starts:?}"
+        );
+    }
+
+    #[test]
+    fn turns_with_breaks_in_between_add_up_until_the_robot_moves() {
+        // Reversing at neighbours behind it and to the right of its travel,
+        // by a controller that stops driving to turn whenever the robot is
+        // off its heading: driven backwards one period, turned on the spot
+        // the next, and its wheels slip. Each reversing period turns it
+        // towards the swerve; the turns add up, so it backs off.
+        let dd = PlatformSpec::diff_drive().build();
+        let back = forward(dd.as_ref(), -0.3);
+        let turn = turning(dd.as_ref(), -0.5);
+        let around = [(1.5, 1.5), (1.65, 1.9), (2.05, 2.0)];
+        let command = |k: u64| {
+            if k.is_multiple_of(2) {
+                back.clone()
+            } else {
+                turn.clone()
+            }
+        };
+        let starts = back_offs_while_slipping(&around, command, 400);
+        let first = starts.first().expect("it backs off").as_secs_f64();
+        assert!(first <= std::f64::consts::PI + 1.3 + 0.1, "{starts:?}");
     }
 
     #[test]
@@ -1158,5 +1206,12 @@ mod tests {
             ..SafetyConfig::default()
         };
         assert!(bad.validate().unwrap_err().contains("stale_after"));
+        // A layer that may not turn a diff-drive could never steer it round
+        // anything, nor back it off.
+        let bad = SafetyConfig {
+            yield_turn_rate: 0.0,
+            ..SafetyConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("yield_turn_rate"));
     }
 }
