@@ -3,8 +3,9 @@
 //! a station.
 //!
 //! Modules, leaves first (each depends only on those above it):
-//! - [`sync`], [`config`]: the poison-tolerant lock and what every
-//!   configuration section shares;
+//! - [`sync`], [`config`], [`budget`]: the poison-tolerant lock, what
+//!   every configuration section shares, and budgets per second for what
+//!   a flood must not multiply;
 //! - [`auth`]: keys, roles and the `[auth]` section of the authenticated
 //!   control plane;
 //! - [`names`]: robot names as an operator reads them (the number a name
@@ -30,6 +31,7 @@
 
 pub mod arena;
 pub mod auth;
+pub mod budget;
 pub mod config;
 pub mod counters;
 pub mod event;

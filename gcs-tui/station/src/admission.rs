@@ -21,8 +21,10 @@
 //!   second; the rest are counted into one line a second.
 //!
 //! The Foxglove live view keeps an [`Admission`] of its own for its
-//! connections' WebSocket handshakes: the same attaching places, and the
-//! same few log lines a second.
+//! connections' WebSocket handshakes: the same attaching places (within
+//! its own 5 s for a handshake, not [`HANDSHAKE`]), and the same few log
+//! lines a second; its clients' places are the live view's own
+//! (`[foxglove] max_clients`), not the session places here.
 //!
 //! [`Admission`] owns the places; [`Attaching`] and [`Seat`] hold one each
 //! and give it back when dropped.
@@ -32,6 +34,7 @@ use std::net::IpAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use mech_core::budget::PerSecond;
 use mech_core::sync::lock;
 use tokio::sync::Notify;
 use tokio::time::Instant;
@@ -79,7 +82,7 @@ struct State {
     unix_sessions: usize,
     tcp_sessions: usize,
     tcp_sessions_by_address: HashMap<IpAddr, usize>,
-    refusals: RefusalLog,
+    refusals: PerSecond<LOGGED_PER_SECOND>,
 }
 
 #[derive(Debug)]
@@ -135,7 +138,7 @@ impl Admission {
     /// its own (at most [`LOGGED_PER_SECOND`] a second; the others are
     /// counted for [`Admission::held_refusals`]).
     pub(crate) fn log_refusal(&self, now: Instant) -> bool {
-        lock(&self.state).refusals.note(now)
+        lock(&self.state).refusals.admit(now)
     }
 
     /// How many refused attaches were not logged one by one since the last
@@ -252,33 +255,17 @@ impl Drop for Seat {
     }
 }
 
-/// Refused attaches logged in the current second, and those held back.
-#[derive(Debug, Default)]
-struct RefusalLog {
-    second: Option<Instant>,
-    logged: u32,
-    held: u32,
-}
-
-impl RefusalLog {
-    fn note(&mut self, now: Instant) -> bool {
-        if self
-            .second
-            .is_none_or(|s| now.saturating_duration_since(s) >= Duration::from_secs(1))
-        {
-            self.second = Some(now);
-            self.logged = 0;
+/// Once a second, `say` how many lines about clients `admission` held
+/// back ([`Admission::log_refusal`]), when it held any.
+pub(crate) async fn say_held(admission: Arc<Admission>, say: impl Fn(u32)) {
+    let mut every = tokio::time::interval(Duration::from_secs(1));
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    loop {
+        every.tick().await;
+        let n = admission.held_refusals();
+        if n > 0 {
+            say(n);
         }
-        if self.logged < LOGGED_PER_SECOND {
-            self.logged += 1;
-            return true;
-        }
-        self.held += 1;
-        false
-    }
-
-    fn take_held(&mut self) -> u32 {
-        std::mem::take(&mut self.held)
     }
 }
 

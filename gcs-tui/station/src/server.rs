@@ -154,7 +154,12 @@ impl Station {
         }
         let feed = Feed::start(gcs.clone(), control.clone(), config.snapshot_rate);
         let admission = Arc::new(Admission::default());
-        let refusals = tokio::spawn(log_held_refusals(gcs.clone(), admission.clone()));
+        let log = gcs.clone();
+        let refusals = tokio::spawn(crate::admission::say_held(admission.clone(), move |n| {
+            let text = format!("attach refused {n} more times (not logged one by one)");
+            tracing::warn!("{text}");
+            log.update_fleet(|f| f.log(Severity::Warn, text));
+        }));
         Station {
             inner: Arc::new(Inner {
                 gcs,
@@ -225,22 +230,6 @@ impl Station {
             s.shutdown_all().await;
         }
         self.inner.gcs.shutdown().await;
-    }
-}
-
-/// Once a second, the refused attaches that were not logged one by one
-/// (see `crate::admission`), as one event-log line.
-async fn log_held_refusals(gcs: Gcs, admission: Arc<Admission>) {
-    let mut every = tokio::time::interval(Duration::from_secs(1));
-    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    loop {
-        every.tick().await;
-        let n = admission.held_refusals();
-        if n > 0 {
-            let text = format!("attach refused {n} more times (not logged one by one)");
-            tracing::warn!("{text}");
-            gcs.update_fleet(|f| f.log(Severity::Warn, text));
-        }
     }
 }
 

@@ -279,7 +279,7 @@ impl Tables {
     /// reported and logged summarized (see [`refusals`]).
     fn bad(&mut self, error: String, cx: &mut Ctx<'_>) -> Delivery {
         self.totals.dropped.count(DropReason::BadPacket);
-        self.tap.note_refusal(|| error.clone());
+        self.tap.note_refusal(cx.now, || error.clone());
         let from = refusals::Source::Peer(cx.from);
         self.refused(refusals::Why::BadPacket, from, || error, cx);
         Delivery::Dropped(DropReason::BadPacket)
@@ -360,7 +360,7 @@ impl Tables {
                     addr.ip()
                 )
             };
-            self.tap.note_refusal(why);
+            self.tap.note_refusal(cx.now, why);
             let from = refusals::Source::Peer(cx.from);
             self.refused(refusals::Why::Shed, from, why, cx);
         }

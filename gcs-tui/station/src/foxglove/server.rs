@@ -7,7 +7,9 @@
 //!
 //! Connections still in their handshake hold places of their own, as the
 //! station's attach port's do (`crate::admission`): 16, at most 4 from one
-//! address; a newcomer closes the one waiting longest. So connections that
+//! address; a newcomer closes the one waiting longest. (Viewers through an
+//! SSH tunnel all come from 127.0.0.1, so 4 of them can be in their
+//! handshake at once.) So connections that
 //! never finish their handshake cost a stranger a descriptor each only
 //! until the next connection comes, never the station's descriptors. What
 //! the server says of each connection (refused, timed out, closed, came
@@ -36,7 +38,7 @@ use super::FoxgloveConfig;
 use super::hub::{Hub, Out};
 use super::protocol::{self, Request as ClientRequest, SUBPROTOCOL};
 use super::source::{Counts, Source};
-use crate::admission::{Admission, Attaching, Door};
+use crate::admission::{self, Admission, Attaching, Door};
 
 /// Time a connection has to complete the WebSocket handshake.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
@@ -78,7 +80,11 @@ impl LiveView {
         let tasks = vec![
             tokio::spawn(source.run(sub)),
             tokio::spawn(accept(listener, hub.clone(), places.clone())),
-            tokio::spawn(log_held(places)),
+            tokio::spawn(admission::say_held(places, |n| {
+                tracing::warn!(
+                    "Foxglove live view: {n} more connections refused, cut or gone (not logged one by one)"
+                );
+            })),
         ];
         tracing::info!(%addr, "Foxglove live view listening (ws://{addr})");
         Ok(LiveView {
@@ -167,25 +173,9 @@ fn choose_subprotocol(req: &Request, mut resp: Response) -> Result<Response, Err
 }
 
 /// Whether a line about a connection goes to the log now (a few a second;
-/// the rest are counted, for [`log_held`]).
+/// the rest are counted, and said once a second).
 fn loggable(places: &Admission) -> bool {
     places.log_refusal(Instant::now())
-}
-
-/// Once a second, how many lines about connections were not logged one by
-/// one, as one line.
-async fn log_held(places: Arc<Admission>) {
-    let mut every = tokio::time::interval(Duration::from_secs(1));
-    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    loop {
-        every.tick().await;
-        let n = places.held_refusals();
-        if n > 0 {
-            tracing::warn!(
-                "Foxglove live view: {n} more connections refused, cut or gone (not logged one by one)"
-            );
-        }
-    }
 }
 
 async fn connection(

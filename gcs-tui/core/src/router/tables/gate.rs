@@ -196,7 +196,7 @@ impl Tables {
     /// [`Tables::reject`] for any source.
     fn reject_from(&mut self, source: Source, r: Rejection, cx: &mut Ctx<'_>) {
         self.tap
-            .note_refusal(|| format!("{}: {}", r.reason.as_str(), r.detail));
+            .note_refusal(cx.now, || format!("{}: {}", r.reason.as_str(), r.detail));
         self.gate.rejected.count(r.reason);
         self.refused(Why::Rejected(r.reason), source, || r.detail, cx);
     }

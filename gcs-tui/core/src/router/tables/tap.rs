@@ -22,6 +22,7 @@ use std::time::Duration;
 use tokio::time::Instant;
 
 use super::{Delivery, Peer};
+use crate::budget::PerSecond;
 use crate::counters::DropReason;
 use crate::event::Stamped;
 
@@ -86,9 +87,8 @@ pub(crate) enum Tapped {
 pub(crate) struct TapSlot {
     tap: Option<Tap>,
     refusal: Option<String>,
-    /// When the current second of refused messages began, and how many of
-    /// them were recorded in it.
-    refused: Option<(Instant, u32)>,
+    /// Refused messages recorded whole this second.
+    refused: PerSecond<REFUSED_RECORDED_PER_SECOND>,
 }
 
 impl TapSlot {
@@ -96,14 +96,18 @@ impl TapSlot {
         self.tap.as_ref()
     }
 
-    /// Puts `tap` on (or takes it off), returning the one that was on.
+    /// Puts `tap` on (or takes it off), returning the one that was on. A
+    /// new recording starts with a whole second's budget.
     pub(crate) fn set(&mut self, tap: Option<Tap>) -> Option<Tap> {
+        self.refused = PerSecond::default();
         std::mem::replace(&mut self.tap, tap)
     }
 
-    /// Keeps why the message being decided was refused, while recording.
-    pub(crate) fn note_refusal(&mut self, why: impl FnOnce() -> String) {
-        if self.tap.is_some() {
+    /// Keeps why the message being decided at `now` was refused, while
+    /// recording and while refused messages are still recorded whole this
+    /// second (a flood costs no text past that).
+    pub(crate) fn note_refusal(&mut self, now: Instant, why: impl FnOnce() -> String) {
+        if self.tap.is_some() && !self.refused.spent(now) {
             self.refusal = Some(why());
         }
     }
@@ -122,16 +126,9 @@ impl TapSlot {
             delivery,
             Delivery::Dropped(DropReason::BadPacket | DropReason::Rejected | DropReason::Shed)
         );
-        if refused {
-            let (since, n) = self
-                .refused
-                .filter(|(since, _)| now.saturating_duration_since(*since) < Duration::from_secs(1))
-                .unwrap_or((now, 0));
-            if n >= REFUSED_RECORDED_PER_SECOND {
-                tap.unrecorded.fetch_add(1, Ordering::Relaxed);
-                return None;
-            }
-            self.refused = Some((since, n + 1));
+        if refused && !self.refused.admit(now) {
+            tap.unrecorded.fetch_add(1, Ordering::Relaxed);
+            return None;
         }
         Some(tap)
     }
