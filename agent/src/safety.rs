@@ -941,48 +941,59 @@ mod tests {
         }
     }
 
+    /// A diff-drive's motion integrated ideally, 20 ms periods: from
+    /// (2, 1.5) facing east and at rest, told `command` each period among
+    /// neighbours standing at `around`; `each` sees the layer, the time and
+    /// the pose and forward speed each period ends with.
+    fn drive_ideally(
+        l: &mut SafetyLayer,
+        around: &[(f64, f64)],
+        command: &[f64],
+        steps: u64,
+        mut each: impl FnMut(&SafetyLayer, Duration, &Pose, f64),
+    ) {
+        let dd = PlatformSpec::diff_drive().build();
+        let mut me = Pose {
+            x: 2.0,
+            y: 1.5,
+            ..Pose::default()
+        };
+        let mut speed = 0.0;
+        for k in 0..steps {
+            let now = Duration::from_millis(20 * k);
+            let robots = around.iter().map(|&(x, y)| neighbour_at(x, y)).collect();
+            l.apply_neighbours(&neighbours(k + 1, robots), now);
+            let velocity = Vec2::from_angle(me.heading) * speed;
+            let f = l.filter(dd.as_ref(), &me, velocity, command, now);
+            let t = dd.motion(&f.outputs);
+            me.heading += t.wz * 0.02;
+            speed = t.vx;
+            me.x += speed * me.heading.cos() * 0.02;
+            me.y += speed * me.heading.sin() * 0.02;
+            each(l, now, &me, speed);
+        }
+    }
+
     #[test]
     fn a_diff_drive_turning_on_the_spot_towards_its_swerve_is_not_stuck() {
         // On a mission (its command heads along its heading) at
         // neighbours standing ahead and to its right: the swerve is far to
-        // the right,
-        // and at 1 rad/s the turn takes longer than `stuck_after`; the
-        // robot (its motion integrated ideally) turns, then drives, and
-        // never backs off meanwhile.
+        // the right, and at 1 rad/s the turn takes longer than
+        // `stuck_after`; the robot turns, then drives, and never backs off
+        // meanwhile.
         let dd = PlatformSpec::diff_drive().build();
         let mut l = enforcing(SafetyConfig::default());
         l.steered_by(Some(3.0));
         let ahead = forward(dd.as_ref(), 0.3);
-        let (mut x, mut y, mut heading, mut speed) = (2.0, 1.5, 0.0f64, 0.0);
-        let mut drove = None;
-        for k in 0..150u64 {
-            let now = Duration::from_millis(20 * k);
-            let around = vec![
-                neighbour_at(2.5, 1.5),
-                neighbour_at(2.35, 1.1),
-                neighbour_at(1.95, 1.0),
-            ];
-            l.apply_neighbours(&neighbours(k + 1, around), now);
-            let me = Pose {
-                x,
-                y,
-                heading,
-                ..Pose::default()
-            };
-            let velocity = Vec2::from_angle(heading) * speed;
-            let f = l.filter(dd.as_ref(), &me, velocity, &ahead, now);
+        let around = [(2.5, 1.5), (2.35, 1.1), (1.95, 1.0)];
+        let (mut drove, mut heading) = (None, 0.0);
+        drive_ideally(&mut l, &around, &ahead, 150, |l, now, me, speed| {
             assert!(l.backing_off.is_none(), "backed off at {now:?}");
-            let t = dd.motion(&f.outputs);
-            heading += t.wz * 0.02;
-            speed = t.vx;
-            (x, y) = (
-                x + speed * heading.cos() * 0.02,
-                y + speed * heading.sin() * 0.02,
-            );
             if speed > 0.05 && drove.is_none() {
                 drove = Some(now);
             }
-        }
+            heading = me.heading;
+        });
         let drove = drove.expect("it drives once turned");
         assert!(
             drove > Duration::from_millis(1300),
@@ -1076,50 +1087,29 @@ mod tests {
         // Driven backwards by a gamepad (a twist: the yaw rate is the
         // sender's) at a neighbour standing behind it, westwards: its rear
         // turns right (north) and it passes the neighbour backwards, never
-        // within the distance to keep, never driven forwards. Its motion
-        // integrated ideally.
+        // within the distance to keep, never driven forwards.
         let dd = PlatformSpec::diff_drive().build();
         let mut l = enforcing(SafetyConfig::default());
         l.steered_by(None);
         let back = forward(dd.as_ref(), -0.3);
         let behind = (1.3, 1.5);
-        let (mut x, mut y, mut heading, mut speed) = (2.0, 1.5, 0.0f64, 0.0f64);
         let (mut nearest, mut fastest_forwards) = (f64::INFINITY, 0.0f64);
-        for k in 0..250u64 {
-            let now = Duration::from_millis(20 * k);
-            let around = vec![neighbour_at(behind.0, behind.1)];
-            l.apply_neighbours(&neighbours(k + 1, around), now);
-            let me = Pose {
-                x,
-                y,
-                heading,
-                ..Pose::default()
-            };
-            let velocity = Vec2::from_angle(heading) * speed;
-            let f = l.filter(dd.as_ref(), &me, velocity, &back, now);
-            let t = dd.motion(&f.outputs);
-            heading += t.wz * 0.02;
-            speed = t.vx;
-            (x, y) = (
-                x + speed * heading.cos() * 0.02,
-                y + speed * heading.sin() * 0.02,
-            );
-            nearest = nearest.min((x - behind.0).hypot(y - behind.1));
+        let mut last = Pose::default();
+        drive_ideally(&mut l, &[behind], &back, 250, |_, _, me, speed| {
+            nearest = nearest.min((me.x - behind.0).hypot(me.y - behind.1));
             fastest_forwards = fastest_forwards.max(speed);
-        }
+            last = *me;
+        });
         // Two radii apart at least (0.15 m each).
         assert!(nearest >= 0.3, "came within {nearest:.3} m");
         assert!(
             fastest_forwards <= 0.0,
             "driven forwards at {fastest_forwards}"
         );
+        assert!(last.heading < -0.3, "its rear turned right: {last:?}");
         assert!(
-            heading < -0.3,
-            "its rear turned right: heading {heading:.2}"
-        );
-        assert!(
-            x < behind.0 - 0.2 && y > behind.1 + 0.3,
-            "passed the neighbour on its right: ({x:.2}, {y:.2})"
+            last.x < behind.0 - 0.2 && last.y > behind.1 + 0.3,
+            "passed the neighbour on its right: {last:?}"
         );
     }
 

@@ -7,14 +7,13 @@
 //!
 //! Connections still in their handshake hold places of their own, as the
 //! station's attach port's do (`crate::admission`): 16, at most 4 from one
-//! address; a newcomer closes the one waiting longest. (Viewers through an
-//! SSH tunnel all come from 127.0.0.1, so 4 of them can be in their
-//! handshake at once.) So connections that
+//! address; a newcomer closes the one waiting longest. So connections that
 //! never finish their handshake cost a stranger a descriptor each only
-//! until the next connection comes, never the station's descriptors. What
-//! the server says of each connection (refused, timed out, closed, came
-//! and went) reaches the log a few lines a second; the rest is counted into
-//! one line a second.
+//! until the next connection comes, never the station's descriptors.
+//! (Viewers through an SSH tunnel all come from 127.0.0.1, so 4 of them
+//! can be in their handshake at once.) What the server says of each
+//! connection (refused, timed out, closed, came and went) reaches the log
+//! a few lines a second; the rest is counted into one line a second.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
