@@ -21,6 +21,17 @@ async fn gcs() -> Gcs {
     Gcs::start(config()).await.unwrap()
 }
 
+/// A station recording to `name` in a directory of its own (kept while
+/// the directory is).
+async fn recording_to(name: &str) -> (tempfile::TempDir, std::path::PathBuf, Gcs) {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join(name);
+    let gcs = gcs().await;
+    gcs.start_recording(RecordTarget::File(file.clone()))
+        .unwrap();
+    (dir, file, gcs)
+}
+
 async fn registered(gcs: &Gcs, name: &str) -> Peer {
     let mut p = Peer::new(name, gcs.router().udp_addr()).await;
     p.register().await;
@@ -218,11 +229,7 @@ async fn no_telemetry_sample_of_100_robots_at_20_hz_is_missing() {
     /// Three seconds at 20 Hz: a count, so a loaded machine sends them all
     /// (later) rather than fewer.
     const ROUNDS: u32 = 60;
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("fleet.mcap");
-    let gcs = gcs().await;
-    gcs.start_recording(RecordTarget::File(file.clone()))
-        .unwrap();
+    let (_dir, file, gcs) = recording_to("fleet.mcap").await;
     let router = gcs.router().udp_addr();
     let mut socks = Vec::new();
     for i in 0..ROBOTS {
@@ -490,11 +497,7 @@ async fn a_recording_begun_mid_run_starts_from_the_fleet_as_it_stood() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_strangers_flood_is_counted_not_recorded_whole() {
     const FLOOD: u64 = 3000;
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("flood.mcap");
-    let gcs = gcs().await;
-    gcs.start_recording(RecordTarget::File(file.clone()))
-        .unwrap();
+    let (_dir, file, gcs) = recording_to("flood.mcap").await;
     let mut r1 = registered(&gcs, "robot_1").await;
     let stranger = UdpSocket::bind("127.0.0.1:0").unwrap();
     let started = std::time::Instant::now();

@@ -127,7 +127,7 @@ impl TapSlot {
             Delivery::Dropped(DropReason::BadPacket | DropReason::Rejected | DropReason::Shed)
         );
         if refused && !self.refused.admit(now) {
-            tap.unrecorded.fetch_add(1, Ordering::Relaxed);
+            tap.counts.unrecorded.fetch_add(1, Ordering::Relaxed);
             return None;
         }
         Some(tap)
@@ -141,7 +141,7 @@ pub(crate) struct TapCounts {
     pub(crate) dropped: Arc<AtomicU64>,
     /// Records queued.
     pub(crate) queued: Arc<AtomicU64>,
-    /// Refused messages not recorded.
+    /// Refused messages not recorded (see the module docs).
     pub(crate) unrecorded: Arc<AtomicU64>,
 }
 
@@ -151,10 +151,7 @@ pub(crate) struct Tap {
     tx: SyncSender<Tapped>,
     /// Router start, for message times.
     start: Instant,
-    dropped: Arc<AtomicU64>,
-    queued: Arc<AtomicU64>,
-    /// Refused messages not recorded (see the module docs).
-    unrecorded: Arc<AtomicU64>,
+    counts: TapCounts,
 }
 
 impl Tap {
@@ -164,9 +161,7 @@ impl Tap {
         Tap {
             tx,
             start,
-            dropped: counts.dropped.clone(),
-            queued: counts.queued.clone(),
-            unrecorded: counts.unrecorded.clone(),
+            counts: counts.clone(),
         }
     }
 
@@ -174,10 +169,10 @@ impl Tap {
     pub(crate) fn offer(&self, t: Tapped) {
         match self.tx.try_send(t) {
             Ok(()) => {
-                self.queued.fetch_add(1, Ordering::Relaxed);
+                self.counts.queued.fetch_add(1, Ordering::Relaxed);
             }
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.dropped.fetch_add(1, Ordering::Relaxed);
+                self.counts.dropped.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
