@@ -20,7 +20,8 @@
 //!   faults, the autopilot queue, actuation, telemetry); [`runtime`]: the
 //!   tokio loop around it.
 //! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
-//!   [`launch`]: bringing a robot up from its config.
+//!   [`launch`]: bringing a robot up from its config; [`preflight`]:
+//!   `--check`'s opening of the devices the config names.
 
 // Tests may unwrap: a panic there is a failed test, not a crashed robot.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
@@ -40,6 +41,7 @@ pub mod launch;
 pub mod links;
 pub mod order;
 pub mod platform;
+pub mod preflight;
 pub mod runtime;
 pub mod safety;
 pub mod sim;

@@ -8,6 +8,7 @@ use anyhow::Context;
 use clap::Parser;
 use mech_agent::config::RobotConfig;
 use mech_agent::launch::{self, Overrides};
+use mech_agent::preflight;
 
 /// MECH robot agent: obeys the routed controller, reports telemetry, stops
 /// when the link or the controller goes quiet.
@@ -31,7 +32,10 @@ struct Cli {
     /// (`udpin:0.0.0.0:14541` for a second simulator, `serial:/dev/ttyACM0:921600`).
     #[arg(long, value_name = "LINK")]
     autopilot: Option<String>,
-    /// Only check the config and exit.
+    /// Check the config and the key, open every device the config names
+    /// (GPIO, serial ports) without driving it, say what could not be
+    /// opened, and exit: 0 when all is well, 1 when a device could not be
+    /// opened (with --sim, no device is opened).
     #[arg(long)]
     check: bool,
 }
@@ -51,7 +55,7 @@ fn main() -> ExitCode {
         )
         .init();
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             eprintln!("mech-agent: {e:#}");
             ExitCode::from(2)
@@ -59,7 +63,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let mut config = match &cli.config {
         Some(path) => RobotConfig::load(path)?,
         None if cli.sim => RobotConfig::parse(DEFAULT_SIM, "<built-in sim config>")?,
@@ -83,15 +87,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         })
         .transpose()?;
     if cli.check {
-        config
-            .key()
-            .map_err(|e| anyhow::anyhow!("[auth] key: {e}"))?;
-        println!(
-            "{}: ok",
-            cli.config
-                .map_or("built-in sim config".into(), |p| p.display().to_string())
-        );
-        return Ok(());
+        return check(&config, cli.config.as_deref(), cli.sim);
     }
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -121,8 +117,41 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         .await
         .context("running the agent")?;
         report(&counters);
-        Ok(())
+        Ok(ExitCode::SUCCESS)
     })
+}
+
+/// `--check`: the config (already loaded), the key, then the devices.
+/// Prints one line when all is well; otherwise one line per device that
+/// could not be opened, and nothing else.
+fn check(
+    config: &RobotConfig,
+    path: Option<&std::path::Path>,
+    sim: bool,
+) -> anyhow::Result<ExitCode> {
+    config
+        .key()
+        .map_err(|e| anyhow::anyhow!("[auth] key: {e}"))?;
+    let name = path.map_or("built-in sim config".into(), |p| p.display().to_string());
+    let unopened = if sim {
+        Vec::new()
+    } else {
+        preflight::check(config, &mut preflight::HostDevices)
+    };
+    if unopened.is_empty() {
+        let devices = if sim {
+            " (simulated: no device opened)"
+        } else {
+            ""
+        };
+        println!("{name}: ok{devices}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!("{name}: the config is valid, but this machine cannot open:");
+    for u in &unopened {
+        println!("  {u}");
+    }
+    Ok(ExitCode::from(1))
 }
 
 /// The agent's counters, as one line on stdout when it stops (for logs

@@ -45,3 +45,69 @@ fn a_bad_configuration_is_reported_once() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `mech-gcs --check` says every reason the station would not start with
+/// its configuration (a key file missing, one readable by others), not
+/// only the first, and passes once the keys are made as it says.
+#[test]
+fn the_station_check_lists_every_key_problem_then_passes() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = dir.path().join("gcs.toml");
+    std::fs::write(
+        &config,
+        "[router]\nudp = \"0.0.0.0:0\"\ntcp = \"127.0.0.1:0\"\n\
+         [[auth.keys]]\nrole = \"robot\"\nname = \"rover\"\nfile = \"keys/rover.key\"\n\
+         [[auth.keys]]\nrole = \"operator\"\nname = \"ana\"\nfile = \"keys/ana.key\"\n",
+    )
+    .expect("config written");
+    let keys = dir.path().join("keys");
+    std::fs::create_dir(&keys).expect("key dir");
+    let gcs = |args: &[&str]| {
+        Command::new(mech_e2e::binary("mech-gcs"))
+            .args(args)
+            .output()
+            .expect("mech-gcs runs")
+    };
+    let ana = keys.join("ana.key");
+    assert!(
+        gcs(&["keygen", "ana", "--out", ana.to_str().unwrap()])
+            .status
+            .success()
+    );
+    std::fs::set_permissions(&ana, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let check = || gcs(&["--config", config.to_str().unwrap(), "--check"]);
+    let out = check();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert!(
+        lines[0].ends_with("the station would not start:"),
+        "{stdout}"
+    );
+    assert!(
+        lines[1].contains("rover.key") && lines[1].contains("mech-gcs keygen rover --out"),
+        "{stdout}"
+    );
+    assert!(lines[2].contains("ana.key"), "{stdout}");
+    std::fs::set_permissions(&ana, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let rover = keys.join("rover.key");
+    assert!(
+        gcs(&["keygen", "rover", "--out", rover.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let out = check();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).ends_with("gcs.toml: ok\n"));
+    // Beyond loopback with no keys at all: refused, and why.
+    std::fs::write(&config, "[router]\nudp = \"0.0.0.0:0\"\n").unwrap();
+    let out = check();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("no keys are configured"));
+}

@@ -189,37 +189,43 @@ impl AuthConfig {
 
     /// Reads every key file.
     pub fn load_keys(&self) -> Result<Vec<Identity>, ConfigError> {
-        self.keys
-            .iter()
-            .map(|e| {
-                let file = KeyFile::load(&e.file).map_err(|err| match err {
-                    KeyFileError::Read { source, .. }
-                        if source.kind() == std::io::ErrorKind::NotFound =>
-                    {
-                        ConfigError(format!(
-                            "the key file {} of {} {:?} does not exist; make it with \
-                             `mech-gcs keygen {} --out {}`",
-                            e.file.display(),
-                            e.role.as_str(),
-                            e.name,
-                            e.name,
-                            e.file.display()
-                        ))
-                    }
-                    other => ConfigError(other.to_string()),
-                })?;
-                if file.name != e.name {
-                    return Err(ConfigError(format!(
-                        "{} is the key of {:?}, but auth.keys lists it for {:?}",
-                        e.file.display(),
-                        file.name,
-                        e.name
-                    )));
-                }
-                Ok(Identity::new(e.role, &e.name, file.key, e.channels.clone()))
-            })
-            .collect()
+        self.keys.iter().map(load_key).collect()
     }
+
+    /// What is wrong with the key files (missing, readable by others, of
+    /// another holder), every one of them rather than the first: for
+    /// `mech-gcs --check`. Empty when every key file loads.
+    pub fn key_problems(&self) -> Vec<ConfigError> {
+        self.keys.iter().filter_map(|e| load_key(e).err()).collect()
+    }
+}
+
+/// Reads one listed key file and checks it is the key of the holder the
+/// list names.
+fn load_key(e: &KeyEntry) -> Result<Identity, ConfigError> {
+    let file = KeyFile::load(&e.file).map_err(|err| match err {
+        KeyFileError::Read { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+            ConfigError(format!(
+                "the key file {} of {} {:?} does not exist; make it with \
+                 `mech-gcs keygen {} --out {}`",
+                e.file.display(),
+                e.role.as_str(),
+                e.name,
+                e.name,
+                e.file.display()
+            ))
+        }
+        other => ConfigError(other.to_string()),
+    })?;
+    if file.name != e.name {
+        return Err(ConfigError(format!(
+            "{} is the key of {:?}, but auth.keys lists it for {:?}",
+            e.file.display(),
+            file.name,
+            e.name
+        )));
+    }
+    Ok(Identity::new(e.role, &e.name, file.key, e.channels.clone()))
 }
 
 /// A key, whose it is, and what it may do.

@@ -60,6 +60,18 @@ impl CoreConfig {
         self.auth.resolve(&endpoints)
     }
 
+    /// What would keep the station from starting that the sections alone
+    /// do not show: a router listening beyond loopback without keys, and
+    /// every key file that does not load (`mech-gcs --check`). Empty when
+    /// it would start.
+    pub fn start_problems(&self) -> Vec<ConfigError> {
+        match self.auth_mode() {
+            Err(e) => vec![e],
+            Ok(AuthMode::Off) => Vec::new(),
+            Ok(AuthMode::Required) => self.auth.key_problems(),
+        }
+    }
+
     /// The keyring the router starts with (reading the key files), or
     /// `None` when unauthenticated.
     pub fn keyring(&self) -> Result<Option<Keyring>, ConfigError> {

@@ -47,6 +47,12 @@ struct Cli {
     /// with the `foxglove` feature.
     #[arg(long, value_name = "ADDR", global = true)]
     foxglove: Option<SocketAddr>,
+    /// Check the configuration (with the command line's overrides) and
+    /// everything the station would need to start with it (keys when it
+    /// listens beyond loopback, each key file readable only by its owner),
+    /// say what is wrong, and exit: 0 when it would start, 1 when not.
+    #[arg(long)]
+    check: bool,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -104,6 +110,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         return keygen(name, out.clone());
     }
     let (config, teleop) = load_config(&cli)?;
+    if cli.check {
+        return Ok(check(&cli, &config));
+    }
     if let Some(Command::Replay { file, script, info }) = &cli.command {
         let show = if *script {
             replay::Show::Script
@@ -170,6 +179,26 @@ fn load_config(cli: &Cli) -> anyhow::Result<(ConfigFile, TeleopConfig)> {
     }
     let teleop = teleop_config(&config)?;
     Ok((config, teleop))
+}
+
+/// `--check`: one line when the station would start with `config`; else
+/// one line per problem, exit code 1.
+fn check(cli: &Cli, config: &ConfigFile) -> ExitCode {
+    let name = cli
+        .station
+        .config
+        .as_ref()
+        .map_or("built-in defaults".into(), |p| p.display().to_string());
+    let problems = config.core().start_problems();
+    if problems.is_empty() {
+        println!("{name}: ok");
+        return ExitCode::SUCCESS;
+    }
+    println!("{name}: the configuration is valid, but the station would not start:");
+    for p in &problems {
+        println!("  {p}");
+    }
+    ExitCode::from(1)
 }
 
 /// Where `--attach` points: the station's control socket when given no
