@@ -4,7 +4,8 @@
 # gilrs and serialport), then socat (serial-link tests over a
 # pseudo-terminal pair), nftables and iproute2 (the fault-injection suite's
 # packet loss in network namespaces), tmux (the end-to-end TUI test), strace
-# (the replay test checks that a replay opens no socket), GNU Octave with its
+# (the replay test checks that a replay opens no socket), qemu-user (the
+# binaries built for a Raspberry Pi's processors run under it), GNU Octave with its
 # instrument-control package (the tests run the Octave example; about a
 # minute to install once, without recommended packages), Python's msgpack
 # (the Python client and the documented controller), pymavlink (the fake
@@ -18,7 +19,7 @@
 set -euo pipefail
 bash "$(dirname "$0")/deps-demo.sh"
 need=()
-for pkg in socat nftables iproute2 tmux strace octave octave-instrument-control; do
+for pkg in socat nftables iproute2 tmux strace qemu-user octave octave-instrument-control; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

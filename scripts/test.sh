@@ -3,8 +3,11 @@
 # binaries (the end-to-end tests run them) and every test, runs the whole
 # workspace's tests (every failing test binary, not only the first), then
 # the Foxglove live view, which is built only with mech-station's `foxglove`
-# feature (mech-gcs's forwards to it). Ends with the time each step took;
-# fails if any test failed.
+# feature (mech-gcs's forwards to it). Before the workspace, the binaries
+# for a Raspberry Pi's processors and the Debian packages are built
+# (scripts/cross.sh) and the packages checked (scripts/check-packages.sh):
+# the end-to-end test `cross` runs those binaries under qemu. Ends with the
+# time each step took; fails if any step or test failed.
 #
 # The tests run in one `cargo test --workspace`: a run of a part of the
 # workspace (`--exclude`, or only some `--test` targets) resolves other
@@ -17,15 +20,21 @@
 #                                   it for the whole run (build included), as
 #                                   a busy machine or CI runner has; the hogs
 #                                   end with the script, failed or not
+#   bash scripts/test.sh --no-cross without the cross builds and packages
+#                                   (about 12 minutes less; the `cross` test
+#                                   then says it skipped them, and fails
+#                                   under CI)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 stress=false
+cross=true
 for arg in "$@"; do
     case "$arg" in
     --stress) stress=true ;;
+    --no-cross) cross=false ;;
     *)
-        echo "usage: bash scripts/test.sh [--stress]" >&2
+        echo "usage: bash scripts/test.sh [--stress] [--no-cross]" >&2
         exit 2
         ;;
     esac
@@ -69,10 +78,22 @@ step() {
 }
 
 step "system packages" bash scripts/deps.sh
+
+failed=()
+if $cross; then
+    rc=0
+    step "cross: Pi binaries and packages" bash scripts/cross.sh || rc=$?
+    if [ "$rc" -eq 0 ]; then
+        step "packages: install and check" bash scripts/check-packages.sh || rc=$?
+        [ "$rc" -eq 0 ] || failed+=(packages)
+    else
+        failed+=(cross)
+    fi
+fi
+
 step "build: binaries" cargo build --workspace --bins
 step "build: tests" cargo test --workspace --no-run
 
-failed=()
 tests=0
 step "tests" cargo test --workspace --no-fail-fast || tests=$?
 [ "$tests" -eq 0 ] || failed+=(tests)

@@ -52,15 +52,15 @@ impl std::fmt::Display for Unopened {
 pub fn check(config: &RobotConfig, devices: &mut impl Devices) -> Vec<Unopened> {
     let mut unopened = Vec::new();
     let (pins, users) = gpio_needs(config);
-    if !pins.is_empty() {
-        if let Err(why) = devices.gpio(&pins) {
-            let list: Vec<String> = pins.iter().map(u8::to_string).collect();
-            unopened.push(Unopened {
-                device: format!("GPIO {}", list.join(", ")),
-                users,
-                why,
-            });
-        }
+    if !pins.is_empty()
+        && let Err(why) = devices.gpio(&pins)
+    {
+        let list: Vec<String> = pins.iter().map(u8::to_string).collect();
+        unopened.push(Unopened {
+            device: format!("GPIO {}", list.join(", ")),
+            users,
+            why,
+        });
     }
     for (port, (baud, users)) in serial_needs(config) {
         if let Err(why) = devices.serial(&port, baud) {

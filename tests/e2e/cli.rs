@@ -111,3 +111,46 @@ fn the_station_check_lists_every_key_problem_then_passes() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stdout).contains("no keys are configured"));
 }
+
+/// The manual pages the Debian packages install (`docs/man/`) name every
+/// option and command each binary's `--help` lists, so they cannot fall
+/// behind the programs.
+#[test]
+fn the_manual_pages_name_every_option() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for (binary, commands) in [
+        ("mech-agent", &[][..]),
+        ("mech-gcs", &["serve", "replay", "keygen"][..]),
+    ] {
+        let page = std::fs::read_to_string(root.join(format!("docs/man/{binary}.1")))
+            .expect("the manual page");
+        let mut helps = vec![vec!["--help"]];
+        helps.extend(commands.iter().map(|c| vec![*c, "--help"]));
+        for args in helps {
+            let out = Command::new(mech_e2e::binary(binary))
+                .args(&args)
+                .output()
+                .expect("runs");
+            let help = String::from_utf8_lossy(&out.stdout);
+            for word in help.split(|c: char| !(c.is_ascii_alphanumeric() || c == '-')) {
+                let Some(name) = word.strip_prefix("--") else {
+                    continue;
+                };
+                if name.is_empty() || !help.contains(&format!("  --{name}")) {
+                    continue; // a mention in a description, not an option
+                }
+                let troff = format!("\\-\\-{}", name.replace('-', "\\-"));
+                assert!(
+                    page.contains(&troff),
+                    "{binary} {args:?}: --{name} is not in its manual page"
+                );
+            }
+            for c in commands {
+                assert!(
+                    page.contains(&format!(".B {c}")) || page.contains(&format!(".BI {c}")),
+                    "{binary}: {c}"
+                );
+            }
+        }
+    }
+}

@@ -3,6 +3,7 @@
 mod autopilot;
 mod cli;
 mod cluster_script;
+mod cross;
 mod examples;
 mod fleet_scale;
 mod hostile;
