@@ -3,7 +3,8 @@
 # mech-agent for arm64 (aarch64: Raspberry Pi 3, 4 and 5 on 64-bit
 # Raspberry Pi OS), armhf (armv7: 32-bit Raspberry Pi OS) and amd64;
 # mech-gcs for arm64 (a Pi 5 as the station of a small fleet) and amd64.
-# Release builds, stripped, each agent with GPIO (`rpi`), serial ports
+# Builds of the `dist` profile (release without link-time optimisation,
+# stripped: Cargo.toml), each agent with GPIO (`rpi`), serial ports
 # and MAVLink; then `mech-agent_*.deb` and `mech-gcs_*.deb` per
 # architecture, made by cargo-deb, under target/cross/debian/.
 #
@@ -55,13 +56,13 @@ root=$out/root
 cargo_deb_version=3.7.0
 # What the root holds: the toolchain and, for each architecture, its
 # standard library, C compiler and libudev; dpkg-dev (dpkg-shlibdeps
-# works out each package's library dependencies), lintian (the packages'
-# check), systemd (`systemd-analyze verify` of the units).
+# works out each package's library dependencies) and lintian (the
+# packages' check).
 root_packages=(
     rustc-web cargo-web gcc libc6-dev libudev-dev pkg-config ca-certificates
     libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu libc6-dev:arm64 libudev-dev:arm64
     libstd-rust-web-dev:armhf gcc-arm-linux-gnueabihf libc6-dev:armhf libudev-dev:armhf
-    dpkg-dev lintian systemd
+    dpkg-dev lintian
 )
 mirror=http://deb.debian.org/debian
 
@@ -124,16 +125,16 @@ in_root() {
             PKG_CONFIG_ALLOW_CROSS=1 \
             PKG_CONFIG_LIBDIR_aarch64_unknown_linux_gnu=/usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig \
             PKG_CONFIG_LIBDIR_armv7_unknown_linux_gnueabihf=/usr/lib/arm-linux-gnueabihf/pkgconfig:/usr/share/pkgconfig \
-            CARGO_PROFILE_RELEASE_STRIP=symbols \
             "$@"
     ' in_root "$PWD/$root" "$PWD" "$cargo_home" "$cainfo" "$@"
 }
 
-# cargo-deb, built by the root's toolchain.
+# cargo-deb, built by the root's toolchain (unoptimised: it packs five
+# packages, and builds in half the time).
 tools=$out/tools
 if ! in_root "/src/$tools/bin/cargo-deb" --version 2>/dev/null | grep -q "$cargo_deb_version"; then
     say "building cargo-deb $cargo_deb_version"
-    in_root cargo install --quiet --locked cargo-deb --version "$cargo_deb_version" \
+    in_root cargo install --quiet --locked --debug cargo-deb --version "$cargo_deb_version" \
         --root "/src/$tools"
 fi
 
@@ -142,12 +143,12 @@ fi
 # the other, each with a target directory of its own.
 say "building: amd64 and arm64 (mech-agent, mech-gcs), armhf (mech-agent)"
 in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build" /bin/sh -c \
-    'cd /src && cargo build --release --locked --quiet --features mech-agent/rpi \
+    'cd /src && cargo build --profile dist --locked --quiet --features mech-agent/rpi \
         --target x86_64-unknown-linux-gnu --target aarch64-unknown-linux-gnu \
         -p mech-agent -p mech-gcs' &
 first=$!
 in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build-armhf" /bin/sh -c \
-    'cd /src && cargo build --release --locked --quiet --features rpi \
+    'cd /src && cargo build --profile dist --locked --quiet --features rpi \
         --target armv7-unknown-linux-gnueabihf -p mech-agent' &
 second=$!
 failed=0
@@ -158,14 +159,14 @@ wait "$second" || failed=1
     exit 1
 }
 # One place for every target's binaries.
-mkdir -p "$out/build/armv7-unknown-linux-gnueabihf/release"
-cp "$out/build-armhf/armv7-unknown-linux-gnueabihf/release/mech-agent" \
-    "$out/build/armv7-unknown-linux-gnueabihf/release/mech-agent"
+mkdir -p "$out/build/armv7-unknown-linux-gnueabihf/dist"
+cp "$out/build-armhf/armv7-unknown-linux-gnueabihf/dist/mech-agent" \
+    "$out/build/armv7-unknown-linux-gnueabihf/dist/mech-agent"
 
 # What each binary is, its size and the newest glibc symbol it needs.
 for triple in x86_64-unknown-linux-gnu aarch64-unknown-linux-gnu armv7-unknown-linux-gnueabihf; do
     for bin in mech-agent mech-gcs; do
-        f=$out/build/$triple/release/$bin
+        f=$out/build/$triple/dist/$bin
         [ -f "$f" ] || continue
         glibc=$(readelf -W --dyn-syms "$f" | grep -o 'GLIBC_[0-9.]*' | sort -uV | tail -1)
         printf '  %-32s %-10s %6d KiB  needs %s\n' "$triple" "$bin" $(($(stat -c %s "$f") / 1024)) "$glibc"
@@ -191,7 +192,7 @@ for pair in mech-agent:x86_64-unknown-linux-gnu mech-agent:aarch64-unknown-linux
     mech-gcs:aarch64-unknown-linux-gnu; do
     package=${pair%%:*} triple=${pair#*:}
     in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build" /bin/sh -c \
-        "cd /src && /src/$tools/bin/cargo-deb --quiet --no-build --no-strip \
+        "cd /src && /src/$tools/bin/cargo-deb --quiet --no-build --no-strip --profile dist \
             -p $package --target $triple --output /src/$out/debian/"
 done
 ls -l "$out/debian"

@@ -66,7 +66,7 @@ fn emulated(arch: Arch, binary: &str) -> Result<Command, String> {
     let bin = dir
         .join("build")
         .join(arch.triple)
-        .join("release")
+        .join("dist")
         .join(binary);
     if !bin.is_file() {
         return Err(format!(
