@@ -84,6 +84,8 @@ if $cross; then
     rc=0
     step "cross: Pi binaries and packages" bash scripts/cross.sh || rc=$?
     if [ "$rc" -eq 0 ]; then
+        # The end-to-end test `cross` must then run them, not skip them.
+        export MECH_CROSS_REQUIRED=1
         step "packages: install and check" bash scripts/check-packages.sh || rc=$?
         [ "$rc" -eq 0 ] || failed+=(packages)
     else
@@ -95,8 +97,15 @@ step "build: binaries" cargo build --workspace --bins
 step "build: tests" cargo test --workspace --no-run
 
 tests=0
+rm -f target/cross/emulated.log
 step "tests" cargo test --workspace --no-fail-fast || tests=$?
 [ "$tests" -eq 0 ] || failed+=(tests)
+# What the Pi binaries did under qemu (the test `cross` writes it).
+if [ -f target/cross/emulated.log ]; then
+    echo
+    echo "the Pi binaries under qemu (tests/e2e/cross.rs):"
+    sed 's/^/  /' target/cross/emulated.log
+fi
 
 # Last: this build replaces target/debug/mech-gcs, which the end-to-end
 # tests run, with the Foxglove build.
