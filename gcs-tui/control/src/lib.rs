@@ -28,6 +28,7 @@ mod formation;
 mod geometry;
 mod hub;
 pub mod lang;
+pub mod files;
 pub mod mission_file;
 mod offboard;
 pub mod playback;

@@ -4,10 +4,9 @@
 //! waypoint file `QGC WPL 110` ([`qgc`]) that MAVProxy's `wp save` and
 //! QGroundControl write. Which one a file is follows its name (`.toml`:
 //! MECH's; `.waypoints`, `.txt`: QGC WPL) when writing, and its first line
-//! when reading. Where a file may be ([`access`]) depends on who asks.
+//! when reading. Where a file may be ([`crate::files`]) depends on who asks.
 //! Nothing here talks to the station: these are text in, text out.
 
-pub mod access;
 pub mod mech;
 pub mod qgc;
 
