@@ -133,9 +133,18 @@ fn an_operator_is_kept_inside_the_stations_directories(s: &Served, via: Via, tag
     let mission = s.outside("mission.toml");
     let refusals = [
         (format!("record start {victim}"), "recording directory"),
-        (format!("record start {victim} overwrite"), "recording directory"),
-        ("record start ../escape.mcap".to_string(), "recording directory"),
-        ("record start up/escape.mcap".to_string(), "leads out of the recording directory"),
+        (
+            format!("record start {victim} overwrite"),
+            "recording directory",
+        ),
+        (
+            "record start ../escape.mcap".to_string(),
+            "recording directory",
+        ),
+        (
+            "record start up/escape.mcap".to_string(),
+            "leads out of the recording directory",
+        ),
         (format!("arena load {arena}"), "missions directory"),
         ("arena load ../arena.toml".to_string(), "missions directory"),
         (format!("mission load all {mission}"), "missions directory"),
@@ -166,7 +175,10 @@ fn an_operator_is_kept_inside_the_stations_directories(s: &Served, via: Via, tag
     let (ok, out) = s.script(via, &format!("record start {name}\n"));
     assert!(!ok && out.contains("exists"), "{via:?}: {out}");
     assert_eq!(std::fs::metadata(&file).expect("kept").len(), size);
-    let (ok, out) = s.script(via, &format!("record start {name} overwrite\nrecord stop\n"));
+    let (ok, out) = s.script(
+        via,
+        &format!("record start {name} overwrite\nrecord stop\n"),
+    );
     assert!(ok, "{via:?}: {out}");
     let (ok, out) = s.script(via, "arena load lab.toml\narena clear\n");
     assert!(ok && out.contains("4 vertices"), "{via:?}: {out}");

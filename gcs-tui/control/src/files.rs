@@ -197,9 +197,13 @@ mod tests {
         let e = access.resolve(sibling.to_str().unwrap(), true).unwrap_err();
         assert!(e.contains("missions directory"), "{e}");
         let climbing = missions.join("../a.toml");
-        let e = access.resolve(climbing.to_str().unwrap(), true).unwrap_err();
+        let e = access
+            .resolve(climbing.to_str().unwrap(), true)
+            .unwrap_err();
         assert!(e.contains("missions directory"), "{e}");
-        let the_dir = access.resolve(missions.to_str().unwrap(), true).unwrap_err();
+        let the_dir = access
+            .resolve(missions.to_str().unwrap(), true)
+            .unwrap_err();
         assert!(the_dir.contains("missions directory"), "{the_dir}");
     }
 
@@ -217,12 +221,16 @@ mod tests {
             assert!(e.contains("recording directory"), "{bad}: {e}");
         }
         std::os::unix::fs::symlink(dir.path(), recordings.join("up")).unwrap();
-        let e = access.recording("up/run.mcap", Some(&recordings)).unwrap_err();
+        let e = access
+            .recording("up/run.mcap", Some(&recordings))
+            .unwrap_err();
         assert!(e.contains("leads out of the recording directory"), "{e}");
         let elsewhere = dir.path().join("elsewhere.mcap");
         std::fs::write(&elsewhere, "").unwrap();
         std::os::unix::fs::symlink(&elsewhere, recordings.join("link.mcap")).unwrap();
-        let e = access.recording("link.mcap", Some(&recordings)).unwrap_err();
+        let e = access
+            .recording("link.mcap", Some(&recordings))
+            .unwrap_err();
         assert!(e.contains("leads out"), "{e}");
         let e = access.recording("run.mcap", None).unwrap_err();
         assert!(e.contains("has none"), "{e}");

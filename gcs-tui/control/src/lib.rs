@@ -23,12 +23,12 @@
 
 mod assignment;
 mod cluster;
+pub mod files;
 mod follow;
 mod formation;
 mod geometry;
 mod hub;
 pub mod lang;
-pub mod files;
 pub mod mission_file;
 mod offboard;
 pub mod playback;

@@ -431,10 +431,7 @@ async fn an_operators_recording_stays_in_the_recording_directory_and_replaces_no
     assert_eq!(started.summary, format!("recording to {}", run.display()));
     ana.execute_line("record stop").await.unwrap();
     let size = std::fs::metadata(&run).unwrap().len();
-    let e = ana
-        .execute_line("record start run.mcap")
-        .await
-        .unwrap_err();
+    let e = ana.execute_line("record start run.mcap").await.unwrap_err();
     assert!(e.message.contains("exists"), "{e}");
     assert!(e.message.contains("overwrite"), "{e}");
     assert_eq!(std::fs::metadata(&run).unwrap().len(), size, "untouched");
@@ -451,10 +448,7 @@ async fn an_operators_recording_stays_in_the_recording_directory_and_replaces_no
 
     // An operator of a station without a recording directory names none.
     let mut bo = Executor::new(gcs.clone()).with_sender("bo");
-    let e = bo
-        .execute_line("record start run.mcap")
-        .await
-        .unwrap_err();
+    let e = bo.execute_line("record start run.mcap").await.unwrap_err();
     assert!(e.message.contains("has none"), "{e}");
 
     // The station's own script: any path, but an existing file only with

@@ -82,7 +82,11 @@ impl Point {
         if let Some(t) = &self.t {
             let secs = *t.get_ref();
             if secs < 0.0 {
-                return Err(at(t, "t", format!("{secs} s: an arrival time is not negative")));
+                return Err(at(
+                    t,
+                    "t",
+                    format!("{secs} s: an arrival time is not negative"),
+                ));
             }
             if secs > MAX_WAYPOINT_TIME {
                 return Err(at(
