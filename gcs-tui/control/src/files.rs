@@ -83,17 +83,31 @@ pub fn confine(dir: &Path, what: &str, name: &str, create: bool) -> Result<PathB
     }
     let path = dir.join(relative);
     let parent = path.parent().unwrap_or(dir);
+    let create_all = |d: &Path| {
+        std::fs::create_dir_all(d).map_err(|e| format!("cannot create {}: {e}", d.display()))
+    };
     if create {
-        std::fs::create_dir_all(parent)
-            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+        create_all(dir)?;
     }
     let real_dir = dir
         .canonicalize()
         .map_err(|e| format!("{what} {}: {e}", dir.display()))?;
     let inside = |p: &Path| p.canonicalize().is_ok_and(|r| r.starts_with(&real_dir));
     let leads_out = || format!("{name:?} leads out of the {what} {}", dir.display());
-    if !inside(parent) {
+    // Nothing is created outside: the nearest part of the way that exists
+    // (a directory, or a link) must already lead inside.
+    let existing = parent
+        .ancestors()
+        .find(|a| a.symlink_metadata().is_ok())
+        .unwrap_or(dir);
+    if !inside(existing) {
         return Err(leads_out());
+    }
+    if create {
+        create_all(parent)?;
+        if !inside(parent) {
+            return Err(leads_out());
+        }
     }
     // An existing file may itself be a link out of the directory.
     if path.symlink_metadata().is_ok() && !inside(&path) {
@@ -221,10 +235,13 @@ mod tests {
             assert!(e.contains("recording directory"), "{bad}: {e}");
         }
         std::os::unix::fs::symlink(dir.path(), recordings.join("up")).unwrap();
-        let e = access
-            .recording("up/run.mcap", Some(&recordings))
-            .unwrap_err();
-        assert!(e.contains("leads out of the recording directory"), "{e}");
+        for through_link in ["up/run.mcap", "up/new/run.mcap"] {
+            let e = access
+                .recording(through_link, Some(&recordings))
+                .unwrap_err();
+            assert!(e.contains("leads out of the recording directory"), "{e}");
+        }
+        assert!(!dir.path().join("new").exists(), "nothing created outside");
         let elsewhere = dir.path().join("elsewhere.mcap");
         std::fs::write(&elsewhere, "").unwrap();
         std::os::unix::fs::symlink(&elsewhere, recordings.join("link.mcap")).unwrap();
