@@ -8,6 +8,7 @@ mod examples;
 mod fleet_scale;
 mod hostile;
 mod octave;
+mod operator_files;
 mod plots;
 mod python;
 mod radio;

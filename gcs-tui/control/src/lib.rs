@@ -23,6 +23,7 @@
 
 mod assignment;
 mod cluster;
+pub mod files;
 mod follow;
 mod formation;
 mod geometry;

@@ -4,10 +4,9 @@
 //! waypoint file `QGC WPL 110` ([`qgc`]) that MAVProxy's `wp save` and
 //! QGroundControl write. Which one a file is follows its name (`.toml`:
 //! MECH's; `.waypoints`, `.txt`: QGC WPL) when writing, and its first line
-//! when reading. Where a file may be ([`access`]) depends on who asks.
+//! when reading. Where a file may be ([`crate::files`]) depends on who asks.
 //! Nothing here talks to the station: these are text in, text out.
 
-pub mod access;
 pub mod mech;
 pub mod qgc;
 
@@ -54,7 +53,9 @@ impl MissionPlan {
     }
 
     /// Checks what a mission may hold: at least one waypoint and at most a
-    /// mission's worth, finite numbers, arrival times not negative.
+    /// mission's worth, finite numbers, arrival times not negative and at
+    /// most a day ([`mech_proto::MAX_WAYPOINT_TIME`]), as `waypoint` takes
+    /// them.
     pub fn check(&self) -> Result<(), MissionFileError> {
         let bad = |why: String| Err(MissionFileError::Invalid(why));
         if self.is_empty() {
@@ -87,6 +88,13 @@ impl MissionPlan {
                         finite(i, "t", t)?;
                         if t < 0.0 {
                             return bad(format!("waypoint {}: t = {t} s is negative", i + 1));
+                        }
+                        if t > mech_proto::MAX_WAYPOINT_TIME {
+                            return bad(format!(
+                                "waypoint {}: t = {t} s is more than {} s (a day)",
+                                i + 1,
+                                mech_proto::MAX_WAYPOINT_TIME
+                            ));
                         }
                     }
                 }

@@ -2,8 +2,9 @@
 //! format and QGC WPL 110 round trips (waypoints, arrival times, loop, a
 //! cluster's headings), a file as MAVProxy's `wp save` writes it (written
 //! by pymavlink's `MAVWPLoader.save`, which `wp save` calls), read back by
-//! pymavlink itself, and the missions directory an operator's session is
-//! kept in.
+//! pymavlink itself, and the directories an operator's session is kept in:
+//! mission and arena files in the missions directory, recordings in the
+//! recording directory (`mech_control::files`).
 
 #![allow(clippy::unwrap_used)]
 
@@ -359,5 +360,143 @@ async fn an_operators_session_reads_and_writes_only_in_the_missions_directory() 
         .await
         .unwrap_err();
     assert!(e.message.contains("missions directory"), "{e}");
+    gcs.shutdown().await;
+}
+
+/// A mission file's arrival time past a day is refused at load, as
+/// `waypoint` refuses it, with the file, the line and the key.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn mission_load_refuses_an_arrival_time_past_a_day_at_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gcs, _robots) = station(None).await;
+    let mut exec = Executor::new(gcs.clone());
+    let file = path(dir.path(), "late.toml");
+    std::fs::write(
+        &file,
+        "mech_mission = 1\nkind = \"robot\"\n[[waypoint]]\nx = 1\ny = 2\nt = 1e20\n",
+    )
+    .unwrap();
+    let e = exec
+        .execute_line(&format!("mission load robot_1 {file}"))
+        .await
+        .unwrap_err();
+    assert!(
+        e.message
+            .starts_with(&format!("{file}: line 6: waypoint 1: `t` = ")),
+        "{e}"
+    );
+    assert!(e.message.contains("(a day)"), "{e}");
+    assert!(draft(&gcs, "robot_1").0.is_empty(), "nothing loaded");
+    gcs.shutdown().await;
+}
+
+/// An operator's `record start FILE` writes only inside the recording
+/// directory, replaces nothing unless told `overwrite`, and follows no
+/// link out; the station's own script names any path but overwrites
+/// nothing unless told either.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_operators_recording_stays_in_the_recording_directory_and_replaces_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let recordings = dir.path().join("recordings");
+    std::fs::create_dir_all(&recordings).unwrap();
+    let (gcs, _robots) = station(Some(&dir.path().join("missions"))).await;
+    let mut ana = Executor::new(gcs.clone())
+        .with_record_dir(recordings.clone())
+        .with_sender("ana");
+    let victim = path(dir.path(), "victim.mcap");
+    std::fs::write(&victim, "an earlier experiment").unwrap();
+    std::os::unix::fs::symlink(dir.path(), recordings.join("up")).unwrap();
+    for (bad, why) in [
+        (victim.as_str(), "recording directory"),
+        ("../escape.mcap", "recording directory"),
+        ("a/../../escape.mcap", "recording directory"),
+        ("up/escape.mcap", "leads out of the recording directory"),
+    ] {
+        let e = ana
+            .execute_line(&format!("record start {bad}"))
+            .await
+            .unwrap_err();
+        assert!(e.message.contains(why), "{bad}: {e}");
+        assert!(e.message.starts_with(&format!("{bad:?}")), "{bad}: {e}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(&victim).unwrap(),
+        "an earlier experiment"
+    );
+    assert!(!dir.path().join("escape.mcap").exists());
+    assert!(gcs.recording().is_none(), "nothing started");
+
+    let started = ana.execute_line("record start run.mcap").await.unwrap();
+    let run = recordings.join("run.mcap");
+    assert_eq!(started.summary, format!("recording to {}", run.display()));
+    ana.execute_line("record stop").await.unwrap();
+    let size = std::fs::metadata(&run).unwrap().len();
+    let e = ana.execute_line("record start run.mcap").await.unwrap_err();
+    assert!(e.message.contains("exists"), "{e}");
+    assert!(e.message.contains("overwrite"), "{e}");
+    assert_eq!(std::fs::metadata(&run).unwrap().len(), size, "untouched");
+    ana.execute_line("record start run.mcap overwrite")
+        .await
+        .unwrap();
+    ana.execute_line("record stop").await.unwrap();
+    let inside = recordings.join("lab/abs.mcap");
+    ana.execute_line(&format!("record start {}", inside.display()))
+        .await
+        .unwrap();
+    ana.execute_line("record stop").await.unwrap();
+    assert!(inside.is_file());
+
+    // An operator of a station without a recording directory names none.
+    let mut bo = Executor::new(gcs.clone()).with_sender("bo");
+    let e = bo.execute_line("record start run.mcap").await.unwrap_err();
+    assert!(e.message.contains("has none"), "{e}");
+
+    // The station's own script: any path, but an existing file only with
+    // `overwrite`.
+    let mut own = Executor::new(gcs.clone());
+    let e = own
+        .execute_line(&format!("record start {victim}"))
+        .await
+        .unwrap_err();
+    assert!(e.message.contains("exists"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(&victim).unwrap(),
+        "an earlier experiment"
+    );
+    own.execute_line(&format!("record start {victim} overwrite"))
+        .await
+        .unwrap();
+    own.execute_line("record stop").await.unwrap();
+    assert!(mech_core::replay::Replay::open(Path::new(&victim)).is_ok());
+    gcs.shutdown().await;
+}
+
+/// An operator's `arena load FILE` reads only in the missions directory;
+/// the station's own script reads any path.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_operators_arena_file_is_read_only_in_the_missions_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let missions = dir.path().join("missions");
+    std::fs::create_dir_all(&missions).unwrap();
+    let (gcs, _robots) = station(Some(&missions)).await;
+    let arena = "boundary = [[0, 0], [5, 0], [5, 4], [0, 4]]\n";
+    std::fs::write(missions.join("lab.toml"), arena).unwrap();
+    let outside = path(dir.path(), "outside.toml");
+    std::fs::write(&outside, arena).unwrap();
+    let mut ana = Executor::new(gcs.clone()).with_sender("ana");
+    for bad in [outside.as_str(), "../outside.toml", "/etc/hostname"] {
+        let e = ana
+            .execute_line(&format!("arena load {bad}"))
+            .await
+            .unwrap_err();
+        assert!(e.message.contains("missions directory"), "{bad}: {e}");
+    }
+    assert!(gcs.router().arena().is_none(), "nothing loaded");
+    let loaded = ana.execute_line("arena load lab.toml").await.unwrap();
+    assert!(loaded.summary.contains("4 vertices"), "{loaded:?}");
+    let mut own = Executor::new(gcs.clone());
+    own.execute_line(&format!("arena load {outside}"))
+        .await
+        .unwrap();
     gcs.shutdown().await;
 }

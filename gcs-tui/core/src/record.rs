@@ -109,8 +109,14 @@ impl RecordConfig {
 /// Where a recording goes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum RecordTarget {
-    /// One file, written until recording stops (no size cap).
+    /// One file, written until recording stops (no size cap); an
+    /// existing file of that name is replaced.
     File(PathBuf),
+    /// Like [`RecordTarget::File`], but the file must not exist yet: it is
+    /// created exclusively (an existing file, or a symbolic link, in its
+    /// place is refused, never followed or truncated). What an operator's
+    /// `record start FILE` asks for unless it says `overwrite`.
+    NewFile(PathBuf),
     /// Files `mech-YYYYMMDD-HHMMSS.mcap` in `dir`: the next is begun when
     /// one reaches `max_file_bytes`, and only the newest `keep` are kept.
     Rotating {

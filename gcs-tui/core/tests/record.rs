@@ -562,3 +562,41 @@ fn refused_recorded(replay: &Replay) -> u64 {
     }
     refused
 }
+
+/// A recording that must be new never replaces what is there: an existing
+/// file is refused and left as it was, a symbolic link is refused, not
+/// followed; a new name is recorded to.
+#[tokio::test]
+async fn a_new_file_recording_refuses_an_existing_file_or_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let gcs = gcs().await;
+    let existing = dir.path().join("keep.mcap");
+    std::fs::write(&existing, "an earlier experiment").unwrap();
+    let e = gcs
+        .start_recording(RecordTarget::NewFile(existing.clone()))
+        .unwrap_err();
+    assert!(e.to_string().contains("keep.mcap"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(&existing).unwrap(),
+        "an earlier experiment"
+    );
+    let target = dir.path().join("target.txt");
+    std::fs::write(&target, "not a recording").unwrap();
+    let link = dir.path().join("link.mcap");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    assert!(
+        gcs.start_recording(RecordTarget::NewFile(link.clone()))
+            .is_err()
+    );
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "not a recording");
+    let fresh = dir.path().join("fresh.mcap");
+    assert_eq!(
+        gcs.start_recording(RecordTarget::NewFile(fresh.clone()))
+            .unwrap(),
+        fresh
+    );
+    let status = gcs.stop_recording().await.unwrap();
+    assert_eq!(status.file, fresh);
+    assert!(Replay::open(&fresh).is_ok());
+    gcs.shutdown().await;
+}

@@ -7,8 +7,8 @@ pub mod cmd_vel;
 pub mod goal;
 
 mech_proto::named_enum! {
-    /// Why a sample from ROS 2 was not forwarded; its name is the counter's
-    /// (`not_finite`, `out_of_range`, ...).
+    /// Why a sample from ROS 2 was not forwarded; the bridge counts it as
+    /// `refused_` and its name (`refused_not_finite`, ...).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
     pub enum Refusal: "refusal" {
         /// A component is NaN or infinite.

@@ -67,10 +67,10 @@ impl Stats {
             goals_unacked: get(&self.goals_unacked),
             estops_sent: get(&self.estops_sent),
             estops_refused: get(&self.estops_refused),
-            not_finite: self.refused(Refusal::NotFinite),
-            out_of_range: self.refused(Refusal::OutOfRange),
-            wrong_frame: self.refused(Refusal::WrongFrame),
-            unknown_robot: self.refused(Refusal::UnknownRobot),
+            refused_not_finite: self.refused(Refusal::NotFinite),
+            refused_out_of_range: self.refused(Refusal::OutOfRange),
+            refused_wrong_frame: self.refused(Refusal::WrongFrame),
+            refused_unknown_robot: self.refused(Refusal::UnknownRobot),
             names_rejected: get(&self.names_rejected),
             link_rejected: get(&self.link_rejected),
             send_failed: get(&self.send_failed),
@@ -79,8 +79,10 @@ impl Stats {
     }
 }
 
-/// The counters at one moment.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+/// The counters at one moment. Each has one name everywhere: the field,
+/// the summary line, `/diagnostics` and the closing JSON line all take it
+/// from [`StatsSnapshot::pairs`], and `docs/ros2.md` lists the same.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct StatsSnapshot {
     pub telemetry: u64,
     pub published: u64,
@@ -91,10 +93,10 @@ pub struct StatsSnapshot {
     pub goals_unacked: u64,
     pub estops_sent: u64,
     pub estops_refused: u64,
-    pub not_finite: u64,
-    pub out_of_range: u64,
-    pub wrong_frame: u64,
-    pub unknown_robot: u64,
+    pub refused_not_finite: u64,
+    pub refused_out_of_range: u64,
+    pub refused_wrong_frame: u64,
+    pub refused_unknown_robot: u64,
     pub names_rejected: u64,
     pub link_rejected: u64,
     pub send_failed: u64,
@@ -115,10 +117,10 @@ impl StatsSnapshot {
             ("goals_unacked", self.goals_unacked),
             ("estops_sent", self.estops_sent),
             ("estops_refused", self.estops_refused),
-            ("refused_not_finite", self.not_finite),
-            ("refused_out_of_range", self.out_of_range),
-            ("refused_wrong_frame", self.wrong_frame),
-            ("refused_unknown_robot", self.unknown_robot),
+            ("refused_not_finite", self.refused_not_finite),
+            ("refused_out_of_range", self.refused_out_of_range),
+            ("refused_wrong_frame", self.refused_wrong_frame),
+            ("refused_unknown_robot", self.refused_unknown_robot),
             ("names_rejected", self.names_rejected),
             ("link_rejected", self.link_rejected),
             ("send_failed", self.send_failed),
@@ -128,7 +130,24 @@ impl StatsSnapshot {
 
     /// Refusals of every reason together.
     pub fn refused(&self) -> u64 {
-        self.not_finite + self.out_of_range + self.wrong_frame + self.unknown_robot
+        self.refused_not_finite
+            + self.refused_out_of_range
+            + self.refused_wrong_frame
+            + self.refused_unknown_robot
+    }
+}
+
+impl Serialize for StatsSnapshot {
+    /// `{"telemetry": 120, ..., "refused_not_finite": 2, ...}`: the names
+    /// and order of [`StatsSnapshot::pairs`].
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let pairs = self.pairs();
+        let mut map = serializer.serialize_map(Some(pairs.len()))?;
+        for (k, v) in pairs {
+            map.serialize_entry(k, &v)?;
+        }
+        map.end()
     }
 }
 
@@ -164,13 +183,58 @@ mod tests {
         s.cmd_forwarded.fetch_add(3, Ordering::Relaxed);
         let snap = s.snapshot();
         assert_eq!(
-            (snap.not_finite, snap.unknown_robot, snap.refused()),
+            (
+                snap.refused_not_finite,
+                snap.refused_unknown_robot,
+                snap.refused()
+            ),
             (2, 1, 3)
         );
         let line = snap.to_string();
         assert!(line.contains("cmd_forwarded=3"), "{line}");
         assert!(line.contains("refused_not_finite=2 "), "{line}");
         assert!(line.contains("refused_unknown_robot=1 "), "{line}");
+    }
+
+    /// The counters `docs/ros2.md` lists under *Counters* are the bridge's,
+    /// by the same names, on every output: the summary line, the closing
+    /// JSON line (and `/diagnostics`, which takes `pairs` too).
+    #[test]
+    fn the_counters_are_named_as_docs_ros2_shows_them() {
+        let page = include_str!("../../../docs/ros2.md");
+        let section = page
+            .split("\n## Counters\n")
+            .nth(1)
+            .and_then(|s| s.split("\n## ").next())
+            .expect("a Counters section");
+        let documented: Vec<&str> = section
+            .lines()
+            .filter_map(|l| l.strip_prefix("| `"))
+            .filter_map(|l| l.split('`').next())
+            .collect();
+        let snap = Stats::default().snapshot();
+        let names: Vec<&str> = snap.pairs().into_iter().map(|(k, _)| k).collect();
+        assert_eq!(documented, names);
+        for r in Refusal::ALL {
+            let name = format!("refused_{}", r.as_str());
+            assert!(names.contains(&name.as_str()), "{name}");
+        }
+        let json = serde_json::to_value(&snap).unwrap();
+        let keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let mut sorted = names.clone();
+        sorted.sort_unstable();
+        let mut keys_sorted = keys.clone();
+        keys_sorted.sort_unstable();
+        assert_eq!(keys_sorted, sorted);
+        let line = snap.to_string();
+        for name in &names {
+            assert!(line.contains(&format!("{name}=0")), "{name}: {line}");
+        }
     }
 
     #[test]

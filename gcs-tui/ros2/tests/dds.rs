@@ -237,9 +237,12 @@ fn odometry_and_tf_for_every_robot_and_cmd_vel_obeyed_only_while_routed() {
     let last = rig.stop_bridge();
     let stats = &last["stats"];
     assert_eq!(last["type"], "ros2", "{last}");
-    assert!(stats["not_finite"].as_u64() >= Some(10), "{last}");
-    assert!(stats["out_of_range"].as_u64() >= Some(10), "{last}");
-    assert!(stats["unknown_robot"].as_u64() >= Some(10), "{last}");
+    assert!(stats["refused_not_finite"].as_u64() >= Some(10), "{last}");
+    assert!(stats["refused_out_of_range"].as_u64() >= Some(10), "{last}");
+    assert!(
+        stats["refused_unknown_robot"].as_u64() >= Some(10),
+        "{last}"
+    );
     assert!(stats["cmd_forwarded"].as_u64() >= Some(20), "{last}");
     assert_eq!(stats["link_rejected"], 0, "{last}");
 }
@@ -334,7 +337,10 @@ fn goal_pose_gets_a_robot_there_and_an_estop_from_ros_stops_every_robot() {
         },
     );
     let last = rig.stop_bridge();
-    assert!(last["stats"]["wrong_frame"].as_u64() >= Some(5), "{last}");
+    assert!(
+        last["stats"]["refused_wrong_frame"].as_u64() >= Some(5),
+        "{last}"
+    );
     assert!(last["stats"]["goals_acked"].as_u64() >= Some(1), "{last}");
 }
 

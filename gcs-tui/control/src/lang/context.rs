@@ -97,10 +97,12 @@ pub(super) struct Context {
     pub(super) control: ControlHub,
     /// Route requests to other stations, when a bridge is plugged in.
     pub(super) remote_routes: Option<Arc<dyn RemoteRoutes>>,
-    /// Where `record start` without a file records (rotating files).
+    /// Where `record start` without a file records (rotating files), and
+    /// where an operator's `record start FILE` must stay.
     pub(super) record_dir: Option<std::path::PathBuf>,
-    /// Where `mission save` and `mission load` may read and write.
-    pub(super) files: crate::mission_file::access::FileAccess,
+    /// Where `mission save`, `mission load`, `arena load` and `record
+    /// start FILE` may read and write.
+    pub(super) files: crate::files::FileAccess,
 }
 
 impl Context {
@@ -113,7 +115,7 @@ impl Context {
             spawner: None,
             remote_routes: None,
             record_dir: None,
-            files: crate::mission_file::access::FileAccess::Station,
+            files: crate::files::FileAccess::Station,
         }
     }
 

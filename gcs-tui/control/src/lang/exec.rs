@@ -7,8 +7,8 @@ use std::sync::Arc;
 use super::context::Context;
 use super::parse::{Statement, parse_line};
 use super::{LangError, Outcome};
+use crate::files::{FileAccess, default_dir};
 use crate::hub::ControlHub;
-use crate::mission_file::access::{FileAccess, default_dir};
 use crate::spec::ClusterSpec;
 use mech_core::Gcs;
 use mech_core::fleet::Severity;
@@ -42,7 +42,8 @@ impl Executor {
     }
 
     /// Where `record start` without a file records (rotating files, with
-    /// the `[record]` size cap): the binary's log directory.
+    /// the `[record]` size cap): `[record] dir`, else the log directory;
+    /// and the only place an operator's `record start FILE` may write.
     pub fn with_record_dir(mut self, dir: std::path::PathBuf) -> Executor {
         self.ctx.record_dir = Some(dir);
         self
@@ -70,11 +71,13 @@ impl Executor {
 
     /// An operator's session: publishes and sends missions as `sender`
     /// (the operator's name) instead of [`SENDER`], so the router and the
-    /// robots see who commanded them; and reads and writes mission files
-    /// only in the station's missions directory (`[fleet] mission_dir`,
-    /// else [`default_dir`](crate::mission_file::access::default_dir)): an
-    /// operator, maybe attached over TCP from elsewhere, has no account on
-    /// the station's machine ([`crate::mission_file::access`]).
+    /// robots see who commanded them; and reads and writes mission and
+    /// arena files only in the station's missions directory (`[fleet]
+    /// mission_dir`, else [`default_dir`](crate::files::default_dir)), and
+    /// recordings only in the recording directory
+    /// ([`Executor::with_record_dir`]): an operator, maybe attached over
+    /// TCP from elsewhere, has no account on the station's machine
+    /// ([`crate::files`]).
     pub fn with_sender(mut self, sender: &str) -> Executor {
         self.ctx.publishers = self.ctx.gcs.router().publishers(sender);
         self.ctx.sender = sender.to_string();
@@ -83,9 +86,10 @@ impl Executor {
         self
     }
 
-    /// Mission files only in `dir` (what [`Executor::with_sender`] sets
-    /// for an operator's session), or, with `None`, wherever the station
-    /// process may read and write (a script the station runs itself).
+    /// Mission and arena files only in `dir`, recordings only in the
+    /// recording directory (what [`Executor::with_sender`] sets for an
+    /// operator's session), or, with `None`, wherever the station process
+    /// may read and write (a script the station runs itself).
     pub fn with_mission_dir(mut self, dir: Option<std::path::PathBuf>) -> Executor {
         self.ctx.files = match dir {
             Some(d) => FileAccess::Confined(d),

@@ -234,8 +234,8 @@ pub static VERBS: &[Verb] = &[
     },
     Verb {
         name: "record",
-        usage: "record start [FILE] | record stop | record toggle | record",
-        help: "record everything the router sees to MCAP (no FILE: rotating files in the recording directory); `record` says how it goes",
+        usage: "record start [FILE [overwrite]] | record stop | record toggle | record",
+        help: "record everything the router sees to MCAP (no FILE: rotating files in the recording directory; a FILE that exists is refused unless `overwrite`); `record` says how it goes",
         parse: |a| record::Record::parse(a).map(Command::Record),
     },
     Verb {

@@ -17,8 +17,9 @@
 //! optional) instead of `z` and `t`. Unknown keys are errors, so a typo is
 //! never silently ignored.
 
-use mech_proto::Waypoint;
+use mech_proto::{MAX_WAYPOINT_TIME, Waypoint};
 use serde::Deserialize;
+use toml::Spanned;
 
 use super::{MissionFileError, MissionPlan};
 use crate::cluster::ClusterWaypoint;
@@ -44,14 +45,71 @@ enum Kind {
     Cluster,
 }
 
+/// A waypoint as written: each number with where it is in the text, so a
+/// value out of bounds is reported at its line.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Point {
-    x: f64,
-    y: f64,
-    z: Option<f64>,
-    t: Option<f64>,
-    heading: Option<f64>,
+    x: Spanned<f64>,
+    y: Spanned<f64>,
+    z: Option<Spanned<f64>>,
+    t: Option<Spanned<f64>>,
+    heading: Option<Spanned<f64>>,
+}
+
+impl Point {
+    /// Checks each number the way the command language does: finite, and
+    /// an arrival time neither negative nor more than a day
+    /// ([`MAX_WAYPOINT_TIME`]); a mistake names waypoint `n` (1-based), the
+    /// key and the line.
+    fn check(&self, text: &str, n: usize) -> Result<(), MissionFileError> {
+        let at = |v: &Spanned<f64>, key: &str, why: String| MissionFileError::AtLine {
+            line: line_of(text, v.span().start),
+            message: format!("waypoint {n}: `{key}` = {why}"),
+        };
+        let numbers = [
+            ("x", Some(&self.x)),
+            ("y", Some(&self.y)),
+            ("z", self.z.as_ref()),
+            ("t", self.t.as_ref()),
+            ("heading", self.heading.as_ref()),
+        ];
+        for (key, v) in numbers {
+            if let Some(v) = v.filter(|v| !v.get_ref().is_finite()) {
+                return Err(at(v, key, format!("{}: not a finite number", v.get_ref())));
+            }
+        }
+        if let Some(t) = &self.t {
+            let secs = *t.get_ref();
+            if secs < 0.0 {
+                return Err(at(
+                    t,
+                    "t",
+                    format!("{secs} s: an arrival time is not negative"),
+                ));
+            }
+            if secs > MAX_WAYPOINT_TIME {
+                return Err(at(
+                    t,
+                    "t",
+                    format!(
+                        "{secs} s: an arrival time is at most {MAX_WAYPOINT_TIME} s (a day) \
+                         after the mission starts"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The line (1-based) of byte `offset` in `text`.
+fn line_of(text: &str, offset: usize) -> usize {
+    text.get(..offset.min(text.len()))
+        .unwrap_or(text)
+        .matches('\n')
+        .count()
+        + 1
 }
 
 /// Reads a MECH mission file.
@@ -80,11 +138,12 @@ pub fn read(text: &str) -> Result<MissionPlan, MissionFileError> {
                 if p.heading.is_some() {
                     return only(i, "heading", "cluster");
                 }
+                p.check(text, i + 1)?;
                 waypoints.push(Waypoint {
-                    x: p.x,
-                    y: p.y,
-                    z: p.z.unwrap_or(0.0),
-                    time: p.t,
+                    x: *p.x.get_ref(),
+                    y: *p.y.get_ref(),
+                    z: p.z.as_ref().map_or(0.0, |z| *z.get_ref()),
+                    time: p.t.as_ref().map(|t| *t.get_ref()),
                 });
             }
             MissionPlan::Robot {
@@ -101,10 +160,11 @@ pub fn read(text: &str) -> Result<MissionPlan, MissionFileError> {
                 if p.t.is_some() {
                     return only(i, "t", "robot");
                 }
+                p.check(text, i + 1)?;
                 waypoints.push(ClusterWaypoint {
-                    x: p.x,
-                    y: p.y,
-                    heading: p.heading,
+                    x: *p.x.get_ref(),
+                    y: *p.y.get_ref(),
+                    heading: p.heading.as_ref().map(|h| *h.get_ref()),
                 });
             }
             MissionPlan::Cluster {
@@ -119,7 +179,7 @@ pub fn read(text: &str) -> Result<MissionPlan, MissionFileError> {
 fn toml_error(text: &str, e: &toml::de::Error) -> MissionFileError {
     match e.span() {
         Some(span) => MissionFileError::AtLine {
-            line: text[..span.start.min(text.len())].matches('\n').count() + 1,
+            line: line_of(text, span.start),
             message: e.message().to_string(),
         },
         None => MissionFileError::Invalid(e.message().to_string()),
@@ -227,6 +287,52 @@ mod tests {
                 looped: false
             }
         );
+    }
+
+    /// The limits `waypoint` puts on a point hold for a file too: the
+    /// message names the line, the waypoint and the key.
+    #[test]
+    fn times_beyond_a_day_negative_times_and_non_finite_numbers_are_refused_at_their_line() {
+        let file = |last: &str| {
+            format!(
+                "mech_mission = 1\nkind = \"robot\"\n\n[[waypoint]]\nx = 1\ny = 2\nt = 10\n\n\
+                 [[waypoint]]\nx = 3\ny = 2\n{last}\n"
+            )
+        };
+        let refused = |last: &str| match read(&file(last)).unwrap_err() {
+            MissionFileError::AtLine { line, message } => (line, message),
+            other => panic!("{last}: {other:?}"),
+        };
+        let (line, message) = refused("t = 1e20");
+        assert_eq!(line, 12, "{message}");
+        assert!(
+            message.starts_with("waypoint 2: `t` = 100000000000000000000 s"),
+            "{message}"
+        );
+        assert!(message.contains("at most 86400 s (a day)"), "{message}");
+        let (line, message) = refused("t = -1.5");
+        assert_eq!(line, 12, "{message}");
+        assert!(message.contains("waypoint 2: `t` = -1.5 s"), "{message}");
+        assert!(message.contains("not negative"), "{message}");
+        let (line, message) = refused("z = nan");
+        assert_eq!(line, 12, "{message}");
+        assert!(
+            message.contains("waypoint 2: `z` = NaN: not a finite number"),
+            "{message}"
+        );
+        assert_eq!(
+            read(&file("t = 86400")).unwrap().len(),
+            2,
+            "a day is the limit, not past it"
+        );
+        let cluster = "mech_mission = 1\nkind = \"cluster\"\n[[waypoint]]\nx = inf\ny = 2\n";
+        match read(cluster).unwrap_err() {
+            MissionFileError::AtLine { line, message } => {
+                assert_eq!(line, 4, "{message}");
+                assert!(message.contains("waypoint 1: `x` = inf"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -40,8 +40,12 @@ impl std::fmt::Debug for McapFile {
 
 impl McapFile {
     /// Creates `path` (and its directory) and writes the metadata record.
+    /// `fresh`: the file must not exist yet (created exclusively, so
+    /// nothing already there, a symbolic link included, is truncated or
+    /// followed); otherwise an existing file is replaced.
     pub(super) fn create(
         path: &Path,
+        fresh: bool,
         compress: bool,
         metadata: BTreeMap<String, String>,
     ) -> Result<McapFile, RecordError> {
@@ -52,7 +56,12 @@ impl McapFile {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(created)?;
         }
-        let file = File::create(path).map_err(created)?;
+        let file = if fresh {
+            File::create_new(path)
+        } else {
+            File::create(path)
+        }
+        .map_err(created)?;
         let compression = compress.then_some(mcap::Compression::Zstd);
         let options = mcap::WriteOptions::new()
             .profile(PROFILE)

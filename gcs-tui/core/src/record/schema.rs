@@ -947,7 +947,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("events.mcap");
         let mut file =
-            super::super::file::McapFile::create(&path, true, Default::default()).unwrap();
+            super::super::file::McapFile::create(&path, false, true, Default::default()).unwrap();
         let events = file.channel(EVENTS, Some(MECH_EVENT)).unwrap();
         let wrong = file.channel("/wrong", Some(MECH_EVENT)).unwrap();
         let all = every_event();

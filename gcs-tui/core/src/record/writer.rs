@@ -123,11 +123,13 @@ impl Writer {
     }
 
     fn open(&mut self) -> Result<(), RecordError> {
-        let path = match &self.target {
-            RecordTarget::File(p) => p.clone(),
+        let (path, fresh) = match &self.target {
+            RecordTarget::File(p) => (p.clone(), false),
+            RecordTarget::NewFile(p) => (p.clone(), true),
             RecordTarget::Rotating { dir, keep, .. } => {
                 rotate::prune(dir, keep.saturating_sub(1));
-                rotate::next_name(dir, mech_proto::unix_micros() / 1_000_000)
+                let name = rotate::next_name(dir, mech_proto::unix_micros() / 1_000_000);
+                (name, false)
             }
         };
         let mut meta = BTreeMap::new();
@@ -138,7 +140,7 @@ impl Writer {
         );
         meta.insert("station_version".into(), env!("CARGO_PKG_VERSION").into());
         meta.insert("file_index".into(), self.files.len().to_string());
-        self.file = Some(McapFile::create(&path, self.compress, meta)?);
+        self.file = Some(McapFile::create(&path, fresh, self.compress, meta)?);
         self.files.push(path);
         self.robot_channels.clear();
         Ok(())

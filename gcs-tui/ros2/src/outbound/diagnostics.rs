@@ -307,7 +307,7 @@ mod tests {
             (s.level, value(&s, "station_attached")),
             (diagnostic::WARN, "no")
         );
-        stats.not_finite = 2;
+        stats.refused_not_finite = 2;
         let s = bridge_status("ros2", 4, Some(true), &stats);
         assert_eq!(s.level, diagnostic::WARN);
         assert_eq!(value(&s, "refused_not_finite"), "2");

@@ -1,9 +1,12 @@
 //! `arena`: the arena robots are kept inside (fleet safety). Alone it says
 //! what the station has; `arena load FILE` reads an arena file (the keys
-//! of the `[arena]` section at its top level, on the station's machine)
-//! and sends it to every robot, `arena demo` the simulator's rectangle,
-//! `arena clear` takes it away (robots keep no fence and get no
-//! neighbours).
+//! of the `[arena]` section at its top level, on the station's machine;
+//! from an operator's session a name in the missions directory, as
+//! [`crate::files`] says) and sends it to every robot, `arena demo` the
+//! simulator's rectangle, `arena clear` takes it away (robots keep no
+//! fence and get no neighbours).
+
+use std::path::Path;
 
 use mech_core::{ArenaConfig, ArenaShape};
 
@@ -53,7 +56,13 @@ impl Arena {
                     None => "no arena: robots keep no fence (`arena load FILE`)".to_string(),
                 }));
             }
-            Arena::Load(file, span) => Some(load(file, *span).await?),
+            Arena::Load(file, span) => {
+                let path = ctx
+                    .files
+                    .resolve(file, false)
+                    .map_err(|e| LangError::new(*span, e))?;
+                Some(load(&path, *span).await?)
+            }
             Arena::Demo => Some(ArenaConfig::demo().shape()),
             Arena::Clear => None,
         };
@@ -66,12 +75,16 @@ impl Arena {
     }
 }
 
+/// Arena files are small: a larger file is not one.
+const MAX_FILE_BYTES: u64 = 1 << 20;
+
 /// The arena of `file`, checked; a mistake says `file:line:column`.
-async fn load(file: &str, span: Span) -> Result<ArenaShape, LangError> {
-    let text = tokio::fs::read_to_string(file)
+async fn load(file: &Path, span: Span) -> Result<ArenaShape, LangError> {
+    let name = file.display().to_string();
+    let text = crate::files::read_text(file, MAX_FILE_BYTES)
         .await
-        .map_err(|e| LangError::new(span, format!("cannot read {file}: {e}")))?;
-    ArenaConfig::parse_file_text(&text, file)
+        .map_err(|e| LangError::new(span, format!("cannot read {name}: {e}")))?;
+    ArenaConfig::parse_file_text(&text, &name)
         .map(|a| a.shape())
         .map_err(|e| LangError::new(span, e.to_string()))
 }

@@ -5,7 +5,7 @@
 //! or as `QGC WPL 110` (`.waypoints`, `.txt`: MAVProxy, QGroundControl).
 //! Loading sets the draft, as `waypoint` / `cluster-waypoint` do: `send`
 //! sends it. The formats are in [`crate::mission_file`]; which paths a
-//! session may use, in [`crate::mission_file::access`].
+//! session may use, in [`crate::files`].
 
 use std::path::Path;
 
@@ -167,17 +167,7 @@ impl MissionFile {
     }
 
     async fn load(&self, ctx: &mut Context, path: &Path) -> Result<Outcome, LangError> {
-        let size = tokio::fs::metadata(path)
-            .await
-            .map_err(|e| self.file_error(path, e))?
-            .len();
-        if size > MAX_FILE_BYTES {
-            return Err(self.file_error(
-                path,
-                format!("{size} bytes: not a mission file (at most {MAX_FILE_BYTES})"),
-            ));
-        }
-        let text = tokio::fs::read_to_string(path)
+        let text = crate::files::read_text(path, MAX_FILE_BYTES)
             .await
             .map_err(|e| self.file_error(path, e))?;
         let cluster = self.is_cluster(ctx);

@@ -1,9 +1,10 @@
-//! `record start [FILE]`, `record stop`, `record toggle`, `record`:
-//! recording everything the router sees to MCAP (`docs/recording.md`). Without a file, `record
-//! start` writes rotating files into the recording directory (`[record]
-//! dir`, or the log directory).
-
-use std::path::PathBuf;
+//! `record start [FILE [overwrite]]`, `record stop`, `record toggle`,
+//! `record`: recording everything the router sees to MCAP
+//! (`docs/recording.md`). Without a file, `record start` writes rotating
+//! files into the recording directory (`[record] dir`, or the log
+//! directory). A file is a new one unless the command says `overwrite`;
+//! from an operator's session it is a name in the recording directory
+//! ([`crate::files`]).
 
 use mech_core::{RecordTarget, RecordingStatus};
 
@@ -15,7 +16,7 @@ use crate::lang::{LangError, Outcome, Span};
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Record {
     /// Start recording, to this file or (`None`) to rotating files.
-    Start(Option<PathBuf>),
+    Start(Option<RecordFile>),
     Stop,
     /// Stop if recording, else start into the recording directory (the
     /// TUI's record key).
@@ -24,13 +25,31 @@ pub enum Record {
     Status,
 }
 
+/// The file `record start FILE` names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordFile {
+    /// As typed.
+    pub name: String,
+    pub span: Span,
+    /// `overwrite`: an existing file of that name is replaced (else it is
+    /// refused).
+    pub overwrite: bool,
+}
+
 impl Record {
     pub(super) fn parse(a: &mut Args<'_>) -> Result<Record, LangError> {
         let record = if a.is_empty() {
             Record::Status
         } else if a.keyword("start") {
             match a.peek() {
-                Some(_) => Record::Start(Some(PathBuf::from(&a.next("file")?.text))),
+                Some(_) => {
+                    let file = a.next("file")?;
+                    Record::Start(Some(RecordFile {
+                        name: file.text.clone(),
+                        span: file.span,
+                        overwrite: a.keyword("overwrite"),
+                    }))
+                }
                 None => Record::Start(None),
             }
         } else if a.keyword("stop") {
@@ -61,7 +80,7 @@ impl Record {
             }
             Record::Start(file) => {
                 let target = match (file, &ctx.record_dir) {
-                    (Some(f), _) => RecordTarget::File(f.clone()),
+                    (Some(f), _) => f.target(ctx)?,
                     (None, Some(dir)) => ctx.gcs.config().record.rotating(dir),
                     (None, None) => {
                         return Err(LangError::new(
@@ -85,6 +104,32 @@ impl Record {
                 None => "not recording".into(),
             })),
         }
+    }
+}
+
+impl RecordFile {
+    /// Where this session may record under this name: the path checked
+    /// against the session's file access, new unless `overwrite`.
+    fn target(&self, ctx: &Context) -> Result<RecordTarget, LangError> {
+        let path = ctx
+            .files
+            .recording(&self.name, ctx.record_dir.as_deref())
+            .map_err(|e| LangError::new(self.span, e))?;
+        if self.overwrite {
+            return Ok(RecordTarget::File(path));
+        }
+        // Said here for a clear message; the recorder creates the file
+        // exclusively all the same, so one appearing meanwhile is refused.
+        if path.symlink_metadata().is_ok() {
+            return Err(LangError::new(
+                self.span,
+                format!(
+                    "{} exists: record to a new name, or add `overwrite` to replace it",
+                    path.display()
+                ),
+            ));
+        }
+        Ok(RecordTarget::NewFile(path))
     }
 }
 
