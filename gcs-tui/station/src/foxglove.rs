@@ -13,13 +13,16 @@
 //!
 //! Modules (with the feature): `protocol` (the wire messages), `hub`
 //! (channels, clients, queues), `source` (router events to messages),
-//! `server` (connections).
+//! `server` (listening, handshakes), `connection` (a client's life after
+//! its handshake, and its end).
 
 use std::net::SocketAddr;
 
 use mech_core::ConfigError;
 use serde::Deserialize;
 
+#[cfg(feature = "foxglove")]
+mod connection;
 #[cfg(feature = "foxglove")]
 mod hub;
 #[cfg(feature = "foxglove")]

@@ -62,7 +62,41 @@ mod live {
     use mech_core::record::schema;
 
     use super::Dir;
+    use futures::SinkExt;
+    use serde_json::json;
+    use tokio_tungstenite::tungstenite::Message;
+
     use super::foxglove::{Client, Got, check_channels, handshake};
+
+    /// A message over the 64 KiB a request may be is counted and closes
+    /// the connection with a status message and close code 1009 (message
+    /// too big) with the reason, as the docs say; the log says so too.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_message_over_64_kib_closes_with_1009_and_a_reason() {
+        let station = Station::start("big");
+        let mut c = Client::connect(station.ws).await;
+        let big = json!({"op": "subscribe", "subscriptions": [], "pad": "x".repeat(70 << 10)});
+        c.ws.send(Message::Text(big.to_string().into()))
+            .await
+            .expect("sent");
+        let closing = c.closing(Duration::from_secs(60)).await;
+        assert_eq!(closing.code, Some(1009), "{closing:?}");
+        assert!(closing.reason.contains("64 KiB"), "{closing:?}");
+        assert!(
+            closing.statuses.iter().any(|s| s.contains("64 KiB")),
+            "{closing:?}"
+        );
+        assert!(
+            station
+                .logged("message too big", Duration::from_secs(20))
+                .await,
+            "{}",
+            station.log()
+        );
+        // The station still serves viewers.
+        let mut viewer = Client::connect(station.ws).await;
+        check_channels(&mut viewer).await;
+    }
 
     /// `mech-gcs serve --demo 2 --foxglove 127.0.0.1:0`, killed on drop.
     struct Station {
@@ -109,6 +143,34 @@ mod live {
                 .and_then(|a| a.trim().parse().ok())
                 .unwrap_or_else(|| panic!("no live view address in {line:?}"));
             Station { child, ws, dir }
+        }
+    }
+
+    impl Station {
+        /// What the station logged so far (its log files and stderr).
+        fn log(&self) -> String {
+            let logs = self.dir.0.join("mech");
+            let mut text: String = std::fs::read_dir(&logs)
+                .into_iter()
+                .flatten()
+                .flatten()
+                .filter(|e| e.file_name().to_string_lossy().starts_with("mech-gcs.log"))
+                .filter_map(|e| std::fs::read_to_string(e.path()).ok())
+                .collect();
+            text += &std::fs::read_to_string(self.dir.0.join("stderr.log")).unwrap_or_default();
+            text
+        }
+
+        /// Waits (up to `wait`) until the log holds `needle`.
+        async fn logged(&self, needle: &str, wait: Duration) -> bool {
+            let deadline = Instant::now() + wait;
+            while Instant::now() < deadline {
+                if self.log().contains(needle) {
+                    return true;
+                }
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+            false
         }
     }
 
