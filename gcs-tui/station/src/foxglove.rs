@@ -9,7 +9,8 @@
 //! from the router's event subscription, a bounded queue: when the view
 //! falls behind, events are dropped and counted, the router is never slowed;
 //! each client has a bounded queue too, and a client that reads too slowly
-//! loses messages (counted), not the station. Drops are logged.
+//! loses messages (counted), not the station; one that does not read for
+//! 10 s is cut, and told why. Drops are logged.
 //!
 //! Modules (with the feature): `protocol` (the wire messages), `hub`
 //! (channels, clients, queues), `source` (router events to messages),

@@ -66,7 +66,114 @@ mod live {
     use serde_json::json;
     use tokio_tungstenite::tungstenite::Message;
 
-    use super::foxglove::{Client, Got, check_channels, handshake};
+    use super::foxglove::{Client, Got, check_channels, handshake, handshake_over};
+
+    /// The log line of a client the station cut.
+    const CUT: &str = "Foxglove client cut:";
+
+    /// A client that sends a million WebSocket pings and never reads is
+    /// cut, and is told why: the station reads nothing more from it while
+    /// the pong it owes is not taken, so pongs never pile up in the
+    /// station (they did: about 124 bytes each, 1,000,000 pings grew it
+    /// by 120 MB, and it was never cut), and it answers none of the
+    /// station's pings. When the log says it was cut, the pinger reads at
+    /// last: the pongs the kernel held, a status message and a close frame
+    /// (1008, policy) with the reason.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_that_pings_and_never_reads_is_cut_and_told_why() {
+        let station = Station::start("pinger");
+        let mut pinger = Client::connect(station.ws).await;
+        let ping = Message::Ping(vec![0x5a; 120].into());
+        let mut sent = 0u32;
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while !station.log().contains(CUT) {
+            assert!(
+                Instant::now() < deadline,
+                "the pinger ({sent} pings sent) was not cut: {}",
+                station.log()
+            );
+            if sent >= 1_000_000 {
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                continue;
+            }
+            // A burst, then a look at the log; a burst the station does
+            // not take (it stopped reading) is left to the kernel.
+            let burst = async {
+                for _ in 0..1000 {
+                    pinger.ws.feed(ping.clone()).await?;
+                }
+                pinger.ws.flush().await
+            };
+            match tokio::time::timeout(Duration::from_millis(500), burst).await {
+                Ok(Ok(())) => sent += 1000,
+                Ok(Err(_)) => break,
+                Err(_) => {}
+            }
+        }
+        let closing = pinger.closing(Duration::from_secs(60)).await;
+        assert_eq!(closing.code, Some(1008), "{closing:?}");
+        assert!(closing.reason.contains("did not read"), "{closing:?}");
+        assert!(
+            closing.statuses.iter().any(|s| s.contains("did not read")),
+            "{closing:?}"
+        );
+        let log = station.log();
+        assert!(log.contains("did not read for 10 s"), "{log}");
+    }
+
+    /// A viewer subscribed to every channel that stops reading is cut
+    /// within the documented 10 s of not reading (the test allows 60),
+    /// although its kernel holds megabytes before the station's sends
+    /// would block (its receive buffer is set large here, as a viewer's
+    /// grows while it reads fast): the station pings every client, and
+    /// one that answers none for 10 s does not read. Then it is told why,
+    /// as the pinger is.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_viewer_that_stops_reading_is_cut_within_the_documented_time_and_told_why() {
+        let station = Station::start("stalled");
+        let socket = tokio::net::TcpSocket::new_v4().expect("socket");
+        socket
+            .set_recv_buffer_size(4 << 20)
+            .expect("receive buffer");
+        let tcp = socket.connect(station.ws).await.expect("connected");
+        let ws = handshake_over(tcp, station.ws, true)
+            .await
+            .expect("handshake");
+        let mut viewer = Client::over(ws).await;
+        check_channels(&mut viewer).await;
+        let all: Vec<serde_json::Value> = viewer
+            .channels
+            .values()
+            .enumerate()
+            .map(|(i, ch)| json!({"id": i, "channelId": ch["id"]}))
+            .collect();
+        viewer
+            .send(json!({"op": "subscribe", "subscriptions": all}))
+            .await;
+        // It gets data, then reads no more.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            assert!(Instant::now() < deadline, "no data");
+            if let Some(Got::Data { .. }) = viewer.next(Duration::from_secs(5)).await {
+                break;
+            }
+        }
+        let stopped = Instant::now();
+        assert!(
+            station.logged(CUT, Duration::from_secs(60)).await,
+            "the viewer was not cut 60 s after it stopped reading: {}",
+            station.log()
+        );
+        // For the record (docs/recording.md), not a limit.
+        println!(
+            "cut {:.1} s after it stopped reading",
+            stopped.elapsed().as_secs_f64()
+        );
+        let closing = viewer.closing(Duration::from_secs(60)).await;
+        assert_eq!(closing.code, Some(1008), "{closing:?}");
+        assert!(closing.reason.contains("did not read"), "{closing:?}");
+        assert!(station.log().contains("did not read for 10 s"));
+    }
 
     /// A message over the 64 KiB a request may be is counted and closes
     /// the connection with a status message and close code 1009 (message

@@ -1,15 +1,30 @@
 //! One live-view client after its WebSocket handshake: frames from its
-//! queue out, in batches; subscribe and unsubscribe in; and how it ends,
-//! with a close code and reason the client is sent and the log is told.
-//! A client that takes nothing sent for [`STALL`] is cut.
+//! queue out, in batches; subscribe and unsubscribe in; pings both ways;
+//! and how it ends, with a close code and reason the client is sent and
+//! the log is told.
+//!
+//! What the station holds for a client is bounded: its queue of frames
+//! (`[foxglove] client_queue`), and what the WebSocket has written but
+//! the kernel has not taken (a batch, or the pong owed for a ping: after
+//! a client's ping the station reads nothing more from it until the pong
+//! is handed to the kernel, so pongs owed to a client that never reads do
+//! not pile up; its pings wait in the kernel's buffers instead).
+//!
+//! A client is cut when it does not read for [`STALL`]: when nothing the
+//! station sends it is taken for that long, or when none of the pings the
+//! station sends it every [`PING_EVERY`] has been answered for that long
+//! (the kernel's buffers take megabytes before a send would block; a
+//! client reads a ping only after everything sent before it, so one that
+//! answers pings reads, however far behind it is).
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use futures::{SinkExt, StreamExt};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
-use tokio::time::Instant;
+use tokio::time::{Instant, MissedTickBehavior};
 use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::error::{CapacityError, Error as WsError};
@@ -25,6 +40,15 @@ pub(super) const MAX_REQUEST: usize = 64 << 10;
 /// Time a client may go without reading before it is cut (it would hold
 /// a place among the clients, and its queue, for nothing).
 pub(super) const STALL: Duration = Duration::from_secs(10);
+
+/// How often the station pings each client (and looks whether it has
+/// stalled): a client that stops reading is cut between [`STALL`] and
+/// `STALL` + 2 `PING_EVERY` later.
+const PING_EVERY: Duration = Duration::from_secs(1);
+
+/// Pings awaiting their pong that are remembered (a client that far
+/// behind still answers the later ones).
+const PINGS_REMEMBERED: usize = 64;
 
 /// Frames sent before one flush.
 const SEND_BATCH: usize = 64;
@@ -66,6 +90,60 @@ impl End {
     }
 }
 
+/// The pings sent to a client and the last time it answered one.
+#[derive(Debug)]
+struct Liveness {
+    next: u64,
+    /// Pings not answered yet, oldest first: number and when sent.
+    waiting: VecDeque<(u64, Instant)>,
+    last_answer: Instant,
+}
+
+impl Liveness {
+    fn new(now: Instant) -> Liveness {
+        Liveness {
+            next: 0,
+            waiting: VecDeque::new(),
+            last_answer: now,
+        }
+    }
+
+    /// Whether the client has read nothing for [`STALL`]: a ping has
+    /// waited that long and no answer came in that time.
+    fn stalled(&self, now: Instant) -> bool {
+        self.waiting
+            .front()
+            .is_some_and(|&(_, sent)| now - sent >= STALL && now - self.last_answer >= STALL)
+    }
+
+    /// The payload of a new ping, remembered as sent `now`.
+    fn ping(&mut self, now: Instant) -> Vec<u8> {
+        self.next += 1;
+        if self.waiting.len() >= PINGS_REMEMBERED {
+            self.waiting.pop_front();
+        }
+        self.waiting.push_back((self.next, now));
+        self.next.to_be_bytes().to_vec()
+    }
+
+    /// A pong: it answers the ping whose number it carries (and every
+    /// earlier one); anything else (a pong the station did not ask for)
+    /// proves nothing.
+    fn pong(&mut self, payload: &[u8], now: Instant) {
+        let Ok(bytes) = <[u8; 8]>::try_from(payload) else {
+            return;
+        };
+        let n = u64::from_be_bytes(bytes);
+        if !self.waiting.iter().any(|&(p, _)| p == n) {
+            return;
+        }
+        while self.waiting.front().is_some_and(|&(p, _)| p <= n) {
+            self.waiting.pop_front();
+        }
+        self.last_answer = now;
+    }
+}
+
 /// Runs a connection until it ends; says why.
 pub(super) async fn serve(
     ws: &mut WebSocketStream<TcpStream>,
@@ -73,6 +151,9 @@ pub(super) async fn serve(
     hub: &Hub,
     id: u64,
 ) -> End {
+    let mut pings = tokio::time::interval(PING_EVERY);
+    pings.set_missed_tick_behavior(MissedTickBehavior::Delay);
+    let mut alive = Liveness::new(Instant::now());
     loop {
         tokio::select! {
             out = rx.recv() => {
@@ -83,9 +164,31 @@ pub(super) async fn serve(
                     Err(_) => return End::stalled("nothing sent was taken"),
                 }
             }
+            _ = pings.tick() => {
+                let now = Instant::now();
+                if alive.stalled(now) {
+                    return End::stalled("no ping answered");
+                }
+                let ping = Message::Ping(alive.ping(now).into());
+                match tokio::time::timeout(STALL, ws.send(ping)).await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => return End::quiet(format!("send failed: {e}")),
+                    Err(_) => return End::stalled("nothing sent was taken"),
+                }
+            }
             msg = ws.next() => match msg {
                 None => return End::quiet("closed"),
                 Some(Err(e)) => return read_failed(e, hub, id),
+                Some(Ok(Message::Ping(_))) => {
+                    // The pong is owed: hand it to the kernel before
+                    // reading on, so pongs never pile up here.
+                    match tokio::time::timeout(STALL, ws.flush()).await {
+                        Ok(Ok(())) => {}
+                        Ok(Err(e)) => return End::quiet(format!("send failed: {e}")),
+                        Err(_) => return End::stalled("its pongs were not taken"),
+                    }
+                }
+                Some(Ok(Message::Pong(p))) => alive.pong(&p, Instant::now()),
                 Some(Ok(m)) => {
                     if let Some(end) = request(m, hub, id) {
                         return end;
@@ -234,6 +337,38 @@ fn close_reason(why: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_client_is_stalled_only_when_a_ping_waited_and_nothing_was_answered_for_the_stall() {
+        let t0 = Instant::now();
+        let mut alive = Liveness::new(t0);
+        assert!(!alive.stalled(t0 + STALL * 5), "no ping, no verdict");
+        let first = alive.ping(t0);
+        assert!(!alive.stalled(t0 + STALL - Duration::from_millis(1)));
+        assert!(alive.stalled(t0 + STALL));
+        // A client far behind still answers: each answer counts, late or
+        // not, and answers every earlier ping.
+        let second = alive.ping(t0 + PING_EVERY);
+        alive.pong(&second, t0 + STALL + PING_EVERY);
+        assert!(alive.waiting.is_empty(), "{first:?} answered by {second:?}");
+        assert!(!alive.stalled(t0 + STALL * 2));
+        // Pongs the station did not ask for prove nothing.
+        let t1 = t0 + STALL * 3;
+        alive.ping(t1);
+        alive.pong(b"nonsense", t1 + STALL);
+        alive.pong(&999u64.to_be_bytes(), t1 + STALL);
+        assert!(alive.stalled(t1 + STALL));
+    }
+
+    #[test]
+    fn pings_remembered_are_bounded() {
+        let t0 = Instant::now();
+        let mut alive = Liveness::new(t0);
+        for _ in 0..PINGS_REMEMBERED * 3 {
+            alive.ping(t0);
+        }
+        assert_eq!(alive.waiting.len(), PINGS_REMEMBERED);
+    }
 
     #[test]
     fn close_reasons_fit_a_close_frame() {

@@ -121,6 +121,11 @@ impl Client {
                 Got::Data { sub, ns, msg }
             }
             Message::Close(_) => Got::Closed,
+            Message::Ping(_) => {
+                // Answered now, as a browser does, not at the next read.
+                let _ = self.ws.flush().await;
+                Got::Text(Value::Null)
+            }
             _ => Got::Text(Value::Null),
         })
     }
