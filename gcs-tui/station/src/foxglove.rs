@@ -9,17 +9,21 @@
 //! from the router's event subscription, a bounded queue: when the view
 //! falls behind, events are dropped and counted, the router is never slowed;
 //! each client has a bounded queue too, and a client that reads too slowly
-//! loses messages (counted), not the station. Drops are logged.
+//! loses messages (counted), not the station; one that does not read for
+//! 10 s is cut, and told why. Drops are logged.
 //!
 //! Modules (with the feature): `protocol` (the wire messages), `hub`
 //! (channels, clients, queues), `source` (router events to messages),
-//! `server` (connections).
+//! `server` (listening, handshakes), `connection` (a client's life after
+//! its handshake, and its end).
 
 use std::net::SocketAddr;
 
 use mech_core::ConfigError;
 use serde::Deserialize;
 
+#[cfg(feature = "foxglove")]
+mod connection;
 #[cfg(feature = "foxglove")]
 mod hub;
 #[cfg(feature = "foxglove")]

@@ -116,44 +116,47 @@ mod live {
             launched.describe(),
             format!("not recording; Foxglove live view on ws://{ws}")
         );
-        let mut viewer = Client::connect(ws).await;
-        super::foxglove::check_channels(&mut viewer).await;
         let _flooder = flood(ws).await;
         garbage(ws).await;
-
+        // A viewer reads all along, as Foxglove does (one that does not
+        // read for 10 s is cut): the mission is sent while it reads.
+        let mut viewer = Client::connect(ws).await;
+        super::foxglove::check_channels(&mut viewer).await;
         viewer.subscribe(1, &schema::pose_topic("robot_1")).await;
         viewer.subscribe(2, schema::SCENE).await;
-        script(
+        let mission = script(
             &station,
             "wait connected robot_1 20s\nwaypoint robot_1 3.2,2.2 0.6,2.2 0.6,0.6 3.2,0.6 loop\n\
              send robot_1\nroute robot_1 wp/gcs\nwait route robot_1 wp/gcs 20s\n",
-        )
-        .await;
-
-        let mut first: Option<(f64, f64)> = None;
-        let mut moved = 0.0f64;
-        let mut last_ns = 0;
-        let mut scene_ids = Vec::new();
-        let deadline = Instant::now() + Duration::from_secs(90);
-        while moved < 0.5 || !scene_ids.iter().any(|i: &String| i == "mission/robot_1") {
-            assert!(
-                Instant::now() < deadline,
-                "robot_1 moved {moved:.2} m; scene {scene_ids:?}"
-            );
-            match viewer.next(Duration::from_secs(5)).await {
-                Some(Got::Data { sub: 1, ns, msg }) => {
-                    assert_eq!(msg["frame_id"], "world");
-                    assert!(ns >= last_ns, "time goes forward");
-                    last_ns = ns;
-                    let p = position(&msg);
-                    let p0 = *first.get_or_insert(p);
-                    moved = moved.max(((p.0 - p0.0).powi(2) + (p.1 - p0.1).powi(2)).sqrt());
+        );
+        let watch = async {
+            let mut first: Option<(f64, f64)> = None;
+            let mut moved = 0.0f64;
+            let mut last_ns = 0;
+            let mut scene_ids = Vec::new();
+            let deadline = Instant::now() + Duration::from_secs(90);
+            while moved < 0.5 || !scene_ids.iter().any(|i: &String| i == "mission/robot_1") {
+                assert!(
+                    Instant::now() < deadline,
+                    "robot_1 moved {moved:.2} m; scene {scene_ids:?}"
+                );
+                match viewer.next(Duration::from_secs(5)).await {
+                    Some(Got::Data { sub: 1, ns, msg }) => {
+                        assert_eq!(msg["frame_id"], "world");
+                        assert!(ns >= last_ns, "time goes forward");
+                        last_ns = ns;
+                        let p = position(&msg);
+                        let p0 = *first.get_or_insert(p);
+                        moved = moved.max(((p.0 - p0.0).powi(2) + (p.1 - p0.1).powi(2)).sqrt());
+                    }
+                    Some(Got::Data { sub: 2, msg, .. }) => scene_ids = entity_ids(&msg),
+                    Some(Got::Closed) => panic!("the live view closed the viewer"),
+                    _ => {}
                 }
-                Some(Got::Data { sub: 2, msg, .. }) => scene_ids = entity_ids(&msg),
-                Some(Got::Closed) => panic!("the live view closed the viewer"),
-                _ => {}
             }
-        }
+            scene_ids
+        };
+        let ((), scene_ids) = tokio::join!(mission, watch);
         assert!(scene_ids.contains(&"robot/robot_1".to_string()));
         assert!(scene_ids.contains(&"robot/robot_2".to_string()));
         // The simulated robots' arena, drawn as a recording draws it.

@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use mech_core::record::schema;
 use mech_core::sync::lock;
-use tokio::sync::mpsc;
+use tokio::sync::{Semaphore, mpsc};
 
 use super::protocol::{self, ChannelInfo, Level, Subscription};
 
@@ -22,6 +22,21 @@ pub(super) enum Out {
     Text(String),
     Binary(Vec<u8>),
 }
+
+/// Why the hub let go of a client (its connection says so as it closes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Cut {
+    /// The live view is stopping.
+    Stopping,
+    /// Its queue had no room for a new channel's advertisement.
+    NoRoomForChannel,
+}
+
+/// Connections closing at once that are given time to take their close
+/// frame and close their side; beyond them a closing connection is dropped
+/// at once, so strangers who get themselves cut and then hold the
+/// connection cannot pile up sockets.
+const CLOSING_PLACES: usize = 16;
 
 /// Bad requests a client may send before it is disconnected.
 const BAD_REQUESTS_ALLOWED: u64 = 32;
@@ -59,6 +74,8 @@ struct Inner {
     next_client: u64,
     /// Channel id -> how many clients subscribe to it.
     wanted: HashMap<u32, usize>,
+    /// Clients let go of, until their connections ask why.
+    cut: HashMap<u64, Cut>,
 }
 
 impl Inner {
@@ -75,6 +92,8 @@ pub(super) struct Hub {
     client_queue: usize,
     max_clients: usize,
     session: String,
+    /// Places for connections closing gracefully ([`CLOSING_PLACES`]).
+    pub(super) closing: Semaphore,
 }
 
 /// Why a request was refused, for the client's status message.
@@ -88,6 +107,7 @@ impl Hub {
             client_queue,
             max_clients,
             session: mech_proto::unix_micros().to_string(),
+            closing: Semaphore::new(CLOSING_PLACES),
         }
     }
 
@@ -121,6 +141,7 @@ impl Hub {
             );
             self.stats.refused.fetch_add(1, Ordering::Relaxed);
             remove(&mut inner, client);
+            inner.cut.insert(client, Cut::NoRoomForChannel);
         }
         id
     }
@@ -153,7 +174,24 @@ impl Hub {
     /// The client is gone: its subscriptions with it. Returns how many
     /// frames it lost to a full queue.
     pub(super) fn disconnect(&self, client: u64) -> u64 {
-        remove(&mut lock(&self.inner), client)
+        let mut inner = lock(&self.inner);
+        inner.cut.remove(&client);
+        remove(&mut inner, client)
+    }
+
+    /// Why the hub let go of `client`, if it did.
+    pub(super) fn cut(&self, client: u64) -> Option<Cut> {
+        lock(&self.inner).cut.remove(&client)
+    }
+
+    /// Counts a bad message from `client` that ends its connection (one
+    /// too big, or breaking the protocol): it is told why as it is closed.
+    pub(super) fn count_bad(&self, client: u64) {
+        self.stats.bad_requests.fetch_add(1, Ordering::Relaxed);
+        self.stats.refused.fetch_add(1, Ordering::Relaxed);
+        if let Some(c) = lock(&self.inner).clients.get_mut(&client) {
+            c.bad += 1;
+        }
     }
 
     /// Subscribes `client` to channels; what could not be done is refused.
@@ -258,13 +296,13 @@ impl Hub {
         lock(&self.inner).clients.len()
     }
 
-    /// Tells every client the live view is ending (and closes their
-    /// queues, so their connections close).
-    pub(super) fn close_all(&self, why: &str) {
+    /// Lets go of every client: the live view is ending (their queues
+    /// close, and their connections close saying so).
+    pub(super) fn close_all(&self) {
         let mut inner = lock(&self.inner);
-        for c in inner.clients.values() {
-            let _ =
-                c.tx.try_send(Out::Text(protocol::status(Level::Error, why)));
+        let ids: Vec<u64> = inner.clients.keys().copied().collect();
+        for id in ids {
+            inner.cut.insert(id, Cut::Stopping);
         }
         inner.clients.clear();
         inner.wanted.clear();
@@ -342,6 +380,8 @@ mod tests {
         }
         hub.channel("/robots/b/pose", schema::POSE_IN_FRAME);
         assert_eq!(hub.clients(), 0);
+        assert_eq!(hub.cut(slow), Some(Cut::NoRoomForChannel));
+        assert_eq!(hub.cut(slow), None, "asked once");
         let (bad, _rx) = hub.connect().unwrap();
         let cut = (0..100).position(|_| !hub.refuse(bad, "no"));
         assert_eq!(cut, Some(BAD_REQUESTS_ALLOWED as usize));

@@ -1,9 +1,7 @@
 //! The live view's WebSocket server: accepts connections, completes the
 //! handshake (which must ask for `foxglove.websocket.v1`, within a few
-//! seconds), then runs each connection: frames from its queue out, in
-//! batches; subscribe and unsubscribe in; anything else refused with a
-//! status message, and a client that keeps at it, or sends frames larger
-//! than a request can be, is cut.
+//! seconds), then runs each connection (`connection`) and logs how it
+//! ended.
 //!
 //! Connections still in their handshake hold places of their own, as the
 //! station's attach port's do (`crate::admission`): 16, at most 4 from one
@@ -21,36 +19,24 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use anyhow::Context;
-use futures::{SinkExt, StreamExt};
 use mech_core::Gcs;
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tokio_tungstenite::WebSocketStream;
-use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tokio_tungstenite::tungstenite::http::{HeaderValue, StatusCode};
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
+use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
 
 use super::FoxgloveConfig;
-use super::hub::{Hub, Out};
-use super::protocol::{self, Request as ClientRequest, SUBPROTOCOL};
+use super::connection::{self, End, MAX_REQUEST};
+use super::hub::Hub;
+use super::protocol::SUBPROTOCOL;
 use super::source::{Counts, Source};
 use crate::admission::{self, Admission, Attaching, Door};
 
 /// Time a connection has to complete the WebSocket handshake.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
-
-/// Largest message a client may send (requests are small).
-const MAX_REQUEST: usize = 64 << 10;
-
-/// Time a client has to take a batch of frames; one that does not read
-/// for this long is cut (it would hold a place among the clients).
-const SEND_TIMEOUT: Duration = Duration::from_secs(10);
-
-/// Frames sent before one flush.
-const SEND_BATCH: usize = 64;
 
 /// A running live view.
 #[derive(Debug)]
@@ -104,7 +90,7 @@ impl LiveView {
         for t in &self.tasks {
             t.abort();
         }
-        self.hub.close_all("the station is stopping");
+        self.hub.close_all();
         let n = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
         let s = &self.hub.stats;
         tracing::info!(
@@ -219,103 +205,26 @@ async fn connection(
         if loggable(&places) {
             tracing::warn!(%peer, "Foxglove client refused: too many clients ([foxglove] max_clients)");
         }
-        let _ = ws
-            .send(Message::Text(
-                protocol::status(protocol::Level::Error, "too many clients").into(),
-            ))
-            .await;
-        let _ = ws.close(None).await;
+        let end = End::coded(CloseCode::Again, "too many clients");
+        connection::close(&mut ws, &end, &hub).await;
         return;
     };
     let said_hello = loggable(&places);
     if said_hello {
         tracing::info!(%peer, client = id, "Foxglove client connected");
     }
-    let why = serve(&mut ws, rx, &hub, id).await;
+    let end = connection::serve(&mut ws, rx, &hub, id).await;
     let dropped = hub.disconnect(id);
-    let _ = ws.close(None).await;
     // A client whose coming was logged has its leaving logged too.
     if said_hello || loggable(&places) {
-        tracing::info!(%peer, client = id, dropped, "Foxglove client left: {why}");
-    }
-}
-
-/// Runs a connection until it ends; says why.
-async fn serve(
-    ws: &mut WebSocketStream<TcpStream>,
-    mut rx: mpsc::Receiver<Out>,
-    hub: &Hub,
-    id: u64,
-) -> String {
-    loop {
-        tokio::select! {
-            out = rx.recv() => {
-                let Some(out) = out else { return "cut by the station".into() };
-                match tokio::time::timeout(SEND_TIMEOUT, send_batch(ws, out, &mut rx)).await {
-                    Ok(Ok(())) => {}
-                    Ok(Err(e)) => return format!("send failed: {e}"),
-                    Err(_) => return "too slow: it did not read for 10 s".into(),
-                }
-            }
-            msg = ws.next() => match msg {
-                None => return "closed".into(),
-                Some(Err(e)) => return format!("error: {e}"),
-                Some(Ok(m)) => {
-                    if let Some(why) = request(m, hub, id) {
-                        return why;
-                    }
-                }
-            },
+        let why = &end.why;
+        match end.code {
+            Some(code) => tracing::warn!(
+                %peer, client = id, dropped,
+                "Foxglove client cut: {why} (close code {})", u16::from(code)
+            ),
+            None => tracing::info!(%peer, client = id, dropped, "Foxglove client left: {why}"),
         }
     }
-}
-
-/// Sends `first` and what else is queued (up to a batch), then flushes.
-async fn send_batch(
-    ws: &mut WebSocketStream<TcpStream>,
-    first: Out,
-    rx: &mut mpsc::Receiver<Out>,
-) -> Result<(), tokio_tungstenite::tungstenite::Error> {
-    ws.feed(message(first)).await?;
-    for _ in 0..SEND_BATCH {
-        match rx.try_recv() {
-            Ok(out) => ws.feed(message(out)).await?,
-            Err(_) => break,
-        }
-    }
-    ws.flush().await
-}
-
-fn message(out: Out) -> Message {
-    match out {
-        Out::Text(t) => Message::Text(t.into()),
-        Out::Binary(b) => Message::Binary(b.into()),
-    }
-}
-
-/// Handles one message from the client; `Some(why)` ends the connection.
-fn request(m: Message, hub: &Hub, id: u64) -> Option<String> {
-    let refused = match m {
-        Message::Text(t) => match protocol::request(t.as_str()) {
-            Ok(ClientRequest::Subscribe { subscriptions }) => {
-                hub.subscribe(id, &subscriptions).err()
-            }
-            Ok(ClientRequest::Unsubscribe { subscription_ids }) => {
-                hub.unsubscribe(id, &subscription_ids);
-                None
-            }
-            Err(why) => Some(why),
-        },
-        Message::Binary(_) => {
-            Some("binary messages are not served: the live view only shows the fleet".into())
-        }
-        Message::Close(_) => return Some("closed".into()),
-        Message::Ping(_) | Message::Pong(_) | Message::Frame(_) => None,
-    };
-    let why = refused?;
-    if hub.refuse(id, &why) {
-        None
-    } else {
-        Some(format!("too many bad requests (last: {why})"))
-    }
+    connection::close(&mut ws, &end, &hub).await;
 }

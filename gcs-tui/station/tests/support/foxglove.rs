@@ -31,11 +31,30 @@ pub struct Client {
     pub channels: HashMap<String, Value>,
 }
 
+/// How the server closed a connection: the status messages it sent last
+/// and its close frame's code and reason (`None`: it closed without one).
+#[derive(Debug)]
+pub struct Closing {
+    pub statuses: Vec<String>,
+    pub code: Option<u16>,
+    pub reason: String,
+}
+
 pub async fn handshake(
     addr: SocketAddr,
     subprotocol: bool,
 ) -> Result<WebSocketStream<TcpStream>, String> {
     let tcp = TcpStream::connect(addr).await.map_err(|e| e.to_string())?;
+    handshake_over(tcp, addr, subprotocol).await
+}
+
+/// The handshake over a TCP connection the caller made (with the socket
+/// options it wants).
+pub async fn handshake_over(
+    tcp: TcpStream,
+    addr: SocketAddr,
+    subprotocol: bool,
+) -> Result<WebSocketStream<TcpStream>, String> {
     let mut req = format!("ws://{addr}/")
         .into_client_request()
         .expect("request");
@@ -60,6 +79,11 @@ pub async fn handshake(
 impl Client {
     pub async fn connect(addr: SocketAddr) -> Client {
         let ws = handshake(addr, true).await.expect("handshake");
+        Client::over(ws).await
+    }
+
+    /// A client over a WebSocket whose handshake is done.
+    pub async fn over(ws: WebSocketStream<TcpStream>) -> Client {
         let mut c = Client {
             ws,
             channels: HashMap::new(),
@@ -97,8 +121,51 @@ impl Client {
                 Got::Data { sub, ns, msg }
             }
             Message::Close(_) => Got::Closed,
+            Message::Ping(_) => {
+                // Answered now, as a browser does, not at the next read.
+                let _ = self.ws.flush().await;
+                Got::Text(Value::Null)
+            }
             _ => Got::Text(Value::Null),
         })
+    }
+
+    /// Reads everything until the server's close frame (or the end of the
+    /// connection), within `wait`: the status messages on the way and the
+    /// close frame's code and reason.
+    pub async fn closing(&mut self, wait: Duration) -> Closing {
+        let deadline = tokio::time::Instant::now() + wait;
+        let mut statuses = Vec::new();
+        loop {
+            let m = match tokio::time::timeout_at(deadline, self.ws.next()).await {
+                Err(_) => panic!("not closed within {wait:?}; statuses {statuses:?}"),
+                Ok(None | Some(Err(_))) => None,
+                Ok(Some(Ok(m))) => Some(m),
+            };
+            match m {
+                None => {
+                    return Closing {
+                        statuses,
+                        code: None,
+                        reason: String::new(),
+                    };
+                }
+                Some(Message::Close(frame)) => {
+                    return Closing {
+                        statuses,
+                        code: frame.as_ref().map(|f| u16::from(f.code)),
+                        reason: frame.map(|f| f.reason.to_string()).unwrap_or_default(),
+                    };
+                }
+                Some(Message::Text(t)) => {
+                    let v: Value = serde_json::from_str(t.as_str()).unwrap_or_default();
+                    if v["op"] == "status" {
+                        statuses.push(v["message"].as_str().unwrap_or_default().to_string());
+                    }
+                }
+                Some(_) => {}
+            }
+        }
     }
 
     /// Reads until `topic` is advertised.
@@ -148,7 +215,8 @@ pub async fn check_channels(c: &mut Client) {
     }
 }
 
-/// A client that sends garbage of every kind is told why and cut; a
+/// A client that sends garbage of every kind is told why and cut (close
+/// code 1008, policy, with the reason); a
 /// plain TCP client and a WebSocket client without the subprotocol are
 /// refused at the handshake.
 pub async fn garbage(addr: SocketAddr) {
@@ -169,7 +237,6 @@ pub async fn garbage(addr: SocketAddr) {
 
     let mut c = Client::connect(addr).await;
     let big = "x".repeat(100 << 10);
-    let mut warned = 0;
     for i in 0..100 {
         let m = match i % 4 {
             0 => Message::Text("not json".into()),
@@ -184,16 +251,16 @@ pub async fn garbage(addr: SocketAddr) {
         }
     }
     let _ = c.ws.send(Message::Text(big.into())).await;
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        assert!(Instant::now() < deadline, "the garbage client was not cut");
-        match c.next(Duration::from_secs(1)).await {
-            Some(Got::Closed) => break,
-            Some(Got::Text(v)) if v["op"] == "status" => warned += 1,
-            _ => {}
-        }
-    }
-    assert!(warned >= 1, "the client was told why");
+    let closing = c.closing(Duration::from_secs(20)).await;
+    assert!(
+        closing.statuses.len() > 1,
+        "the client was told why: {closing:?}"
+    );
+    assert_eq!(closing.code, Some(1008), "{closing:?}");
+    assert!(
+        closing.reason.starts_with("too many bad requests"),
+        "{closing:?}"
+    );
 }
 
 /// A client that floods the server with requests, then subscribes to
