@@ -23,7 +23,7 @@ pub use config::FleetConfig;
 pub use remote::remote_name;
 pub use robot::{
     AutopilotState, MissionDelivery, PathPoint, Registration, Robot, RouteState, SentMission,
-    WaypointList,
+    WaypointList, held_mission_text,
 };
 
 use crate::arena::ArenaShape;
@@ -416,6 +416,12 @@ impl Fleet {
         }
         if accepted {
             self.log(Severity::Info, format!("{robot} acknowledged mission {id}"));
+            if let Some(held) = self.robots.get(robot).and_then(|r| {
+                let sent = r.waypoints.sent.as_ref().filter(|s| s.id == id)?;
+                sent.held(robot, r.route.requested.as_deref())
+            }) {
+                self.log(Severity::Warn, held);
+            }
         } else {
             self.log(
                 Severity::Warn,
@@ -891,6 +897,87 @@ mod tests {
             !f.robot("robot_1").unwrap().arrived(),
             "an older mission finishing is not arrival"
         );
+    }
+
+    #[test]
+    fn a_stored_mission_on_a_channel_the_robot_is_not_routed_to_says_how_to_start_it() {
+        let mut f = Fleet::new(FleetConfig::default());
+        f.apply(&at(0, registered("robot_1")));
+        let send_and_ack = |f: &mut Fleet, ms: u64, id: u32| {
+            f.apply(&at(
+                ms,
+                Event::MissionSent {
+                    robot: "robot_1".into(),
+                    channel: "wp/gcs".into(),
+                    id,
+                    waypoints: vec![Waypoint {
+                        x: 3.5,
+                        y: 2.5,
+                        z: 0.0,
+                        time: None,
+                    }],
+                    looped: false,
+                },
+            ));
+            f.apply(&at(
+                ms + 1,
+                Event::MissionAcked {
+                    robot: "robot_1".into(),
+                    id,
+                    accepted: true,
+                    reason: String::new(),
+                },
+            ));
+        };
+        let held = |f: &Fleet| -> Vec<(Severity, String)> {
+            f.log
+                .iter()
+                .filter(|e| e.text.contains("holds mission"))
+                .map(|e| (e.severity, e.text.clone()))
+                .collect()
+        };
+        // Routed to none: acknowledged, and the log says why it stands still.
+        send_and_ack(&mut f, 1, 3);
+        assert_eq!(
+            held(&f),
+            vec![(
+                Severity::Warn,
+                "robot_1 holds mission 3; it starts when routed to wp/gcs \
+                 (`route robot_1 wp/gcs`)"
+                    .to_string()
+            )]
+        );
+        // Routed to the mission's channel (even before the robot
+        // acknowledges the route): nothing held, nothing said.
+        f.apply(&at(
+            10,
+            Event::RouteChanged {
+                robot: "robot_1".into(),
+                channel: Some("wp/gcs".into()),
+                epoch: 1,
+            },
+        ));
+        send_and_ack(&mut f, 11, 4);
+        assert_eq!(held(&f).len(), 1, "{:?}", f.log);
+        // A refused mission is not held.
+        f.apply(&at(
+            20,
+            Event::RouteChanged {
+                robot: "robot_1".into(),
+                channel: Some("joy/0".into()),
+                epoch: 2,
+            },
+        ));
+        f.apply(&at(
+            21,
+            Event::MissionAcked {
+                robot: "robot_1".into(),
+                id: 5,
+                accepted: false,
+                reason: "too many waypoints".into(),
+            },
+        ));
+        assert_eq!(held(&f).len(), 1, "{:?}", f.log);
     }
 
     #[test]

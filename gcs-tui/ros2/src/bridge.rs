@@ -88,6 +88,8 @@ pub struct Bridge {
     bad_names: std::collections::BTreeSet<String>,
     /// The station's own view, when the bridge attaches to it.
     station: Option<tokio::sync::watch::Receiver<StationView>>,
+    /// Said once that the station requires keys and the bridge has none.
+    keyless_said: bool,
 }
 
 impl Bridge {
@@ -160,6 +162,7 @@ impl Bridge {
             estop_until: None,
             bad_names: Default::default(),
             station,
+            keyless_said: false,
         })
     }
 
@@ -316,16 +319,21 @@ impl Bridge {
         }
     }
 
-    /// Ok if the station has reported robot `robot`.
+    /// Ok if the station has reported robot `robot`; else why not, as
+    /// far as the bridge can tell (the station's own view, when attached,
+    /// says whether it has the robot and whether it requires keys).
     fn known(&self, robot: &str) -> Result<(), Refused> {
         if self.fleet.knows(robot) {
-            Ok(())
-        } else {
-            Err(Refused {
-                reason: Refusal::UnknownRobot,
-                detail: format!("{robot} is not a robot of the station"),
-            })
+            return Ok(());
         }
+        let detail = match &self.station {
+            Some(view) => view.borrow().why_unknown(robot, self.link.signs()),
+            None => format!("{robot} is not a robot of the station"),
+        };
+        Err(Refused {
+            reason: Refusal::UnknownRobot,
+            detail,
+        })
     }
 
     fn refused(&self, robot: &str, topic: &str, e: Refused) {
@@ -425,6 +433,10 @@ impl Bridge {
             .as_ref()
             .map(|s| s.borrow().clone())
             .unwrap_or_default();
+        if view.requires_keys() && !self.link.signs() && !self.keyless_said {
+            self.keyless_said = true;
+            error!("{}", crate::station::KEYLESS);
+        }
         let out = outbound::periodic(&self.fleet, &view, &self.config, now, stamp);
         for (robot, b) in out.batteries {
             self.ros.battery(&robot, b);

@@ -16,7 +16,7 @@ use mech_core::arena::ArenaShape;
 use mech_core::counters::LinkQuality;
 use mech_core::event::LinkState;
 use mech_station::client::{Address, AttachOptions, KeyFileRef, attach};
-use mech_station::view::{FleetSnapshot, MissionView};
+use mech_station::view::{FleetSnapshot, MissionView, Security};
 use mech_station::wire::{FromStation, Streams};
 use tokio::sync::watch;
 use tracing::{info, warn};
@@ -45,6 +45,8 @@ pub struct StationView {
     pub missions: HashMap<String, MissionView>,
     /// The station's arena, when it has one.
     pub arena: Option<ArenaShape>,
+    /// Whether the station checks signatures (`None` until attached).
+    pub security: Option<Security>,
 }
 
 impl StationView {
@@ -76,9 +78,37 @@ impl StationView {
             robots,
             missions,
             arena: fleet.arena.clone(),
+            security: Some(fleet.security),
         }
     }
+
+    /// Whether the station requires keys, as its attach protocol says.
+    /// Only the station's own answer to the bridge's attach tells; the
+    /// router never answers a message it refuses, so a bridge without a
+    /// key learns it here or not at all.
+    pub fn requires_keys(&self) -> bool {
+        self.attached && self.security == Some(Security::Authenticated)
+    }
+
+    /// Why `robot`, which the bridge has not heard of through the router,
+    /// is not served: a robot the station has, at a station that requires
+    /// keys, while the bridge signs nothing (`signs` false), is refused for
+    /// want of a key; one the station has is otherwise not yet heard from;
+    /// any other is not the station's.
+    pub fn why_unknown(&self, robot: &str, signs: bool) -> String {
+        if !self.robots.contains_key(robot) {
+            return format!("{robot} is not a robot of the station");
+        }
+        if !signs && self.requires_keys() {
+            return format!("{robot} is a robot of the station, but {KEYLESS}");
+        }
+        format!("{robot} is a robot of the station, but no telemetry of it has reached the bridge")
+    }
 }
+
+/// What a bridge without a key is told at a station that requires keys.
+pub const KEYLESS: &str = "the station needs keys and this bridge has none: the router refuses its \
+     unsigned messages (give it a controller key the station's [auth] lists: --key, ros2.key)";
 
 /// Where and how to attach.
 #[derive(Debug, Clone)]
@@ -225,5 +255,36 @@ mod tests {
         assert_eq!(v.missions.len(), 1);
         assert_eq!(v.missions["robot_1"].id, 4);
         assert!(!StationView::default().attached);
+    }
+
+    #[test]
+    fn a_keyless_bridge_at_a_station_that_requires_keys_is_told_why_its_robots_are_refused() {
+        let snapshot = |security| FleetSnapshot {
+            robots: vec![RobotView::at("rb_1", 1, "diff-drive", 0.0, 0.0, 0.0)],
+            security,
+            ..FleetSnapshot::default()
+        };
+        let keyed = StationView::from_snapshot(&snapshot(Security::Authenticated));
+        assert!(keyed.requires_keys());
+        assert_eq!(
+            keyed.why_unknown("rb_1", false),
+            format!("rb_1 is a robot of the station, but {KEYLESS}")
+        );
+        // With a key, keys are not the reason; a robot the station does
+        // not have is not its robot, key or not.
+        assert!(!keyed.why_unknown("rb_1", true).contains("needs keys"));
+        assert_eq!(
+            keyed.why_unknown("rb_9", false),
+            "rb_9 is not a robot of the station"
+        );
+        // A station without keys, or one not attached: never blamed on keys.
+        let open = StationView::from_snapshot(&snapshot(Security::LoopbackOnly));
+        assert!(!open.requires_keys());
+        assert!(!open.why_unknown("rb_1", false).contains("needs keys"));
+        assert!(!StationView::default().requires_keys());
+        assert_eq!(
+            StationView::default().why_unknown("rb_1", false),
+            "rb_1 is not a robot of the station"
+        );
     }
 }

@@ -245,6 +245,11 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
                 waypoints: m.waypoints.clone(),
                 looped: m.looped,
             }),
+            mission_held: r
+                .waypoints
+                .sent
+                .as_ref()
+                .and_then(|m| m.held(&r.name, r.route.requested.as_deref())),
         })
         .collect();
     FleetSnapshot {

@@ -105,6 +105,12 @@ pub struct RobotView {
     /// sender to the robot).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sent_mission: Option<MissionView>,
+    /// Why the robot stands still with a mission: it stored the station's
+    /// mission, but runs it only once routed to its channel. The words the
+    /// event log says too, with the command that starts it; `None` when no
+    /// mission waits so (and from a station that predates it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mission_held: Option<String>,
 }
 
 /// A mission the station sent a robot.
@@ -173,6 +179,7 @@ impl RobotView {
             autopilot: None,
             safety: None,
             sent_mission: None,
+            mission_held: None,
         }
     }
 }

@@ -7,11 +7,16 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use mech_core::{CoreConfig, Gcs};
+use mech_gcs::ui::theme::Theme;
+use mech_gcs::ui::waypoints::WaypointPanel;
 use mech_gcs::ui::{Action, App, LinkState, Select, StationLink};
 use mech_proto::Waypoint;
 use mech_station::client::{AttachOptions, attach_stream};
 use mech_station::wire::{FromStation, Streams};
 use mech_station::{Station, StationConfig};
+use ratatui::buffer::Buffer;
+use ratatui::layout::Rect;
+use ratatui::widgets::Widget;
 use tokio::sync::mpsc;
 
 /// A station with simulated robots, and a TUI's App attached to it.
@@ -188,6 +193,86 @@ async fn app_requests_reach_simulated_robots() {
                 .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
     })
     .await;
+    rig.stop().await;
+}
+
+/// The waypoint panel alone, drawn `w` wide and 12 high, as text.
+fn waypoint_panel(app: &App, w: u16) -> String {
+    let area = Rect::new(0, 0, w, 12);
+    let mut buf = Buffer::empty(area);
+    WaypointPanel {
+        app,
+        theme: Theme::new(true),
+    }
+    .render(area, &mut buf);
+    (0..area.height)
+        .map(|y| {
+            (0..area.width)
+                .map(|x| buf[(x, y)].symbol())
+                .collect::<String>()
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mission_sent_to_a_robot_routed_to_none_says_why_it_waits_and_how_to_start_it() {
+    let mut rig = Rig::start(1).await;
+    let held = "robot_1 holds mission";
+    let how = "it starts when routed to wp/gcs (`route robot_1 wp/gcs`)";
+    // As an operator would: `e 3.5,2.5`, `s`, the robot routed to none.
+    rig.app
+        .update(Action::Select(Select::Only("robot_1".into())));
+    rig.app.update(Action::AddWaypoint(Waypoint {
+        x: 3.5,
+        y: 2.5,
+        z: 0.0,
+        time: None,
+    }));
+    rig.app.update(Action::SendWaypoints);
+    rig.carry_all();
+    rig.wait_for(
+        "the held mission in the log",
+        Duration::from_secs(20),
+        |a| {
+            a.events
+                .iter()
+                .any(|l| l.text.starts_with(held) && l.text.ends_with(how))
+        },
+    )
+    .await;
+    rig.wait_for(
+        "the held mission in the snapshot",
+        Duration::from_secs(20),
+        |a| a.robot("robot_1").is_some_and(|r| r.mission_held.is_some()),
+    )
+    .await;
+    let panel = waypoint_panel(&rig.app, 40);
+    // The panel's words, its borders and line breaks left out.
+    let words = panel
+        .replace('│', " ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(
+        words.contains(held) && words.contains(how),
+        "the waypoint panel says why:\n{panel}"
+    );
+
+    // Routed to the mission's channel, the robot runs it: the panel no
+    // longer says it waits.
+    rig.app.update(Action::Route {
+        robot: "robot_1".into(),
+        channel: "wp/gcs".into(),
+    });
+    rig.carry_all();
+    rig.wait_for("the mission running", Duration::from_secs(20), |a| {
+        a.robot("robot_1")
+            .is_some_and(|r| r.mission_held.is_none() && r.route.channel == "wp/gcs")
+    })
+    .await;
+    let panel = waypoint_panel(&rig.app, 40);
+    assert!(!panel.contains("holds"), "{panel}");
     rig.stop().await;
 }
 

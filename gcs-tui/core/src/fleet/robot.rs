@@ -59,6 +59,25 @@ pub struct SentMission {
     pub delivery: MissionDelivery,
 }
 
+impl SentMission {
+    /// Why the robot does not run this mission although it stored it: it
+    /// runs a mission only while routed to the mission's channel, and
+    /// `route` (the robot's route now, `None` = none) is another.
+    pub fn held(&self, robot: &str, route: Option<&str>) -> Option<String> {
+        (self.delivery == MissionDelivery::Acked && route != Some(self.channel.as_str()))
+            .then(|| held_mission_text(robot, self.id, &self.channel))
+    }
+}
+
+/// What the operator is told of a mission a robot stored but does not run,
+/// as its channel is not the robot's route: the same words in the event
+/// log and on the waypoint panel, with the command that starts it.
+pub fn held_mission_text(robot: &str, id: u32, channel: &str) -> String {
+    format!(
+        "{robot} holds mission {id}; it starts when routed to {channel} (`route {robot} {channel}`)"
+    )
+}
+
 /// A robot's waypoints: the list being edited in the GCS (`draft`) and the
 /// last mission sent.
 #[derive(Debug, Clone, Default, PartialEq)]

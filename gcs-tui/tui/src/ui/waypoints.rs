@@ -1,5 +1,6 @@
 //! The waypoint panel: the list being edited (newest first), where it will
-//! be sent, and the mission progress of the selected robots.
+//! be sent, and the mission progress of the selected robots, or why one
+//! holds a mission it does not run.
 
 use ratatui::buffer::Buffer;
 use ratatui::layout::Rect;
@@ -55,24 +56,7 @@ impl Widget for WaypointPanel<'_> {
             Span::raw(to),
             Span::styled(format!(" on {WAYPOINT_CHANNEL}"), t.dim()),
         ]));
-        for r in app
-            .fleet
-            .robots
-            .iter()
-            .filter(|r| app.cards.selection.contains(&r.name))
-        {
-            if let Some(m) = r.mission {
-                let state = if m.next >= m.total {
-                    Span::styled("arrived", t.ok())
-                } else {
-                    Span::raw(format!("to wp {}/{}", m.next + 1, m.total))
-                };
-                lines.push(Line::from(vec![
-                    Span::raw(format!(" {} mission {} ", r.name, m.id)),
-                    state,
-                ]));
-            }
-        }
+        lines.extend(mission_lines(app, t, inner.width));
         let n = app.waypoints.list.len();
         for (k, w) in app.waypoints.list.iter().enumerate().rev() {
             let time = w.time.map(|s| format!(" t {s:.1}s")).unwrap_or_default();
@@ -97,5 +81,80 @@ impl Widget for WaypointPanel<'_> {
             ));
         }
         Paragraph::new(lines).render(inner, buf);
+    }
+}
+
+/// The selected robots' missions: the progress of each one runs, and, for
+/// one that stores the station's mission but is routed elsewhere, why it
+/// stands still and the command that starts it (wrapped to `width`).
+fn mission_lines(app: &App, t: Theme, width: u16) -> Vec<Line<'static>> {
+    let mut lines = Vec::new();
+    for r in app
+        .fleet
+        .robots
+        .iter()
+        .filter(|r| app.cards.selection.contains(&r.name))
+    {
+        if let Some(held) = &r.mission_held {
+            let rows = wrap_words(held, usize::from(width).saturating_sub(1));
+            lines.extend(
+                rows.into_iter()
+                    .map(|row| Line::styled(format!(" {row}"), t.warn())),
+            );
+        } else if let Some(m) = r.mission {
+            let state = if m.next >= m.total {
+                Span::styled("arrived", t.ok())
+            } else {
+                Span::raw(format!("to wp {}/{}", m.next + 1, m.total))
+            };
+            lines.push(Line::from(vec![
+                Span::raw(format!(" {} mission {} ", r.name, m.id)),
+                state,
+            ]));
+        }
+    }
+    lines
+}
+
+/// `text` in rows of at most `width` characters, broken between words (a
+/// word longer than a row is cut).
+fn wrap_words(text: &str, width: usize) -> Vec<String> {
+    let width = width.max(1);
+    let mut rows: Vec<String> = Vec::new();
+    let mut row = String::new();
+    for word in text.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        let taken = row.chars().count();
+        if taken > 0 && taken + 1 + word.len() <= width {
+            row.push(' ');
+            row.extend(word);
+            continue;
+        }
+        if taken > 0 {
+            rows.push(std::mem::take(&mut row));
+        }
+        while word.len() > width {
+            rows.push(word.drain(..width).collect());
+        }
+        row.extend(word);
+    }
+    if !row.is_empty() {
+        rows.push(row);
+    }
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_note_wraps_between_words_and_cuts_only_a_word_longer_than_a_row() {
+        assert_eq!(
+            wrap_words("robot_1 holds mission 3; it starts", 16),
+            vec!["robot_1 holds", "mission 3; it", "starts"]
+        );
+        assert_eq!(wrap_words("abcdefgh ij", 3), vec!["abc", "def", "gh", "ij"]);
+        assert!(wrap_words("", 10).is_empty());
     }
 }

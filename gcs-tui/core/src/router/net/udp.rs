@@ -95,7 +95,9 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
                 continue;
             }
         };
-        // The one clock reading of a batch: when it arrived.
+        // When the batch arrived, for polling only: the tables read their
+        // own time once they hold their lock, so their decisions (and the
+        // recording's times) follow the order they are made in.
         let arrived = Instant::now();
         poll.came(arrived - last_arrived, n, polling);
         last_arrived = arrived;
@@ -104,7 +106,7 @@ fn udp_worker(shared: Arc<Shared>, socket: Arc<std::net::UdpSocket>, poll: Durat
         // A full batch: more datagrams wait in the socket.
         let behind = n == BATCH;
         let take = |i, fx: &mut Effects| decided.take(i, fx);
-        let ticket = shared.decide_each(arrived, n, message, behind, &mut fx, take);
+        let ticket = shared.decide_each(n, message, behind, &mut fx, take);
         shared.events.deliver(ticket);
         send_decided(&shared, fd, &mut sender, &received, &mut decided);
         polling_until = poll.next().map(|budget| arrived + budget);
