@@ -44,7 +44,7 @@ started=$SECONDS
 say() { printf '[packages %4d s] %s\n' $((SECONDS - started)) "$*"; }
 
 # Runs a command in `root` with /proc and /dev, in a mount namespace.
-in() {
+run_in() {
     local root=$1
     shift
     unshare --mount --propagation private -- /bin/sh -euc '
@@ -53,7 +53,7 @@ in() {
         mount -t proc proc "$root/proc"
         mount --bind /dev "$root/dev"
         exec chroot "$root" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 "$@"
-    ' in "$root" "$@"
+    ' run_in "$root" "$@"
 }
 
 cleanup() { rm -rf "$clean"; }
@@ -99,10 +99,10 @@ mmdebstrap --quiet --variant=minbase --include=systemd,adduser bookworm "$clean"
     http://deb.debian.org/debian
 cp "$(deb mech-agent amd64)" "$(deb mech-gcs amd64)" "$clean/tmp/"
 say "dpkg -i mech-agent and mech-gcs"
-in "$clean" dpkg -i "/tmp/$(basename "$(deb mech-agent amd64)")" \
+run_in "$clean" dpkg -i "/tmp/$(basename "$(deb mech-agent amd64)")" \
     "/tmp/$(basename "$(deb mech-gcs amd64)")" || fail "dpkg -i"
 for pkg in mech-agent mech-gcs; do
-    in "$clean" dpkg -L "$pkg" | sed "s/^/    $pkg: /"
+    run_in "$clean" dpkg -L "$pkg" | sed "s/^/    $pkg: /"
 done
 for path in /usr/bin/mech-agent /usr/bin/mech-gcs /etc/mech/agent.toml /etc/mech/gcs.toml \
     /lib/systemd/system/mech-agent.service /lib/systemd/system/mech-gcs.service; do
@@ -110,27 +110,27 @@ for path in /usr/bin/mech-agent /usr/bin/mech-gcs /etc/mech/agent.toml /etc/mech
 done
 # The configuration files are conffiles: an upgrade keeps a robot's edits.
 for pkg in mech-agent:agent mech-gcs:gcs; do
-    in "$clean" dpkg-query -W -f='${Conffiles}\n' "${pkg%:*}" | grep -q "/etc/mech/${pkg#*:}.toml" ||
+    run_in "$clean" dpkg-query -W -f='${Conffiles}\n' "${pkg%:*}" | grep -q "/etc/mech/${pkg#*:}.toml" ||
         fail "/etc/mech/${pkg#*:}.toml is not a conffile of ${pkg%:*}"
 done
 # The user: a system user without a login shell.
-user=$(in "$clean" getent passwd mech || true)
+user=$(run_in "$clean" getent passwd mech || true)
 say "user: $user"
 IFS=: read -r _ _ uid _ _ _ shell <<<"$user"
 if [ -z "$user" ] || [ "$uid" -ge 1000 ] || [ "$shell" != /usr/sbin/nologin ]; then
     fail "the mech user: '$user' (expected a system user with /usr/sbin/nologin)"
 fi
-keys=$(in "$clean" stat -c '%U:%G %a' /etc/mech/keys)
+keys=$(run_in "$clean" stat -c '%U:%G %a' /etc/mech/keys)
 say "/etc/mech/keys: $keys"
 [ "$keys" = "mech:mech 700" ] || fail "/etc/mech/keys is $keys, expected mech:mech 700"
 # The units, as systemd reads them (the binaries they start, the user).
-verify=$(in "$clean" systemd-analyze verify mech-agent.service mech-gcs.service 2>&1) ||
+verify=$(run_in "$clean" systemd-analyze verify mech-agent.service mech-gcs.service 2>&1) ||
     fail "systemd-analyze verify: $verify"
 echo "$verify" | sed 's/^/    verify: /'
 [ -z "$verify" ] || fail "systemd-analyze verify said: $verify"
 # The installed agent's --check, as the service runs it.
 set +e
-check=$(in "$clean" runuser -u mech -- mech-agent --config /etc/mech/agent.toml --check 2>&1)
+check=$(run_in "$clean" runuser -u mech -- mech-agent --config /etc/mech/agent.toml --check 2>&1)
 rc=$?
 set -e
 echo "$check" | sed 's/^/    /'
@@ -143,26 +143,26 @@ fi
 # missing; made as it says (as the mech user), it passes, and nobody
 # else can read them.
 set +e
-check=$(in "$clean" runuser -u mech -- mech-gcs --config /etc/mech/gcs.toml --check 2>&1)
+check=$(run_in "$clean" runuser -u mech -- mech-gcs --config /etc/mech/gcs.toml --check 2>&1)
 rc=$?
 set -e
 echo "$check" | sed 's/^/    /'
 [ $rc -eq 1 ] && [ "$(grep -c 'does not exist; make it with' <<<"$check")" -eq 4 ] ||
     fail "installed mech-gcs --check: exit $rc, expected 1 naming four missing keys"
 for name in robot_1 matlab operator button; do
-    in "$clean" runuser -u mech -- mech-gcs keygen "$name" --out "/etc/mech/keys/$name.key" >/dev/null ||
+    run_in "$clean" runuser -u mech -- mech-gcs keygen "$name" --out "/etc/mech/keys/$name.key" >/dev/null ||
         fail "keygen $name as mech"
 done
-mode=$(in "$clean" stat -c '%U %a' /etc/mech/keys/robot_1.key)
+mode=$(run_in "$clean" stat -c '%U %a' /etc/mech/keys/robot_1.key)
 [ "$mode" = "mech 600" ] || fail "a key made as mech is '$mode', expected 'mech 600'"
-if in "$clean" runuser -u nobody -- cat /etc/mech/keys/robot_1.key >/dev/null 2>&1; then
+if run_in "$clean" runuser -u nobody -- cat /etc/mech/keys/robot_1.key >/dev/null 2>&1; then
     fail "another user can read a key"
 fi
-check=$(in "$clean" runuser -u mech -- mech-gcs --config /etc/mech/gcs.toml --check 2>&1) ||
+check=$(run_in "$clean" runuser -u mech -- mech-gcs --config /etc/mech/gcs.toml --check 2>&1) ||
     fail "installed mech-gcs --check with its keys: $check"
 echo "    $check"
 # Purged, both go; the keys and the user stay.
-in "$clean" dpkg --purge mech-agent mech-gcs >/dev/null || fail "dpkg --purge"
+run_in "$clean" dpkg --purge mech-agent mech-gcs >/dev/null || fail "dpkg --purge"
 for path in /usr/bin/mech-agent /usr/bin/mech-gcs /etc/mech/agent.toml /etc/mech/gcs.toml; do
     [ ! -e "$clean$path" ] || fail "$path is still there after the purge"
 done
@@ -172,15 +172,18 @@ done
 say "lintian"
 mkdir -p "$build_root/tmp/debs"
 cp "$debs"/*.deb "$build_root/tmp/debs/"
+inside=()
+for f in "$debs"/*.deb; do inside+=("/tmp/debs/$(basename "$f")"); done
 set +e
-verdict=$(in "$build_root" lintian --info --no-tag-display-limit /tmp/debs/*.deb 2>&1)
+verdict=$(run_in "$build_root" lintian --fail-on error --tag-display-limit 0 "${inside[@]}" 2>&1)
+rc=$?
 set -e
 rm -rf "$build_root/tmp/debs"
-echo "$verdict" | grep -E '^[EWI]: ' | sed 's/^/    /' || true
+echo "$verdict" | grep -v '^running with root privileges' | sed 's/^/    /' || true
 errors=$(grep -c '^E: ' <<<"$verdict" || true)
 warnings=$(grep -c '^W: ' <<<"$verdict" || true)
-say "lintian: $errors errors, $warnings warnings"
-[ "$errors" -eq 0 ] || fail "lintian found $errors errors"
+say "lintian on ${#inside[@]} packages: $errors errors, $warnings warnings (exit $rc)"
+[ "$rc" -eq 0 ] && [ "$errors" -eq 0 ] || fail "lintian: exit $rc, $errors errors"
 
 if [ ${#failures[@]} -gt 0 ]; then
     printf 'package check FAILED:\n' >&2
