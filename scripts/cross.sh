@@ -71,6 +71,14 @@ mirror=http://deb.debian.org/debian
 step_started=$SECONDS
 say() { printf '[cross %4d s] %s\n' $((SECONDS - step_started)) "$*"; }
 
+# amd64 first, on the host with the machine's own Rust toolchain (see
+# below): it needs no root, so it compiles while the root is made (mostly
+# downloads) and cargo-deb built. Stopped with the script, failed or not.
+CARGO_TARGET_DIR="$out/build-amd64" cargo build --profile dist --locked --quiet \
+    --features mech-agent/rpi --target x86_64-unknown-linux-gnu -p mech-agent -p mech-gcs &
+amd64=$!
+trap 'kill "$amd64" 2>/dev/null || true' EXIT
+
 # The host's tools: mmdebstrap makes the root.
 if ! command -v mmdebstrap >/dev/null; then
     say "installing mmdebstrap"
@@ -143,10 +151,10 @@ fi
 # Three builds side by side, so that one's linking overlaps another's
 # compiling, each with a target directory of its own: in the root, arm64
 # (agent and station) and armhf (agent); on the host, with the machine's
-# own Rust toolchain, amd64 (agent and station). The amd64 binaries so take
-# the host's C library (the packages are checked on Debian bookworm: build
-# them on bookworm), and its compiler, which builds them in about half the
-# CPU time Debian's takes.
+# own Rust toolchain, amd64 (agent and station, started above). The amd64
+# binaries so take the host's C library (the packages are checked on
+# Debian bookworm: build them on bookworm), and its compiler, which builds
+# them in about half the CPU time Debian's takes.
 say "building: arm64 (mech-agent, mech-gcs), armhf (mech-agent), amd64 (both)"
 in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build" /bin/sh -c \
     'cd /src && cargo build --profile dist --locked --quiet --features mech-agent/rpi \
@@ -156,9 +164,6 @@ in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build-armhf" /bin/sh -c \
     'cd /src && cargo build --profile dist --locked --quiet --features rpi \
         --target armv7-unknown-linux-gnueabihf -p mech-agent' &
 armhf=$!
-CARGO_TARGET_DIR="$out/build-amd64" cargo build --profile dist --locked --quiet \
-    --features mech-agent/rpi --target x86_64-unknown-linux-gnu -p mech-agent -p mech-gcs &
-amd64=$!
 failed=()
 wait "$arm64" || failed+=(arm64)
 wait "$armhf" || failed+=(armhf)

@@ -39,8 +39,11 @@ fn the_map_shows_the_arena_and_a_card_the_layer_stopping_a_robot_at_the_wall() {
     }
     let state = std::env::temp_dir().join(format!("mech-e2e-safety-{}", std::process::id()));
     std::fs::create_dir_all(&state).expect("temp dir");
-    let arena = state.join("arena.toml");
-    std::fs::write(&arena, ARENA).expect("arena file");
+    // An operator names a file in the station's missions directory
+    // (docs/commands.md, *Files a command names*).
+    let missions = state.join("mech").join("missions");
+    std::fs::create_dir_all(&missions).expect("missions dir");
+    std::fs::write(missions.join("arena.toml"), ARENA).expect("arena file");
     let tmux = Tmux {
         socket: format!("mech-e2e-safety-{}", std::process::id()),
         session: "gcs".into(),
@@ -48,7 +51,7 @@ fn the_map_shows_the_arena_and_a_card_the_layer_stopping_a_robot_at_the_wall() {
     };
     let gcs = mech_e2e::binary("mech-gcs");
     let cmd = format!(
-        "XDG_STATE_HOME={} {} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
+        "XDG_STATE_HOME={0} XDG_DATA_HOME={0} {1} --demo 2 --udp 127.0.0.1:0 --tcp 127.0.0.1:0",
         state.display(),
         gcs.display()
     );
@@ -77,7 +80,7 @@ fn the_map_shows_the_arena_and_a_card_the_layer_stopping_a_robot_at_the_wall() {
 
     // The arena file: a keep-out and a slow zone more on the map.
     tmux.keys(&[":"]);
-    tmux.literal(&format!("arena load {}", arena.display()));
+    tmux.literal("arena load arena.toml");
     tmux.keys(&["Enter"]);
     tmux.wait_for("the arena loaded", Duration::from_secs(10), |s| {
         s.contains("1 keep-out, 1 slow zone")
