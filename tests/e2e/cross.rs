@@ -3,7 +3,7 @@
 //! this machine against the x86 station, as they would on a robot:
 //!
 //! - each agent, with the Pi robot's own config (`--sim` for its wheels and
-//!   tag), registers, holds still until routed, drives a waypoint mission
+//!   tag), registers routed to none, drives a waypoint mission
 //!   to arrival, obeys an e-stop while a controller keeps commanding it,
 //!   drives again once released, and stops itself when the station goes
 //!   away (its telemetry, still sent to the station's address, reports a
@@ -261,7 +261,7 @@ fn drive_against_the_x86_station(arch: Arch) {
     let ctl = Controller::start(router, &[&robot], "ext/x", 0.15);
     station.wait_log("arrived", Duration::from_secs(420));
     report(&format!(
-        "{}: {robot} registered, held still unrouted, was routed to wp/gcs and \
+        "{}: {robot} registered routed to none, was routed to wp/gcs and \
          arrived at 0.6,0.4 (within 0.2 m) {:.0} s after it started",
         arch.debian,
         started.elapsed().as_secs_f64()
