@@ -5,7 +5,7 @@
 //! directories, nor replace an existing recording unasked
 //! (`docs/commands.md`, *Files a command names*).
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -101,24 +101,9 @@ impl Served {
             Via::Tcp => cmd.args(["--attach", &self.tcp, "--key"]).arg(&self.key),
             Via::Socket => cmd.arg("--attach").arg(&self.socket),
         };
-        let mut child = cmd
-            .args(["--script", "-"])
-            .env("XDG_STATE_HOME", self.dir.path())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("mech-gcs --attach --script starts");
-        child
-            .stdin
-            .take()
-            .expect("stdin")
-            .write_all(source.as_bytes())
-            .expect("script written");
-        let out = child.wait_with_output().expect("script ends");
-        let text = String::from_utf8_lossy(&out.stdout).into_owned()
-            + &String::from_utf8_lossy(&out.stderr);
-        (out.status.success(), text)
+        cmd.args(["--script", "-"])
+            .env("XDG_STATE_HOME", self.dir.path());
+        mech_e2e::harness::run_script(cmd, source)
     }
 
     fn outside(&self, name: &str) -> String {

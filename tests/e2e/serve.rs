@@ -77,27 +77,12 @@ impl Service {
     /// Runs a script attached to the station; returns its JSON lines and
     /// whether it passed.
     fn script(&self, source: &str) -> (bool, String) {
-        let mut child = Command::new(mech_e2e::binary("mech-gcs"))
-            .arg("--attach")
+        let mut cmd = Command::new(mech_e2e::binary("mech-gcs"));
+        cmd.arg("--attach")
             .arg(&self.socket)
             .args(["--script", "-"])
-            .env("XDG_STATE_HOME", &self.dir)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("mech-gcs --attach --script starts");
-        use std::io::Write;
-        child
-            .stdin
-            .take()
-            .expect("stdin")
-            .write_all(source.as_bytes())
-            .expect("script written");
-        let out = child.wait_with_output().expect("script ends");
-        let text = String::from_utf8_lossy(&out.stdout).into_owned()
-            + &String::from_utf8_lossy(&out.stderr);
-        (out.status.success(), text)
+            .env("XDG_STATE_HOME", &self.dir);
+        mech_e2e::harness::run_script(cmd, source)
     }
 
     /// A TUI attached to the station in a new tmux session (the TUI is the
