@@ -240,51 +240,66 @@ fn check_labels(map: &Map) -> Result<usize, String> {
     Ok(named.len())
 }
 
-/// The first word of each row of the fleet table (the robots' names).
-fn table_names(screen: &str) -> Vec<String> {
+/// The first word of each row of the fleet table (the robots' names), once
+/// the whole table is on the screen: every row closed by the table's right
+/// border and the bottom border under the last. A screen caught mid-draw
+/// (the table's top over the cards it replaces) reads as `None`.
+fn table_names(screen: &str) -> Option<Vec<String>> {
     let lines: Vec<Vec<char>> = screen.lines().map(|l| l.chars().collect()).collect();
-    let Some(top) = lines
+    let top = lines
         .iter()
-        .position(|l| l.iter().collect::<String>().contains("┌ Fleet"))
-    else {
-        return Vec::new();
-    };
-    let left = lines[top].iter().position(|&c| c == '┌').unwrap_or(0);
-    let right = (left + 1..lines[top].len())
-        .find(|&c| lines[top][c] == '┐')
-        .unwrap_or(lines[top].len());
-    lines[top + 2..]
+        .position(|l| l.iter().collect::<String>().contains("┌ Fleet"))?;
+    let left = lines[top].iter().position(|&c| c == '┌')?;
+    let right = (left + 1..lines[top].len()).find(|&c| lines[top][c] == '┐')?;
+    let rows: Vec<&Vec<char>> = lines[top + 1..]
         .iter()
-        .take_while(|l| l.get(left) == Some(&'│'))
-        .filter_map(|l| {
-            let inside: String = l.get(left + 1..right)?.iter().collect();
-            let word = inside
-                .split_whitespace()
-                .map(|w| w.trim_start_matches(|c: char| !c.is_ascii_alphanumeric()))
-                .find(|w| !w.is_empty())?;
-            word.starts_with("robot_").then(|| word.to_string())
-        })
-        .collect()
+        .take_while(|l| l.get(left) == Some(&'│') && l.get(right) == Some(&'│'))
+        .collect();
+    let bottom = lines.get(top + 1 + rows.len())?;
+    if bottom.get(left) != Some(&'└') || bottom.get(right) != Some(&'┘') {
+        return None;
+    }
+    Some(
+        rows.iter()
+            .skip(1)
+            .filter_map(|l| {
+                let inside: String = l.get(left + 1..right)?.iter().collect();
+                let word = inside
+                    .split_whitespace()
+                    .map(|w| w.trim_start_matches(|c: char| !c.is_ascii_alphanumeric()))
+                    .find(|w| !w.is_empty())?;
+                word.starts_with("robot_").then(|| word.to_string())
+            })
+            .collect(),
+    )
 }
 
 /// `v` opens the table in natural name order; `/robot_9` keeps robot_9 and
-/// robot_90..99.
+/// robot_90..99. A screen is read until it shows what is expected (a
+/// capture can land mid-draw); one that never does fails with the screen.
 fn check_table(tmux: &Tmux, w: u16, h: u16) {
+    let natural = |names: &[String]| {
+        names.len() >= 12
+            && names
+                .iter()
+                .enumerate()
+                .all(|(i, n)| *n == format!("robot_{}", i + 1))
+    };
     tmux.keys(&["v"]);
-    let screen = tmux.wait_for("the fleet table", Duration::from_secs(10), |s| {
-        s.contains("Fleet 100/100") && table_names(s).len() >= 12
-    });
-    let names = table_names(&screen);
-    let natural: Vec<String> = (1..=names.len()).map(|i| format!("robot_{i}")).collect();
-    assert_eq!(names, natural, "{w}x{h}: natural order\n{screen}");
+    tmux.wait_for(
+        &format!("{w}x{h}: the fleet table in natural order"),
+        Duration::from_secs(10),
+        |s| s.contains("Fleet 100/100") && table_names(s).is_some_and(|n| natural(&n)),
+    );
     tmux.keys(&["/"]);
     tmux.literal("robot_9");
-    let screen = tmux.wait_for("the filtered table", Duration::from_secs(10), |s| {
-        s.contains("Fleet 11/100")
-    });
     let mut expect = vec!["robot_9".to_string()];
     expect.extend((90..=99).map(|i| format!("robot_{i}")));
-    assert_eq!(table_names(&screen), expect, "{w}x{h}: /robot_9\n{screen}");
+    tmux.wait_for(
+        &format!("{w}x{h}: the table filtered by /robot_9 to robot_9 and robot_90..99"),
+        Duration::from_secs(10),
+        |s| s.contains("Fleet 11/100") && table_names(s).as_ref() == Some(&expect),
+    );
     tmux.keys(&["Escape"]);
 }
 
