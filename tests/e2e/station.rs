@@ -188,6 +188,19 @@ pub fn observe_telemetry(
     router: String,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) -> std::collections::HashMap<String, Vec<mech_proto::Telemetry>> {
+    observe_timed(router, stop)
+        .into_iter()
+        .map(|(robot, ts)| (robot, ts.into_iter().map(|(_, t)| t).collect()))
+        .collect()
+}
+
+/// [`observe_telemetry`] with the moment each message arrived: the
+/// samples of two robots are compared at one moment by it (their counts
+/// differ when the observer was late or a datagram was lost).
+pub fn observe_timed(
+    router: String,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::collections::HashMap<String, Vec<(Instant, mech_proto::Telemetry)>> {
     let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     socket
         .set_read_timeout(Some(Duration::from_millis(100)))
@@ -197,7 +210,8 @@ pub fn observe_telemetry(
         Body::Subscribe(Subscribe { telemetry: true }),
     ))
     .unwrap();
-    let mut seen = std::collections::HashMap::<String, Vec<mech_proto::Telemetry>>::new();
+    let mut seen =
+        std::collections::HashMap::<String, Vec<(Instant, mech_proto::Telemetry)>>::new();
     let mut renewed = Instant::now() - Duration::from_secs(10);
     let mut buf = vec![0; 65_536];
     while !stop.load(std::sync::atomic::Ordering::SeqCst) {
@@ -214,7 +228,9 @@ pub fn observe_telemetry(
             ..
         }) = mech_proto::decode(&buf[..n])
         {
-            seen.entry(header.sender).or_default().push(t);
+            seen.entry(header.sender)
+                .or_default()
+                .push((Instant::now(), t));
         }
     }
     seen
