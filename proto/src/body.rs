@@ -453,6 +453,11 @@ pub enum NoticeCode {
     /// The robot's fleet safety layer began limiting its commands, or was
     /// switched on or off (at most one notice per change).
     Safety = 7,
+    /// The station's permissions refused the receiver's message: its key
+    /// may not send that kind, or not on that channel (the text says
+    /// which). Sent only to a sender whose message was signed and fresh,
+    /// a few times a second at most.
+    NotPermitted = 8,
 }
 
 /// Error or notice, any direction, for humans and logs.

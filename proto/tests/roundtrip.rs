@@ -387,7 +387,7 @@ fn body() -> impl Strategy<Value = Body> {
                 formation,
             })
         });
-    let notice = (0..=3u8, 0..=7u16, text()).prop_map(|(level, code, text)| {
+    let notice = (0..=3u8, 0..=8u16, text()).prop_map(|(level, code, text)| {
         Body::Notice(Notice {
             level: [Level::Debug, Level::Info, Level::Warn, Level::Error][level as usize],
             code: [
@@ -399,6 +399,7 @@ fn body() -> impl Strategy<Value = Body> {
                 NoticeCode::Failsafe,
                 NoticeCode::DriverFault,
                 NoticeCode::Safety,
+                NoticeCode::NotPermitted,
             ][code as usize],
             text,
         })

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use mech_proto::NoticeCode;
 use mech_proto::auth::{Key, KeyText, private_mode};
 use tokio::sync::mpsc;
 use tracing::{error, info, warn};
@@ -256,13 +257,20 @@ impl Bridge {
                 if ack.accepted {
                     info!(%robot, id = ack.id, "goal accepted");
                 } else {
-                    warn!(%robot, id = ack.id, "goal refused by the robot: {}", ack.reason);
+                    // The robot's reason, or the station's when its
+                    // permissions refused the goal before the robot saw it.
+                    warn!(%robot, id = ack.id, "goal refused: {}", ack.reason);
                 }
                 goal.ack = Some((ack.accepted, ack.reason));
             }
             FromStation::Notice { from, notice } => {
                 let n = self.stats.notices.fetch_add(1, Ordering::Relaxed) + 1;
-                if worth_logging(n) {
+                // A refusal by the station's permissions is always said:
+                // the station sends a few a second at most.
+                if notice.code == NoticeCode::NotPermitted {
+                    self.stats.station_refusals.fetch_add(1, Ordering::Relaxed);
+                    warn!(%from, "the station refused a message of this bridge: {}", notice.text);
+                } else if worth_logging(n) {
                     warn!(%from, code = ?notice.code, notices = n, "notice from the station: {}", notice.text);
                 }
             }

@@ -41,6 +41,8 @@ pub struct Stats {
     pub send_failed: AtomicU64,
     /// Notices the station sent the bridge (logged, thinned out).
     pub notices: AtomicU64,
+    /// Of them, refusals by the station's permissions (each logged).
+    pub station_refusals: AtomicU64,
 }
 
 impl Stats {
@@ -75,6 +77,7 @@ impl Stats {
             link_rejected: get(&self.link_rejected),
             send_failed: get(&self.send_failed),
             notices: get(&self.notices),
+            station_refusals: get(&self.station_refusals),
         }
     }
 }
@@ -101,6 +104,7 @@ pub struct StatsSnapshot {
     pub link_rejected: u64,
     pub send_failed: u64,
     pub notices: u64,
+    pub station_refusals: u64,
 }
 
 impl StatsSnapshot {
@@ -125,6 +129,7 @@ impl StatsSnapshot {
             ("link_rejected", self.link_rejected),
             ("send_failed", self.send_failed),
             ("notices", self.notices),
+            ("station_refusals", self.station_refusals),
         ]
     }
 

@@ -385,10 +385,12 @@ fn at_a_station_with_keys_the_bridge_is_a_controller_its_auth_section_limits() {
     rig.script("route robot_2 ros2goal/robot_2\n");
     rig.node
         .ask(json!({"op": "goal", "robot": "robot_2", "x": 0.0, "y": 0.0, "frame": "map"}));
+    // Refused by the station's gate, and the bridge is told why at once
+    // (the station answers for the robot), not left to give up after 5 s.
     eventually(&mut rig, "the goal refused by the station's gate", |s| {
         (counter(s, "goals_sent") == 1
-            && counter(s, "goals_unacked") == 1
-            && counter(s, "goals_acked") == 0)
+            && counter(s, "goals_acked") == 1
+            && counter(s, "goals_unacked") == 0)
             .then_some(())
     });
     let station_log = std::fs::read_to_string(rig.dir.path().join("station.log")).unwrap();
@@ -397,6 +399,13 @@ fn at_a_station_with_keys_the_bridge_is_a_controller_its_auth_section_limits() {
             .lines()
             .any(|l| l.contains("refused") && l.contains("ros2goal/robot_2")),
         "the router says why:\n{station_log}"
+    );
+    let bridge_log = std::fs::read_to_string(rig.dir.path().join("bridge.log")).unwrap();
+    assert!(
+        bridge_log.lines().any(|l| l.contains(
+            "goal refused: refused by the station: controller ros2 may not publish on \"ros2goal/robot_2\""
+        )),
+        "the bridge says why:\n{bridge_log}"
     );
 
     rig.node.ask(json!({"op": "estop"}));

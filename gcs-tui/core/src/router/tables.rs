@@ -250,12 +250,20 @@ impl Tables {
     /// Encodes a message from the router itself, counted as sent to
     /// `destination` when that is a robot.
     fn make(&mut self, destination: &str, body: Body) -> Option<Vec<u8>> {
+        let sender = self.config.name.clone();
+        self.make_as(&sender, destination, body)
+    }
+
+    /// [`Tables::make`] with another name as the header's sender: the
+    /// router answering for a robot (a mission it refused before the robot
+    /// saw it). Signed by the router, as everything it sends.
+    fn make_as(&mut self, sender: &str, destination: &str, body: Body) -> Option<Vec<u8>> {
         self.seq = self.seq.wrapping_add(1);
         let station_us = mech_proto::unix_micros();
         let header = Header {
             seq: self.seq,
             stamp_us: station_us,
-            sender: self.config.name.clone(),
+            sender: sender.to_string(),
             destination: destination.to_string(),
             channel: String::new(),
         };
@@ -405,7 +413,8 @@ impl Tables {
                 Err(d) => return d,
             };
             let body = Body::Command(command);
-            if let Err(d) = self.permit(admitted, &body, head.channel, cx) {
+            let to = (head.destination, head.channel);
+            if let Err(d) = self.permit(admitted, &body, to, head.sender, cx) {
                 return d;
             }
             return self.route_command(&head, bytes, cx);
@@ -425,7 +434,8 @@ impl Tables {
             Ok(a) => a,
             Err(d) => return d,
         };
-        if let Err(d) = self.permit(admitted, &env.body, &env.header.channel, cx) {
+        let to = (env.header.destination.as_str(), env.header.channel.as_str());
+        if let Err(d) = self.permit(admitted, &env.body, to, sender, cx) {
             return d;
         }
         if let Body::TimeRequest(request) = env.body {

@@ -10,8 +10,12 @@
 
 mod time;
 
+use std::collections::HashMap;
+use std::time::Duration;
+
 use mech_proto::auth::{FROM_ROUTER, Stamper, Tag, split};
-use mech_proto::{Body, Time, TimeRequest};
+use mech_proto::{Body, Level, MissionAck, Notice, NoticeCode, Time, TimeRequest};
+use tokio::time::Instant;
 use tracing::warn;
 
 use super::refusals::{Source, Why};
@@ -47,6 +51,34 @@ pub(super) struct Gate {
     rejected: Rejections,
     /// Which time requests were answered.
     time_answers: TimeAnswers,
+    /// When each key was last told why the station's permissions refused
+    /// it (see [`Tables::permit`]).
+    told: Told,
+}
+
+/// The replies to senders refused by the station's permissions: at most
+/// [`Told::BURST`] per key in any [`Told::WINDOW`]. Only keys that signed
+/// a fresh message are told, so the map holds at most one entry per key
+/// the station lists.
+#[derive(Debug, Default)]
+struct Told {
+    /// Per key id: the window's start and the replies sent in it.
+    by_key: HashMap<u32, (Instant, u32)>,
+}
+
+impl Told {
+    const WINDOW: Duration = Duration::from_secs(1);
+    const BURST: u32 = 4;
+
+    /// Whether key `id` may be told once more at `now` (counted if so).
+    fn take(&mut self, id: u32, now: Instant) -> bool {
+        let (start, n) = self.by_key.entry(id).or_insert((now, 0));
+        if now.saturating_duration_since(*start) >= Self::WINDOW {
+            (*start, *n) = (now, 0);
+        }
+        *n += 1;
+        *n <= Self::BURST
+    }
 }
 
 impl Gate {
@@ -56,6 +88,7 @@ impl Gate {
             stamper: Stamper::default(),
             rejected: Rejections::default(),
             time_answers: TimeAnswers::default(),
+            told: Told::default(),
         }
     }
 
@@ -159,14 +192,22 @@ impl Tables {
         checked.map_err(|r| self.reject(r, cx))
     }
 
-    /// Checks that the key `admitted` may send `body` on `channel`.
+    /// Checks that the key `admitted` may send `body` on `channel` (to
+    /// `destination`). A refused sender is told why, as its message proved
+    /// it holds its key and is fresh (a stranger's or a copy never gets
+    /// this far), and at most [`Told::BURST`] times a second per key: a
+    /// refused mission gets the robot's answer, a [`MissionAck`] that
+    /// refuses it, so that a client waiting for one learns why at once;
+    /// anything else a [`NoticeCode::NotPermitted`] notice.
     pub(super) fn permit(
         &mut self,
         admitted: Admitted,
         body: &Body,
-        channel: &str,
+        to: (&str, &str),
+        sender: &str,
         cx: &mut Ctx<'_>,
     ) -> Result<(), Delivery> {
+        let (destination, channel) = to;
         let (Some(id), Some(keys)) = (admitted, self.gate.keys.as_ref()) else {
             return Ok(());
         };
@@ -174,16 +215,38 @@ impl Tables {
             Some(identity) => identity.permits(body, channel),
             None => Some(format!("key {id:08x} was removed")),
         };
-        match why {
-            None => Ok(()),
-            Some(detail) => {
-                let r = Rejection {
-                    reason: RejectReason::NotPermitted,
-                    detail,
-                };
-                Err(self.reject(r, cx))
+        let Some(detail) = why else {
+            return Ok(());
+        };
+        if self.gate.told.take(id, cx.now) {
+            let reason = format!("refused by the station: {detail}");
+            let (from, reply) = match body {
+                Body::Mission(m) => (
+                    destination.to_string(),
+                    Body::MissionAck(MissionAck {
+                        id: m.id,
+                        accepted: false,
+                        reason,
+                    }),
+                ),
+                _ => (
+                    self.config.name.clone(),
+                    Body::Notice(Notice {
+                        level: Level::Warn,
+                        code: NoticeCode::NotPermitted,
+                        text: format!("{} to {destination} {reason}", body.kind()),
+                    }),
+                ),
+            };
+            if let Some(b) = self.make_as(&from, sender, reply) {
+                cx.send(cx.from, b);
             }
         }
+        let r = Rejection {
+            reason: RejectReason::NotPermitted,
+            detail,
+        };
+        Err(self.reject(r, cx))
     }
 
     /// Counts a rejection of the message from `cx.from` and reports it
@@ -487,5 +550,123 @@ mod tests {
         // the same bytes again are refused by the stream.
         assert_eq!(decide(&mut t, &fresh, robot, t0), []);
         assert_eq!(t.rejections().replay, 2);
+    }
+
+    /// A planner whose key may publish on `wp/planner` only.
+    fn planner_tables() -> Tables {
+        let planner = Identity::new(
+            Role::Controller,
+            "planner",
+            Key::new(&[7; 32]),
+            vec!["wp/planner".into()],
+        );
+        let ring = Keyring::new(
+            vec![planner],
+            Duration::from_secs(10),
+            mech_proto::unix_micros(),
+        );
+        Tables::new(RouterConfig::default(), Some(ring))
+    }
+
+    /// `body` from the planner to robot_1 on `channel`, signed with `key`
+    /// at `stamp_us`.
+    fn from_planner(body: Body, channel: &str, key: &Key, stamp_us: u64) -> Vec<u8> {
+        let header = Header {
+            sender: "planner".into(),
+            destination: "robot_1".into(),
+            channel: channel.into(),
+            ..Header::default()
+        };
+        let mut b = mech_proto::encode(&Envelope::new(header, body)).unwrap();
+        key.seal(&mut b, 0, stamp_us).unwrap();
+        b
+    }
+
+    /// Everything the router sent for `bytes` from `from` at `now`.
+    fn answers(t: &mut Tables, bytes: &[u8], from: Peer, now: Instant) -> Vec<(Peer, Envelope)> {
+        let mut fx = Effects::default();
+        t.handle(bytes, &mut Ctx::new(now, from, &mut fx));
+        let Outbox { owned, .. } = fx.out;
+        owned
+            .into_iter()
+            .map(|(p, b)| (p, mech_proto::decode(&b).unwrap()))
+            .collect()
+    }
+
+    /// A holder refused by the station's permissions is told why, in its
+    /// own answer: a mission gets robot_1's refusing MissionAck, a command
+    /// a not-permitted notice; at most `Told::BURST` a second per key, and
+    /// a forgery in the holder's name gets nothing back.
+    #[test]
+    fn a_holder_refused_by_permissions_is_told_why_a_few_times_a_second() {
+        let mut t = planner_tables();
+        let (key, from, t0) = (Key::new(&[7; 32]), peer(9300), Instant::now());
+        let stamp = mech_proto::unix_micros();
+        let mission = Body::Mission(mech_proto::Mission {
+            id: 17,
+            waypoints: vec![],
+            looped: false,
+            arrival_radius: 0.1,
+            start_index: 0,
+        });
+        let sent = answers(
+            &mut t,
+            &from_planner(mission.clone(), "wp/gcs", &key, stamp),
+            from,
+            t0,
+        );
+        assert_eq!(sent.len(), 1, "{sent:?}");
+        let (to, env) = &sent[0];
+        assert_eq!(*to, from);
+        assert_eq!(env.header.sender, "robot_1");
+        assert_eq!(env.header.destination, "planner");
+        let Body::MissionAck(ack) = &env.body else {
+            panic!("{env:?}");
+        };
+        assert_eq!(ack.id, 17);
+        assert!(!ack.accepted);
+        assert_eq!(
+            ack.reason,
+            "refused by the station: controller planner may not publish on \"wp/gcs\""
+        );
+        let twist = Body::Command(mech_proto::Command::Twist(mech_proto::Twist::default()));
+        let sent = answers(
+            &mut t,
+            &from_planner(twist.clone(), "ext/x", &key, stamp + 1),
+            from,
+            t0,
+        );
+        let Body::Notice(n) = &sent[0].1.body else {
+            panic!("{sent:?}");
+        };
+        assert_eq!(n.code, NoticeCode::NotPermitted);
+        assert!(
+            n.text.contains("may not publish on \"ext/x\""),
+            "{}",
+            n.text
+        );
+        // Ten more in the same second: two more answers (four in all).
+        let told: usize = (2..12)
+            .map(|k| {
+                let b = from_planner(twist.clone(), "ext/x", &key, stamp + k);
+                answers(&mut t, &b, from, t0 + Duration::from_millis(k * 10)).len()
+            })
+            .sum();
+        assert_eq!(told, 2);
+        assert_eq!(t.gate.rejections().not_permitted, 12);
+        // A second later, told again.
+        let b = from_planner(twist.clone(), "ext/x", &key, stamp + 20);
+        assert_eq!(
+            answers(&mut t, &b, from, t0 + Duration::from_secs(1)).len(),
+            1
+        );
+        // Signed with another key in the planner's name: refused earlier,
+        // and never answered.
+        let later = t0 + Duration::from_secs(5);
+        let forged = from_planner(mission, "wp/gcs", &Key::new(&[8; 32]), stamp + 30);
+        assert!(answers(&mut t, &forged, peer(9301), later).is_empty());
+        // A copy of a refused message (its stamp no longer fresh): nothing.
+        let copy = from_planner(twist, "ext/x", &key, stamp + 20);
+        assert!(answers(&mut t, &copy, peer(9302), later).is_empty());
     }
 }
