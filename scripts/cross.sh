@@ -53,8 +53,6 @@ fi
 
 out=target/cross
 root=$out/root
-# cargo-deb, the one packaging tool: Debian package metadata stays in the
-# crates' Cargo.toml ([package.metadata.deb]).
 cargo_deb_version=3.7.0
 # What the root holds: the toolchain and, for each architecture, its
 # standard library, C compiler and libudev; dpkg-dev (dpkg-shlibdeps
@@ -72,12 +70,24 @@ step_started=$SECONDS
 say() { printf '[cross %4d s] %s\n' $((SECONDS - step_started)) "$*"; }
 
 # amd64 first, on the host with the machine's own Rust toolchain (see
-# below): it needs no root, so it compiles while the root is made (mostly
-# downloads) and cargo-deb built. Stopped with the script, failed or not.
+# below), and cargo-deb beside it: neither needs the root, so both compile
+# while the root is made (mostly downloads). Stopped with the script,
+# failed or not.
 CARGO_TARGET_DIR="$out/build-amd64" cargo build --profile dist --locked --quiet \
     --features mech-agent/rpi --target x86_64-unknown-linux-gnu -p mech-agent -p mech-gcs &
 amd64=$!
-trap 'kill "$amd64" 2>/dev/null || true' EXIT
+# cargo-deb, the one packaging tool (Debian package metadata stays in the
+# crates' Cargo.toml, [package.metadata.deb]), built by the host's
+# toolchain (unoptimised: it packs five packages, and builds in a third of
+# the time; it needs glibc 2.36, so it runs in the trixie root too).
+tools=$out/tools
+cargo_deb=
+if ! "$tools/bin/cargo-deb" --version 2>/dev/null | grep -q "$cargo_deb_version"; then
+    cargo install --quiet --locked --debug cargo-deb --version "$cargo_deb_version" \
+        --root "$tools" &
+    cargo_deb=$!
+fi
+trap 'kill $amd64 $cargo_deb 2>/dev/null || true' EXIT
 
 # The host's tools: mmdebstrap makes the root.
 if ! command -v mmdebstrap >/dev/null; then
@@ -139,15 +149,6 @@ in_root() {
     ' in_root "$PWD/$root" "$PWD" "$cargo_home" "$cainfo" "$@"
 }
 
-# cargo-deb, built by the root's toolchain (unoptimised: it packs five
-# packages, and builds in half the time).
-tools=$out/tools
-if ! in_root "/src/$tools/bin/cargo-deb" --version 2>/dev/null | grep -q "$cargo_deb_version"; then
-    say "building cargo-deb $cargo_deb_version"
-    in_root cargo install --quiet --locked --debug cargo-deb --version "$cargo_deb_version" \
-        --root "/src/$tools"
-fi
-
 # Three builds side by side, so that one's linking overlaps another's
 # compiling, each with a target directory of its own: in the root, arm64
 # (agent and station) and armhf (agent); on the host, with the machine's
@@ -168,6 +169,7 @@ failed=()
 wait "$arm64" || failed+=(arm64)
 wait "$armhf" || failed+=(armhf)
 wait "$amd64" || failed+=(amd64)
+[ -z "$cargo_deb" ] || wait "$cargo_deb" || failed+=(cargo-deb)
 [ ${#failed[@]} -eq 0 ] || {
     echo "cross build failed: ${failed[*]}" >&2
     exit 1
