@@ -475,3 +475,67 @@ fn the_default_build_leaves_zenoh_out() {
         );
     }
 }
+
+/// The crate graph `docs/architecture.md` states in its table ("Each
+/// crate's library and binary use these of MECH's crates") is the
+/// manifests' `[dependencies]`: a crate that starts using another, or stops,
+/// fails here until the doc says so.
+#[test]
+fn the_architecture_doc_states_the_crate_graph_of_the_manifests() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(&cargo)
+        .current_dir(workspace())
+        .args(["metadata", "--format-version", "1", "--no-deps", "--offline"])
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        out.status.success(),
+        "cargo metadata: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).expect("metadata is JSON");
+    let manifests: BTreeMap<String, BTreeSet<String>> = meta["packages"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .filter_map(|p| {
+            let name = p["name"].as_str()?;
+            (name.starts_with("mech-") && name != "mech-e2e").then(|| {
+                let uses = p["dependencies"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .filter(|d| d["kind"].is_null())
+                    .filter_map(|d| d["name"].as_str())
+                    .filter(|d| d.starts_with("mech-"))
+                    .map(str::to_string)
+                    .collect();
+                (name.to_string(), uses)
+            })
+        })
+        .collect();
+    assert!(manifests.len() >= 8, "{manifests:?}");
+    let doc = std::fs::read_to_string(workspace().join("docs/architecture.md")).unwrap();
+    let table = doc
+        .split("| crate | uses |\n| --- | --- |\n")
+        .nth(1)
+        .expect("docs/architecture.md has its crate table");
+    let stated: BTreeMap<String, BTreeSet<String>> = table
+        .lines()
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let cells: Vec<&str> = l.trim_matches('|').split('|').map(str::trim).collect();
+            let name = cells[0].trim_matches('`').to_string();
+            let uses = cells[1]
+                .split(", ")
+                .filter(|u| *u != "none")
+                .map(|u| u.trim_matches('`').to_string())
+                .collect();
+            (name, uses)
+        })
+        .collect();
+    assert_eq!(
+        stated, manifests,
+        "docs/architecture.md's crate table (left) against the manifests (right)"
+    );
+}

@@ -228,10 +228,15 @@ impl ControlHub {
 
     /// Everything the controllers are doing.
     pub fn snapshot(&self) -> ControlSnapshot {
+        // One statement per lock: a guard lives to the end of its
+        // statement, so in one struct expression all three would be held.
+        let clusters = lock(&self.shared.clusters).views();
+        let follows = lock(&self.shared.follows).views();
+        let navs = lock(&self.shared.navs).views();
         ControlSnapshot {
-            clusters: lock(&self.shared.clusters).views(),
-            follows: lock(&self.shared.follows).views(),
-            navs: lock(&self.shared.navs).views(),
+            clusters,
+            follows,
+            navs,
         }
     }
 

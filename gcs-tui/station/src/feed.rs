@@ -202,9 +202,10 @@ fn log_message(e: &LogEntry) -> Option<FromStation> {
 }
 
 /// Converts the core's fleet model into what the screen shows. Read
-/// `channels` from the router *before* taking the fleet lock: the router
-/// holds its tables while it updates the fleet, so asking it for channels
-/// inside [`Gcs::with_fleet`] can deadlock.
+/// `channels` from the router before taking the fleet lock, so that the
+/// fleet is held for the copy alone: the router applies its events to the
+/// fleet holding its delivery lock, and waits for whoever holds the fleet
+/// (the lock order is [`Gcs::with_fleet`]'s).
 pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
     let robots = fleet
         .robots
