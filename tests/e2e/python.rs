@@ -319,23 +319,12 @@ fn leader_follower_keeps_the_follower_behind_the_leader() {
         .sum();
     assert!(path > 2.0, "the leader drove only {path:.2} m: {report}");
     // Over the program's last 5 s of driving, the follower kept its slot,
-    // `offset` behind the leader: each follower sample against the leader
-    // sample that arrived nearest to it (within 60 ms), by this observer.
+    // `offset` behind the leader.
     let window = (
         ended - Duration::from_secs(6),
         ended - Duration::from_secs(1),
     );
-    let pairs: Vec<((f64, f64, f64), (f64, f64, f64))> = follower
-        .iter()
-        .filter(|(at, _)| *at >= window.0 && *at <= window.1)
-        .filter_map(|(at, f)| {
-            let (when, l) = leader
-                .iter()
-                .min_by_key(|(t, _)| t.max(at).duration_since(*t.min(at)))?;
-            (when.max(at).duration_since(*when.min(at)) < Duration::from_millis(60))
-                .then(|| (pose(l), pose(f)))
-        })
-        .collect();
+    let pairs = paired(leader, follower, window);
     assert!(
         pairs.len() > 50,
         "{} pairs of samples in the last 5 s ({} leader, {} follower samples in all): {report}",
@@ -343,33 +332,60 @@ fn leader_follower_keeps_the_follower_behind_the_leader() {
         leader.len(),
         follower.len()
     );
-    let errors: Vec<f64> = pairs
-        .iter()
-        .map(|(l, f)| {
-            let slot = (l.0 - offset * l.2.cos(), l.1 - offset * l.2.sin());
-            (f.0 - slot.0).hypot(f.1 - slot.1)
-        })
-        .collect();
+    let (mean, behind) = tracking(&pairs, offset);
     // The slot circles 0.78 m from the centre of the leader's circle, so a
     // follower that did not follow is 0.78 m from it on average or more;
     // one following is within 0.2 m on a quiet machine, 0.31 m seen on a
     // busy one (the program's loop is late).
-    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
     assert!(
         mean < 0.45,
         "the follower was {mean:.2} m from its slot on average over {} samples: {report}",
-        errors.len()
+        pairs.len()
     );
-    let behind = pairs
-        .iter()
-        .filter(|(l, f)| (f.0 - l.0) * l.2.cos() + (f.1 - l.1) * l.2.sin() < 0.0)
-        .count();
     assert!(
         behind * 10 > pairs.len() * 9,
         "the follower was behind the leader {behind} of {} times: {report}",
         pairs.len()
     );
     assert!(report.contains("\"mean_error\""), "{report}");
+}
+
+type Pose2 = (f64, f64, f64);
+
+/// Each follower sample that arrived within `window` with the leader
+/// sample that arrived nearest to it, if within 60 ms (by the observer's
+/// clock: the two robots' counts differ when it was late or a datagram was
+/// lost, so the n-th samples of each are not of one moment).
+fn paired(
+    leader: &[(Instant, Telemetry)],
+    follower: &[(Instant, Telemetry)],
+    window: (Instant, Instant),
+) -> Vec<(Pose2, Pose2)> {
+    let pose = |t: &Telemetry| (t.pose.x, t.pose.y, t.pose.heading);
+    let apart = |a: &Instant, b: &Instant| a.max(b).duration_since(*a.min(b));
+    follower
+        .iter()
+        .filter(|(at, _)| *at >= window.0 && *at <= window.1)
+        .filter_map(|(at, f)| {
+            let (when, l) = leader.iter().min_by_key(|(t, _)| apart(t, at))?;
+            (apart(when, at) < Duration::from_millis(60)).then(|| (pose(l), pose(f)))
+        })
+        .collect()
+}
+
+/// The follower's mean distance from its slot, `offset` behind the
+/// leader, and how many times it was behind the leader.
+fn tracking(pairs: &[(Pose2, Pose2)], offset: f64) -> (f64, usize) {
+    let error = |(l, f): &(Pose2, Pose2)| {
+        let slot = (l.0 - offset * l.2.cos(), l.1 - offset * l.2.sin());
+        (f.0 - slot.0).hypot(f.1 - slot.1)
+    };
+    let mean = pairs.iter().map(error).sum::<f64>() / pairs.len().max(1) as f64;
+    let behind = pairs
+        .iter()
+        .filter(|(l, f)| (f.0 - l.0) * l.2.cos() + (f.1 - l.1) * l.2.sin() < 0.0)
+        .count();
+    (mean, behind)
 }
 
 /// A mission and channel discovery through the package's own calls.
