@@ -421,6 +421,50 @@ fn a_python_client_sends_a_mission_and_discovers_the_channel() {
     assert!(ok, "robot_1 did not reach the last waypoint: {lines:#?}");
 }
 
+/// A mission on a channel the key does not list, then one on its own.
+const REFUSED_MISSION: &str = r#"
+import json, sys
+from mech_client import Client, Waypoint
+with Client.from_key_file(sys.argv[1], sys.argv[2]) as mech:
+    for channel in ("wp/gcs", "wp/python"):
+        ack = mech.send_mission("robot_1", channel, [Waypoint(1.0, 1.0)], timeout=3.0)
+        print(json.dumps({"channel": channel, "accepted": ack.accepted, "reason": ack.reason}))
+"#;
+
+/// A signed controller whose mission the station's permissions refuse
+/// learns why at once, in the robot's answer (`docs/external-controllers.md`),
+/// where it used to wait out its timeout for an answer that never came.
+#[test]
+fn a_mission_its_key_may_not_send_comes_back_refused_with_why() {
+    let script = "spawn 1\nwait connected robot_1 10s\nlog go\nsleep 30s\n";
+    let mut station = Station::start(
+        script,
+        &[(
+            "python",
+            "role = \"controller\"\nchannels = [\"wp/python\"]",
+        )],
+    );
+    station.until("\"summary\":\"go\"");
+    let mut c = python();
+    c.args(["-c", REFUSED_MISSION])
+        .arg(station.key("python"))
+        .arg(station.router());
+    let out = run_ok(c, "python3 with mech_client");
+    station.child.kill().ok();
+    station.child.wait().ok();
+    let report = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = report.lines().collect();
+    assert_eq!(lines.len(), 2, "{report}");
+    assert_eq!(
+        lines[0],
+        r#"{"channel": "wp/gcs", "accepted": false, "reason": "refused by the station: controller python may not publish on \"wp/gcs\""}"#
+    );
+    assert!(
+        lines[1].starts_with(r#"{"channel": "wp/python", "accepted": true"#),
+        "{report}"
+    );
+}
+
 /// A `mech-gcs serve --demo N` for the headless recipe, stopped on drop.
 struct Served {
     child: std::process::Child,

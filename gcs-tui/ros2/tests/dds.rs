@@ -57,16 +57,20 @@ fn counter(s: &Value, key: &str) -> u64 {
 /// Odometry, TF, battery and name markers of every robot, in the ROS 2
 /// layout; returns the node's state that showed them.
 fn every_robot_in_the_ros2_layout(rig: &mut Rig, robots: [&str; 3]) -> Value {
-    let s = eventually(rig, "odometry, TF and diagnostics of every robot", |s| {
-        robots
-            .iter()
-            .all(|r| {
+    // Markers are published once a second, odometry with every sample:
+    // wait for both (on a busy machine the first markers come later).
+    let s = eventually(
+        rig,
+        "odometry, TF, diagnostics and markers of every robot",
+        |s| {
+            (robots.iter().all(|r| {
                 odom(s, r).is_some_and(|o| o.3 >= 10)
                     && s["tf"][format!("{r}/base_link")]["count"].as_u64() >= Some(10)
                     && diag(s, r, "route").is_some()
-            })
+            }) && s["markers"]["mech/names/0"].is_object())
             .then(|| s.clone())
-    });
+        },
+    );
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
