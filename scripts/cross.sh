@@ -151,9 +151,9 @@ in_root() {
 
 # The arm builds in the root, one after the other, each with a target
 # directory of its own, once the amd64 build and cargo-deb are done: each
-# build keeps both cores busy by itself, and three side by side took 25%
+# build keeps both cores busy by itself, and three side by side took 47%
 # more CPU time than one after another (2,035 CPU-s for the whole step
-# against about 1,600), on a machine with memory to spare. The amd64
+# against 1,380: 1,054 s against 725 s), with memory to spare. The amd64
 # binaries are built on the host, with the machine's own Rust toolchain:
 # they take the host's C library (the packages are checked on Debian
 # bookworm: build them on bookworm), and its compiler builds them in about
