@@ -364,22 +364,20 @@ fn the_station_core_needs_no_terminal_gamepad_or_simulator() {
 /// `cargo tree -p KRATE -e normal,build` (what the crate's library and
 /// binaries link), one crate a line.
 fn normal_tree(cargo: &str, krate: &str) -> String {
+    let args = ["tree", "-p", krate, "-e", "normal,build"];
+    cargo_stdout(cargo, &[&args[..], &["--prefix", "none"]].concat())
+}
+
+/// What `cargo ARGS` prints in the workspace; it must succeed.
+fn cargo_stdout(cargo: &str, args: &[&str]) -> String {
     let out = Command::new(cargo)
         .current_dir(workspace())
-        .args([
-            "tree",
-            "-p",
-            krate,
-            "-e",
-            "normal,build",
-            "--prefix",
-            "none",
-        ])
+        .args(args)
         .output()
-        .expect("cargo tree runs");
+        .unwrap_or_else(|e| panic!("cargo {args:?} runs: {e}"));
     assert!(
         out.status.success(),
-        "cargo tree -p {krate}: {}",
+        "cargo {args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
@@ -483,23 +481,15 @@ fn the_default_build_leaves_zenoh_out() {
 #[test]
 fn the_architecture_doc_states_the_crate_graph_of_the_manifests() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(&cargo)
-        .current_dir(workspace())
-        .args([
-            "metadata",
-            "--format-version",
-            "1",
-            "--no-deps",
-            "--offline",
-        ])
-        .output()
-        .expect("cargo metadata runs");
-    assert!(
-        out.status.success(),
-        "cargo metadata: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).expect("metadata is JSON");
+    let args = [
+        "metadata",
+        "--format-version",
+        "1",
+        "--no-deps",
+        "--offline",
+    ];
+    let out = cargo_stdout(&cargo, &args);
+    let meta: serde_json::Value = serde_json::from_str(&out).expect("metadata is JSON");
     let manifests: BTreeMap<String, BTreeSet<String>> = meta["packages"]
         .as_array()
         .expect("packages")
