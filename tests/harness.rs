@@ -83,27 +83,3 @@ pub fn poll<T>(timeout: Duration, mut f: impl FnMut() -> Option<T>) -> Option<T>
         std::thread::sleep(Duration::from_millis(10));
     }
 }
-
-/// Runs `cmd` (`mech-gcs ... --script -`) with the script `source` on its
-/// standard input, its output captured: whether it passed, and its
-/// standard output followed by its standard error.
-pub fn run_script(mut cmd: std::process::Command, source: &str) -> (bool, String) {
-    use std::io::Write;
-    use std::process::Stdio;
-    let mut child = cmd
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mech-gcs --script starts");
-    child
-        .stdin
-        .take()
-        .expect("stdin")
-        .write_all(source.as_bytes())
-        .expect("script written");
-    let out = child.wait_with_output().expect("script ends");
-    let text =
-        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}

@@ -60,3 +60,15 @@ pub fn mech_gcs<A: AsRef<OsStr>>(args: &[A], stdin: &str, state: &Path) -> Outpu
         .wait_with_output()
         .expect("mech-gcs finishes")
 }
+
+/// `mech-gcs ARGS --script -` with the script `source` on its standard
+/// input, as [`mech_gcs`] runs it: whether it passed, and its standard
+/// output followed by its standard error.
+pub fn run_script<A: AsRef<OsStr>>(args: &[A], source: &str, state: &Path) -> (bool, String) {
+    let mut all: Vec<&OsStr> = args.iter().map(AsRef::as_ref).collect();
+    all.extend([OsStr::new("--script"), OsStr::new("-")]);
+    let out = mech_gcs(&all, source, state);
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}

@@ -96,14 +96,16 @@ impl Served {
     /// `mech-gcs --attach ... --script -` with `source`: whether it passed,
     /// and its output.
     fn script(&self, via: Via, source: &str) -> (bool, String) {
-        let mut cmd = Command::new(mech_e2e::binary("mech-gcs"));
-        match via {
-            Via::Tcp => cmd.args(["--attach", &self.tcp, "--key"]).arg(&self.key),
-            Via::Socket => cmd.arg("--attach").arg(&self.socket),
+        let attach: Vec<&std::ffi::OsStr> = match via {
+            Via::Tcp => vec![
+                "--attach".as_ref(),
+                self.tcp.as_ref(),
+                "--key".as_ref(),
+                self.key.as_ref(),
+            ],
+            Via::Socket => vec!["--attach".as_ref(), self.socket.as_ref()],
         };
-        cmd.args(["--script", "-"])
-            .env("XDG_STATE_HOME", self.dir.path());
-        mech_e2e::harness::run_script(cmd, source)
+        mech_e2e::run_script(&attach, source, self.dir.path())
     }
 
     fn outside(&self, name: &str) -> String {

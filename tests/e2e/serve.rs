@@ -77,12 +77,8 @@ impl Service {
     /// Runs a script attached to the station; returns its JSON lines and
     /// whether it passed.
     fn script(&self, source: &str) -> (bool, String) {
-        let mut cmd = Command::new(mech_e2e::binary("mech-gcs"));
-        cmd.arg("--attach")
-            .arg(&self.socket)
-            .args(["--script", "-"])
-            .env("XDG_STATE_HOME", &self.dir);
-        mech_e2e::harness::run_script(cmd, source)
+        let attach: [&std::ffi::OsStr; 2] = ["--attach".as_ref(), self.socket.as_ref()];
+        mech_e2e::run_script(&attach, source, &self.dir)
     }
 
     /// A TUI attached to the station in a new tmux session (the TUI is the
