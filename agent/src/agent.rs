@@ -308,6 +308,8 @@ impl Agent {
         self.registration
             .tick(&mut step, || hello(settings, controller));
         self.sensors.watch_stall(&mut self.controller, &mut step);
+        self.sensors
+            .advance(self.controller.platform(), self.actuation.outputs(), now);
         let state = self.failsafe_state(now);
         let mission_running = self.mission_running();
         let mut step = Step::new(now, &mut self.wire, &mut self.counters, &mut outgoing);

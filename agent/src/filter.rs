@@ -5,6 +5,7 @@
 //! where a mean would be dragged by them.
 
 use std::collections::VecDeque;
+use std::time::Duration;
 
 use mech_proto::{Pose, wrap_angle};
 
@@ -48,6 +49,17 @@ impl MedianFilter {
         }
         self.samples.push_back(sample);
         self.estimate().unwrap_or(sample)
+    }
+
+    /// The time the estimate refers to: the median of the samples' stamps.
+    /// A median of fixes of a moving robot lags its newest fix by about
+    /// half the window (each fix being the median's in turn as the robot
+    /// moves on), so the estimate is where the robot was then. `None`
+    /// before the first sample.
+    pub fn middle_stamp(&self) -> Option<Duration> {
+        let n = self.samples.len();
+        let (a, b) = (self.samples.get((n.checked_sub(1)?) / 2)?, self.samples.get(n / 2)?);
+        Some((a.stamp + b.stamp) / 2)
     }
 
     /// The current estimate, `None` before the first sample.
@@ -154,6 +166,24 @@ mod tests {
             "filtered sd {}",
             sd(&filtered[9..])
         );
+    }
+
+    #[test]
+    fn the_estimate_refers_to_the_middle_of_the_window() {
+        let mut f = MedianFilter::new(9);
+        assert_eq!(f.middle_stamp(), None);
+        for i in 0..20u64 {
+            f.push(PositionSample {
+                stamp: Duration::from_millis(50 * i),
+                ..at(0.01 * i as f64, 0.0, 0.0)
+            });
+            let n = (i + 1).min(9);
+            let middle = Duration::from_millis(50 * (i + 1 - n) + 25 * (n - 1));
+            assert_eq!(f.middle_stamp(), Some(middle), "after {} samples", i + 1);
+        }
+        // A robot moving steadily: the median is where it was 200 ms ago.
+        let x = f.estimate().unwrap().pose.x;
+        assert!((x - 0.15).abs() < 1e-9, "{x}");
     }
 
     #[test]

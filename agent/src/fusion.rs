@@ -141,6 +141,16 @@ impl PoseFusion {
         })
     }
 
+    /// The standard deviation of the position along its worst direction,
+    /// m: the square root of the largest eigenvalue of the x-y covariance.
+    pub fn position_sigma(&self) -> Option<f64> {
+        self.belief.map(|b| {
+            let (a, c, off) = (b.cov[(0, 0)], b.cov[(1, 1)], b.cov[(0, 1)]);
+            let largest = (a + c) / 2.0 + ((a - c) / 2.0).hypot(off);
+            largest.max(0.0).sqrt()
+        })
+    }
+
     /// Moves the pose on by a body-frame displacement (`dx` forward, `dy`
     /// left, m; `dheading`, rad) measured by the encoders up to `now`;
     /// `cov` is its covariance.
@@ -348,6 +358,22 @@ mod tests {
         );
         let y = f.pose().unwrap().y;
         assert!(y > 2.1 && y < 2.12, "{y}");
+    }
+
+    #[test]
+    fn the_position_sigma_is_the_worst_direction_s() {
+        let mut f = PoseFusion::new(FusionSettings::default());
+        assert_eq!(f.position_sigma(), None);
+        let start = fix(0.0, 0.0, 0.0, 0);
+        f.correct(&start, &start, Duration::ZERO);
+        let at_fix = f.position_sigma().unwrap();
+        assert!((at_fix - 0.05).abs() < 1e-9, "a fix's sigma: {at_fix}");
+        // Odometry along x only: x's variance grows, y's does not.
+        let along_x = Matrix3::from_diagonal(&Vector3::new(0.04, 0.0, 0.0));
+        f.predict(Vector3::zeros(), along_x, Duration::from_millis(20));
+        let (sx, sy, _) = f.sigmas().unwrap();
+        let worst = f.position_sigma().unwrap();
+        assert!(sx > sy && (worst - sx).abs() < 1e-6, "{sx} {sy} {worst}");
     }
 
     #[test]

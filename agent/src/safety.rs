@@ -80,6 +80,14 @@ pub struct SafetyConfig {
     /// How long it backs off, s (a diff-drive turns towards the way out at
     /// `yield_turn_rate` first, which may take longer than this).
     pub back_off_time: f64,
+    /// How far the position estimate may be from the truth, m, for a
+    /// position source that does not say (a UWB tag, an external
+    /// tracker): the filtered fixes' error at rest. Odometry fused with
+    /// fixes states its own (from its covariance) instead. The layer grows
+    /// the robot's disc by it, and by what the estimate's age adds, so the
+    /// distances it keeps hold on the true positions. 0: exact positions
+    /// (motion capture, a simulator's truth).
+    pub position_error: f64,
 }
 
 impl Default for SafetyConfig {
@@ -94,6 +102,7 @@ impl Default for SafetyConfig {
             horizon: 1.5,
             stuck_after: 1.0,
             back_off_time: 1.0,
+            position_error: 0.05,
         }
     }
 }
@@ -134,6 +143,13 @@ impl SafetyConfig {
         nonnegative(self.horizon, "horizon")?;
         nonnegative(self.stuck_after, "stuck_after")?;
         nonnegative(self.back_off_time, "back_off_time")?;
+        nonnegative(self.position_error, "position_error")?;
+        if self.position_error > MAX_POSITION_ERROR {
+            return Err(format!(
+                "`safety.position_error` must be {MAX_POSITION_ERROR} m or less, got {}",
+                self.position_error
+            ));
+        }
         for (v, what) in [
             (self.reaction_time, "reaction_time"),
             (self.stale_after, "stale_after"),
@@ -153,6 +169,10 @@ impl SafetyConfig {
         }
     }
 }
+
+/// Largest configured position error, m: beyond it a robot does not know
+/// where it is well enough to move among others.
+pub const MAX_POSITION_ERROR: f64 = 1.0;
 
 /// Speed below which a robot that wants to move counts as stuck, m/s.
 const STILL: f64 = 0.02;
@@ -223,6 +243,9 @@ pub struct SafetyLayer {
     /// Registered with a router since the last arena: the next arena and
     /// neighbour list apply whatever their id and stamp.
     fresh_station: bool,
+    /// How far the position estimate may be from the truth now, m
+    /// ([`SafetyLayer::set_position_error`]): the robot's disc grows by it.
+    position_error: f64,
     intervention: Intervention,
     counts: InterventionCounts,
 }
@@ -240,6 +263,7 @@ impl SafetyLayer {
             turning_since: None,
             id: None,
             fresh_station: false,
+            position_error: 0.0,
             intervention: Intervention::None,
             counts: InterventionCounts::default(),
         }
@@ -319,6 +343,21 @@ impl SafetyLayer {
         self.bearing_gain = gain;
     }
 
+    /// How far the position estimate the next [`SafetyLayer::filter`]
+    /// judges may be from the true position, m (the agent's sensors say,
+    /// each control period): every distance the layer keeps is kept from a
+    /// disc grown by it. Until told, 0 (exact positions). A bound that is
+    /// not a number holds the robot still, as no estimate does.
+    pub fn set_position_error(&mut self, error: f64) {
+        self.position_error = if error >= 0.0 { error } else { f64::NAN };
+    }
+
+    /// The disc the layer keeps inside the arena and apart from others:
+    /// the robot's, grown by its position error, m.
+    pub fn footprint(&self) -> f64 {
+        self.config.radius + self.position_error
+    }
+
     /// Whether the layer enforces anything.
     pub fn state(&self) -> SafetyState {
         match &self.arena {
@@ -367,7 +406,8 @@ impl SafetyLayer {
             None => (None, DEFAULT_MARGIN),
         };
         let position = Vec2::new(pose.x, pose.y);
-        if !(position.is_finite() && pose.heading.is_finite() && velocity.is_finite()) {
+        let finite = position.is_finite() && pose.heading.is_finite() && velocity.is_finite();
+        if !(finite && self.position_error.is_finite()) {
             return self.hold(outputs.len());
         }
         let (twist, desired) = mapping::commanded_motion(platform, pose.heading, outputs);
@@ -380,10 +420,10 @@ impl SafetyLayer {
         let reach = braking.distance(fastest);
         let mut c = Constraints::new(position, braking);
         if let Some(fence) = fence {
-            fence.constrain(&mut c, self.config.radius, reach);
+            fence.constrain(&mut c, self.footprint(), reach);
         }
         if let Some(n) = &self.neighbours {
-            n.constrain(&mut c, velocity, self.config.radius, margin, reach, now);
+            n.constrain(&mut c, velocity, self.footprint(), margin, reach, now);
         }
         if self.stale(now) {
             c.caps
@@ -535,7 +575,7 @@ impl SafetyLayer {
         let target = n.anticipate(
             c.position,
             intent,
-            self.config.radius,
+            self.footprint(),
             margin,
             self.config.horizon,
             now,
@@ -575,7 +615,7 @@ impl SafetyLayer {
         let away = self
             .neighbours
             .as_ref()?
-            .away(c.position, self.config.radius, margin, now)?;
+            .away(c.position, self.footprint(), margin, now)?;
         self.stuck_since = None;
         self.turning_since = None;
         let target = away * BACK_OFF_SPEED;
@@ -606,6 +646,11 @@ impl SafetyLayer {
             intervention: self.intervention,
             counts: self.counts,
             radius: self.config.radius,
+            position_error: if self.position_error.is_finite() {
+                self.position_error
+            } else {
+                MAX_POSITION_ERROR
+            },
         }
     }
 }

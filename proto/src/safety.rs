@@ -109,7 +109,9 @@ pub struct Neighbour {
     pub vx: f64,
     pub vy: f64,
     pub vz: f64,
-    /// Radius of the disc the robot occupies, m.
+    /// Radius of the disc the robot occupies, m, grown by how far its
+    /// position estimate may be from the truth (its report's
+    /// `position_error`).
     pub radius: f64,
     /// How old this state was when the station sent it, ms (time since the
     /// telemetry it comes from arrived, plus what that telemetry said about
@@ -247,9 +249,15 @@ pub struct SafetyReport {
     /// What the layer did to the current command.
     pub intervention: Intervention,
     pub counts: InterventionCounts,
-    /// Radius of the disc this robot occupies, m: what the station tells
-    /// its neighbours.
+    /// Radius of the disc this robot occupies, m.
     pub radius: f64,
+    /// How far the robot's position estimate may be from its true
+    /// position now, m: its layer keeps its distances from a disc of
+    /// `radius + position_error`, and the station tells its neighbours
+    /// that disc. Added at the end: a report without it reads as 0 (exact
+    /// positions), as such robots assumed.
+    #[serde(default)]
+    pub position_error: f64,
 }
 
 impl SafetyReport {

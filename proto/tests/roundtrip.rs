@@ -168,9 +168,9 @@ fn safety_report() -> impl Strategy<Value = SafetyReport> {
         any::<u32>(),
         0..Intervention::ALL.len(),
         vec(any::<u32>(), 6),
-        0.0..5.0f64,
+        (0.0..5.0f64, 0.0..1.0f64),
     )
-        .prop_map(|(state, arena, intervention, c, radius)| SafetyReport {
+        .prop_map(|(state, arena, intervention, c, (radius, position_error))| SafetyReport {
             state: [SafetyState::NoArena, SafetyState::On, SafetyState::Off][state],
             arena,
             intervention: Intervention::ALL[intervention],
@@ -183,6 +183,7 @@ fn safety_report() -> impl Strategy<Value = SafetyReport> {
                 returning: c[5],
             },
             radius,
+            position_error,
         })
 }
 
@@ -710,6 +711,7 @@ fn telemetry_without_a_safety_report_keeps_its_old_bytes_and_one_with_it_round_t
                 ..InterventionCounts::default()
             },
             radius: 0.12,
+            position_error: 0.04,
         }),
         ..plain
     };

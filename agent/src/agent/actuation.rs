@@ -112,7 +112,9 @@ impl Actuation {
                 return self.hold(controller.platform(), sensors);
             }
         }
-        let estimate = sensors.estimate().map(|e| e.pose);
+        let now = step.now;
+        let motion = sensors.motion(controller.platform(), &self.outputs, now);
+        let estimate = motion.estimate.map(|e| e.pose);
         let pose = match estimate {
             Some(pose) => pose,
             None if controller.needs_position() => {
@@ -121,14 +123,13 @@ impl Actuation {
             }
             None => Pose::default(),
         };
-        let now = step.now;
         let demand = controller.demand(&pose, now, mission);
         let platform = controller.platform();
-        let velocity = sensors.motion(platform, &self.outputs, now).velocity;
+        let velocity = motion.velocity;
         safety.steered_by(controller.bearing_gain());
         let outputs = safety.filter(
             platform,
-            estimate.as_ref(),
+            estimate.as_ref().map(|pose| (pose, motion.position_error)),
             Vec2::new(velocity.vx, velocity.vy),
             demand.outputs(platform),
             step,

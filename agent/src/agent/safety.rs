@@ -69,21 +69,24 @@ impl Safety {
     }
 
     /// The outputs to write instead of `outputs` (the controller's) for a
-    /// robot of `platform` at `pose` (`None`: no estimate) moving at
-    /// `velocity` (map frame); an intervention that begins is noticed.
+    /// robot of `platform` at `pose`, within its error bound (m; `None`:
+    /// no estimate), moving at `velocity` (map frame); an intervention
+    /// that begins is noticed.
     pub(crate) fn filter(
         &mut self,
         platform: &dyn Platform,
-        pose: Option<&Pose>,
+        pose: Option<(&Pose, f64)>,
         velocity: Vec2,
         outputs: Vec<f64>,
         step: &mut Step,
     ) -> Vec<f64> {
         let before = self.layer.report().intervention;
         let filtered = match pose {
-            Some(pose) => self
-                .layer
-                .filter(platform, pose, velocity, &outputs, step.now),
+            Some((pose, error)) => {
+                self.layer.set_position_error(error);
+                self.layer
+                    .filter(platform, pose, velocity, &outputs, step.now)
+            }
             None if self.layer.enforcing() => self.layer.hold(outputs.len()),
             None => return outputs,
         };
@@ -191,17 +194,34 @@ mod tests {
 
     /// `r1` on a kiwi at (`x`, 1.5) facing +x, routed to `joy/0`.
     fn kiwi_at(x: f64) -> Agent {
-        let mut a = Agent::new(AgentSettings::new("r1"), PlatformSpec::kiwi().build(), 0);
+        kiwi_with(AgentSettings::new("r1"), x)
+    }
+
+    /// `kiwi_at` with exact positions (no median window, no error), to be
+    /// given a fix every period ([`fix`]).
+    fn exact_kiwi_at(x: f64) -> Agent {
+        let mut s = AgentSettings::new("r1");
+        s.filter_window = 1;
+        s.safety.position_error = 0.0;
+        kiwi_with(s, x)
+    }
+
+    fn fix(a: &mut Agent, x: f64, now: Duration) {
         a.observe_position(PositionSample {
             pose: Pose {
                 x,
                 y: 1.5,
                 ..Pose::default()
             },
-            stamp: ms(0),
+            stamp: now,
             quality: 1.0,
             has_heading: true,
         });
+    }
+
+    fn kiwi_with(settings: AgentSettings, x: f64) -> Agent {
+        let mut a = Agent::new(settings, PlatformSpec::kiwi().build(), 0);
+        fix(&mut a, x, ms(0));
         let w = Body::Welcome(Welcome {
             robot_id: 1,
             route: Route {
@@ -266,7 +286,7 @@ mod tests {
     fn a_twist_at_the_wall_is_limited_counted_and_noticed_once() {
         // 0.4 m from the wall, the free space ends 0.15 m on: at 0.5 m/s
         // the stopping point (0.175 m on) would be beyond it.
-        let mut a = kiwi_at(3.6);
+        let mut a = exact_kiwi_at(3.6);
         a.handle(msg("", arena(1, true)), ms(0));
         a.handle(msg("", neighbours(1, vec![])), ms(0));
         let mut notices = Vec::new();
@@ -277,6 +297,7 @@ mod tests {
             cmd.header.seq = k;
             a.handle(cmd, now);
             a.handle(msg("", neighbours(u64::from(k) + 1, vec![])), now);
+            fix(&mut a, 3.6, now);
             let t = a.tick(now);
             notices.extend(safety_notices(&t.outgoing));
             let kiwi = PlatformSpec::kiwi().build();
@@ -298,6 +319,56 @@ mod tests {
         let out = b.tick(ms(40)).outputs;
         let v = PlatformSpec::kiwi().build().motion(&out).vx;
         assert!((v - 0.5).abs() < 1e-9, "{v}");
+    }
+
+    #[test]
+    fn a_robot_unsure_where_it_is_keeps_its_distances_from_a_grown_disc() {
+        // 0.4 m from the wall at 0.3 m/s: the stopping point (0.075 m on)
+        // is inside the free space (0.15 m on) of an exact position, and
+        // outside it (0.05 m on) when the position may be 0.1 m off.
+        let kiwi = PlatformSpec::kiwi().build();
+        let mut speeds = Vec::new();
+        for error in [0.0, 0.1] {
+            let mut s = AgentSettings::new("r1");
+            s.filter_window = 1;
+            s.safety.position_error = error;
+            let mut a = kiwi_with(s, 3.6);
+            a.handle(msg("", arena(1, true)), ms(0));
+            a.handle(msg("", neighbours(1, vec![])), ms(0));
+            a.handle(msg("joy/0", twist(0.3)), ms(20));
+            fix(&mut a, 3.6, ms(20));
+            speeds.push(kiwi.motion(&a.tick(ms(20)).outputs).vx);
+            let report = a.telemetry(ms(20)).safety.unwrap();
+            assert_eq!(report.position_error, error, "reported");
+            assert_eq!(report.radius, 0.15, "the robot's own radius");
+        }
+        assert!((speeds[0] - 0.3).abs() < 1e-9, "{speeds:?}");
+        assert!(speeds[1] < 0.3 - 0.05, "{speeds:?}");
+    }
+
+    #[test]
+    fn a_moving_robots_median_of_fixes_is_moved_on_to_now() {
+        // Nine fixes at 50 Hz: their median is where the robot was 80 ms
+        // ago, 4 cm behind at 0.5 m/s.
+        let mut a = kiwi_at(1.0);
+        let mut now = ms(0);
+        for k in 1..=50u32 {
+            now = ms(u64::from(k) * 20);
+            let mut cmd = msg("joy/0", twist(0.5));
+            cmd.header.seq = k;
+            a.handle(cmd, now);
+            let truth = 1.0 + 0.5 * (now.as_secs_f64() - 0.02).max(0.0);
+            fix(&mut a, truth, now);
+            a.tick(now);
+        }
+        let truth = 1.0 + 0.5 * (now.as_secs_f64() - 0.02);
+        let lagging = a.estimate().unwrap().pose.x;
+        assert!((truth - lagging - 0.04).abs() < 1e-9, "{truth} {lagging}");
+        let t = a.telemetry(now);
+        assert!((t.pose.x - truth).abs() < 1e-9, "{} {truth}", t.pose.x);
+        // The source's 0.05 m and a·t²/2 over the 80 ms moved on.
+        let error = t.safety.unwrap().position_error;
+        assert!((error - (0.05 + 0.0032)).abs() < 1e-9, "{error}");
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! health, and the [`faults`] of its drivers.
 
 mod faults;
+mod track;
 
 use std::time::Duration;
 
@@ -21,12 +22,17 @@ use crate::platform::Platform;
 use crate::wheels::Wheels;
 
 pub(crate) use faults::Faults;
+use track::Track;
 
 /// What the robot knows of its own motion now.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Motion {
-    /// The position estimate.
+    /// The position estimate, moved on to now by the robot's own motion
+    /// since the time it refers to.
     pub(crate) estimate: Option<PositionSample>,
+    /// How far `estimate` may be from the true position, m (see
+    /// [`Sensors::motion`]); infinite without an estimate.
+    pub(crate) position_error: f64,
     /// The velocity in the world frame (turned by the estimated heading).
     pub(crate) velocity: Velocity,
     /// Measured by the wheel encoders while their readings are fresh;
@@ -56,6 +62,8 @@ pub(crate) struct Sensors {
     wheel_jacobian: Option<DMatrix<f64>>,
     /// Odometry noise per metre of wheel travel.
     odometry_sigma: f64,
+    /// Where the robot's own motion took it, to move a lagging estimate on.
+    track: Track,
     pub(crate) faults: Faults,
 }
 
@@ -82,6 +90,10 @@ impl Sensors {
             fusion,
             wheel_jacobian,
             odometry_sigma: settings.fusion.odometry_sigma,
+            track: Track::new(
+                settings.safety.position_error,
+                settings.safety.max_deceleration,
+            ),
             faults: Faults::default(),
         }
     }
@@ -196,9 +208,57 @@ impl Sensors {
         self.faults.actuator_fault(&text, controller, step);
     }
 
+    /// Once per control period, before the outputs are computed: the
+    /// robot moved at the velocity `outputs` (the ones driven since the
+    /// last period) give, or its encoders measured, until `now`.
+    pub(crate) fn advance(&mut self, platform: &dyn Platform, outputs: &[f64], now: Duration) {
+        let (velocity, _) = self.velocity(platform, outputs, now);
+        self.track.advance(&velocity, now);
+    }
+
     /// What the robot knows of its motion now, `outputs` being the outputs
     /// it drives.
+    ///
+    /// The estimate is moved on to `now`: a median of fixes is where the
+    /// robot was at the middle of its window (200 ms ago for 9 fixes at
+    /// 20 Hz: 10 cm at 0.5 m/s), so the robot's own motion since then (its
+    /// [`Track`]) is added; odometry fused with the fixes is current. Its
+    /// error bound: for fused odometry, 3 standard deviations along the
+    /// worst direction (99% of a planar Gaussian); for a median, the
+    /// configured `safety.position_error` plus `a·t²/2` for the time `t`
+    /// moved on (the velocity may have changed by `a·t` meanwhile, `a`
+    /// being `max_deceleration`, the rate the layer assumes of every
+    /// robot).
     pub(crate) fn motion(&self, platform: &dyn Platform, outputs: &[f64], now: Duration) -> Motion {
+        let (velocity, velocity_source) = self.velocity(platform, outputs, now);
+        let (estimate, position_error) = match (self.estimate, &self.fusion) {
+            (None, _) => (None, f64::INFINITY),
+            (Some(e), Some(fusion)) => {
+                let sigma = fusion.position_sigma().unwrap_or(f64::INFINITY);
+                (Some(e), FUSED_BOUND * sigma)
+            }
+            (Some(e), None) => {
+                let since = self.filter.middle_stamp().unwrap_or(e.stamp);
+                let (moved, error) = self.track.since(since, now);
+                (Some(moved_on(e, moved)), error)
+            }
+        };
+        Motion {
+            estimate,
+            position_error,
+            velocity,
+            velocity_source,
+        }
+    }
+
+    /// The velocity in the world frame (turned by the estimated heading):
+    /// measured by the encoders while fresh, else what `outputs` give.
+    fn velocity(
+        &self,
+        platform: &dyn Platform,
+        outputs: &[f64],
+        now: Duration,
+    ) -> (Velocity, VelocitySource) {
         let (twist, velocity_source) = match self
             .wheel_speeds(now)
             .and_then(|speeds| platform.wheel_odometry(&speeds))
@@ -208,16 +268,13 @@ impl Sensors {
         };
         let heading = self.estimate.map_or(0.0, |e| e.pose.heading);
         let (sin, cos) = heading.sin_cos();
-        Motion {
-            estimate: self.estimate,
-            velocity: Velocity {
-                vx: twist.vx * cos - twist.vy * sin,
-                vy: twist.vx * sin + twist.vy * cos,
-                vz: twist.vz,
-                wz: twist.wz,
-            },
-            velocity_source,
-        }
+        let velocity = Velocity {
+            vx: twist.vx * cos - twist.vy * sin,
+            vy: twist.vx * sin + twist.vy * cos,
+            vz: twist.vz,
+            wz: twist.wz,
+        };
+        (velocity, velocity_source)
     }
 
     /// `Fault` for a second after a driver error, `Degraded` while the
@@ -235,6 +292,19 @@ impl Sensors {
             Health::Ok
         }
     }
+}
+
+/// Standard deviations of a fused position taken as its error bound: 99%
+/// of a planar Gaussian lies within 3.03 of them.
+const FUSED_BOUND: f64 = 3.03;
+
+/// `estimate` moved on by the robot's own displacement `moved` (x, y,
+/// heading) since the time it refers to.
+fn moved_on(mut estimate: PositionSample, moved: [f64; 3]) -> PositionSample {
+    estimate.pose.x += moved[0];
+    estimate.pose.y += moved[1];
+    estimate.pose.heading = mech_proto::wrap_angle(estimate.pose.heading + moved[2]);
+    estimate
 }
 
 /// The estimate with the fused planar pose; height, quality and stamp stay

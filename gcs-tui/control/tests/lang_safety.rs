@@ -56,6 +56,7 @@ async fn report(robot: &mut Peer, state: SafetyState, why: Intervention, fence: 
             ..InterventionCounts::default()
         },
         radius: 0.15,
+        position_error: 0.0,
     });
     robot.send_telemetry(t).await;
 }

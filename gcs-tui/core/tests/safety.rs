@@ -47,6 +47,7 @@ async fn report(peer: &mut Peer, x: f64, y: f64) {
         intervention: Default::default(),
         counts: InterventionCounts::default(),
         radius: 0.2,
+        position_error: 0.0,
     });
     peer.send_telemetry(t).await;
 }
@@ -189,6 +190,7 @@ async fn a_recording_carries_the_arena_the_switches_and_what_robots_report() {
         intervention: mech_proto::Intervention::Fence,
         counts: InterventionCounts::default(),
         radius: 0.15,
+        position_error: 0.0,
     });
     let mut events = gcs.router().subscribe(256, false);
     r1.send_telemetry(t).await;

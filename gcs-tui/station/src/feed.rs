@@ -285,12 +285,16 @@ fn safety_view(r: &Robot) -> Option<SafetyView> {
             intervention: s.intervention,
             interventions: s.counts.total(),
             alarm,
+            footprint: s.radius + s.position_error,
+            position_error: s.position_error,
         }),
         None if alarm => Some(SafetyView {
             state: mech_proto::SafetyState::NoArena,
             intervention: mech_proto::Intervention::None,
             interventions: 0,
             alarm,
+            footprint: 0.0,
+            position_error: 0.0,
         }),
         None => None,
     }

@@ -134,6 +134,11 @@ pub struct SafetyView {
     pub interventions: u64,
     /// Switched off, or asked to be: shown as an alarm.
     pub alarm: bool,
+    /// The disc the layer keeps apart and inside, m: the robot's radius
+    /// grown by `position_error` (0 when unknown).
+    pub footprint: f64,
+    /// How far the robot's position estimate may be from the truth, m.
+    pub position_error: f64,
 }
 
 impl RobotView {

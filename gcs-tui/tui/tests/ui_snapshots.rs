@@ -248,18 +248,23 @@ fn arena_intervention_and_safety_alarm_120x36() {
         intervention: Intervention::Fence,
         interventions: 3,
         alarm: false,
+        footprint: 0.35,
+        position_error: 0.05,
     });
     snap.robots[1].safety = Some(SafetyView {
         state: SafetyState::Off,
         intervention: Intervention::None,
         interventions: 0,
         alarm: true,
+        footprint: 0.0,
+        position_error: 0.0,
     });
     app.update(mech_gcs::ui::Action::Fleet(snap));
     let text = screen(&app, 120, 36);
     assert!(text.contains(" SAFETY OFF robot_2 "), "status bar: {text}");
     assert!(text.contains("#2 SAFETY OFF"), "robot_2's card: {text}");
     assert!(text.contains(" ok fence"), "robot_1's card: {text}");
+    assert!(text.contains("±5cm"), "robot_1's position error: {text}");
     insta::assert_snapshot!(text);
 }
 
@@ -278,6 +283,8 @@ fn the_safety_alarm_fits_a_narrow_status_bar() {
             intervention: Intervention::None,
             interventions: 0,
             alarm: true,
+            footprint: 0.0,
+            position_error: 0.0,
         });
     }
     app.update(mech_gcs::ui::Action::Fleet(snap));

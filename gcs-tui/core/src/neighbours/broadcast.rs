@@ -50,11 +50,13 @@ pub fn gather(fleet: &Fleet, now: Duration, config: &NeighbourConfig) -> Option<
         let Some(heard) = r.last_telemetry else {
             continue;
         };
+        // Its disc grown by how far its position estimate may be off (a
+        // bound that is not a number is no report).
         let radius = r
             .telemetry
             .safety
-            .map(|s| s.radius)
-            .filter(|v| *v > 0.0)
+            .map(|s| s.radius + s.position_error)
+            .filter(|v| *v > 0.0 && v.is_finite())
             .unwrap_or(config.default_radius);
         let t = &r.telemetry;
         let v = [t.velocity.vx, t.velocity.vy, t.velocity.vz];
@@ -199,9 +201,36 @@ mod tests {
                     intervention: Default::default(),
                     counts: InterventionCounts::default(),
                     radius: 0.2,
+                    position_error: 0.0,
                 }),
             },
         }
+    }
+
+    #[test]
+    fn a_robot_is_told_of_its_neighbours_disc_grown_by_their_position_error() {
+        let config = NeighbourConfig::default();
+        let mut fleet = Fleet::new(FleetConfig::default());
+        fleet.apply(&at(
+            0,
+            Event::Arena {
+                arena: Some(ArenaConfig::demo().shape()),
+            },
+        ));
+        for (i, error) in [(1, 0.05), (2, f64::NAN)] {
+            let name = format!("robot_{i}");
+            fleet.apply(&at(0, registered(&name, i)));
+            let mut t = telemetry(&name, f64::from(i), 0.0, SafetyState::On);
+            if let Event::Telemetry { telemetry, .. } = &mut t {
+                telemetry.safety.as_mut().unwrap().position_error = error;
+            }
+            fleet.apply(&at(10, t));
+        }
+        let g = gather(&fleet, Duration::from_millis(50), &config).unwrap();
+        let sent = lists(&g, &config, 7);
+        let (about_2, about_1) = (sent[0].robots[0], sent[1].robots[0]);
+        assert!((about_1.radius - 0.25).abs() < 1e-12, "{about_1:?}");
+        assert_eq!(about_2.radius, config.default_radius, "no number: no report");
     }
 
     #[test]

@@ -273,6 +273,7 @@ mod tests {
             intervention: Intervention::Fence,
             counts: InterventionCounts::default(),
             radius: 0.15,
+            position_error: 0.0,
         });
         let scene: Value = serde_json::from_slice(&scene(1, &fleet)).unwrap();
         assert_eq!(

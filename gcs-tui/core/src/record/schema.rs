@@ -552,7 +552,8 @@ fn safety_report() -> Value {
                "intervention": one_of("mech.Intervention", &[("NONE", 0), ("FENCE", 1), ("KEEP_OUT", 2),
                    ("SEPARATION", 3), ("STALE_NEIGHBOURS", 4), ("SLOW_ZONE", 5), ("RETURNING", 6)]),
                "counts": counts,
-               "radius": {"description": "m", "type": "number"}}),
+               "radius": {"description": "m", "type": "number"},
+               "position_error": {"description": "m: how far the position estimate may be from the truth (the layer keeps its distances from a disc of radius + position_error)", "type": "number"}}),
     )
 }
 
@@ -907,6 +908,7 @@ mod tests {
                     ..Default::default()
                 },
                 radius: 0.15,
+                position_error: 0.03,
             }),
         }
     }

@@ -15,7 +15,11 @@
 //! loaded machine the simulation falls behind the clock, which only makes
 //! the station's information look older to the robots.
 //!
-//! Positions are true (no noise, no filter lag), as the guarantee assumes.
+//! Positions are true (no noise, no filter lag), as the lock-step trials'
+//! are, unless the rig is made with [`Options::noisy`]: then each robot
+//! measures its position as the demo's robots do (UWB-like noise and
+//! outliers through the median filter, with its `position_error`), and
+//! every figure is still measured on the simulator's true poses.
 //! The layer "off" is the operator's switch (`safety off`) for every robot,
 //! so a run with it off differs in nothing else. Each control period the
 //! true poses are measured: the smallest gap between two robots' discs, the
@@ -31,7 +35,7 @@ use std::time::{Duration, Instant};
 use mech_agent::PlatformSpec;
 use mech_agent::agent::AgentSettings;
 use mech_agent::safety::{Fence, SafetyConfig, Vec2};
-use mech_agent::sim::SimAgent;
+use mech_agent::sim::{SimAgent, UwbNoise, UwbNoiseModel};
 use mech_agent::sim::safety_trial::clearance;
 use mech_core::router::Publishers;
 use mech_core::{ArenaConfig, CoreConfig, Gcs};
@@ -60,6 +64,15 @@ pub struct Metrics {
     /// longer than its stale limit, one list period and half a second for
     /// its actuators to follow (they lag), m/s.
     pub max_stale_speed: f64,
+    /// Simulated time in which two discs or a disc and an edge were closer
+    /// than the margin (by more than the tolerance), s.
+    pub below_margin: f64,
+    /// Fastest true speed of a robot whose centre was inside a slow zone,
+    /// above the zone's cap, m/s (0: never faster than a cap).
+    pub zone_overspeed: f64,
+    /// Largest distance between a robot's true position and the one it
+    /// reported, m.
+    pub max_estimate_error: f64,
 }
 
 impl Default for Metrics {
@@ -72,6 +85,9 @@ impl Default for Metrics {
             margin_violations: 0,
             breaches: 0,
             max_stale_speed: 0.0,
+            below_margin: 0.0,
+            zone_overspeed: 0.0,
+            max_estimate_error: 0.0,
         }
     }
 }
@@ -90,6 +106,9 @@ struct Robot {
     drop_neighbours_from: Option<Duration>,
     /// When it finished its mission.
     arrived: Option<Duration>,
+    /// Where its telemetry says it is (its estimate), after its last
+    /// period.
+    reported: Option<Vec2>,
 }
 
 impl Robot {
@@ -104,12 +123,60 @@ impl Robot {
     }
 }
 
+/// How a rig's robots sense and move.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Seed of the robots' position noise (robot `i` uses `seed + i`);
+    /// `None`: true poses every period.
+    pub noise: Option<u64>,
+    /// Control period.
+    pub dt: Duration,
+    /// Every robot's `[safety]`.
+    pub safety: SafetyConfig,
+    /// Fraction of its top speed a robot drives a mission at.
+    pub cruise_fraction: f64,
+    /// The station's arena.
+    pub arena: ArenaConfig,
+    /// Neighbour lists' rate at the station, Hz.
+    pub neighbour_rate: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            noise: None,
+            dt: Duration::from_millis(20),
+            safety: SafetyConfig {
+                position_error: 0.0,
+                ..SafetyConfig::default()
+            },
+            cruise_fraction: 0.6,
+            arena: ArenaConfig::demo(),
+            neighbour_rate: 20.0,
+        }
+    }
+}
+
+impl Options {
+    /// The demo's robots: UWB-like positions through the median filter,
+    /// 20 control periods a second, the default `[safety]` (its
+    /// `position_error` included).
+    pub fn noisy(seed: u64) -> Options {
+        Options {
+            noise: Some(seed),
+            dt: Duration::from_millis(50),
+            safety: SafetyConfig::default(),
+            ..Options::default()
+        }
+    }
+}
+
 /// A station and its simulated fleet.
 pub struct Rig {
     pub gcs: Gcs,
     router: SocketAddr,
     robots: Vec<Robot>,
-    safety: SafetyConfig,
+    options: Options,
     layer_on: bool,
     fence: Fence,
     controllers: Publishers,
@@ -119,6 +186,8 @@ pub struct Rig {
     dt: Duration,
     started: Instant,
     next_commands: Duration,
+    /// Until this time nothing from the station reaches a robot.
+    frozen_until: Duration,
     /// Shortfall below the margin not counted as a violation, m.
     pub tolerance: f64,
     metrics: Metrics,
@@ -143,26 +212,33 @@ impl Rig {
     /// A station on loopback with the demo arena; its robots' layers on or
     /// (as an operator switches them) off.
     pub async fn new(layer_on: bool) -> Rig {
+        Rig::with(layer_on, Options::default()).await
+    }
+
+    /// A station on loopback with `options`' arena, and robots as they say.
+    pub async fn with(layer_on: bool, options: Options) -> Rig {
         let turn = TURN.lock().await;
         let mut config = CoreConfig::default();
         config.router.udp = "127.0.0.1:0".parse().unwrap();
         config.router.tcp = None;
-        config.arena = Some(ArenaConfig::demo());
+        config.arena = Some(options.arena.clone());
+        config.neighbours.rate_hz = options.neighbour_rate;
         let gcs = Gcs::start(config).await.unwrap();
-        let arena = ArenaConfig::demo().to_arena("any", 1, true);
+        let arena = options.arena.to_arena("any", 1, true);
         Rig {
             _turn: turn,
             router: gcs.router().udp_addr(),
             controllers: gcs.router().publishers("ctl"),
             gcs,
             robots: Vec::new(),
-            safety: SafetyConfig::default(),
             layer_on,
             fence: Fence::from_arena(&arena),
             time: Duration::ZERO,
-            dt: Duration::from_millis(20),
+            dt: options.dt,
+            options,
             started: Instant::now(),
             next_commands: Duration::ZERO,
+            frozen_until: Duration::ZERO,
             tolerance: 1e-3,
             metrics: Metrics::default(),
             buf: vec![0; 65_536],
@@ -173,12 +249,18 @@ impl Rig {
     pub async fn add(&mut self, platform: &PlatformSpec, pose: Pose) -> usize {
         let name = format!("robot_{}", self.robots.len() + 1);
         let mut settings = AgentSettings::new(&name);
-        settings.safety = self.safety;
-        // True poses, every control period: nothing for a median filter
-        // to remove, and the pose the layer judges is exact (assumption 1
-        // of docs/safety.md), as in the lock-step trials.
-        settings.filter_window = 1;
-        let sim = SimAgent::new(settings, platform, pose, None, mech_proto::unix_micros());
+        settings.safety = self.options.safety;
+        settings.gains.cruise_fraction = self.options.cruise_fraction;
+        let noise = self.options.noise.map(|seed| {
+            let seed = seed.wrapping_add(self.robots.len() as u64);
+            UwbNoise::new(UwbNoiseModel::default(), seed)
+        });
+        if noise.is_none() {
+            // True poses, every control period: nothing for a median
+            // filter to remove, and the pose the layer judges is exact.
+            settings.filter_window = 1;
+        }
+        let sim = SimAgent::new(settings, platform, pose, noise, mech_proto::unix_micros());
         let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
         self.robots.push(Robot {
             channel: format!("ctl/{}", self.robots.len() + 1),
@@ -188,6 +270,7 @@ impl Rig {
             command: None,
             drop_neighbours_from: None,
             arrived: None,
+            reported: None,
         });
         self.robots.len() - 1
     }
@@ -222,6 +305,9 @@ impl Rig {
         };
         self.until(ready, "every robot routed, its layer as asked")
             .await;
+        // A robot's first estimates, before its median window filled, are
+        // single fixes (outliers included); none of them moved meanwhile.
+        self.metrics.max_estimate_error = 0.0;
     }
 
     /// Runs control periods until `done` holds; panics after [`SETTLE`].
@@ -291,6 +377,12 @@ impl Rig {
     /// that loses exactly them).
     pub fn drop_neighbours(&mut self, i: usize) {
         self.robots[i].drop_neighbours_from = Some(self.time);
+    }
+
+    /// Nothing from the station reaches any robot for `span` from now (a
+    /// station frozen, or its link down).
+    pub fn freeze(&mut self, span: Duration) {
+        self.frozen_until = self.time + span;
     }
 
     /// Runs `seconds` of simulated time.
@@ -399,7 +491,7 @@ impl Rig {
                         let bytes = &self.buf[..n];
                         let neighbours =
                             mech_proto::peek(bytes).is_ok_and(|h| h.kind == neighbours_kind());
-                        if neighbours && r.drop_neighbours_from.is_some() {
+                        if neighbours && r.drop_neighbours_from.is_some() || now < self.frozen_until {
                             continue;
                         }
                         let replies = r.sim.handle_bytes(bytes, now);
@@ -424,6 +516,8 @@ impl Rig {
         }
         for r in &mut self.robots {
             let out = r.sim.tick(now);
+            let p = r.sim.agent.telemetry(now).pose;
+            r.reported = Some(Vec2::new(p.x, p.y));
             send(&mut r.sim, &r.socket, self.router, out).await;
             let done = r.sim.agent.mission("wp/gcs").is_some_and(|m| m.finished());
             if r.arrived.is_none() && r.channel == "wp/gcs" && done {
@@ -441,8 +535,9 @@ impl Rig {
     }
 
     fn measure(&mut self) {
-        let (margin, radius) = (self.fence.margin, self.safety.radius);
-        let stale_after = Duration::from_secs_f64(self.safety.stale_after + 0.05 + 0.5);
+        let safety = &self.options.safety;
+        let (margin, radius) = (self.fence.margin, safety.radius);
+        let stale_after = Duration::from_secs_f64(safety.stale_after + 0.05 + 0.5);
         let m = &mut self.metrics;
         let (mut close, mut touching) = (false, false);
         for (i, a) in self.robots.iter().enumerate() {
@@ -469,6 +564,20 @@ impl Rig {
         }
         m.margin_violations += u64::from(short);
         m.breaches += u64::from(breached);
+        if close || short {
+            m.below_margin += self.dt.as_secs_f64();
+        }
+        for r in &self.robots {
+            let (p, speed) = (r.position(), r.velocity().norm());
+            for (zone, cap) in &self.fence.slow_zones {
+                if mech_agent::safety::geometry::inside(zone, p) {
+                    m.zone_overspeed = m.zone_overspeed.max(speed - cap);
+                }
+            }
+            if let Some(e) = r.reported {
+                m.max_estimate_error = m.max_estimate_error.max((e - p).norm());
+            }
+        }
     }
 
     /// Stops the station (the robots' sockets close with the rig).

@@ -186,7 +186,9 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
     Line::from(spans)
 }
 
-/// The card's second line: ` x  1.00 y  2.00   90° 0.20m/s meas`.
+/// The card's second line: ` x  1.00 y  2.00   90° 0.20m/s meas`, or
+/// ` x 1.00 y 2.00   90° 0.20m/s meas ±5cm`
+/// (how far the position may be off, as its safety layer reports it).
 fn pose_line<'a>(r: &RobotView) -> Line<'a> {
     // Height only when airborne, so a ground robot's line has room for
     // whether its speed was measured.
@@ -195,14 +197,18 @@ fn pose_line<'a>(r: &RobotView) -> Line<'a> {
     } else {
         String::new()
     };
-    Line::raw(format!(
-        " x{:6.2} y{:6.2}{z} {:4.0}° {:.2}m/s {}",
-        r.pose.x,
-        r.pose.y,
-        r.heading_deg(),
-        r.speed(),
-        velocity_source_str(r.velocity_source),
-    ))
+    let source = velocity_source_str(r.velocity_source);
+    let (x, y, heading, speed) = (r.pose.x, r.pose.y, r.heading_deg(), r.speed());
+    match r.safety {
+        // Narrower coordinates, so the card's width still holds the error.
+        Some(s) if s.position_error > 0.0 => Line::raw(format!(
+            " x{x:5.2} y{y:5.2}{z} {heading:4.0}° {speed:.2}m/s {source} ±{:.0}cm",
+            s.position_error * 100.0
+        )),
+        _ => Line::raw(format!(
+            " x{x:6.2} y{y:6.2}{z} {heading:4.0}° {speed:.2}m/s {source}"
+        )),
+    }
 }
 
 /// The card's third line: mode, route (✓ acknowledged, … pending),

@@ -401,13 +401,30 @@ fn paint_cluster_control(
     }
 }
 
-/// Robots: heading line, and a ring round the selected ones.
+/// Robots: heading line, the disc its safety layer keeps (its radius
+/// grown by its position error) when that is wider than the mark, and a
+/// ring round the selected ones.
 fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     let m = proj.metres_per_dot;
     for (i, r) in app.fleet.robots.iter().enumerate() {
         let (x, y, h) = (r.pose.x, r.pose.y, r.pose.heading);
         let colour = t.robot(i);
         ctx.draw(&Segment::heading(proj, (x, y, h), 6.0 * m, colour, 1));
+        let footprint = r.safety.map_or(0.0, |s| s.footprint);
+        if footprint > 4.0 * m && footprint.is_finite() {
+            let dots = (footprint / m * 1.5).clamp(12.0, 64.0) as u32;
+            let disc: Vec<(f64, f64)> = (0..dots)
+                .map(|k| {
+                    let a = f64::from(k) * std::f64::consts::TAU / f64::from(dots);
+                    (x + footprint * a.cos(), y + footprint * a.sin())
+                })
+                .collect();
+            ctx.draw(&Dots {
+                proj,
+                points: &disc,
+                color: colour,
+            });
+        }
         if app.cards.selection.contains(&r.name) {
             let ring: Vec<(f64, f64)> = (0..16)
                 .map(|k| {

@@ -547,6 +547,7 @@ mod tests {
                         intervention,
                         counts: InterventionCounts::default(),
                         radius: 0.15,
+                        position_error: 0.0,
                     }),
                 }),
             )
