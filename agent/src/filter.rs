@@ -37,6 +37,12 @@ impl MedianFilter {
         self.window
     }
 
+    /// Whether the window holds all its samples: before that the median
+    /// of a few fixes is no protection from an outlier among them.
+    pub fn full(&self) -> bool {
+        self.samples.len() == self.window
+    }
+
     /// Forgets every sample (after a teleport in simulation, or a new origin).
     pub fn reset(&mut self) {
         self.samples.clear();

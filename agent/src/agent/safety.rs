@@ -373,7 +373,7 @@ mod tests {
 
     #[test]
     fn stale_neighbours_slow_the_robot_to_a_crawl() {
-        let mut a = kiwi_at(2.0);
+        let mut a = exact_kiwi_at(2.0);
         a.handle(msg("", arena(1, true)), ms(0));
         let far = Neighbour {
             id: 2,
@@ -390,6 +390,7 @@ mod tests {
         a.handle(msg("", neighbours(1, vec![far])), ms(0));
         a.handle(msg("joy/0", twist(0.3)), ms(20));
         let kiwi = PlatformSpec::kiwi().build();
+        fix(&mut a, 2.0, ms(40));
         let fresh = kiwi.motion(&a.tick(ms(40)).outputs).vx;
         assert!((fresh - 0.3).abs() < 1e-9, "{fresh}");
         // No neighbour list since 0 ms: stale after 300 ms. Moving faster
@@ -401,6 +402,7 @@ mod tests {
             let mut cmd = msg("joy/0", twist(0.3));
             cmd.header.seq = k;
             a.handle(cmd, now);
+            fix(&mut a, 2.0, now);
             speeds.push(kiwi.motion(&a.tick(now).outputs).vx);
             assert_eq!(a.safety().intervention, Intervention::StaleNeighbours);
         }

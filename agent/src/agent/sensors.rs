@@ -228,7 +228,8 @@ impl Sensors {
     /// configured `safety.position_error` plus `a·t²/2` for the time `t`
     /// moved on (the velocity may have changed by `a·t` meanwhile, `a`
     /// being `max_deceleration`, the rate the layer assumes of every
-    /// robot).
+    /// robot), infinite until the median's window is full (the layer
+    /// then holds the robot still, as it does without an estimate).
     pub(crate) fn motion(&self, platform: &dyn Platform, outputs: &[f64], now: Duration) -> Motion {
         let (velocity, velocity_source) = self.velocity(platform, outputs, now);
         let (estimate, position_error) = match (self.estimate, &self.fusion) {
@@ -240,6 +241,8 @@ impl Sensors {
             (Some(e), None) => {
                 let since = self.filter.middle_stamp().unwrap_or(e.stamp);
                 let (moved, error) = self.track.since(since, now);
+                // Until the window is full an outlier can be the estimate.
+                let error = if self.filter.full() { error } else { f64::INFINITY };
                 (Some(moved_on(e, moved)), error)
             }
         };

@@ -31,6 +31,15 @@ pub struct TrialResult {
     pub pose_rms: f64,
     /// 95th percentile of that error over the run, m.
     pub pose_p95: f64,
+    /// The same for the position the robot reports (its estimate moved on
+    /// to now, as telemetry and the safety layer take it): 99th
+    /// percentile, m.
+    pub reported_p99: f64,
+    /// Largest error of the reported position, m.
+    pub reported_max: f64,
+    /// Fraction of periods in which the reported position was further
+    /// from the truth than the error bound the robot reported with it.
+    pub beyond_bound: f64,
 }
 
 /// Parameters of a trial.
@@ -115,6 +124,7 @@ impl Trial {
         let mut next_heartbeat = Duration::ZERO;
         let mut finished_at = None;
         let mut pose_errors = Vec::new();
+        let mut reported = Reported::default();
         while now < self.timeout {
             now += self.control_period;
             if now >= next_heartbeat {
@@ -125,6 +135,7 @@ impl Trial {
             if let Some(e) = sim.agent.estimate() {
                 let truth = sim.robot.pose();
                 pose_errors.push((e.pose.x - truth.x).hypot(e.pose.y - truth.y));
+                reported.record(&sim, now);
             }
             let done = sim.agent.mission("wp/gcs").is_some_and(|m| m.finished());
             match finished_at {
@@ -134,7 +145,9 @@ impl Trial {
                 _ => {}
             }
         }
-        self.outcome(&sim, finished_at, now, &pose_errors)
+        let mut result = self.outcome(&sim, finished_at, now, &pose_errors);
+        reported.fill(&mut result);
+        result
     }
 
     /// The simulated robot: noise, encoders and battery as the trial says.
@@ -205,7 +218,45 @@ impl Trial {
             seconds: finished_at.unwrap_or(now).as_secs_f64(),
             pose_rms,
             pose_p95: median_p95(pose_errors).1,
+            reported_p99: f64::NAN,
+            reported_max: f64::NAN,
+            beyond_bound: f64::NAN,
         }
+    }
+}
+
+/// The reported position's errors against the truth, and how often they
+/// were beyond the bound reported with them.
+#[derive(Debug, Default)]
+struct Reported {
+    errors: Vec<f64>,
+    beyond: usize,
+}
+
+impl Reported {
+    fn record(&mut self, sim: &SimAgent, now: Duration) {
+        let t = sim.agent.telemetry(now);
+        let truth = sim.robot.pose();
+        let error = (t.pose.x - truth.x).hypot(t.pose.y - truth.y);
+        let bound = t.safety.map_or(0.0, |s| s.position_error);
+        if bound >= crate::safety::MAX_POSITION_ERROR {
+            // The robot says it does not know where it is (its median
+            // window is filling): nothing is claimed.
+            return;
+        }
+        self.errors.push(error);
+        self.beyond += usize::from(error > bound);
+    }
+
+    fn fill(mut self, result: &mut TrialResult) {
+        self.errors.sort_by(f64::total_cmp);
+        let n = self.errors.len();
+        if n == 0 {
+            return;
+        }
+        result.reported_p99 = self.errors[(n * 99).div_ceil(100).clamp(1, n) - 1];
+        result.reported_max = self.errors[n - 1];
+        result.beyond_bound = self.beyond as f64 / n as f64;
     }
 }
 

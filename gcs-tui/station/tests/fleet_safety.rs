@@ -136,7 +136,12 @@ async fn ten_robots_under_random_twists_for_a_minute_never_touch_or_leave() {
 /// mission to the point opposite: every path crosses every other. The
 /// simulated time until the last arrived.
 async fn crossing(layer_on: bool) -> (Option<f64>, fleet::Metrics) {
-    let mut rig = Rig::new(layer_on).await;
+    crossing_with(layer_on, fleet::Options::default()).await
+}
+
+/// [`crossing`] with the robots sensing and moving as `options` say.
+async fn crossing_with(layer_on: bool, options: fleet::Options) -> (Option<f64>, fleet::Metrics) {
+    let mut rig = Rig::with(layer_on, options).await;
     let specs = platforms();
     let (cx, cy, r) = (1.95, 1.4, 1.05);
     let angle = |i: usize| i as f64 / 8.0 * std::f64::consts::TAU;
@@ -189,6 +194,30 @@ async fn eight_robots_crossing_on_missions_all_arrive_within_twice_the_time_and_
         on.separation_violations + on.margin_violations + on.breaches,
         0,
         "{on:?}"
+    );
+}
+
+/// The crossing on the demo's noisy positions (UWB-like fixes through the
+/// median filter): each robot grows its disc by how far its estimate may
+/// be off, so the margin holds between the true discs, which the robots
+/// never see.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn eight_robots_crossing_on_noisy_positions_keep_the_margin_between_true_discs() {
+    let (alone, off) = crossing_with(false, fleet::Options::noisy(1)).await;
+    let alone = alone.expect("without the layer every robot arrives");
+    assert!(off.separation_violations > 0, "{off:?}");
+    let (with, on) = crossing_with(true, fleet::Options::noisy(1)).await;
+    println!("noisy crossing: {with:?} s with the layer, {alone:.2} s without; {on:?}");
+    assert!(
+        on.max_estimate_error > 0.01,
+        "the estimates were noisy: {on:?}"
+    );
+    let with = with.unwrap_or_else(|| panic!("not all arrived in 120 s: {on:?}"));
+    assert!(on.min_gap >= MARGIN - 1e-3, "true discs: {on:?}");
+    assert_eq!(on.separation_violations + on.margin_violations + on.breaches, 0, "{on:?}");
+    assert!(
+        with <= 2.5 * alone,
+        "{with:.1} s with the layer, {alone:.1} s without"
     );
 }
 
