@@ -31,9 +31,16 @@
 //! Verification compares MACs in constant time. Payloads are not encrypted:
 //! anyone on the network can read them, nobody without the key can make or
 //! change one.
+//!
+//! A peer of the router (a robot, a controller, a bridge) signs and checks
+//! with [`Signer`] and [`Verifier`].
+
+mod peer;
 
 use hmac::{Hmac, Mac};
 use sha2::{Digest, Sha256};
+
+pub use peer::{Refused, Signer, Verifier};
 
 /// Bytes of a tag (the `auth` element's payload).
 pub const TAG_LEN: usize = 4 + 1 + 8 + MAC_LEN;
