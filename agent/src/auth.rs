@@ -20,7 +20,7 @@
 use std::collections::VecDeque;
 
 use mech_proto::Body;
-use mech_proto::auth::{AuthError, Key, Stamper, Stream, split};
+use mech_proto::auth::{AuthError, Key, Refused, Signer, Verifier};
 
 /// Time requests whose answer is still taken: the last 16, four seconds of
 /// requests at the agent's default `hello_retry` of 0.25 s.
@@ -29,12 +29,13 @@ pub const ASKED: usize = 16;
 /// Signing and checking for one robot.
 #[derive(Debug)]
 pub struct RobotAuth {
-    key: Key,
+    signer: Signer,
+    /// The router's messages: one stream of them all, started only by a
+    /// `Time` answer (the robot may have no clock to judge a first stamp
+    /// by).
+    from_router: Verifier<()>,
     /// The router's sender name (its messages must say so).
     router: String,
-    stamper: Stamper,
-    /// The router's stream, once a `Time` answer started it.
-    router_stream: Option<Stream>,
     /// Nonces of the time requests waiting for an answer, newest last.
     asked: VecDeque<u64>,
     /// Messages refused, by reason.
@@ -75,10 +76,9 @@ pub enum Checked {
 impl RobotAuth {
     pub fn new(key: Key, router: &str) -> RobotAuth {
         RobotAuth {
-            key,
+            signer: Signer::new(Some(key.clone())),
+            from_router: Verifier::new(key, None),
             router: router.to_string(),
-            stamper: Stamper::default(),
-            router_stream: None,
             asked: VecDeque::with_capacity(ASKED),
             rejected: RobotRejections::default(),
         }
@@ -87,7 +87,7 @@ impl RobotAuth {
     /// Whether station time is known (a `Time` answer was accepted since
     /// the last [`RobotAuth::forget_router`]).
     pub fn synced(&self) -> bool {
-        self.router_stream.is_some()
+        self.from_router.started()
     }
 
     /// A new time request: its nonce is random and remembered (with the
@@ -104,16 +104,14 @@ impl RobotAuth {
     /// The router was lost (it may have restarted, or someone is replaying
     /// its traffic): ask the time again before trusting it.
     pub fn forget_router(&mut self) {
-        self.router_stream = None;
+        self.from_router.forget();
         self.asked.clear();
     }
 
     /// Signs an encoded message (nil `auth` element) with station time
     /// `local_us` + offset, as sent on the robot's link number `link`.
     pub fn seal(&mut self, bytes: &mut Vec<u8>, local_us: u64, link: u8) -> Result<(), AuthError> {
-        let stamp = self.stamper.next(local_us);
-        self.key
-            .seal(bytes, link & !mech_proto::auth::FROM_ROUTER, stamp)
+        self.signer.seal(bytes, link, local_us)
     }
 
     /// Checks a received message whose decoded form is `sender` + `body`,
@@ -122,30 +120,30 @@ impl RobotAuth {
     /// the router signed it for this robot. The router's own messages (the
     /// time answer among them) name the router as sender.
     pub fn check(&mut self, bytes: &[u8], sender: &str, body: &Body, local_us: u64) -> Checked {
-        let tag = match split(bytes) {
-            Ok((region, Some(tag))) if self.key.verify(region, &tag) => tag,
-            _ => {
+        let tag = match self.from_router.verify(bytes) {
+            Ok(tag) => tag,
+            Err(Refused::NotFromRouter) => {
+                self.rejected.not_router += 1;
+                return Checked::Reject;
+            }
+            Err(Refused::Auth(_)) => {
                 self.rejected.bad_tag += 1;
                 return Checked::Reject;
             }
         };
-        if !tag.from_router() {
-            self.rejected.not_router += 1;
-            return Checked::Reject;
-        }
         if let Body::Time(t) = body {
             if sender == self.router && !self.synced() && self.asked.contains(&t.nonce) {
                 self.asked.clear();
-                self.stamper.sync(t.station_us, local_us);
-                self.router_stream = Some(Stream::starting_at(tag.stamp_us));
+                self.signer.sync(t.station_us, local_us);
+                self.from_router.start((), tag.stamp_us);
                 return Checked::Synced;
             }
             self.rejected.replay += 1;
             return Checked::Reject;
         }
-        match self.router_stream.as_mut().map(|s| s.accept(tag.stamp_us)) {
-            Some(Ok(())) => Checked::Accept,
-            _ => {
+        match self.from_router.accept((), tag.stamp_us, local_us) {
+            Ok(()) => Checked::Accept,
+            Err(_) => {
                 self.rejected.replay += 1;
                 Checked::Reject
             }
@@ -156,7 +154,7 @@ impl RobotAuth {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mech_proto::auth::FROM_ROUTER;
+    use mech_proto::auth::{FROM_ROUTER, split};
     use mech_proto::{Envelope, Header, Time};
 
     fn router_msg(key: &Key, body: Body, stamp: u64) -> (Vec<u8>, Body) {
