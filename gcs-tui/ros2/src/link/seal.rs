@@ -4,9 +4,7 @@
 //! accepted only when the router signed them for this key, each stamp once.
 //! Pure: the clock is passed in.
 
-use std::collections::HashMap;
-
-use mech_proto::auth::{self, Freshness, Key, Stamper, Stream};
+use mech_proto::auth::{self, Freshness, Key, Refused, Signer, Verifier};
 use mech_proto::{Body, Envelope, Header};
 
 /// How far a new stream's first stamp may be from our clock (the
@@ -24,23 +22,30 @@ pub enum SealError {
     NotFromRouter,
 }
 
-/// The sending side of one identity at the station: its name, its key
-/// (none at an unauthenticated station), its message numbers and stamps.
+impl From<Refused> for SealError {
+    fn from(refused: Refused) -> SealError {
+        match refused {
+            Refused::Auth(e) => SealError::Auth(e),
+            Refused::NotFromRouter => SealError::NotFromRouter,
+        }
+    }
+}
+
+/// The sending side of one identity at the station: its name, its message
+/// numbers, and its stamps and key (none at an unauthenticated station).
 #[derive(Debug)]
 pub struct Sealer {
     name: String,
-    key: Option<Key>,
     seq: u32,
-    stamper: Stamper,
+    signer: Signer,
 }
 
 impl Sealer {
     pub fn new(name: &str, key: Option<Key>) -> Sealer {
         Sealer {
             name: name.to_string(),
-            key,
             seq: 0,
-            stamper: Stamper::default(),
+            signer: Signer::new(key),
         }
     }
 
@@ -51,18 +56,18 @@ impl Sealer {
 
     /// Whether messages are signed.
     pub fn signs(&self) -> bool {
-        self.key.is_some()
+        self.signer.signs()
     }
 
     /// Adopts the router's clock: it read `station_us` when ours read
     /// `local_us`.
     pub fn sync(&mut self, station_us: u64, local_us: u64) {
-        self.stamper.sync(station_us, local_us);
+        self.signer.sync(station_us, local_us);
     }
 
     /// Station time now, as our stamps give it.
     pub fn station_us(&self, local_us: u64) -> u64 {
-        local_us.saturating_add_signed(self.stamper.offset_us)
+        self.signer.station_us(local_us)
     }
 
     /// One message, encoded and (with a key) signed on link 0.
@@ -74,7 +79,7 @@ impl Sealer {
         local_us: u64,
     ) -> Result<Vec<u8>, SealError> {
         self.seq = self.seq.wrapping_add(1);
-        let stamp_us = self.stamper.next(local_us);
+        let stamp_us = self.signer.stamp(local_us);
         let env = Envelope::new(
             Header {
                 seq: self.seq,
@@ -86,9 +91,7 @@ impl Sealer {
             body,
         );
         let mut bytes = mech_proto::encode(&env)?;
-        if let Some(key) = &self.key {
-            key.seal(&mut bytes, 0, stamp_us)?;
-        }
+        self.signer.seal_at(&mut bytes, 0, stamp_us)?;
         Ok(bytes)
     }
 }
@@ -98,21 +101,19 @@ impl Sealer {
 /// stream (sender and link), a new stream only near our clock.
 #[derive(Debug)]
 pub struct Opener {
-    key: Option<Key>,
-    freshness: Freshness,
-    streams: HashMap<(String, u8), Stream>,
+    /// `None` at an unauthenticated station: messages are decoded only.
+    verifier: Option<Verifier<(String, u8)>>,
 }
 
 impl Opener {
     /// An opener that takes nothing signed before `started_us`.
     pub fn new(key: Option<Key>, started_us: u64) -> Opener {
+        let admit = Freshness {
+            window_us: WINDOW_US,
+            not_before_us: started_us.saturating_sub(WINDOW_US),
+        };
         Opener {
-            key,
-            freshness: Freshness {
-                window_us: WINDOW_US,
-                not_before_us: started_us.saturating_sub(WINDOW_US),
-            },
-            streams: HashMap::new(),
+            verifier: key.map(|k| Verifier::new(k, Some(admit))),
         }
     }
 
@@ -120,13 +121,12 @@ impl Opener {
     /// nonce of a time request): any stamp, as long as the router signed
     /// it for this key.
     pub fn any_time(key: Option<Key>) -> Opener {
+        let admit = Freshness {
+            window_us: u64::MAX,
+            not_before_us: 0,
+        };
         Opener {
-            key,
-            freshness: Freshness {
-                window_us: u64::MAX,
-                not_before_us: 0,
-            },
-            streams: HashMap::new(),
+            verifier: key.map(|k| Verifier::new(k, Some(admit))),
         }
     }
 
@@ -134,30 +134,11 @@ impl Opener {
     /// time.
     pub fn open(&mut self, bytes: &[u8], now_us: u64) -> Result<Envelope, SealError> {
         let env = mech_proto::decode(bytes)?;
-        let Some(key) = &self.key else {
+        let Some(verifier) = self.verifier.as_mut() else {
             return Ok(env);
         };
-        let (region, tag) = auth::split(bytes)?;
-        let tag = tag.ok_or(auth::AuthError::Unsigned)?;
-        if !tag.from_router() {
-            return Err(SealError::NotFromRouter);
-        }
-        if tag.key_id != key.id() {
-            return Err(auth::AuthError::UnknownKey(tag.key_id).into());
-        }
-        if !key.verify(region, &tag) {
-            return Err(auth::AuthError::BadTag.into());
-        }
-        let id = (env.header.sender.clone(), tag.link);
-        match self.streams.get_mut(&id) {
-            Some(stream) => stream.accept(tag.stamp_us)?,
-            None => {
-                if !self.freshness.admits(tag.stamp_us, now_us) {
-                    return Err(auth::AuthError::Replay.into());
-                }
-                self.streams.insert(id, Stream::starting_at(tag.stamp_us));
-            }
-        }
+        let sender = &env.header.sender;
+        verifier.open(bytes, |tag| (sender.clone(), tag.link), now_us)?;
         Ok(env)
     }
 }
@@ -183,17 +164,18 @@ mod tests {
         }))
     }
 
-    /// What the router sends us: `bytes` re-signed with `k`, router bit set.
-    fn from_router(k: &Key, body: Body, stamp: u64) -> Vec<u8> {
+    /// What the router sends us from `sender`: signed with `k`, router
+    /// bit set.
+    fn from_router(k: &Key, sender: &str, stamp: u64) -> Vec<u8> {
         let env = Envelope::new(
             Header {
                 seq: 1,
                 stamp_us: stamp,
-                sender: "robot_1".into(),
+                sender: sender.into(),
                 destination: "ros2".into(),
                 channel: String::new(),
             },
-            body,
+            twist(),
         );
         let mut b = mech_proto::encode(&env).unwrap();
         k.seal(&mut b, FROM_ROUTER, stamp).unwrap();
@@ -227,11 +209,14 @@ mod tests {
         assert_eq!(u.unwrap().last(), Some(&0xc0), "nil auth");
     }
 
+    /// Refusals are the bridge's errors; each sender is a stream of its
+    /// own, and a new one starts only near our clock (at any stamp for the
+    /// answer to a time request).
     #[test]
     fn only_router_signed_fresh_messages_for_our_key_are_opened() {
         let k = key(1);
         let mut o = Opener::new(Some(k.clone()), NOW);
-        let m = from_router(&k, twist(), NOW + 10);
+        let m = from_router(&k, "robot_1", NOW + 10);
         assert!(o.open(&m, NOW).is_ok());
         assert!(
             matches!(
@@ -240,21 +225,28 @@ mod tests {
             ),
             "each stamp once"
         );
-        assert!(o.open(&from_router(&k, twist(), NOW + 20), NOW).is_ok());
-        let other = from_router(&key(2), twist(), NOW + 30);
-        assert!(o.open(&other, NOW).is_err(), "another key");
+        assert!(
+            o.open(&from_router(&k, "robot_1", NOW + 3_000_000), NOW)
+                .is_ok()
+        );
+        assert!(
+            o.open(&from_router(&k, "robot_2", NOW + 20), NOW).is_ok(),
+            "another sender, a stream of its own"
+        );
         let mut s = Sealer::new("ros2", Some(k.clone()));
         let ours = s.seal("robot_1", "", twist(), NOW + 40).unwrap();
         assert!(
             matches!(o.open(&ours, NOW), Err(SealError::NotFromRouter)),
             "reflected"
         );
-        let old = from_router(&k, twist(), NOW - 60_000_000);
+        let old = from_router(&k, "robot_1", NOW - 60_000_000);
         let mut fresh = Opener::new(Some(k.clone()), NOW);
         assert!(
             fresh.open(&old, NOW).is_err(),
             "a new stream far from our clock"
         );
+        let mut answer = Opener::any_time(Some(k.clone()));
+        assert!(answer.open(&old, NOW).is_ok(), "a time answer: any stamp");
         let mut unsigned = Opener::new(None, NOW);
         assert!(unsigned.open(&m, NOW).is_ok(), "no key: decoded only");
         assert!(unsigned.open(&[0x93, 1, 2, 3], NOW).is_err());
