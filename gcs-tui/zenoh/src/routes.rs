@@ -16,7 +16,7 @@ use mech_core::Gcs;
 use mech_core::auth::{KeyFile, Role};
 use mech_core::fleet::Severity;
 use mech_core::sync::lock;
-use mech_proto::auth::Stamper;
+use mech_proto::auth::Signer;
 use tokio::runtime::Handle;
 use tracing::{debug, info, warn};
 use zenoh::Session;
@@ -207,31 +207,30 @@ impl Deciding {
 #[derive(Debug)]
 pub struct RouteRequester {
     session: Session,
-    /// The key's name and key; `None`: requests go unsigned, under the
+    /// The operator key's name; `None`: requests go unsigned, under the
     /// station's name.
-    operator: Option<KeyFile>,
+    operator: Option<String>,
     station: String,
-    stamper: Mutex<Stamper>,
+    /// Stamps and signs requests with the operator key, if there is one.
+    signer: Mutex<Signer>,
 }
 
 impl RouteRequester {
     pub(crate) fn new(session: Session, station: &str, operator: Option<KeyFile>) -> Self {
+        let (operator, key) = operator.map(|k| (k.name, k.key)).unzip();
         RouteRequester {
             session,
             operator,
             station: station.to_string(),
-            stamper: Mutex::new(Stamper::default()),
+            signer: Mutex::new(Signer::new(key)),
         }
     }
 
     /// The request, signed when this station has an operator key.
     fn request(&self, station: &str, robot: &str, channel: Option<&str>) -> RouteRequest {
-        let operator = self.operator.as_ref().map_or(&self.station, |k| &k.name);
+        let operator = self.operator.as_deref().unwrap_or(&self.station);
         let mut request = RouteRequest::new(station, robot, channel, operator);
-        if let Some(k) = &self.operator {
-            let stamp = lock(&self.stamper).next(mech_proto::unix_micros());
-            request.sign(&k.key, stamp);
-        }
+        request.sign(&mut lock(&self.signer), mech_proto::unix_micros());
         request
     }
 

@@ -12,7 +12,7 @@
 //! with link number [`ROUTE_LINK`], so a tag made for one station, robot
 //! and channel is worth nothing for another, and each is accepted once.
 
-use mech_proto::auth::{Key, TAG_LEN, Tag};
+use mech_proto::auth::{Signer, TAG_LEN, Tag};
 use serde::{Deserialize, Serialize};
 
 use super::{PayloadError, VERSION};
@@ -62,11 +62,12 @@ impl RouteRequest {
         .into_bytes()
     }
 
-    /// Signs the request with `key` at station time `stamp_us` (strictly
-    /// increasing from one request to the next).
-    pub fn sign(&mut self, key: &Key, stamp_us: u64) {
-        let tag = key.sign(&self.region(), ROUTE_LINK, stamp_us);
-        self.tag = Some(tag.iter().map(|b| format!("{b:02x}")).collect());
+    /// Signs the request with `signer`'s key and its next stamp, taken at
+    /// `local_us` on the station's clock; unsigned without a key.
+    pub fn sign(&mut self, signer: &mut Signer, local_us: u64) {
+        if let Some(tag) = signer.sign(&self.region(), ROUTE_LINK, local_us) {
+            self.tag = Some(tag.iter().map(|b| format!("{b:02x}")).collect());
+        }
     }
 
     /// The tag, if the request carries one.
@@ -131,12 +132,13 @@ impl RouteReply {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mech_proto::auth::Key;
 
     #[test]
     fn a_signed_request_checks_only_for_what_it_names() {
         let key = Key::new(&[7; 32]);
         let mut r = RouteRequest::new("site-a", "robot_1", Some("ext/x"), "op-b");
-        r.sign(&key, 1_000);
+        r.sign(&mut Signer::new(Some(key.clone())), 1_000);
         let json = serde_json::to_vec(&r).unwrap();
         let back: RouteRequest = serde_json::from_slice(&json).unwrap();
         let tag = back.parsed_tag().unwrap().unwrap();
