@@ -20,7 +20,13 @@ fn main() {
     println!("{runs} runs per row; errors in mm, every control period, truth from the simulator");
     println!(
         "{:<12} {:>7} {:>14} {:>12} {:>12} {:>12} {:>14}",
-        "platform", "period", "raw median p95", "reported p99", "reported max", "bound", "beyond bound"
+        "platform",
+        "period",
+        "raw median p95",
+        "reported p99",
+        "reported max",
+        "bound",
+        "beyond bound"
     );
     for spec in [
         PlatformSpec::diff_drive(),

@@ -64,7 +64,10 @@ impl MedianFilter {
     /// before the first sample.
     pub fn middle_stamp(&self) -> Option<Duration> {
         let n = self.samples.len();
-        let (a, b) = (self.samples.get((n.checked_sub(1)?) / 2)?, self.samples.get(n / 2)?);
+        let (a, b) = (
+            self.samples.get((n.checked_sub(1)?) / 2)?,
+            self.samples.get(n / 2)?,
+        );
         Some((a.stamp + b.stamp) / 2)
     }
 

@@ -564,21 +564,22 @@ impl SafetyLayer {
     }
 
     /// The right-hand rule: `intent` turned right by the smallest angle
-    /// that meets no neighbour within `horizon`
-    /// ([`NeighbourSet::anticipate`]). `None`: the way is clear (or the
-    /// look-ahead is off).
+    /// that meets no neighbour within `horizon` and does not head into the
+    /// fence ([`NeighbourSet::anticipate_within`]). `None`: the way is
+    /// clear (or the look-ahead is off).
     fn swerve(&self, c: &Constraints, intent: Vec2, margin: f64, now: Duration) -> Option<Vec2> {
         let n = self
             .neighbours
             .as_ref()
             .filter(|_| self.config.horizon > 0.0)?;
-        let target = n.anticipate(
+        let fence = self.arena.as_ref().and_then(|a| a.fence.as_ref());
+        let target = n.anticipate_within(
             c.position,
             intent,
-            self.footprint(),
-            margin,
+            (self.footprint(), margin),
             self.config.horizon,
             now,
+            fence,
         )?;
         Some(along_cell_edge(c, target))
     }
@@ -1022,15 +1023,22 @@ mod tests {
     #[test]
     fn a_diff_drive_turning_on_the_spot_towards_its_swerve_is_not_stuck() {
         // On a mission (its command heads along its heading) at
-        // neighbours standing ahead and to its right: the swerve is far to
-        // the right, and at 1 rad/s the turn takes longer than
-        // `stuck_after`; the robot turns, then drives, and never backs off
-        // meanwhile.
+        // neighbours standing ahead and to both sides alike: the swerve is
+        // far to the right (round standing robots the smaller turn either
+        // side, right first at equal ones), and at 1 rad/s the turn takes
+        // longer than `stuck_after`; the robot turns, then drives, and
+        // never backs off meanwhile.
         let dd = PlatformSpec::diff_drive().build();
         let mut l = enforcing(SafetyConfig::default());
         l.steered_by(Some(3.0));
         let ahead = forward(dd.as_ref(), 0.3);
-        let around = [(2.5, 1.5), (2.35, 1.1), (1.95, 1.0)];
+        let around = [
+            (2.5, 1.5),
+            (2.35, 1.1),
+            (1.95, 1.0),
+            (2.35, 1.9),
+            (1.95, 2.0),
+        ];
         let (mut drove, mut heading) = (None, 0.0);
         drive_ideally(&mut l, &around, &ahead, 150, |l, now, me, speed| {
             assert!(l.backing_off.is_none(), "backed off at {now:?}");

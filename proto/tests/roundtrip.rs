@@ -170,21 +170,23 @@ fn safety_report() -> impl Strategy<Value = SafetyReport> {
         vec(any::<u32>(), 6),
         (0.0..5.0f64, 0.0..1.0f64),
     )
-        .prop_map(|(state, arena, intervention, c, (radius, position_error))| SafetyReport {
-            state: [SafetyState::NoArena, SafetyState::On, SafetyState::Off][state],
-            arena,
-            intervention: Intervention::ALL[intervention],
-            counts: InterventionCounts {
-                fence: c[0],
-                keep_out: c[1],
-                separation: c[2],
-                stale_neighbours: c[3],
-                slow_zone: c[4],
-                returning: c[5],
+        .prop_map(
+            |(state, arena, intervention, c, (radius, position_error))| SafetyReport {
+                state: [SafetyState::NoArena, SafetyState::On, SafetyState::Off][state],
+                arena,
+                intervention: Intervention::ALL[intervention],
+                counts: InterventionCounts {
+                    fence: c[0],
+                    keep_out: c[1],
+                    separation: c[2],
+                    stale_neighbours: c[3],
+                    slow_zone: c[4],
+                    returning: c[5],
+                },
+                radius,
+                position_error,
             },
-            radius,
-            position_error,
-        })
+        )
 }
 
 fn body() -> impl Strategy<Value = Body> {

@@ -242,7 +242,11 @@ impl Sensors {
                 let since = self.filter.middle_stamp().unwrap_or(e.stamp);
                 let (moved, error) = self.track.since(since, now);
                 // Until the window is full an outlier can be the estimate.
-                let error = if self.filter.full() { error } else { f64::INFINITY };
+                let error = if self.filter.full() {
+                    error
+                } else {
+                    f64::INFINITY
+                };
                 (Some(moved_on(e, moved)), error)
             }
         };

@@ -69,6 +69,41 @@ impl Fence {
                 .all(|k| !geometry::inside(k, p) && edges_clear(k))
     }
 
+    /// Signed distance from `p` to the nearest edge of the boundary or a
+    /// keep-out: positive on the free side (inside the boundary, outside
+    /// keep-outs), negative beyond; infinite with no edges.
+    pub fn clearance(&self, p: Vec2) -> f64 {
+        let mut best = f64::INFINITY;
+        let mut polygon = |poly: &[Vec2], keep_inside: bool| {
+            let d = geometry::edges(poly)
+                .map(|e| e.distance(p))
+                .fold(f64::INFINITY, f64::min);
+            let right_side = geometry::inside(poly, p) == keep_inside;
+            best = best.min(if right_side { d } else { -d });
+        };
+        if !self.boundary.is_empty() {
+            polygon(&self.boundary, true);
+        }
+        for k in &self.keep_out {
+            polygon(k, false);
+        }
+        best
+    }
+
+    /// Whether heading `way` from `p` takes a robot of `radius` into the
+    /// band within its margin of an edge (or deeper into it) within
+    /// `ahead` m: a way a swerve should not choose, as the fence would stop
+    /// the robot on it.
+    pub fn closes_in(&self, p: Vec2, way: Vec2, radius: f64, ahead: f64) -> bool {
+        let Some(u) = way.unit() else {
+            return false;
+        };
+        let rho = radius + self.margin;
+        let here = self.clearance(p) - rho;
+        let there = self.clearance(p + u * ahead) - rho;
+        there < 0.0 && there < here - 1e-9
+    }
+
     /// Adds this fence's constraints on a robot of `radius` at
     /// `c.position` whose braking paths reach at most `reach` m.
     pub fn constrain(&self, c: &mut Constraints, radius: f64, reach: f64) {

@@ -19,7 +19,7 @@ use mech_proto::{Arena, Command, Mission, Neighbour, Neighbours, Pose, Twist};
 use super::robot::SimRobot;
 use crate::control::{Controller, Gains, MissionRun};
 use crate::platform::{Platform, PlatformSpec};
-use crate::safety::{Fence, SafetyConfig, SafetyLayer, Vec2, geometry};
+use crate::safety::{Fence, SafetyConfig, SafetyLayer, Vec2};
 
 /// One simulated robot of a trial.
 #[derive(Debug)]
@@ -302,24 +302,9 @@ impl SafetyTrial {
     }
 }
 
-/// Signed distance from `p` to the arena's edges: positive in the free
-/// space side (inside the boundary, outside keep-outs), negative beyond.
+/// Signed distance from `p` to the arena's edges ([`Fence::clearance`]).
 pub fn clearance(fence: &Fence, p: Vec2) -> f64 {
-    let mut best = f64::INFINITY;
-    let mut polygon = |poly: &[Vec2], keep_inside: bool| {
-        let d = geometry::edges(poly)
-            .map(|e| e.distance(p))
-            .fold(f64::INFINITY, f64::min);
-        let right_side = geometry::inside(poly, p) == keep_inside;
-        best = best.min(if right_side { d } else { -d });
-    };
-    if !fence.boundary.is_empty() {
-        polygon(&fence.boundary, true);
-    }
-    for k in &fence.keep_out {
-        polygon(k, false);
-    }
-    best
+    fence.clearance(p)
 }
 
 /// The demo simulator's arena ([`super::Arena::default`], 3.9 m x 2.8 m)

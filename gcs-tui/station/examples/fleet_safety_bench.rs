@@ -85,7 +85,10 @@ async fn missions(
         }
     }
     if !arrived && layer_on {
-        println!("not all arrived; the robots at the end:\n{}", rig.describe());
+        println!(
+            "not all arrived; the robots at the end:\n{}",
+            rig.describe()
+        );
     }
     let took = arrived
         .then(|| rig.last_arrival())

@@ -214,7 +214,11 @@ async fn eight_robots_crossing_on_noisy_positions_keep_the_margin_between_true_d
     );
     let with = with.unwrap_or_else(|| panic!("not all arrived in 120 s: {on:?}"));
     assert!(on.min_gap >= MARGIN - 1e-3, "true discs: {on:?}");
-    assert_eq!(on.separation_violations + on.margin_violations + on.breaches, 0, "{on:?}");
+    assert_eq!(
+        on.separation_violations + on.margin_violations + on.breaches,
+        0,
+        "{on:?}"
+    );
     assert!(
         with <= 2.5 * alone,
         "{with:.1} s with the layer, {alone:.1} s without"

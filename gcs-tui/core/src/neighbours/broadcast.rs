@@ -230,7 +230,10 @@ mod tests {
         let sent = lists(&g, &config, 7);
         let (about_2, about_1) = (sent[0].robots[0], sent[1].robots[0]);
         assert!((about_1.radius - 0.25).abs() < 1e-12, "{about_1:?}");
-        assert_eq!(about_2.radius, config.default_radius, "no number: no report");
+        assert_eq!(
+            about_2.radius, config.default_radius,
+            "no number: no report"
+        );
     }
 
     #[test]

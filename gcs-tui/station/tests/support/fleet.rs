@@ -35,8 +35,8 @@ use std::time::{Duration, Instant};
 use mech_agent::PlatformSpec;
 use mech_agent::agent::AgentSettings;
 use mech_agent::safety::{Fence, SafetyConfig, Vec2};
-use mech_agent::sim::{SimAgent, UwbNoise, UwbNoiseModel};
 use mech_agent::sim::safety_trial::clearance;
+use mech_agent::sim::{SimAgent, UwbNoise, UwbNoiseModel};
 use mech_core::router::Publishers;
 use mech_core::{ArenaConfig, CoreConfig, Gcs};
 use mech_proto::{Command, Pose, SafetyState, Waypoint};
@@ -491,7 +491,8 @@ impl Rig {
                         let bytes = &self.buf[..n];
                         let neighbours =
                             mech_proto::peek(bytes).is_ok_and(|h| h.kind == neighbours_kind());
-                        if neighbours && r.drop_neighbours_from.is_some() || now < self.frozen_until {
+                        if neighbours && r.drop_neighbours_from.is_some() || now < self.frozen_until
+                        {
                             continue;
                         }
                         let replies = r.sim.handle_bytes(bytes, now);
