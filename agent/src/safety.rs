@@ -45,7 +45,7 @@ pub use constraints::{Braking, Constraints};
 pub use filter::{Decision, Mobility, decide};
 pub use geofence::Fence;
 pub use geometry::Vec2;
-pub use separation::NeighbourSet;
+pub use separation::{NeighbourSet, Side};
 
 use crate::platform::Platform;
 
@@ -246,6 +246,9 @@ pub struct SafetyLayer {
     /// How far the position estimate may be from the truth now, m
     /// ([`SafetyLayer::set_position_error`]): the robot's disc grows by it.
     position_error: f64,
+    /// The side the robot swerves to while the right-hand rule holds: round
+    /// neighbours standing still it keeps passing on it.
+    passing: Option<Side>,
     intervention: Intervention,
     counts: InterventionCounts,
 }
@@ -264,6 +267,7 @@ impl SafetyLayer {
             id: None,
             fresh_station: false,
             position_error: 0.0,
+            passing: None,
             intervention: Intervention::None,
             counts: InterventionCounts::default(),
         }
@@ -479,6 +483,7 @@ impl SafetyLayer {
         self.circling = None;
         self.stuck_since = None;
         self.turning_since = None;
+        self.passing = None;
     }
 
     /// The decision: a robot backing off keeps at it; otherwise the
@@ -567,7 +572,25 @@ impl SafetyLayer {
     /// that meets no neighbour within `horizon` and does not head into the
     /// fence ([`NeighbourSet::anticipate_within`]). `None`: the way is
     /// clear (or the look-ahead is off).
-    fn swerve(&self, c: &Constraints, intent: Vec2, margin: f64, now: Duration) -> Option<Vec2> {
+    fn swerve(
+        &mut self,
+        c: &Constraints,
+        intent: Vec2,
+        margin: f64,
+        now: Duration,
+    ) -> Option<Vec2> {
+        let swerve = self.swerve_from(c, intent, margin, now);
+        self.passing = swerve.map(|t| Side::of(intent, t));
+        swerve
+    }
+
+    fn swerve_from(
+        &self,
+        c: &Constraints,
+        intent: Vec2,
+        margin: f64,
+        now: Duration,
+    ) -> Option<Vec2> {
         let n = self
             .neighbours
             .as_ref()
@@ -579,7 +602,7 @@ impl SafetyLayer {
             (self.footprint(), margin),
             self.config.horizon,
             now,
-            fence,
+            (fence, self.passing),
         )?;
         Some(along_cell_edge(c, target))
     }

@@ -175,7 +175,7 @@ impl NeighbourSet {
         horizon: f64,
         now: Duration,
     ) -> Option<Vec2> {
-        self.anticipate_within(p, desired, (radius, margin), horizon, now, None)
+        self.anticipate_within(p, desired, (radius, margin), horizon, now, (None, None))
     }
 
     /// [`NeighbourSet::anticipate`] inside `fence`: a turn that would take
@@ -183,8 +183,10 @@ impl NeighbourSet {
     /// [`FENCE_AHEAD`] is not taken (the fence would stop it there, and a
     /// robot pressed against a wall by the rule is jammed). Where every
     /// neighbour in the way stands still (one that arrived, a static
-    /// disc), nothing needs the two to turn the same way: the smallest
-    /// turn either side is taken, right first at equal angles.
+    /// disc), nothing needs the two to turn the same way: the side the
+    /// robot is already passing on (`passing`: [`Side`] of its last
+    /// swerve), else the smaller turn either side, right first at equal
+    /// angles.
     pub fn anticipate_within(
         &self,
         p: Vec2,
@@ -192,7 +194,7 @@ impl NeighbourSet {
         (radius, margin): (f64, f64),
         horizon: f64,
         now: Duration,
-        fence: Option<&Fence>,
+        (fence, passing): (Option<&Fence>, Option<Side>),
     ) -> Option<Vec2> {
         let others: Vec<(Vec2, Vec2, f64)> = self
             .robots
@@ -223,7 +225,12 @@ impl NeighbourSet {
         // puts contact off longest (robots jammed together back away from
         // each other).
         let mut best = (soonest(desired), desired);
-        for a in turns(standing) {
+        let order = match (standing, passing) {
+            (false, _) | (true, Some(Side::Right)) => Order::RightFirst,
+            (true, Some(Side::Left)) => Order::LeftFirst,
+            (true, None) => Order::Nearest,
+        };
+        for a in turns(order) {
             let u = desired.rotated(a);
             let t = soonest(u);
             if t.is_infinite() && open(u) {
@@ -244,20 +251,48 @@ pub const FENCE_AHEAD: f64 = 0.3;
 /// m/s.
 const STANDING: f64 = 0.02;
 
-/// The turns [`NeighbourSet::anticipate_within`] tries, in order: every
-/// step to the right up to half a circle, then to the left; or, round
-/// neighbours that stand still, the smallest first, right before left.
-fn turns(standing: bool) -> impl Iterator<Item = f64> {
+/// Which way a swerve turns from where the command heads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    Right,
+    Left,
+}
+
+impl Side {
+    /// The side `swerve` turns to from `from`.
+    pub fn of(from: Vec2, swerve: Vec2) -> Side {
+        if from.cross(swerve) > 0.0 {
+            Side::Left
+        } else {
+            Side::Right
+        }
+    }
+}
+
+/// The order of the turns tried.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Order {
+    /// Every step to the right up to half a circle, then to the left.
+    RightFirst,
+    /// Every step to the left, then to the right.
+    LeftFirst,
+    /// The smallest first, right before left at equal angles.
+    Nearest,
+}
+
+/// The turns [`NeighbourSet::anticipate_within`] tries, rad (right turns
+/// are negative), in `order`.
+fn turns(order: Order) -> impl Iterator<Item = f64> {
     let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
     let n = ANTICIPATION_STEPS as i32;
-    // Right turns are negative: -1..=-n, then 1..n; or -1, 1, -2, 2, ...
     (0..2 * n - 1).map(move |i| {
-        let k = if standing {
-            if i % 2 == 0 { -(i / 2 + 1) } else { i / 2 + 1 }
-        } else if i < n {
-            -(i + 1)
-        } else {
-            i - n + 1
+        let k = match order {
+            Order::Nearest if i % 2 == 0 => -(i / 2 + 1),
+            Order::Nearest => i / 2 + 1,
+            Order::RightFirst if i < n => -(i + 1),
+            Order::RightFirst => i - n + 1,
+            Order::LeftFirst if i < n - 1 => i + 1,
+            Order::LeftFirst => -(i - n + 2),
         };
         f64::from(k) * step
     })
@@ -418,7 +453,14 @@ mod tests {
         let blind = standing.anticipate(p, desired, 0.15, 0.1, 3.0, Duration::ZERO);
         assert!(blind.unwrap().y > 0.0, "without the fence: up, into it");
         let swerve = standing
-            .anticipate_within(p, desired, (0.15, 0.1), 3.0, Duration::ZERO, Some(&fence))
+            .anticipate_within(
+                p,
+                desired,
+                (0.15, 0.1),
+                3.0,
+                Duration::ZERO,
+                (Some(&fence), None),
+            )
             .unwrap();
         assert!(
             swerve.y < 0.0 && swerve.x < 0.0,
@@ -435,7 +477,7 @@ mod tests {
                 (0.15, 0.1),
                 3.0,
                 Duration::ZERO,
-                Some(&fence),
+                (Some(&fence), None),
             )
             .unwrap();
         assert!(right.y < 0.0, "to the right: {right:?}");
@@ -444,13 +486,29 @@ mod tests {
     #[test]
     fn turns_are_right_then_left_or_round_a_standing_robot_the_smaller_first() {
         let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
-        let moving: Vec<f64> = turns(false).map(|a| (a / step).round()).collect();
-        assert_eq!(moving.len(), 2 * ANTICIPATION_STEPS - 1);
-        assert_eq!(&moving[..3], [-1.0, -2.0, -3.0]);
-        assert_eq!(moving[ANTICIPATION_STEPS], 1.0);
-        let standing: Vec<f64> = turns(true).map(|a| (a / step).round()).collect();
-        assert_eq!(&standing[..5], [-1.0, 1.0, -2.0, 2.0, -3.0]);
-        assert_eq!(standing.last(), Some(&-(ANTICIPATION_STEPS as f64)));
+        let n = ANTICIPATION_STEPS as f64;
+        let of = |order| -> Vec<f64> { turns(order).map(|a| (a / step).round()).collect() };
+        let right = of(Order::RightFirst);
+        assert_eq!(right.len(), 2 * ANTICIPATION_STEPS - 1);
+        assert_eq!(&right[..3], [-1.0, -2.0, -3.0]);
+        assert_eq!(right[ANTICIPATION_STEPS], 1.0);
+        let left = of(Order::LeftFirst);
+        assert_eq!(&left[..2], [1.0, 2.0]);
+        assert_eq!(
+            left[ANTICIPATION_STEPS - 2..ANTICIPATION_STEPS + 1],
+            [n - 1.0, -1.0, -2.0]
+        );
+        assert_eq!(left.last(), Some(&-n));
+        let nearest = of(Order::Nearest);
+        assert_eq!(&nearest[..5], [-1.0, 1.0, -2.0, 2.0, -3.0]);
+        assert_eq!(nearest.last(), Some(&-n));
+        for order in [left, nearest] {
+            let mut sorted = order.clone();
+            sorted.sort_by(f64::total_cmp);
+            let mut all = right.clone();
+            all.sort_by(f64::total_cmp);
+            assert_eq!(sorted, all, "the same turns");
+        }
     }
 
     #[test]
