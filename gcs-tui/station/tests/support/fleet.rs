@@ -182,8 +182,6 @@ pub struct Rig {
     controllers: Publishers,
     /// Simulated time.
     time: Duration,
-    /// Control period.
-    dt: Duration,
     started: Instant,
     next_commands: Duration,
     /// Until this time nothing from the station reaches a robot.
@@ -234,7 +232,6 @@ impl Rig {
             layer_on,
             fence: Fence::from_arena(&arena),
             time: Duration::ZERO,
-            dt: options.dt,
             options,
             started: Instant::now(),
             next_commands: Duration::ZERO,
@@ -525,7 +522,7 @@ impl Rig {
                 r.arrived = Some(now);
             }
         }
-        self.time += self.dt;
+        self.time += self.options.dt;
         self.measure();
         let ahead = self.time.saturating_sub(self.started.elapsed());
         if !ahead.is_zero() {
@@ -566,7 +563,7 @@ impl Rig {
         m.margin_violations += u64::from(short);
         m.breaches += u64::from(breached);
         if close || short {
-            m.below_margin += self.dt.as_secs_f64();
+            m.below_margin += self.options.dt.as_secs_f64();
         }
         for r in &self.robots {
             let (p, speed) = (r.position(), r.velocity().norm());
