@@ -16,6 +16,8 @@
 //!   robot's measured link quality);
 //! - [`gate`]: the authenticated control plane (what comes in is checked,
 //!   what goes out is signed);
+//! - [`traffic`]: the traffic ledger (what is counted received,
+//!   forwarded and dropped, router-wide, per robot and per channel);
 //! - [`refusals`]: how refused traffic is reported (counted summaries);
 //! - [`sources`]: known peers first and failure budgets, under a flood;
 //! - [`tap`]: the recorder's tap.
@@ -49,6 +51,7 @@ mod safety;
 mod sources;
 pub(crate) mod tap;
 mod telemetry;
+mod traffic;
 
 use mech_proto::{Body, Envelope, Header};
 use tokio::time::Instant;
@@ -60,7 +63,7 @@ use tap::{MessageTap, Tap, TapSlot};
 pub(crate) use sources::Treatment;
 
 use crate::auth::{Identity, Keyring};
-use crate::counters::{Counters, DropReason, Drops, Rejections};
+use crate::counters::{Counters, DropReason, Rejections};
 use crate::event::Event;
 
 /// Where a message came from, and where a reply goes.
@@ -179,16 +182,6 @@ pub enum Delivery {
     Consumed,
 }
 
-/// Router-wide message counts (per robot and per channel are kept with
-/// each robot and channel). Send failures are counted where sending is
-/// done, in `super::net`.
-#[derive(Debug, Default, Clone, Copy)]
-struct Totals {
-    received: u64,
-    forwarded: u64,
-    dropped: Drops,
-}
-
 /// The router's state. See the module docs.
 #[derive(Debug)]
 pub(crate) struct Tables {
@@ -203,7 +196,7 @@ pub(crate) struct Tables {
     gate: gate::Gate,
     refusals: refusals::Refusals,
     sources: sources::Sources,
-    totals: Totals,
+    ledger: traffic::Ledger,
     tap: TapSlot,
     /// Sequence number of the router's own messages.
     seq: u32,
@@ -241,7 +234,7 @@ impl Tables {
             gate: gate::Gate::new(auth),
             refusals: refusals::Refusals::default(),
             sources: sources::Sources::default(),
-            totals: Totals::default(),
+            ledger: traffic::Ledger::default(),
             tap: TapSlot::default(),
             seq: 0,
         }
@@ -286,7 +279,7 @@ impl Tables {
     /// A message that cannot be read or is not expected: counted, and
     /// reported and logged summarized (see [`refusals`]).
     fn bad(&mut self, error: String, cx: &mut Ctx<'_>) -> Delivery {
-        self.totals.dropped.count(DropReason::BadPacket);
+        self.ledger.dropped(DropReason::BadPacket);
         self.tap.note_refusal(cx.now, || error.clone());
         let from = refusals::Source::Peer(cx.from);
         self.refused(refusals::Why::BadPacket, from, || error, cx);
@@ -307,16 +300,10 @@ impl Tables {
         }
     }
 
-    /// Counts a message dropped for `reason` router-wide.
-    fn drop_for(&mut self, reason: DropReason) -> Delivery {
-        self.totals.dropped.count(reason);
-        Delivery::Dropped(reason)
-    }
-
     /// Decides what to do with one received message, and offers it with the
     /// decision to the recorder's tap when recording.
     pub(crate) fn handle(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
-        self.totals.received += 1;
+        self.ledger.received();
         cx.fx.unproven = false;
         let delivery = self.decide(bytes, cx);
         if let Peer::Udp(addr) = cx.from {
@@ -357,8 +344,8 @@ impl Tables {
     /// A datagram shed unread (see [`sources`]): counted, reported
     /// (summarized) and offered to the recording.
     pub(crate) fn shed(&mut self, bytes: &[u8], cx: &mut Ctx<'_>) -> Delivery {
-        self.totals.received += 1;
-        let delivery = self.drop_for(DropReason::Shed);
+        self.ledger.received();
+        let delivery = self.ledger.dropped(DropReason::Shed);
         if let Peer::Udp(addr) = cx.from {
             let refused = self.sources.failing(addr.ip(), cx.now).unwrap_or(0);
             let why = || {
@@ -382,7 +369,7 @@ impl Tables {
         if let Some(tap) = self.tap.for_message(delivery, cx.now) {
             tap.message(MessageTap {
                 now: cx.now,
-                number: self.totals.received,
+                number: self.ledger.received_so_far(),
                 from: cx.from,
                 bytes,
                 delivery,
@@ -505,20 +492,14 @@ impl Tables {
     /// A copy of the counters the tables keep (send failures are added by
     /// the caller, from `super::net`).
     pub(crate) fn counters(&self) -> Counters {
-        Counters {
-            robots: self.robots.traffic(),
-            channels: self.channels.traffic(),
-            received: self.totals.received,
-            forwarded: self.totals.forwarded,
-            dropped: self.totals.dropped,
-            fanout_dropped: 0,
-            rejected: self.gate.rejections(),
-        }
+        let (robots, channels) = (self.robots.traffic(), self.channels.traffic());
+        self.ledger
+            .counters(robots, channels, self.gate.rejections())
     }
 
     /// Messages received so far.
     pub(crate) fn received(&self) -> u64 {
-        self.totals.received
+        self.ledger.received_so_far()
     }
 
     pub(crate) fn rejections(&self) -> Rejections {

@@ -17,13 +17,13 @@ impl Tables {
         cx: &mut Ctx<'_>,
     ) -> Delivery {
         let Some(entry) = self.robots.get_mut(&request.robot) else {
-            return self.drop_for(DropReason::UnknownRobot);
+            return self.ledger.dropped(DropReason::UnknownRobot);
         };
-        entry.traffic.forwarded += 1;
-        let Some(to) = self.target(&request.robot, cx.now) else {
-            return self.drop_for(DropReason::UnknownRobot);
+        let to = entry.links.target(cx.now, self.config.link_timeout);
+        // Sent whatever the robot's route: counted by no channel.
+        let Ok(to) = self.ledger.forwarded(&mut entry.traffic, None, to) else {
+            return Delivery::Dropped(DropReason::UnknownRobot);
         };
-        self.totals.forwarded += 1;
         info!(
             robot = %request.robot,
             action = request.action.as_str(),

@@ -10,6 +10,7 @@ use mech_proto::{Body, Channels as ChannelsBody};
 use tokio::time::Instant;
 use tracing::info;
 
+use super::traffic::Tally;
 use super::{Ctx, Delivery, Incoming, Tables};
 use crate::counters::{ChannelStatus, Traffic};
 use crate::event::Event;
@@ -31,7 +32,7 @@ struct ChannelEntry {
     publisher: String,
     last: Instant,
     rate: RateMeter,
-    traffic: Traffic,
+    traffic: Tally,
 }
 
 impl Channels {
@@ -40,7 +41,7 @@ impl Channels {
     fn note(&mut self, sender: &str, channel: &str, now: Instant) -> bool {
         match self.by_name.get_mut(channel) {
             Some(c) => {
-                c.traffic.received += 1;
+                c.traffic.heard();
                 c.last = now;
                 c.rate.record(now);
                 if c.publisher == sender {
@@ -57,10 +58,7 @@ impl Channels {
                     publisher: sender.to_string(),
                     last: now,
                     rate,
-                    traffic: Traffic {
-                        received: 1,
-                        ..Traffic::default()
-                    },
+                    traffic: Tally::first(),
                 };
                 if self.by_name.len() >= CHANNELS {
                     let silent = self.by_name.iter().min_by_key(|(_, c)| c.last);
@@ -74,8 +72,8 @@ impl Channels {
         }
     }
 
-    /// The traffic counters of `channel`, if anything was published on it.
-    pub(super) fn traffic_mut(&mut self, channel: &str) -> Option<&mut Traffic> {
+    /// The counts of `channel`, if anything was published on it.
+    pub(super) fn tally_mut(&mut self, channel: &str) -> Option<&mut Tally> {
         self.by_name.get_mut(channel).map(|c| &mut c.traffic)
     }
 
@@ -93,7 +91,7 @@ impl Channels {
     pub(super) fn traffic(&self) -> BTreeMap<String, Traffic> {
         self.by_name
             .iter()
-            .map(|(n, c)| (n.clone(), c.traffic))
+            .map(|(n, c)| (n.clone(), c.traffic.traffic()))
             .collect()
     }
 }

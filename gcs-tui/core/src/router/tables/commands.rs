@@ -21,7 +21,7 @@ impl Tables {
     ) -> Delivery {
         let (sender, destination, channel) = (head.sender, head.destination, head.channel);
         if channel.is_empty() {
-            return self.drop_for(DropReason::NotRouted);
+            return self.ledger.dropped(DropReason::NotRouted);
         }
         self.note_publisher(sender, channel, cx);
         match self.check_route(destination, channel, cx) {
@@ -82,42 +82,23 @@ impl Tables {
     }
 
     /// Whether `robot` obeys `channel` now, and on which link to send to
-    /// it; counts the outcome for the robot and the channel (which
-    /// [`Tables::note_publisher`] created).
+    /// it; the outcome is counted by the ledger for the robot, the channel
+    /// (which [`Tables::note_publisher`] created) and the router.
     fn check_route(
         &mut self,
         robot: &str,
         channel: &str,
         cx: &mut Ctx<'_>,
     ) -> Result<Peer, DropReason> {
-        let timeout = self.config.link_timeout;
-        let outcome = match self.robots.get_mut(robot) {
-            None => Err(DropReason::UnknownRobot),
-            Some(r) if r.route.is(channel) => {
-                r.traffic.forwarded += 1;
-                r.meter.sent();
-                r.links
-                    .target(cx.now, timeout)
-                    .ok_or(DropReason::UnknownRobot)
-            }
-            Some(r) => {
-                r.traffic.dropped.count(DropReason::NotRouted);
-                Err(DropReason::NotRouted)
-            }
+        let on = self.channels.tally_mut(channel);
+        let Some(r) = self.robots.get_mut(robot) else {
+            return Err(self.ledger.dropped_on(DropReason::UnknownRobot, on));
         };
-        let traffic = self.channels.traffic_mut(channel);
-        match outcome {
-            Ok(_) => {
-                self.totals.forwarded += 1;
-                if let Some(t) = traffic {
-                    t.forwarded += 1;
-                }
-            }
-            Err(reason) => match traffic {
-                Some(t) => t.dropped.count(reason),
-                None => self.totals.dropped.count(reason),
-            },
+        if !r.route.is(channel) {
+            return Err(self.ledger.not_routed(&mut r.traffic, on));
         }
-        outcome
+        r.meter.sent();
+        let to = r.links.target(cx.now, self.config.link_timeout);
+        self.ledger.forwarded(&mut r.traffic, on, to)
     }
 }

@@ -129,11 +129,10 @@ impl Tables {
         let robot = h.destination.clone();
         self.note_publisher(&h.sender, &h.channel, cx);
         let Some(entry) = self.robots.get_mut(&robot) else {
-            return self.drop_for(DropReason::UnknownRobot);
+            return self.ledger.dropped(DropReason::UnknownRobot);
         };
-        entry.traffic.forwarded += 1;
+        self.ledger.handed_over(&mut entry.traffic);
         let to = self.target(&robot, cx.now);
-        self.totals.forwarded += 1;
         let region = match mech_proto::auth::split(m.bytes) {
             Ok((region, _)) => region.to_vec(),
             Err(e) => return self.bad(e.to_string(), cx),

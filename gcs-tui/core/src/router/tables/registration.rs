@@ -18,6 +18,7 @@ use super::link_quality::LinkMeter;
 use super::links::Links;
 use super::routes::RouteState;
 use super::safety::RobotSafety;
+use super::traffic::Tally;
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::Traffic;
 use crate::event::{Event, LinkState};
@@ -47,7 +48,7 @@ pub(super) struct RobotEntry {
     pub(super) links: Links,
     /// Rates each way, loss and round trip (see `super::link_quality`).
     pub(super) meter: LinkMeter,
-    pub(super) traffic: Traffic,
+    pub(super) traffic: Tally,
     /// Its safety switch and arena delivery (see `super::safety`).
     pub(super) safety: RobotSafety,
 }
@@ -97,7 +98,7 @@ impl Robots {
     pub(super) fn traffic(&self) -> BTreeMap<String, Traffic> {
         self.by_name
             .iter()
-            .map(|(n, r)| (n.clone(), r.traffic))
+            .map(|(n, r)| (n.clone(), r.traffic.traffic()))
             .collect()
     }
 
@@ -269,10 +270,7 @@ impl Tables {
             route,
             links: Links::new(cx.from, cx.now),
             meter: LinkMeter::new(cx.now),
-            traffic: Traffic {
-                received: 1,
-                ..Traffic::default()
-            },
+            traffic: Tally::first(),
             safety: RobotSafety::new(cx.now),
         };
         self.robots.by_name.insert(hello.name.clone(), entry);
@@ -300,7 +298,7 @@ impl Tables {
         let Some(r) = self.robots.get_mut(sender) else {
             return;
         };
-        r.traffic.received += 1;
+        r.traffic.heard();
         r.meter.received(seq);
         if let Some(old) = r.links.heard(cx.from, cx.now) {
             info!(robot = sender, %old, new = %cx.from, "robot moved to a new address");

@@ -167,7 +167,7 @@ impl Tables {
         let sender = m.header.sender.as_str();
         let Some(robot) = self.robots.get_mut(sender) else {
             self.unknown_robot(m, cx);
-            return self.drop_for(DropReason::UnknownRobot);
+            return self.ledger.dropped(DropReason::UnknownRobot);
         };
         if let Peer::Serial(_) = cx.from {
             robot.links.radio_telemetry(m.bytes.len());
@@ -216,7 +216,7 @@ impl Tables {
                 self.count_sent(&fix.robot);
                 Delivery::Consumed
             }
-            None => self.drop_for(DropReason::UnknownRobot),
+            None => self.ledger.dropped(DropReason::UnknownRobot),
         }
     }
 
