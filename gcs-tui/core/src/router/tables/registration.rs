@@ -17,7 +17,6 @@ use tracing::{debug, info, warn};
 use super::link_quality::LinkMeter;
 use super::links::Links;
 use super::routes::RouteState;
-use super::safety::RobotSafety;
 use super::traffic::Tally;
 use super::{Ctx, Delivery, Incoming, Peer, Tables};
 use crate::counters::Traffic;
@@ -38,24 +37,23 @@ pub(super) struct Robots {
     started: Instant,
 }
 
-/// One registered robot: its id and liveness, and each concern's part.
+/// One registered robot: its id and liveness, and the parts the
+/// forwarding path reads (its route, links, link meter and counts).
 #[derive(Debug)]
 pub(super) struct RobotEntry {
-    pub(super) id: u16,
-    pub(super) liveness: Liveness,
+    id: u16,
+    liveness: Liveness,
     pub(super) route: RouteState,
     /// Where the robot is heard (UDP, a radio), and so where to send.
     pub(super) links: Links,
     /// Rates each way, loss and round trip (see `super::link_quality`).
     pub(super) meter: LinkMeter,
     pub(super) traffic: Tally,
-    /// Its safety switch and arena delivery (see `super::safety`).
-    pub(super) safety: RobotSafety,
 }
 
 /// How recently a robot was heard, and when the router last beat to it.
 #[derive(Debug)]
-pub(super) struct Liveness {
+struct Liveness {
     last_seen: Instant,
     link: LinkState,
     heartbeat_sent: Instant,
@@ -271,8 +269,8 @@ impl Tables {
             links: Links::new(cx.from, cx.now),
             meter: LinkMeter::new(cx.now),
             traffic: Tally::first(),
-            safety: RobotSafety::new(cx.now),
         };
+        self.safety.enrol(&hello.name, cx.now);
         self.robots.by_name.insert(hello.name.clone(), entry);
         info!(robot = %hello.name, platform = %hello.platform, from = %cx.from, id, "robot registered");
     }

@@ -6,16 +6,19 @@
 //! [`SiteSafety`] holds the arena (`None`: the station has none) and
 //! numbers every arena message: each change of the arena or of a robot's
 //! switch takes a new id, which goes to the robot every `arena_retry`
-//! until the robot acknowledges that id (as a route does). Each robot's
-//! part, [`RobotSafety`], lives in its registry entry: its switch, the id
-//! it owes an acknowledgement for, and what it last reported.
+//! until the robot acknowledges that id (as a route does). It also holds
+//! each registered robot's part, `RobotSafety`: its switch, the id it owes
+//! an acknowledgement for, and what it last reported.
 //!
 //! Without an arena nothing is sent at registration (the robot's layer
 //! says "no arena"); clearing the arena sends every robot that had one an
 //! empty arena, so each drops its fence. Nothing here is on the path of
 //! forwarded commands.
 
-use mech_proto::{ArenaAck, Body, Intervention, Neighbours, SafetyReport, SafetyState};
+use std::collections::HashMap;
+use std::time::Duration;
+
+use mech_proto::{Arena, ArenaAck, Body, Intervention, Neighbours, SafetyReport, SafetyState};
 use tokio::time::Instant;
 use tracing::{info, warn};
 
@@ -23,32 +26,20 @@ use super::{Ctx, Delivery, Incoming, Tables};
 use crate::arena::ArenaShape;
 use crate::event::Event;
 
-/// The station's arena and the ids of the arena messages.
+/// The station's arena, each robot's switch and arena delivery, and the
+/// ids of the arena messages.
 #[derive(Debug)]
 pub(super) struct SiteSafety {
     arena: Option<ArenaShape>,
     next_id: u32,
-}
-
-impl SiteSafety {
-    /// Ids start from `seed` (see `super::clock_seed`), so a restarted
-    /// station's are newer than its predecessor's.
-    pub(super) fn new(seed: u32) -> SiteSafety {
-        SiteSafety {
-            arena: None,
-            next_id: seed,
-        }
-    }
-
-    fn next_id(&mut self) -> u32 {
-        self.next_id = self.next_id.wrapping_add(1).max(1);
-        self.next_id
-    }
+    /// Every registered robot's part, by name (off the forwarding path,
+    /// so kept here rather than in the robot's registry entry).
+    robots: HashMap<String, RobotSafety>,
 }
 
 /// One robot's safety switch and the delivery of its arena.
 #[derive(Debug)]
-pub(super) struct RobotSafety {
+struct RobotSafety {
     /// Whether its layer is on (only an operator switches it off).
     enabled: bool,
     /// The arena id it was last sent; 0: never sent one.
@@ -61,17 +52,160 @@ pub(super) struct RobotSafety {
     reported: Option<(SafetyState, Intervention)>,
 }
 
-impl RobotSafety {
-    pub(super) fn new(now: Instant) -> RobotSafety {
-        RobotSafety {
+impl SiteSafety {
+    /// Ids start from `seed` (see `super::clock_seed`), so a restarted
+    /// station's are newer than its predecessor's.
+    pub(super) fn new(seed: u32) -> SiteSafety {
+        SiteSafety {
+            arena: None,
+            next_id: seed,
+            robots: HashMap::new(),
+        }
+    }
+
+    fn next_id(&mut self) -> u32 {
+        self.next_id = self.next_id.wrapping_add(1).max(1);
+        self.next_id
+    }
+
+    /// The station's arena, if it has one.
+    pub(super) fn arena(&self) -> Option<&ArenaShape> {
+        self.arena.as_ref()
+    }
+
+    /// A robot registered for the first time: its layer on, no arena
+    /// sent yet.
+    pub(super) fn enrol(&mut self, robot: &str, now: Instant) {
+        let part = RobotSafety {
             enabled: true,
             id: 0,
             acked: true,
             sent: now,
             reported: None,
-        }
+        };
+        self.robots.insert(robot.to_string(), part);
     }
 
+    /// Sets (or clears) the arena; returns the robots to send it to, each
+    /// with a new id: every robot, or when clearing, those sent one before.
+    fn set_arena(&mut self, arena: Option<ArenaShape>, now: Instant) -> Vec<String> {
+        let clearing = arena.is_none();
+        self.arena = arena;
+        let names: Vec<String> = self
+            .robots
+            .iter()
+            .filter(|(_, r)| !clearing || r.id != 0)
+            .map(|(n, _)| n.clone())
+            .collect();
+        for name in &names {
+            let id = self.next_id();
+            if let Some(r) = self.robots.get_mut(name) {
+                r.renumber(id, now);
+            }
+        }
+        names
+    }
+
+    /// Switches `robot`'s layer; returns the arena id to send it with a new
+    /// id when the station has an arena or had one to send it, else 0 (the
+    /// switch waits for the next arena); `None` for an unknown robot.
+    fn switch(&mut self, robot: &str, enabled: bool, now: Instant) -> Option<u32> {
+        let has_arena = self.arena.is_some();
+        let held = self.robots.get(robot)?.id;
+        let id = if has_arena || held != 0 {
+            self.next_id()
+        } else {
+            0
+        };
+        let r = self.robots.get_mut(robot)?;
+        r.enabled = enabled;
+        if id != 0 {
+            r.renumber(id, now);
+        }
+        Some(id)
+    }
+
+    /// A robot registering (for the first time or again), when the station
+    /// has an arena: a new robot gets a new id, a known one the id it holds,
+    /// to be confirmed again (its agent may have restarted without it).
+    /// `true` if it is to be sent the arena.
+    fn newcomer(&mut self, robot: &str, now: Instant) -> bool {
+        if self.arena.is_none() {
+            return false;
+        }
+        let Some(held) = self.robots.get(robot).map(|r| r.id) else {
+            return false;
+        };
+        let id = if held == 0 { self.next_id() } else { held };
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.renumber(id, now);
+        }
+        true
+    }
+
+    /// `robot` acknowledged arena `id`: the event, when that confirms the
+    /// id it owes for the first time.
+    fn acked(&mut self, robot: &str, id: u32) -> Option<Event> {
+        let s = self.robots.get_mut(robot)?;
+        if id != s.id || s.acked {
+            return None;
+        }
+        s.acked = true;
+        info!(robot, id, enabled = s.enabled, "arena acknowledged");
+        Some(Event::ArenaAcked {
+            robot: robot.to_string(),
+            id,
+            enabled: s.enabled,
+        })
+    }
+
+    /// The robots whose unacknowledged arena is due again at `now` (noted
+    /// as sent).
+    fn due(&mut self, now: Instant, retry: Duration) -> Vec<String> {
+        self.robots
+            .iter_mut()
+            .filter_map(|(name, r)| r.resend_due(now, retry).then(|| name.clone()))
+            .collect()
+    }
+
+    /// The arena message `robot` owes an acknowledgement for (empty when
+    /// the station has none).
+    fn arena_for(&self, robot: &str) -> Option<Arena> {
+        let s = self.robots.get(robot)?;
+        Some(match &self.arena {
+            Some(a) => a.to_arena(robot, s.id, s.enabled),
+            None => ArenaShape::none_for(robot, s.id, s.enabled),
+        })
+    }
+
+    /// Whether `robot` is registered with its layer on.
+    fn enabled(&self, robot: &str) -> bool {
+        self.robots.get(robot).is_some_and(|r| r.enabled)
+    }
+
+    /// What a robot's telemetry says of its safety layer: an event when its
+    /// state or intervention changed since the last telemetry.
+    pub(super) fn reported(&mut self, robot: &str, report: Option<SafetyReport>) -> Option<Event> {
+        let report = report?;
+        let r = self.robots.get_mut(robot)?;
+        let now = (report.state, report.intervention);
+        // A robot starts without an arena, limiting nothing: nothing to say.
+        let was = r
+            .reported
+            .unwrap_or((SafetyState::NoArena, Intervention::None));
+        if was == now {
+            return None;
+        }
+        r.reported = Some(now);
+        Some(Event::Safety {
+            robot: robot.to_string(),
+            state: report.state,
+            intervention: report.intervention,
+        })
+    }
+}
+
+impl RobotSafety {
     /// A new arena id to deliver.
     fn renumber(&mut self, id: u32, now: Instant) {
         self.id = id;
@@ -81,7 +215,7 @@ impl RobotSafety {
 
     /// Whether an unacknowledged arena is due to be sent again (noted as
     /// sent when it is).
-    fn resend_due(&mut self, now: Instant, retry: std::time::Duration) -> bool {
+    fn resend_due(&mut self, now: Instant, retry: Duration) -> bool {
         let due = !self.acked && self.id != 0 && now.saturating_duration_since(self.sent) >= retry;
         if due {
             self.sent = now;
@@ -93,7 +227,7 @@ impl RobotSafety {
 impl Tables {
     /// The station's arena, if it has one.
     pub(crate) fn arena(&self) -> Option<&ArenaShape> {
-        self.safety.arena.as_ref()
+        self.safety.arena()
     }
 
     /// Sets (or clears) the station's arena and sends it to every robot,
@@ -103,20 +237,9 @@ impl Tables {
             Some(a) => info!(arena = %a.summary(), "arena set"),
             None => info!("arena cleared"),
         }
-        let clearing = arena.is_none();
-        self.safety.arena.clone_from(&arena);
+        let names = self.safety.set_arena(arena.clone(), cx.now);
         cx.event(Event::Arena { arena });
-        let names: Vec<String> = self
-            .robots
-            .iter()
-            .filter(|(_, r)| !clearing || r.safety.id != 0)
-            .map(|(n, _)| n.clone())
-            .collect();
         for name in names {
-            let id = self.safety.next_id();
-            if let Some(r) = self.robots.get_mut(&name) {
-                r.safety.renumber(id, cx.now);
-            }
             self.send_arena(&name, cx);
         }
     }
@@ -132,15 +255,7 @@ impl Tables {
         enabled: bool,
         cx: &mut Ctx<'_>,
     ) -> Option<u32> {
-        let has_arena = self.safety.arena.is_some();
-        let entry = self.robots.get(robot)?;
-        let send = has_arena || entry.safety.id != 0;
-        let id = if send { self.safety.next_id() } else { 0 };
-        let entry = self.robots.get_mut(robot)?;
-        entry.safety.enabled = enabled;
-        if send {
-            entry.safety.renumber(id, cx.now);
-        }
+        let id = self.safety.switch(robot, enabled, cx.now)?;
         if enabled {
             info!(robot, id, "safety switched on");
         } else {
@@ -151,32 +266,18 @@ impl Tables {
             enabled,
             id,
         });
-        if send {
+        if id != 0 {
             self.send_arena(robot, cx);
         }
         Some(id)
     }
 
     /// A robot registering (for the first time or again) is sent the
-    /// station's arena: a new robot with a new id, a known one the id it
-    /// holds, to be confirmed again (its agent may have restarted without
-    /// it).
+    /// station's arena (see [`SiteSafety::newcomer`]).
     pub(super) fn arena_newcomer(&mut self, robot: &str, cx: &mut Ctx<'_>) {
-        if self.safety.arena.is_none() {
-            return;
+        if self.safety.newcomer(robot, cx.now) {
+            self.send_arena(robot, cx);
         }
-        let Some(held) = self.robots.get(robot).map(|r| r.safety.id) else {
-            return;
-        };
-        let id = if held == 0 {
-            self.safety.next_id()
-        } else {
-            held
-        };
-        if let Some(r) = self.robots.get_mut(robot) {
-            r.safety.renumber(id, cx.now);
-        }
-        self.send_arena(robot, cx);
     }
 
     pub(super) fn on_arena_ack(
@@ -189,36 +290,15 @@ impl Tables {
         if ack.robot != sender {
             return self.bad(format!("arena ack for {} sent by {sender}", ack.robot), cx);
         }
-        let Some(entry) = self.robots.get_mut(sender) else {
-            return Delivery::Consumed;
-        };
-        let s = &mut entry.safety;
-        if ack.id == s.id && !s.acked {
-            s.acked = true;
-            info!(
-                robot = sender,
-                id = ack.id,
-                enabled = s.enabled,
-                "arena acknowledged"
-            );
-            cx.event(Event::ArenaAcked {
-                robot: sender.to_string(),
-                id: ack.id,
-                enabled: s.enabled,
-            });
+        if let Some(e) = self.safety.acked(sender, ack.id) {
+            cx.event(e);
         }
         Delivery::Consumed
     }
 
     /// Resends every unacknowledged arena every `arena_retry`.
     pub(super) fn retry_arenas(&mut self, cx: &mut Ctx<'_>) {
-        let (now, retry) = (cx.now, self.config.arena_retry);
-        let due: Vec<String> = self
-            .robots
-            .iter_mut()
-            .filter_map(|(name, r)| r.safety.resend_due(now, retry).then(|| name.clone()))
-            .collect();
-        for name in due {
+        for name in self.safety.due(cx.now, self.config.arena_retry) {
             self.send_arena(&name, cx);
         }
     }
@@ -226,13 +306,8 @@ impl Tables {
     /// Sends `robot` the arena it owes an acknowledgement for, on the link
     /// it is reached on.
     fn send_arena(&mut self, robot: &str, cx: &mut Ctx<'_>) {
-        let Some(s) = self.robots.get(robot).map(|r| &r.safety) else {
+        let Some(arena) = self.safety.arena_for(robot) else {
             return;
-        };
-        let (id, enabled) = (s.id, s.enabled);
-        let arena = match &self.safety.arena {
-            Some(a) => a.to_arena(robot, id, enabled),
-            None => ArenaShape::none_for(robot, id, enabled),
         };
         let to = self.target(robot, cx.now);
         if let (Some(b), Some(to)) = (self.make(robot, Body::Arena(arena)), to) {
@@ -245,7 +320,7 @@ impl Tables {
     /// reached, or its layer is switched off (it would not use them).
     pub(crate) fn send_neighbours(&mut self, n: Neighbours, cx: &mut Ctx<'_>) -> bool {
         let robot = n.robot.clone();
-        if !self.robots.get(&robot).is_some_and(|r| r.safety.enabled) {
+        if !self.safety.enabled(&robot) {
             return false;
         }
         let Some(to) = self.target(&robot, cx.now) else {
@@ -258,37 +333,6 @@ impl Tables {
             }
             None => false,
         }
-    }
-
-    /// What a robot's telemetry says of its safety layer: an event when its
-    /// state or intervention changed since the last telemetry.
-    pub(super) fn safety_reported(
-        &mut self,
-        robot: &str,
-        report: Option<SafetyReport>,
-        cx: &mut Ctx<'_>,
-    ) {
-        let Some(report) = report else {
-            return;
-        };
-        let Some(entry) = self.robots.get_mut(robot) else {
-            return;
-        };
-        let now = (report.state, report.intervention);
-        // A robot starts without an arena, limiting nothing: nothing to say.
-        let was = entry
-            .safety
-            .reported
-            .unwrap_or((SafetyState::NoArena, Intervention::None));
-        if was == now {
-            return;
-        }
-        entry.safety.reported = Some(now);
-        cx.event(Event::Safety {
-            robot: robot.to_string(),
-            state: report.state,
-            intervention: report.intervention,
-        });
     }
 }
 

@@ -175,7 +175,9 @@ impl Tables {
         for (peer, name) in self.subscribers.list() {
             self.pass_on(m.bytes, peer, &name, cx);
         }
-        self.safety_reported(sender, t.safety, cx);
+        if let Some(e) = self.safety.reported(sender, t.safety) {
+            cx.event(e);
+        }
         cx.event(Event::Telemetry {
             robot: sender.to_string(),
             telemetry: t,
