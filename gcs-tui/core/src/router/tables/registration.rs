@@ -254,13 +254,10 @@ impl Tables {
     /// still).
     fn enrol(&mut self, hello: &Hello, cx: &mut Ctx<'_>) {
         let id = self.robots.id_for(&hello.name);
-        let route = RouteState::new(self.config.default_route.clone(), cx.now);
-        if let Some(channel) = route.channel() {
-            cx.event(Event::RouteChanged {
-                robot: hello.name.clone(),
-                channel: Some(channel.to_string()),
-                epoch: route.epoch(),
-            });
+        let default = self.config.default_route.clone();
+        let (route, routed) = RouteState::first(&hello.name, default, cx.now);
+        if let Some(e) = routed {
+            cx.event(e);
         }
         let entry = RobotEntry {
             id,

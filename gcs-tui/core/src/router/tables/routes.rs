@@ -32,23 +32,26 @@ pub(super) struct RouteState {
 }
 
 impl RouteState {
-    /// A new robot's route: `channel` as epoch 1, or none as epoch 0 (which
-    /// needs no acknowledgement: the agent starts routed to none).
-    pub(super) fn new(channel: Option<String>, now: Instant) -> RouteState {
-        RouteState {
+    /// A new robot's route: `channel` (the configured default) as epoch 1,
+    /// or none as epoch 0 (which needs no acknowledgement: the agent starts
+    /// routed to none); with the event that says so when it has a channel.
+    pub(super) fn first(
+        robot: &str,
+        channel: Option<String>,
+        now: Instant,
+    ) -> (RouteState, Option<Event>) {
+        let event = channel.as_ref().map(|c| Event::RouteChanged {
+            robot: robot.to_string(),
+            channel: Some(c.clone()),
+            epoch: 1,
+        });
+        let route = RouteState {
             epoch: u32::from(channel.is_some()),
             acked: channel.is_none(),
             channel,
             sent: now,
-        }
-    }
-
-    pub(super) fn channel(&self) -> Option<&str> {
-        self.channel.as_deref()
-    }
-
-    pub(super) fn epoch(&self) -> u32 {
-        self.epoch
+        };
+        (route, event)
     }
 
     /// Whether the robot obeys `channel` now.
@@ -65,13 +68,26 @@ impl RouteState {
         }
     }
 
-    /// Changes the route: a new epoch, to be acknowledged.
-    fn change(&mut self, channel: Option<&str>, now: Instant) -> u32 {
+    /// Changes `robot`'s route: a new epoch, to be acknowledged. Returns
+    /// the event that says so and the route to send the robot.
+    fn change(&mut self, robot: &str, channel: Option<&str>, now: Instant) -> (Event, Route) {
         self.channel = channel.map(str::to_string);
         self.epoch = self.epoch.wrapping_add(1);
         self.acked = false;
         self.sent = now;
-        self.epoch
+        let epoch = self.epoch;
+        info!(
+            robot,
+            channel = channel.unwrap_or("none"),
+            epoch,
+            "route changed"
+        );
+        let event = Event::RouteChanged {
+            robot: robot.to_string(),
+            channel: self.channel.clone(),
+            epoch,
+        };
+        (event, self.wire(robot))
     }
 
     /// The robot registered again and has forgotten its route: it must
@@ -81,24 +97,35 @@ impl RouteState {
         self.sent = now;
     }
 
-    /// An acknowledgement; `true` if it confirms the current route for the
-    /// first time.
-    fn ack(&mut self, epoch: u32, channel: &Option<String>) -> bool {
-        let confirms = epoch == self.epoch && *channel == self.channel && !self.acked;
-        if confirms {
-            self.acked = true;
+    /// `robot`'s acknowledgement: the event, when it confirms the current
+    /// epoch and channel for the first time.
+    fn acked(&mut self, robot: &str, ack: RouteAck) -> Option<Event> {
+        let channel = route_of(&ack.channel);
+        if ack.epoch != self.epoch || channel != self.channel || self.acked {
+            return None;
         }
-        confirms
+        self.acked = true;
+        info!(
+            robot,
+            channel = channel.as_deref().unwrap_or("none"),
+            epoch = ack.epoch,
+            "route acknowledged"
+        );
+        Some(Event::RouteAcked {
+            robot: robot.to_string(),
+            channel,
+            epoch: ack.epoch,
+        })
     }
 
-    /// Whether an unacknowledged route is due to be sent again (noted as
-    /// sent when it is).
-    fn resend_due(&mut self, now: Instant, retry: Duration) -> bool {
-        let due = !self.acked && now.saturating_duration_since(self.sent) >= retry;
-        if due {
-            self.sent = now;
+    /// The route to send `robot` again at `now`, while it is not
+    /// acknowledged, every `retry` (noted as sent).
+    fn resend(&mut self, robot: &str, now: Instant, retry: Duration) -> Option<Route> {
+        if self.acked || now.saturating_duration_since(self.sent) < retry {
+            return None;
         }
-        due
+        self.sent = now;
+        Some(self.wire(robot))
     }
 }
 
@@ -112,20 +139,10 @@ impl Tables {
         cx: &mut Ctx<'_>,
     ) -> Option<u32> {
         let entry = self.robots.get_mut(robot)?;
-        let epoch = entry.route.change(channel, cx.now);
-        let route = entry.route.wire(robot);
-        let to = self.target(robot, cx.now);
-        info!(
-            robot,
-            channel = channel.unwrap_or("none"),
-            epoch,
-            "route changed"
-        );
-        cx.event(Event::RouteChanged {
-            robot: robot.to_string(),
-            channel: channel.map(str::to_string),
-            epoch,
-        });
+        let (event, route) = entry.route.change(robot, channel, cx.now);
+        let to = entry.links.target(cx.now, self.config.link_timeout);
+        let epoch = route.epoch;
+        cx.event(event);
         if let (Some(b), Some(to)) = (self.make(robot, Body::Route(route)), to) {
             cx.send(to, b);
         }
@@ -139,22 +156,12 @@ impl Tables {
         cx: &mut Ctx<'_>,
     ) -> Delivery {
         let sender = m.header.sender.as_str();
-        let Some(entry) = self.robots.get_mut(sender) else {
-            return Delivery::Consumed;
-        };
-        let channel = route_of(&ack.channel);
-        if entry.route.ack(ack.epoch, &channel) {
-            info!(
-                robot = sender,
-                channel = channel.as_deref().unwrap_or("none"),
-                epoch = ack.epoch,
-                "route acknowledged"
-            );
-            cx.event(Event::RouteAcked {
-                robot: sender.to_string(),
-                channel,
-                epoch: ack.epoch,
-            });
+        let acked = self
+            .robots
+            .get_mut(sender)
+            .and_then(|r| r.route.acked(sender, ack));
+        if let Some(e) = acked {
+            cx.event(e);
         }
         Delivery::Consumed
     }
@@ -165,8 +172,7 @@ impl Tables {
         let now = cx.now;
         let mut due = Vec::new();
         for (name, r) in self.robots.iter_mut() {
-            if r.route.resend_due(now, retry) {
-                let route = r.route.wire(name);
+            if let Some(route) = r.route.resend(name, now, retry) {
                 due.extend(r.links.target(now, timeout).map(|to| (to, route)));
             }
         }
