@@ -12,6 +12,7 @@ use tokio::time::Instant;
 
 use super::{Ctx, Peer, Tables};
 use crate::event::{Event, LinkAddr, RobotLinks};
+use crate::router::config::SerialEndpoint;
 
 /// Share of a radio's bandwidth given to the robots' telemetry; the rest
 /// carries commands, acknowledgements, heartbeats and retries.
@@ -111,6 +112,71 @@ impl Links {
     }
 }
 
+/// The station's radios as configured (`router.serial`), by port number:
+/// how a radio is named and how its rate is shared.
+#[derive(Debug, Clone, Copy)]
+struct Radios<'a>(&'a [SerialEndpoint]);
+
+impl Radios<'_> {
+    fn name(&self, port: u16) -> String {
+        self.0
+            .get(usize::from(port))
+            .map_or_else(|| format!("#{port}"), |s| s.port.clone())
+    }
+
+    /// Telemetry messages per second each of the `robots` on radio `port`
+    /// may send, at `frame` bytes each: the radio's telemetry share split
+    /// evenly among them.
+    fn budget(&self, port: u16, robots: usize, frame: f64) -> Option<f64> {
+        let baud = self.0.get(usize::from(port))?.baud;
+        let hz = f64::from(baud) / 10.0 * TELEMETRY_SHARE / robots.max(1) as f64 / frame;
+        // Whole messages per second once there are a few, so the budget
+        // does not flicker with the frame size.
+        Some(if hz >= 2.0 {
+            hz.floor()
+        } else {
+            (hz * 10.0).floor() / 10.0
+        })
+    }
+}
+
+impl Links {
+    /// What the links look like at `now` (live within `timeout`), as
+    /// [`Event::Links`] says; `sharing` robots are on the robot's radio.
+    fn report(
+        &self,
+        now: Instant,
+        timeout: std::time::Duration,
+        radios: Radios<'_>,
+        sharing: usize,
+    ) -> RobotLinks {
+        let live = |at: Instant| now.saturating_duration_since(at) < timeout;
+        let mut down = Vec::new();
+        if self.udp.is_some_and(|(_, t)| !live(t)) {
+            down.push("wifi".to_string());
+        }
+        if self.radio.is_some_and(|(_, t)| !live(t)) {
+            down.push("radio".to_string());
+        }
+        RobotLinks {
+            udp: self.udp.is_some_and(|(_, t)| live(t)),
+            radio: self
+                .radio
+                .filter(|(_, t)| live(*t))
+                .map(|(p, _)| radios.name(p)),
+            active: match self.target(now, timeout) {
+                Some(Peer::Udp(_)) if self.udp.is_some_and(|(_, t)| live(t)) => "udp",
+                Some(Peer::Serial(_)) if self.radio.is_some_and(|(_, t)| live(t)) => "radio",
+                _ => "",
+            },
+            radio_budget_hz: self
+                .radio()
+                .and_then(|p| radios.budget(p, sharing, self.radio_frame)),
+            down,
+        }
+    }
+}
+
 impl Tables {
     /// Where to send to `robot` now.
     pub(super) fn target(&self, robot: &str, now: Instant) -> Option<Peer> {
@@ -121,37 +187,10 @@ impl Tables {
     /// How a link is named in events and logs.
     pub(super) fn link_addr(&self, peer: Peer) -> LinkAddr {
         match peer {
-            Peer::Serial(i) => LinkAddr::Radio(self.radio_name(i)),
+            Peer::Serial(i) => LinkAddr::Radio(Radios(&self.config.serial).name(i)),
             Peer::Udp(a) => LinkAddr::Udp(a),
             Peer::Tcp(_) | Peer::Local => LinkAddr::Radio(peer.to_string()),
         }
-    }
-
-    fn radio_name(&self, port: u16) -> String {
-        self.config
-            .serial
-            .get(usize::from(port))
-            .map_or_else(|| format!("#{port}"), |s| s.port.clone())
-    }
-
-    /// Telemetry messages per second each robot on radio `port` may send:
-    /// the radio's telemetry share split evenly among its robots.
-    fn radio_budget(&self, port: u16, frame: f64) -> Option<f64> {
-        let baud = self.config.serial.get(usize::from(port))?.baud;
-        let robots = self
-            .robots
-            .iter()
-            .filter(|(_, r)| r.links.radio() == Some(port))
-            .count()
-            .max(1);
-        let hz = f64::from(baud) / 10.0 * TELEMETRY_SHARE / robots as f64 / frame;
-        // Whole messages per second once there are a few, so the budget
-        // does not flicker with the frame size.
-        Some(if hz >= 2.0 {
-            hz.floor()
-        } else {
-            (hz * 10.0).floor() / 10.0
-        })
     }
 
     /// Radio `port` failed (`error`) or was opened again (`None`): the
@@ -159,48 +198,27 @@ impl Tables {
     /// their links say so, on their own).
     pub(crate) fn radio_changed(&mut self, port: u16, error: Option<String>, cx: &mut Ctx<'_>) {
         cx.event(Event::Radio {
-            port: self.radio_name(port),
+            port: Radios(&self.config.serial).name(port),
             up: error.is_none(),
             reason: error.unwrap_or_default(),
         });
     }
 
-    /// What a robot's links look like at `now`, as [`Event::Links`] says.
-    fn links_report(&self, l: &Links, now: Instant) -> RobotLinks {
-        let timeout = self.config.link_timeout;
-        let live = |at: Instant| now.saturating_duration_since(at) < timeout;
-        let mut down = Vec::new();
-        if l.udp.is_some_and(|(_, t)| !live(t)) {
-            down.push("wifi".to_string());
-        }
-        if l.radio.is_some_and(|(_, t)| !live(t)) {
-            down.push("radio".to_string());
-        }
-        RobotLinks {
-            udp: l.udp.is_some_and(|(_, t)| live(t)),
-            radio: l
-                .radio
-                .filter(|(_, t)| live(*t))
-                .map(|(p, _)| self.radio_name(p)),
-            active: match l.target(now, timeout) {
-                Some(Peer::Udp(_)) if l.udp.is_some_and(|(_, t)| live(t)) => "udp",
-                Some(Peer::Serial(_)) if l.radio.is_some_and(|(_, t)| live(t)) => "radio",
-                _ => "",
-            },
-            radio_budget_hz: l.radio().and_then(|p| self.radio_budget(p, l.radio_frame)),
-            down,
-        }
-    }
-
     /// Reports every robot with a radio whose live links (or radio budget)
     /// changed. A robot on UDP alone has one link: its link state says it.
     pub(super) fn report_links(&mut self, cx: &mut Ctx<'_>) {
+        let (radios, timeout) = (Radios(&self.config.serial), self.config.link_timeout);
         let mut changed = Vec::new();
         for (name, r) in self.robots.iter() {
-            if r.links.radio.is_none() {
+            let Some(port) = r.links.radio() else {
                 continue;
-            }
-            let report = self.links_report(&r.links, cx.now);
+            };
+            let sharing = self
+                .robots
+                .iter()
+                .filter(|(_, r)| r.links.radio() == Some(port))
+                .count();
+            let report = r.links.report(cx.now, timeout, radios, sharing);
             if report != r.links.reported {
                 changed.push((name.clone(), report));
             }
