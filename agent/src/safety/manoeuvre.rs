@@ -109,8 +109,9 @@ impl SafetyLayer {
     }
 
     /// The right-hand rule: `intent` turned right by the smallest angle
-    /// that meets no neighbour within `horizon` and does not head into the
-    /// fence ([`NeighbourSet::anticipate_within`]). `None`: the way is
+    /// that meets no neighbour within `horizon`; round neighbours standing
+    /// still, the side it passes on kept and never into the fence
+    /// ([`super::NeighbourSet::anticipate_within`]). `None`: the way is
     /// clear (or the look-ahead is off).
     fn swerve(
         &mut self,

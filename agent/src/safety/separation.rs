@@ -178,15 +178,16 @@ impl NeighbourSet {
         self.anticipate_within(p, desired, (radius, margin), horizon, now, (None, None))
     }
 
-    /// [`NeighbourSet::anticipate`] inside `fence`: a turn that would take
-    /// the robot into the band within its margin of an edge within
-    /// [`FENCE_AHEAD`] is not taken (the fence would stop it there, and a
-    /// robot pressed against a wall by the rule is jammed). Where every
-    /// neighbour in the way stands still (one that arrived, a static
-    /// disc), nothing needs the two to turn the same way: the side the
-    /// robot is already passing on (`passing`: [`Side`] of its last
-    /// swerve), else the smaller turn either side, right first at equal
-    /// angles.
+    /// [`NeighbourSet::anticipate`], and where every neighbour in the way
+    /// stands still (one that arrived, a static disc), inside `fence`:
+    /// nothing then needs the two to turn the same way, so the robot keeps
+    /// the side it is already passing on (`passing`: [`Side`] of its last
+    /// swerve), else takes the smaller turn either side, right first at
+    /// equal angles; and a turn that would take it into the band within
+    /// its margin of an edge within [`FENCE_AHEAD`] is not taken (the
+    /// fence would stop it there, pressed against the wall by the rule,
+    /// jammed). Round moving neighbours the rule is the plain right-hand
+    /// one, which every robot keeps alike.
     pub fn anticipate_within(
         &self,
         p: Vec2,
@@ -218,6 +219,7 @@ impl NeighbourSet {
             return None;
         }
         let standing = contacts(desired).all(|(_, w)| w.norm() < STANDING);
+        let fence = fence.filter(|_| standing);
         let open = |u: Vec2| fence.is_none_or(|f| !f.closes_in(p, u, radius, FENCE_AHEAD));
         // Turn right until clear; if no turn to the right up to half a
         // circle clears, to the left (round a standing neighbour, the

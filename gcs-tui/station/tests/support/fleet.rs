@@ -53,7 +53,8 @@ pub struct Metrics {
     pub separation_violations: u64,
     /// Periods in which two discs overlapped.
     pub collisions: u64,
-    /// Smallest distance between a disc and the arena's edges, m.
+    /// Smallest distance between a disc and the arena's edges (boundary,
+    /// keep-outs) or a static disc of the arena, m.
     pub min_clearance: f64,
     /// Periods in which a disc came closer to an edge than the margin (by
     /// more than the tolerance).
@@ -549,8 +550,16 @@ impl Rig {
         m.separation_violations += u64::from(close);
         m.collisions += u64::from(touching);
         let (mut short, mut breached) = (false, false);
+        let discs = self.options.arena.shape().obstacle_list();
         for r in &self.robots {
-            let c = clearance(&self.fence, r.position()) - radius;
+            let to_discs = discs.iter().filter_map(|o| match o {
+                mech_proto::Obstacle::Disc(d) => {
+                    Some((r.position() - Vec2::new(d.x, d.y)).norm() - d.radius)
+                }
+                mech_proto::Obstacle::Polygon(_) => None,
+            });
+            let edges = clearance(&self.fence, r.position());
+            let c = to_discs.fold(edges, f64::min) - radius;
             m.min_clearance = m.min_clearance.min(c);
             short |= c < margin - self.tolerance;
             breached |= c < 0.0;
