@@ -179,15 +179,15 @@ impl NeighbourSet {
     }
 
     /// [`NeighbourSet::anticipate`], and where every neighbour in the way
-    /// stands still (one that arrived, a static disc), inside `fence`:
-    /// nothing then needs the two to turn the same way, so the robot keeps
-    /// the side it is already passing on (`passing`: [`Side`] of its last
-    /// swerve), else takes the smaller turn either side, right first at
-    /// equal angles; and a turn that would take it into the band within
-    /// its margin of an edge within [`FENCE_AHEAD`] is not taken (the
-    /// fence would stop it there, pressed against the wall by the rule,
-    /// jammed). Round moving neighbours the rule is the plain right-hand
-    /// one, which every robot keeps alike.
+    /// stands still (one that arrived, a static disc), inside `fence`: a
+    /// turn that would take the robot into the band within its margin of
+    /// an edge within [`FENCE_AHEAD`] is not taken (the fence would stop
+    /// it there, pressed against the wall by the rule, jammed), and when
+    /// no turn to the right up to a quarter circle is left, the robot
+    /// passes on the left; it keeps the side it is passing on (`passing`:
+    /// [`Side`] of its last swerve) until the swerve ends. Round moving
+    /// neighbours the rule is the plain right-hand one, which every robot
+    /// keeps alike.
     pub fn anticipate_within(
         &self,
         p: Vec2,
@@ -230,7 +230,7 @@ impl NeighbourSet {
         let order = match (standing, passing) {
             (false, _) | (true, Some(Side::Right)) => Order::RightFirst,
             (true, Some(Side::Left)) => Order::LeftFirst,
-            (true, None) => Order::Nearest,
+            (true, None) => Order::RightQuarterFirst,
         };
         for a in turns(order) {
             let u = desired.rotated(a);
@@ -278,8 +278,10 @@ enum Order {
     RightFirst,
     /// Every step to the left, then to the right.
     LeftFirst,
-    /// The smallest first, right before left at equal angles.
-    Nearest,
+    /// To the right up to a quarter circle, then to the left, then the
+    /// rest to the right: the right-hand rule while it has room, the other
+    /// side when the right is walled.
+    RightQuarterFirst,
 }
 
 /// The turns [`NeighbourSet::anticipate_within`] tries, rad (right turns
@@ -289,8 +291,9 @@ fn turns(order: Order) -> impl Iterator<Item = f64> {
     let n = ANTICIPATION_STEPS as i32;
     (0..2 * n - 1).map(move |i| {
         let k = match order {
-            Order::Nearest if i % 2 == 0 => -(i / 2 + 1),
-            Order::Nearest => i / 2 + 1,
+            Order::RightQuarterFirst if i < n / 2 => -(i + 1),
+            Order::RightQuarterFirst if i < n / 2 + n - 1 => i - n / 2 + 1,
+            Order::RightQuarterFirst => -(i - n + 2),
             Order::RightFirst if i < n => -(i + 1),
             Order::RightFirst => i - n + 1,
             Order::LeftFirst if i < n - 1 => i + 1,
@@ -501,10 +504,12 @@ mod tests {
             [n - 1.0, -1.0, -2.0]
         );
         assert_eq!(left.last(), Some(&-n));
-        let nearest = of(Order::Nearest);
-        assert_eq!(&nearest[..5], [-1.0, 1.0, -2.0, 2.0, -3.0]);
-        assert_eq!(nearest.last(), Some(&-n));
-        for order in [left, nearest] {
+        let quarter = of(Order::RightQuarterFirst);
+        let q = ANTICIPATION_STEPS / 2;
+        assert_eq!(&quarter[q - 1..q + 2], [-(q as f64), 1.0, 2.0]);
+        assert_eq!(quarter[q + ANTICIPATION_STEPS - 1], -(q as f64) - 1.0);
+        assert_eq!(quarter.last(), Some(&-n));
+        for order in [left, quarter] {
             let mut sorted = order.clone();
             sorted.sort_by(f64::total_cmp);
             let mut all = right.clone();

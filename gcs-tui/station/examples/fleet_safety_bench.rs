@@ -145,6 +145,16 @@ async fn mission_run(
     }
 }
 
+/// What a run without missions measured, its station stopped.
+async fn stopped(rig: Rig) -> Run {
+    let metrics = rig.metrics();
+    rig.shutdown().await;
+    Run {
+        metrics,
+        arrival: None,
+    }
+}
+
 /// Ten robots given a new random twist each second for 30 s.
 async fn random_twists(options: &Options, seed: u64) -> Run {
     let mut rig = Rig::with(true, options.clone()).await;
@@ -169,15 +179,10 @@ async fn random_twists(options: &Options, seed: u64) -> Run {
         }
         rig.run_for(1.0).await;
     }
-    let metrics = rig.metrics();
-    rig.shutdown().await;
-    Run {
-        metrics,
-        arrival: None,
-    }
+    stopped(rig).await
 }
 
-/// A kiwi driven at full speed for 6 s from (1.0, 1.4) along `heading`,
+/// A kiwi driven at full speed for 6 s from (1.6, 1.4) along `heading`,
 /// its neighbour a diff-drive pressing it the same way from behind.
 async fn driven_at(options: &Options, heading: f64) -> Run {
     let mut rig = Rig::with(true, options.clone()).await;
@@ -190,12 +195,7 @@ async fn driven_at(options: &Options, heading: f64) -> Run {
     rig.command(a, twist(kiwi.build().as_ref(), 1.0, 0.0, 0.0));
     rig.command(b, twist(dd.build().as_ref(), 1.0, 0.0, 0.0));
     rig.run_for(6.0).await;
-    let metrics = rig.metrics();
-    rig.shutdown().await;
-    Run {
-        metrics,
-        arrival: None,
-    }
+    stopped(rig).await
 }
 
 /// The demo arena with a keep-out square and a static disc in the middle
@@ -231,12 +231,7 @@ async fn obstacles(options: &Options) -> Run {
         rig.command(i, twist(spec.build().as_ref(), 1.0, 0.0, 0.0));
     }
     rig.run_for(6.0).await;
-    let metrics = rig.metrics();
-    rig.shutdown().await;
-    Run {
-        metrics,
-        arrival: None,
-    }
+    stopped(rig).await
 }
 
 const SCENARIOS: [&str; 9] = [
