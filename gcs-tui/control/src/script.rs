@@ -176,7 +176,8 @@ pub fn event_json(s: &Stamped) -> Value {
     if let Value::Object(m) = &mut v {
         m.insert("type".into(), json!("event"));
         m.insert("t".into(), json!(secs(s.at)));
-        m.insert("event".into(), json!(s.event.name()));
+        let tag = serde_json::to_value(&s.event).map(|e| e["event"].clone());
+        m.insert("event".into(), tag.unwrap_or_default());
     }
     v
 }

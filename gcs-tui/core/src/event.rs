@@ -16,6 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::arena::ArenaShape;
 use crate::counters::{LinkQuality, RejectReason};
 
+mod names;
+
 mech_proto::named_enum! {
     /// How recently the router heard from a robot.
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -127,8 +129,9 @@ impl RobotLinks {
 pub const REFUSED_SOURCES_COUNTED: usize = 4096;
 
 /// Something the router did or saw. Subscribers receive them in order, each
-/// wrapped in a [`Stamped`]. Recordings store them as JSON objects tagged
-/// with [`Event::name`] (a test keeps the two the same).
+/// wrapped in a [`Stamped`]. Recordings and script output store them as
+/// JSON objects in serde's form below, tagged with their `event` name
+/// ([`Event::names`] lists them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
@@ -327,36 +330,11 @@ mod intervention_name {
 }
 
 impl Event {
-    /// Short snake_case name, as printed in JSON output.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Event::Listening { .. } => "listening",
-            Event::Registered { .. } => "registered",
-            Event::Link { .. } => "link",
-            Event::Links { .. } => "links",
-            Event::Radio { .. } => "radio",
-            Event::Telemetry { .. } => "telemetry",
-            Event::LinkQuality { .. } => "link_quality",
-            Event::RouteChanged { .. } => "route_changed",
-            Event::RouteAcked { .. } => "route_acked",
-            Event::MissionSent { .. } => "mission_sent",
-            Event::MissionAcked { .. } => "mission_acked",
-            Event::MissionFailed { .. } => "mission_failed",
-            Event::EStop { .. } => "estop",
-            Event::EStopAcked { .. } => "estop_acked",
-            Event::EStopComplete { .. } => "estop_complete",
-            Event::ChannelPublisher { .. } => "channel_publisher",
-            Event::ClusterCommand { .. } => "cluster_command",
-            Event::Bye { .. } => "bye",
-            Event::Notice { .. } => "notice",
-            Event::BadPacket { .. } => "bad_packet",
-            Event::Rejected { .. } => "rejected",
-            Event::Refused { .. } => "refused",
-            Event::Arena { .. } => "arena",
-            Event::SafetySwitched { .. } => "safety_switched",
-            Event::ArenaAcked { .. } => "arena_acked",
-            Event::Safety { .. } => "safety",
-        }
+    /// Every event's name, in the order of the variants: the `event` tag
+    /// serde writes, as recordings and script output carry it (read from
+    /// the type, so a new variant is named here as it is in them).
+    pub fn names() -> &'static [&'static str] {
+        names::all()
     }
 }
 

@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use agent::{Peer, envelope, eventually, twist};
 use mech_core::auth::{AuthConfig, AuthMode, KeyEntry, KeyFile, Role};
-use mech_core::{CoreConfig, Delivery, DropReason, Gcs};
+use mech_core::{CoreConfig, Delivery, DropReason, Event, Gcs};
 use mech_proto::auth::{Key, split};
 use mech_proto::{Body, EStop, EStopAck, Hello, MissionAck, Route, RouteAck, Time, TimeRequest};
 use tempfile::TempDir;
@@ -618,7 +618,10 @@ async fn a_flood_from_3000_source_ports_reaches_operators_as_a_few_summaries() {
             .await
             .expect("the summary of the rest comes within a second or so")
             .expect("router running");
-        if matches!(e.event.name(), "bad_packet" | "rejected" | "refused") {
+        if matches!(
+            e.event,
+            Event::BadPacket { .. } | Event::Rejected { .. } | Event::Refused { .. }
+        ) {
             reports += 1;
             let v = serde_json::to_value(&e.event).unwrap();
             reported += v["count"].as_u64().unwrap_or(1);

@@ -4,6 +4,8 @@
 
 use serde_json::{Value, json};
 
+use crate::event::Event;
+
 /// Every router message as received (MessagePack bytes, no schema).
 pub const RAW: &str = "/mech/raw";
 /// The router's decision on each message (except accepted telemetry).
@@ -212,15 +214,16 @@ fn scene_update() -> Value {
     )
 }
 
-/// The fields of each event beside `t` and `event`, every one required:
-/// the data is `mech_core::Event` as serde writes it, and a test records
-/// every variant and validates it against this schema.
+/// The fields of each event beside `t` and `event`, every one required,
+/// by the event's name ([`Event::names`], in its order): the data is
+/// `mech_core::Event` as serde writes it, and a test records every variant
+/// and validates it against this schema.
 const EVENT_FIELDS: &[(&str, &[&str])] = &[
     ("listening", &["udp", "tcp"]),
     ("registered", &["hello", "id", "addr", "known"]),
     ("links", &["robot", "links"]),
-    ("link", &["robot", "state"]),
     ("radio", &["port", "up", "reason"]),
+    ("link", &["robot", "state"]),
     ("telemetry", &["robot", "telemetry"]),
     ("link_quality", &["robot", "quality"]),
     ("route_changed", &["robot", "channel", "epoch"]),
@@ -248,36 +251,6 @@ const EVENT_FIELDS: &[(&str, &[&str])] = &[
     ("safety_switched", &["robot", "enabled", "id"]),
     ("arena_acked", &["robot", "id", "enabled"]),
     ("safety", &["robot", "safety_state", "intervention"]),
-];
-
-/// Names of every event, as [`crate::Event::name`] gives them.
-pub const EVENT_NAMES: &[&str] = &[
-    "listening",
-    "registered",
-    "links",
-    "link",
-    "radio",
-    "telemetry",
-    "link_quality",
-    "route_changed",
-    "route_acked",
-    "mission_sent",
-    "mission_acked",
-    "mission_failed",
-    "estop",
-    "estop_acked",
-    "estop_complete",
-    "channel_publisher",
-    "cluster_command",
-    "bye",
-    "notice",
-    "bad_packet",
-    "rejected",
-    "refused",
-    "arena",
-    "safety_switched",
-    "arena_acked",
-    "safety",
 ];
 
 fn nullable(type_name: &str) -> Value {
@@ -413,7 +386,7 @@ fn event() -> Value {
     properties.insert("t".into(), number());
     properties.insert(
         "event".into(),
-        json!({"type": "string", "enum": EVENT_NAMES}),
+        json!({"type": "string", "enum": Event::names()}),
     );
     let mut cases = Vec::new();
     for (name, fields) in EVENT_FIELDS {
@@ -563,7 +536,7 @@ mod tests {
 
     #[test]
     fn every_event_name_is_listed_and_topics_name_their_robot() {
-        let names: Vec<&str> = EVENT_NAMES.to_vec();
+        let names = Event::names();
         assert!(names.contains(&"estop_complete") && names.len() == 26);
         let described: Vec<&str> = EVENT_FIELDS.iter().map(|(n, _)| *n).collect();
         assert_eq!(described, names, "every event has its fields described");
@@ -631,8 +604,8 @@ mod tests {
         ];
         for e in events {
             let v = serde_json::to_value(&e).unwrap();
-            assert_eq!(v["event"], e.name());
-            assert!(EVENT_NAMES.contains(&e.name()));
+            let name = v["event"].as_str().unwrap_or_default();
+            assert!(Event::names().contains(&name), "{name}");
             assert_eq!(serde_json::from_value::<Event>(v).unwrap(), e);
         }
     }
@@ -690,14 +663,14 @@ mod tests {
                     down: vec!["radio".into()],
                 },
             },
-            Event::Link {
-                robot: robot(),
-                state: LinkState::Stale,
-            },
             Event::Radio {
                 port: "/dev/ttyUSB0".into(),
                 up: false,
                 reason: "Broken pipe".into(),
+            },
+            Event::Link {
+                robot: robot(),
+                state: LinkState::Stale,
             },
             Event::Telemetry {
                 robot: robot(),
@@ -954,9 +927,13 @@ mod tests {
         let wrong = file.channel("/wrong", Some(MECH_EVENT)).unwrap();
         let all = every_event();
         let written = all.len() as u64;
-        let mut names: Vec<&str> = all.iter().map(|e| e.name()).collect();
+        let mut names: Vec<String> = all
+            .iter()
+            .map(|e| serde_json::to_value(e).unwrap()["event"].to_string())
+            .map(|tag| tag.trim_matches('"').to_string())
+            .collect();
         names.dedup();
-        assert_eq!(names, EVENT_NAMES, "one of every event, in order");
+        assert_eq!(names, Event::names(), "one of every event, in order");
         for (i, e) in all.into_iter().enumerate() {
             let stamped = Stamped {
                 at: std::time::Duration::from_millis(i as u64),
