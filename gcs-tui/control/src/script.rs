@@ -387,3 +387,252 @@ pub async fn run(gcs: &Gcs, executor: &mut Executor, source: &str, sink: Sink) -
     emit(&sink, &summary);
     outcome
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mech_core::counters::RejectReason;
+    use mech_core::{LinkAddr, RobotLinks};
+    use mech_proto::{
+        ClusterCommand, ClusterGoal, ClusterVelocity, CommandKind, Hello, Intervention, Level,
+        Notice, NoticeCode, SafetyState, Waypoint,
+    };
+    use std::time::Duration;
+
+    fn line(event: Event) -> Value {
+        event_json(&Stamped {
+            at: Duration::from_millis(1500),
+            event,
+        })
+    }
+
+    fn hello() -> Hello {
+        Hello {
+            name: "robot_1".into(),
+            platform: "diff-drive".into(),
+            capabilities: vec![CommandKind::Twist, CommandKind::Actuators],
+            motors: 2,
+            max_speed: 0.5,
+            max_yaw_rate: 2.0,
+            agent_version: "0.1.0".into(),
+        }
+    }
+
+    /// The events whose script line is not their serde form, and the
+    /// lines `docs/commands.md` and the end-to-end tests read.
+    #[test]
+    fn events_whose_script_line_differs_from_their_recorded_form_print_as_documented() {
+        let waypoint = Waypoint {
+            x: 1.0,
+            y: 2.0,
+            z: 0.0,
+            time: None,
+        };
+        let cases = [
+            (
+                Event::Registered {
+                    hello: hello(),
+                    id: 1,
+                    addr: LinkAddr::Udp("127.0.0.1:40000".parse().unwrap()),
+                    known: false,
+                },
+                json!({"robot": "robot_1", "id": 1, "addr": "127.0.0.1:40000",
+                       "platform": "diff-drive", "capabilities": ["twist", "actuators"],
+                       "known": false}),
+            ),
+            (
+                Event::Registered {
+                    hello: Hello {
+                        capabilities: vec![],
+                        ..hello()
+                    },
+                    id: 2,
+                    addr: LinkAddr::Radio("/dev/ttyUSB0".into()),
+                    known: true,
+                },
+                json!({"robot": "robot_1", "id": 2, "addr": "radio /dev/ttyUSB0",
+                       "platform": "diff-drive", "capabilities": [], "known": true}),
+            ),
+            (
+                Event::Links {
+                    robot: "robot_1".into(),
+                    links: RobotLinks {
+                        udp: true,
+                        radio: Some("/dev/ttyUSB0".into()),
+                        active: "radio",
+                        radio_budget_hz: Some(14.0),
+                        down: vec!["wifi".into()],
+                    },
+                },
+                json!({"robot": "robot_1", "udp": true, "radio": "/dev/ttyUSB0",
+                       "active": "radio", "radio_budget_hz": 14.0, "down": ["wifi"]}),
+            ),
+            (
+                Event::RouteChanged {
+                    robot: "robot_1".into(),
+                    channel: None,
+                    epoch: 2,
+                },
+                json!({"robot": "robot_1", "channel": "none", "epoch": 2}),
+            ),
+            (
+                Event::RouteAcked {
+                    robot: "robot_1".into(),
+                    channel: Some("wp/gcs".into()),
+                    epoch: 3,
+                },
+                json!({"robot": "robot_1", "channel": "wp/gcs", "epoch": 3}),
+            ),
+            (
+                Event::MissionSent {
+                    robot: "robot_1".into(),
+                    channel: "wp/gcs".into(),
+                    id: 3,
+                    waypoints: vec![waypoint, waypoint],
+                    looped: true,
+                },
+                json!({"robot": "robot_1", "channel": "wp/gcs", "id": 3, "waypoints": 2,
+                       "looped": true}),
+            ),
+            (
+                Event::ClusterCommand {
+                    channel: "fleet/c1".into(),
+                    command: ClusterCommand {
+                        cluster: "c1".into(),
+                        members: vec!["robot_1".into()],
+                        goal: ClusterGoal::Velocity(ClusterVelocity {
+                            vx: 0.1,
+                            vy: 0.0,
+                            wz: 0.0,
+                            scale_rate: 0.0,
+                        }),
+                        formation: None,
+                    },
+                },
+                json!({"channel": "fleet/c1", "cluster": "c1"}),
+            ),
+            (
+                Event::Notice {
+                    from: "robot_1".into(),
+                    notice: Notice {
+                        level: Level::Warn,
+                        code: NoticeCode::DriverFault,
+                        text: "left wheel stalled".into(),
+                    },
+                },
+                json!({"from": "robot_1", "level": "Warn", "text": "left wheel stalled"}),
+            ),
+            (
+                Event::Arena {
+                    arena: Some(mech_core::ArenaConfig::demo().shape()),
+                },
+                json!({"arena": true, "vertices": 4, "keep_out": 0, "slow_zones": 0,
+                       "obstacles": 0, "margin": 0.1, "bounds": [0.0, 0.0, 3.9, 2.8]}),
+            ),
+            (Event::Arena { arena: None }, json!({"arena": false})),
+            (
+                Event::Safety {
+                    robot: "robot_1".into(),
+                    state: SafetyState::On,
+                    intervention: Intervention::Fence,
+                },
+                json!({"robot": "robot_1", "state": "on", "intervention": "fence"}),
+            ),
+        ];
+        for (event, fields) in cases {
+            let mut want = json!({"type": "event", "t": 1.5});
+            if let (Value::Object(w), Value::Object(f)) = (&mut want, fields) {
+                w.extend(f);
+            }
+            let tag = serde_json::to_value(&event).unwrap()["event"].clone();
+            want["event"] = tag;
+            assert_eq!(line(event), want);
+        }
+    }
+
+    /// Every other event prints as it is recorded, with the line's `type`
+    /// and `t`.
+    #[test]
+    fn other_events_print_their_serde_form() {
+        let robot = || "robot_1".to_string();
+        let events = [
+            Event::Listening {
+                udp: "127.0.0.1:7400".parse().unwrap(),
+                tcp: Some("127.0.0.1:7401".parse().unwrap()),
+            },
+            Event::Link {
+                robot: robot(),
+                state: mech_core::LinkState::Stale,
+            },
+            Event::Radio {
+                port: "/dev/ttyUSB0".into(),
+                up: false,
+                reason: "Broken pipe".into(),
+            },
+            Event::MissionAcked {
+                robot: robot(),
+                id: 3,
+                accepted: false,
+                reason: "too far".into(),
+            },
+            Event::MissionFailed {
+                robot: robot(),
+                id: 3,
+                reason: "no acknowledgement".into(),
+            },
+            Event::EStop {
+                engage: true,
+                id: 7,
+            },
+            Event::EStopAcked {
+                robot: robot(),
+                engage: true,
+                id: 7,
+            },
+            Event::EStopComplete {
+                engage: false,
+                id: 8,
+            },
+            Event::ChannelPublisher {
+                channel: "joy/0".into(),
+                publisher: "gcs".into(),
+            },
+            Event::Bye {
+                robot: robot(),
+                reason: "shutdown".into(),
+            },
+            Event::BadPacket {
+                from: "udp:127.0.0.1:5".into(),
+                error: "truncated".into(),
+            },
+            Event::Rejected {
+                from: "udp:1.2.3.4:5".into(),
+                reason: RejectReason::Replay,
+                detail: "stamp seen".into(),
+            },
+            Event::Refused {
+                count: 1200,
+                sources: 16,
+                by_reason: [("bad-tag".to_string(), 1000)].into_iter().collect(),
+                from: "udp:1.2.3.4:5".into(),
+                detail: "bad tag".into(),
+            },
+            Event::SafetySwitched {
+                robot: robot(),
+                enabled: false,
+                id: 4,
+            },
+            Event::ArenaAcked {
+                robot: robot(),
+                id: 4,
+                enabled: true,
+            },
+        ];
+        for event in events {
+            let mut want = serde_json::to_value(&event).unwrap();
+            want["type"] = json!("event");
+            want["t"] = json!(1.5);
+            assert_eq!(line(event), want);
+        }
+    }
+}
