@@ -121,12 +121,6 @@ pub const EXCEPTIONS: &[Exception] = &[
     ),
     // Functions that are flat tables.
     allow(
-        "gcs-tui/control/src/script.rs",
-        "event_json",
-        Limit::FnLines,
-        "a flat table: one JSON shape per event variant",
-    ),
-    allow(
         "agent/src/drivers/l298.rs",
         "pin_sequence_forward_back_turn_stop",
         Limit::FnLines,

@@ -13,11 +13,11 @@
 use std::io::Write;
 use std::sync::{Arc, Mutex};
 
-use serde_json::{Value, json};
+use serde_json::{Map, Value, json};
 
 use crate::lang::{Executor, LangError, Outcome, Statement, parse_script};
 use mech_core::router::Subscription;
-use mech_core::{Event, Gcs, LinkState, Stamped};
+use mech_core::{ArenaShape, Event, Gcs, LinkState, Stamped};
 
 /// How a script run ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -56,130 +56,83 @@ pub fn secs(d: std::time::Duration) -> f64 {
     (d.as_secs_f64() * 1e6).round() / 1e6
 }
 
-/// The JSON form of an event.
+/// The JSON line of an event: its serde form, as recordings hold it
+/// (tagged with its name in `event`), with the line's `type` and `t`,
+/// changed only where [`script_fields`] says.
 pub fn event_json(s: &Stamped) -> Value {
-    let mut v = match &s.event {
-        Event::Listening { udp, tcp } => {
-            json!({"udp": udp.to_string(), "tcp": tcp.map(|t| t.to_string())})
-        }
-        Event::Registered {
-            hello,
-            id,
-            addr,
-            known,
-        } => json!({
-            "robot": hello.name, "id": id, "addr": addr.to_string(), "platform": hello.platform,
-            "capabilities": hello.capabilities.iter().map(|c| c.as_str()).collect::<Vec<_>>(),
-            "known": known,
-        }),
-        Event::Link { robot, state } => json!({"robot": robot, "state": state.as_str()}),
-        Event::Links { robot, links } => json!({
-            "robot": robot, "udp": links.udp, "radio": links.radio, "active": links.active,
-            "radio_budget_hz": links.radio_budget_hz, "down": links.down,
-        }),
-        Event::Radio { port, up, reason } => json!({"port": port, "up": up, "reason": reason}),
-        Event::Telemetry {
-            robot,
-            telemetry: t,
-        } => json!({
-            "robot": robot, "x": t.pose.x, "y": t.pose.y, "heading": t.pose.heading, "channel": t.channel,
-        }),
-        Event::LinkQuality { robot, quality: q } => json!({
-            "robot": robot, "rx_hz": q.rx_hz, "tx_hz": q.tx_hz, "loss": q.loss,
-            "rtt_ms": q.rtt.map(|d| d.as_secs_f64() * 1e3),
-        }),
-        Event::RouteChanged {
-            robot,
-            channel,
-            epoch,
-        }
-        | Event::RouteAcked {
-            robot,
-            channel,
-            epoch,
-        } => {
-            json!({"robot": robot, "channel": channel.as_deref().unwrap_or("none"), "epoch": epoch})
-        }
-        Event::MissionSent {
-            robot,
-            channel,
-            id,
-            waypoints,
-            looped,
-        } => {
-            json!({"robot": robot, "channel": channel, "id": id, "waypoints": waypoints.len(), "looped": looped})
-        }
-        Event::MissionAcked {
-            robot,
-            id,
-            accepted,
-            reason,
-        } => {
-            json!({"robot": robot, "id": id, "accepted": accepted, "reason": reason})
-        }
-        Event::MissionFailed { robot, id, reason } => {
-            json!({"robot": robot, "id": id, "reason": reason})
-        }
-        Event::EStop { engage, id } | Event::EStopComplete { engage, id } => {
-            json!({"engage": engage, "id": id})
-        }
-        Event::EStopAcked { robot, engage, id } => {
-            json!({"robot": robot, "engage": engage, "id": id})
-        }
-        Event::ChannelPublisher { channel, publisher } => {
-            json!({"channel": channel, "publisher": publisher})
-        }
-        Event::ClusterCommand { channel, command } => {
-            json!({"channel": channel, "cluster": command.cluster})
-        }
-        Event::Bye { robot, reason } => json!({"robot": robot, "reason": reason}),
-        Event::Notice { from, notice } => {
-            json!({"from": from, "level": format!("{:?}", notice.level), "text": notice.text})
-        }
-        Event::BadPacket { from, error } => json!({"from": from, "error": error}),
-        Event::Rejected {
-            from,
-            reason,
-            detail,
-        } => json!({"from": from, "reason": reason.as_str(), "detail": detail}),
-        Event::Refused {
-            count,
-            sources,
-            by_reason,
-            from,
-            detail,
-        } => json!({"count": count, "sources": sources, "by_reason": by_reason,
-                    "from": from, "detail": detail}),
-        Event::Arena { arena } => match arena {
-            Some(a) => json!({
-                "arena": true, "vertices": a.boundary.len(), "keep_out": a.keep_out.len(),
-                "slow_zones": a.slow_zones.len(), "obstacles": a.obstacles.len(),
-                "margin": a.margin, "bounds": a.bounds(),
-            }),
-            None => json!({"arena": false}),
-        },
-        Event::SafetySwitched { robot, enabled, id } => {
-            json!({"robot": robot, "enabled": enabled, "id": id})
-        }
-        Event::ArenaAcked { robot, id, enabled } => {
-            json!({"robot": robot, "id": id, "enabled": enabled})
-        }
-        Event::Safety {
-            robot,
-            state,
-            intervention,
-        } => json!({
-            "robot": robot, "state": mech_core::event::safety_state_str(*state),
-            "intervention": intervention.as_str(),
-        }),
-    };
+    let mut v = serde_json::to_value(&s.event).unwrap_or_default();
     if let Value::Object(m) = &mut v {
+        script_fields(&s.event, m);
         m.insert("type".into(), json!("event"));
         m.insert("t".into(), json!(secs(s.at)));
-        let tag = serde_json::to_value(&s.event).map(|e| e["event"].clone());
-        m.insert("event".into(), tag.unwrap_or_default());
     }
     v
+}
+
+/// Where an event's line is not its serde form, the fields the line has
+/// always had instead (`docs/commands.md`, *Script output*): a robot's
+/// registration and links at the top level (its name as `robot`, its
+/// address as text), a route to none as `"none"`, a mission's length, a
+/// cluster command's cluster, a notice's level by name, an arena's size
+/// and bounds, a safety layer's state as `state`. Telemetry and link
+/// quality, which no script line shows, print as recorded.
+fn script_fields(event: &Event, m: &mut Map<String, Value>) {
+    let mut put = |key: &str, value: Value| m.insert(key.into(), value);
+    match event {
+        Event::Registered { hello, addr, .. } => {
+            let capabilities: Vec<&str> = hello.capabilities.iter().map(|c| c.as_str()).collect();
+            put("robot", json!(hello.name));
+            put("platform", json!(hello.platform));
+            put("capabilities", json!(capabilities));
+            put("addr", json!(addr.to_string()));
+            m.remove("hello");
+        }
+        Event::Links { .. } => {
+            if let Some(Value::Object(links)) = m.remove("links") {
+                m.extend(links);
+            }
+        }
+        Event::RouteChanged { channel, .. } | Event::RouteAcked { channel, .. } => {
+            put("channel", json!(channel.as_deref().unwrap_or("none")));
+        }
+        Event::MissionSent { waypoints, .. } => {
+            put("waypoints", json!(waypoints.len()));
+        }
+        Event::ClusterCommand { command, .. } => {
+            put("cluster", json!(command.cluster));
+            m.remove("command");
+        }
+        Event::Notice { notice, .. } => {
+            put("level", json!(format!("{:?}", notice.level)));
+            put("text", json!(notice.text));
+            m.remove("notice");
+        }
+        Event::Arena { arena } => {
+            if let Value::Object(fields) = arena_json(arena.as_ref()) {
+                m.extend(fields);
+            }
+        }
+        Event::Safety { .. } => {
+            if let Some(state) = m.remove("safety_state") {
+                m.insert("state".into(), state);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// An arena as a script line gives it: whether there is one, how many
+/// vertices, keep-outs, slow zones and obstacles it has, its margin and
+/// bounds.
+fn arena_json(arena: Option<&ArenaShape>) -> Value {
+    match arena {
+        Some(a) => json!({
+            "arena": true, "vertices": a.boundary.len(), "keep_out": a.keep_out.len(),
+            "slow_zones": a.slow_zones.len(), "obstacles": a.obstacles.len(),
+            "margin": a.margin, "bounds": a.bounds(),
+        }),
+        None => json!({"arena": false}),
+    }
 }
 
 fn result_json(gcs: &Gcs, stmt: &Statement, outcome: Result<&Outcome, &LangError>) -> Value {
@@ -418,17 +371,25 @@ mod tests {
         }
     }
 
-    /// The events whose script line is not their serde form, and the
-    /// lines `docs/commands.md` and the end-to-end tests read.
+    /// Each event's line: the fields given, with `type`, `t` and the
+    /// event's name.
+    fn prints_as_documented<const N: usize>(cases: [(Event, Value); N]) {
+        for (event, fields) in cases {
+            let mut want = json!({"type": "event", "t": 1.5});
+            if let (Value::Object(w), Value::Object(f)) = (&mut want, fields) {
+                w.extend(f);
+            }
+            want["event"] = serde_json::to_value(&event).unwrap()["event"].clone();
+            assert_eq!(line(event), want);
+        }
+    }
+
+    /// The events whose script line is not their serde form, and the lines
+    /// `docs/commands.md` and the end-to-end tests read: a registration,
+    /// links.
     #[test]
-    fn events_whose_script_line_differs_from_their_recorded_form_print_as_documented() {
-        let waypoint = Waypoint {
-            x: 1.0,
-            y: 2.0,
-            z: 0.0,
-            time: None,
-        };
-        let cases = [
+    fn a_registration_and_links_print_at_the_top_level() {
+        prints_as_documented([
             (
                 Event::Registered {
                     hello: hello(),
@@ -467,6 +428,19 @@ mod tests {
                 json!({"robot": "robot_1", "udp": true, "radio": "/dev/ttyUSB0",
                        "active": "radio", "radio_budget_hz": 14.0, "down": ["wifi"]}),
             ),
+        ]);
+    }
+
+    /// A route to none, a mission's length, a cluster command, a notice.
+    #[test]
+    fn routes_missions_clusters_and_notices_print_as_documented() {
+        let waypoint = Waypoint {
+            x: 1.0,
+            y: 2.0,
+            z: 0.0,
+            time: None,
+        };
+        prints_as_documented([
             (
                 Event::RouteChanged {
                     robot: "robot_1".into(),
@@ -522,6 +496,13 @@ mod tests {
                 },
                 json!({"from": "robot_1", "level": "Warn", "text": "left wheel stalled"}),
             ),
+        ]);
+    }
+
+    /// An arena's size and bounds, none, a safety layer's state.
+    #[test]
+    fn arenas_and_safety_print_as_documented() {
+        prints_as_documented([
             (
                 Event::Arena {
                     arena: Some(mech_core::ArenaConfig::demo().shape()),
@@ -538,24 +519,13 @@ mod tests {
                 },
                 json!({"robot": "robot_1", "state": "on", "intervention": "fence"}),
             ),
-        ];
-        for (event, fields) in cases {
-            let mut want = json!({"type": "event", "t": 1.5});
-            if let (Value::Object(w), Value::Object(f)) = (&mut want, fields) {
-                w.extend(f);
-            }
-            let tag = serde_json::to_value(&event).unwrap()["event"].clone();
-            want["event"] = tag;
-            assert_eq!(line(event), want);
-        }
+        ]);
     }
 
-    /// Every other event prints as it is recorded, with the line's `type`
-    /// and `t`.
-    #[test]
-    fn other_events_print_their_serde_form() {
+    /// One of every event a script line prints as it is recorded.
+    fn recorded_as_is() -> Vec<Event> {
         let robot = || "robot_1".to_string();
-        let events = [
+        vec![
             Event::Listening {
                 udp: "127.0.0.1:7400".parse().unwrap(),
                 tcp: Some("127.0.0.1:7401".parse().unwrap()),
@@ -627,8 +597,14 @@ mod tests {
                 id: 4,
                 enabled: true,
             },
-        ];
-        for event in events {
+        ]
+    }
+
+    /// Every other event prints as it is recorded, with the line's `type`
+    /// and `t`.
+    #[test]
+    fn other_events_print_their_serde_form() {
+        for event in recorded_as_is() {
             let mut want = serde_json::to_value(&event).unwrap();
             want["type"] = json!("event");
             want["t"] = json!(1.5);
