@@ -214,26 +214,18 @@ pub fn snapshot(fleet: &Fleet, channels: Vec<ChannelStatus>) -> FleetSnapshot {
             name: r.name.clone(),
             id: r.registration.id,
             platform: r.registration.hello.platform.clone(),
-            pose: r.telemetry.pose,
-            velocity: r.telemetry.velocity,
-            velocity_source: r.telemetry.velocity_source,
-            mode: r.telemetry.mode,
+            telemetry: r.telemetry.clone(),
             route: RouteView {
                 channel: r.route.requested.clone().unwrap_or_default(),
                 acknowledged: !r.route.is_pending(),
             },
-            computation: r.telemetry.computation,
             link: r.link,
             links: r
                 .links
                 .radio_budget_hz
                 .map(|hz| format!("{} {hz}Hz", r.links.label()))
                 .unwrap_or_default(),
-            failsafe: r.telemetry.failsafe,
-            health: r.telemetry.health,
             fault: r.fault.clone(),
-            battery: r.telemetry.battery,
-            mission: r.telemetry.mission,
             trail: recent_path(r),
             quality: r.quality,
             remote: r.remote.clone(),

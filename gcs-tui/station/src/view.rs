@@ -8,7 +8,7 @@
 
 use mech_proto::{
     Computation, ControlMode, FailsafeState, Health, Intervention, MissionProgress, Pose,
-    SafetyState, Velocity, VelocitySource,
+    SafetyReport, SafetyState, Telemetry, Velocity, VelocitySource,
 };
 use serde::{Deserialize, Serialize};
 
@@ -54,24 +54,21 @@ pub struct RobotView {
     /// Router-assigned id.
     pub id: u16,
     pub platform: String,
-    pub pose: Pose,
-    pub velocity: Velocity,
-    /// Measured by wheel encoders, or following from the commands.
-    pub velocity_source: VelocitySource,
-    pub mode: ControlMode,
+    /// What the robot last said of itself, as the fleet model holds it.
+    /// The attach protocol carries its pose, velocity and where that
+    /// comes from, mode, computation, failsafe, health, battery and
+    /// mission, at the robot's top level ([`CardTelemetry`]); a client
+    /// reads the rest as the defaults (the channel the robot obeys is in
+    /// `route`, its safety layer in `safety`).
+    #[serde(flatten, with = "CardTelemetry")]
+    pub telemetry: Telemetry,
     pub route: RouteView,
-    pub computation: Computation,
     pub link: LinkState,
     /// Live links and radio budget of a robot with a radio
     /// (`wifi*+radio 14Hz`); empty for a robot on UDP alone.
     pub links: String,
-    pub failsafe: FailsafeState,
-    pub health: Health,
     /// The robot's driver fault text while it reports the fault.
     pub fault: Option<String>,
-    /// Fraction `[0, 1]`.
-    pub battery: Option<f64>,
-    pub mission: Option<MissionProgress>,
     /// Where the robot went in the last [`TRAIL_SECONDS`],
     /// oldest first (x, y in m): the core's recorded path, not a copy the
     /// UI keeps.
@@ -113,6 +110,35 @@ pub struct RobotView {
     pub mission_held: Option<String>,
 }
 
+/// A robot's telemetry as the attach protocol carries it, each field at
+/// the robot's top level where it has always been (`docs/control-protocol.md`,
+/// *Fleet*); the fields skipped do not cross.
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Telemetry")]
+struct CardTelemetry {
+    pose: Pose,
+    velocity: Velocity,
+    mode: ControlMode,
+    #[serde(skip)]
+    channel: String,
+    computation: Computation,
+    failsafe: FailsafeState,
+    health: Health,
+    /// Fraction `[0, 1]`.
+    battery: Option<f64>,
+    #[serde(skip)]
+    position_quality: f64,
+    #[serde(skip)]
+    actuators: Vec<f64>,
+    mission: Option<MissionProgress>,
+    #[serde(skip)]
+    stale: u32,
+    /// Measured by wheel encoders, or following from the commands.
+    velocity_source: VelocitySource,
+    #[serde(skip)]
+    safety: Option<SafetyReport>,
+}
+
 /// A mission the station sent a robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MissionView {
@@ -144,12 +170,13 @@ pub struct SafetyView {
 impl RobotView {
     /// Ground speed, m/s.
     pub fn speed(&self) -> f64 {
-        self.velocity.vx.hypot(self.velocity.vy)
+        let v = self.telemetry.velocity;
+        v.vx.hypot(v.vy)
     }
 
     /// Heading in degrees, `(-180, 180]`, counter-clockwise from +x.
     pub fn heading_deg(&self) -> f64 {
-        let d = self.pose.heading.to_degrees().rem_euclid(360.0);
+        let d = self.telemetry.pose.heading.to_degrees().rem_euclid(360.0);
         if d > 180.0 { d - 360.0 } else { d }
     }
 
@@ -159,24 +186,19 @@ impl RobotView {
             name: name.to_string(),
             id,
             platform: platform.to_string(),
-            pose: Pose {
-                x,
-                y,
-                z: 0.0,
-                heading,
+            telemetry: Telemetry {
+                pose: Pose {
+                    x,
+                    y,
+                    z: 0.0,
+                    heading,
+                },
+                ..Telemetry::default()
             },
-            velocity: Velocity::default(),
-            velocity_source: VelocitySource::Commanded,
-            mode: ControlMode::Idle,
             route: RouteView::default(),
-            computation: Computation::Onboard,
             link: LinkState::Connected,
             links: String::new(),
-            failsafe: FailsafeState::Ok,
-            health: Health::Ok,
             fault: None,
-            battery: None,
-            mission: None,
             trail: Vec::new(),
             quality: LinkQuality::default(),
             remote: None,
@@ -367,5 +389,54 @@ pub fn health_str(h: Health) -> &'static str {
         Health::Ok => "ok",
         Health::Degraded => "degraded",
         Health::Fault => "FAULT",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_robot_crosses_the_attach_protocol_with_the_keys_it_always_had() {
+        let mut r = RobotView::at("robot_1", 1, "diff-drive", 1.0, 2.0, 0.5);
+        r.telemetry.mode = ControlMode::Twist;
+        r.telemetry.battery = Some(0.8);
+        r.telemetry.velocity_source = VelocitySource::Measured;
+        let v = serde_json::to_value(&r).unwrap();
+        let mut keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        keys.sort_unstable();
+        assert_eq!(
+            keys,
+            [
+                "autopilot",
+                "battery",
+                "computation",
+                "failsafe",
+                "fault",
+                "health",
+                "id",
+                "link",
+                "links",
+                "mission",
+                "mode",
+                "name",
+                "platform",
+                "pose",
+                "quality",
+                "remote",
+                "route",
+                "stale_for",
+                "trail",
+                "velocity",
+                "velocity_source",
+            ]
+        );
+        assert_eq!(v["pose"]["x"], 1.0);
+        assert_eq!(v["mode"], 4, "numeric, as docs/protocol.md numbers it");
+        assert_eq!(serde_json::from_value::<RobotView>(v).unwrap(), r);
+        // What the card does not show stays at the station.
+        r.telemetry.actuators = vec![0.5, -0.5];
+        let back: RobotView = serde_json::from_value(serde_json::to_value(&r).unwrap()).unwrap();
+        assert!(back.telemetry.actuators.is_empty());
     }
 }

@@ -44,7 +44,7 @@ fn x_of(p: &Player<'_>) -> Option<f64> {
     s.robots
         .iter()
         .find(|r| r.name == "robot_1")
-        .map(|r| r.pose.x)
+        .map(|r| r.telemetry.pose.x)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

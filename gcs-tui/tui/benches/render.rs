@@ -19,16 +19,19 @@ fn app_with_paths(n: usize, w: u16, h: u16) -> mech_gcs::ui::App {
     // 10 s of path at 10 Hz: every robot drifted along its heading.
     let mut snap = fixture::fleet(n);
     for r in &mut snap.robots {
-        let (x0, y0) = (r.pose.x, r.pose.y);
+        let (x0, y0) = (r.telemetry.pose.x, r.telemetry.pose.y);
         r.trail = (0..100u32)
             .map(|k| {
                 let f = f64::from(k) * 0.01;
-                (x0 + f * r.pose.heading.cos(), y0 + f * r.pose.heading.sin())
+                (
+                    x0 + f * r.telemetry.pose.heading.cos(),
+                    y0 + f * r.telemetry.pose.heading.sin(),
+                )
             })
             .collect();
         if let Some(&(x, y)) = r.trail.last() {
-            r.pose.x = x;
-            r.pose.y = y;
+            r.telemetry.pose.x = x;
+            r.telemetry.pose.y = y;
         }
     }
     app.update(Action::Fleet(snap));

@@ -137,8 +137,8 @@ fn cluster_slots_and_tracking_errors_160x48() {
 
     let mut app = populated(160, 48);
     let mut snap = fixture::fleet(6);
-    let p1 = app.robot("robot_1").expect("robot_1").pose;
-    let p2 = app.robot("robot_2").expect("robot_2").pose;
+    let p1 = app.robot("robot_1").expect("robot_1").telemetry.pose;
+    let p2 = app.robot("robot_2").expect("robot_2").telemetry.pose;
     let (cx, cy) = ((p1.x + p2.x) / 2.0, (p1.y + p2.y) / 2.0);
     snap.clusters = Some(vec![ClusterOnScreen {
         name: "c1".into(),

@@ -155,7 +155,7 @@ fn waypoint_click_lands_in_metres_under_zoom_and_pan() {
         add: false,
     });
     let w = app.waypoints.list[1];
-    let pose = app.robot("robot_2").expect("robot_2").pose;
+    let pose = app.robot("robot_2").expect("robot_2").telemetry.pose;
     assert!((w.x - pose.x).abs() <= m + 1e-9, "x {} vs {}", w.x, pose.x);
     assert!(
         (w.y - pose.y).abs() <= 2.0 * m + 1e-9,

@@ -64,7 +64,7 @@ impl Rig {
                 && a.fleet
                     .robots
                     .iter()
-                    .all(|r| r.link == LinkState::Connected && r.pose.x != 0.0)
+                    .all(|r| r.link == LinkState::Connected && r.telemetry.pose.x != 0.0)
         })
         .await;
         rig
@@ -128,7 +128,7 @@ async fn app_requests_reach_simulated_robots() {
     );
 
     // A waypoint 0.3 m ahead of robot_1, sent and routed from the App.
-    let p = rig.app.robot("robot_1").expect("robot_1").pose;
+    let p = rig.app.robot("robot_1").expect("robot_1").telemetry.pose;
     rig.app
         .update(Action::Select(Select::Only("robot_1".into())));
     rig.app.update(Action::AddWaypoint(Waypoint {
@@ -150,15 +150,17 @@ async fn app_requests_reach_simulated_robots() {
             let r = a.robot("robot_1").expect("robot_1");
             r.route.channel == "wp/gcs"
                 && r.route.acknowledged
-                && r.mission.is_some_and(|m| m.total == 1 && m.next == 1)
+                && r.telemetry
+                    .mission
+                    .is_some_and(|m| m.total == 1 && m.next == 1)
         },
     )
     .await;
     let r = rig.app.robot("robot_1").expect("robot_1");
     assert!(
-        (r.pose.x - (p.x + 0.3)).abs() < 0.15,
+        (r.telemetry.pose.x - (p.x + 0.3)).abs() < 0.15,
         "arrived near the waypoint: {:?}",
-        r.pose
+        r.telemetry.pose
     );
 
     // The map trail is the core's recorded path: it runs from about the
@@ -167,7 +169,7 @@ async fn app_requests_reach_simulated_robots() {
     let trail = &r.trail;
     let passes = |x: f64, y: f64| trail.iter().any(|(a, b)| (a - x).hypot(b - y) < 0.1);
     assert!(
-        passes(p.x, p.y) && passes(r.pose.x, r.pose.y),
+        passes(p.x, p.y) && passes(r.telemetry.pose.x, r.telemetry.pose.y),
         "the trail runs from the start to the robot: {trail:?}"
     );
     // Every command is in the event log under the operator who sent it.
@@ -190,7 +192,7 @@ async fn app_requests_reach_simulated_robots() {
             && a.fleet
                 .robots
                 .iter()
-                .all(|r| r.failsafe == mech_proto::FailsafeState::EStopped)
+                .all(|r| r.telemetry.failsafe == mech_proto::FailsafeState::EStopped)
     })
     .await;
     rig.stop().await;
@@ -343,7 +345,7 @@ async fn members_move(rig: &mut Rig, start: &[mech_proto::Pose]) {
         rig.carry_all();
         rig.pump();
         let moved = ["robot_1", "robot_2"].iter().zip(start).all(|(r, p)| {
-            let q = rig.app.robot(r).expect("member").pose;
+            let q = rig.app.robot(r).expect("member").telemetry.pose;
             (q.x - p.x).hypot(q.y - p.y) > 0.3
         });
         if moved {
@@ -405,7 +407,7 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
     cluster_c1(&mut rig);
     let start: Vec<_> = ["robot_1", "robot_2", "robot_3"]
         .iter()
-        .map(|r| rig.app.robot(r).expect("robot").pose)
+        .map(|r| rig.app.robot(r).expect("robot").telemetry.pose)
         .collect();
 
     // Pad: steering-throttle -> ... -> cluster (four Selects), dead-man,
@@ -478,7 +480,7 @@ async fn pad_in_cluster_mode_moves_the_routed_members_through_the_hub() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn nav_key_switches_the_route_to_offboard_and_back() {
     let mut rig = Rig::start(1).await;
-    let p = rig.app.robot("robot_1").expect("robot_1").pose;
+    let p = rig.app.robot("robot_1").expect("robot_1").telemetry.pose;
     rig.app
         .update(Action::Select(Select::Only("robot_1".into())));
     for (dx, dy) in [(0.3, 0.0), (0.3, 0.3), (0.0, 0.3), (0.0, 0.0)] {
@@ -497,7 +499,7 @@ async fn nav_key_switches_the_route_to_offboard_and_back() {
     rig.carry_all();
     rig.wait_for("mission running onboard", Duration::from_secs(10), |a| {
         let r = a.robot("robot_1").expect("robot_1");
-        r.route.channel == "wp/gcs" && r.route.acknowledged && r.mission.is_some()
+        r.route.channel == "wp/gcs" && r.route.acknowledged && r.telemetry.mission.is_some()
     })
     .await;
 
@@ -517,7 +519,7 @@ async fn nav_key_switches_the_route_to_offboard_and_back() {
         let r = a.robot("robot_1").expect("robot_1");
         r.route.channel == "offboard/robot_1"
             && r.route.acknowledged
-            && r.computation == mech_proto::Computation::Offboard
+            && r.telemetry.computation == mech_proto::Computation::Offboard
     })
     .await;
     assert!(rig.station.control().nav_view("robot_1").is_some());

@@ -192,13 +192,18 @@ fn identity_line<'a>(r: &'a RobotView, i: usize, selected: bool, t: &Theme) -> L
 fn pose_line<'a>(r: &RobotView) -> Line<'a> {
     // Height only when airborne, so a ground robot's line has room for
     // whether its speed was measured.
-    let z = if r.pose.z.abs() >= AIRBORNE {
-        format!(" z{:5.2}", r.pose.z)
+    let z = if r.telemetry.pose.z.abs() >= AIRBORNE {
+        format!(" z{:5.2}", r.telemetry.pose.z)
     } else {
         String::new()
     };
-    let source = velocity_source_str(r.velocity_source);
-    let (x, y, heading, speed) = (r.pose.x, r.pose.y, r.heading_deg(), r.speed());
+    let source = velocity_source_str(r.telemetry.velocity_source);
+    let (x, y, heading, speed) = (
+        r.telemetry.pose.x,
+        r.telemetry.pose.y,
+        r.heading_deg(),
+        r.speed(),
+    );
     match r.safety {
         // Narrower coordinates, so the card's width still holds the error.
         Some(s) if s.position_error > 0.0 => Line::raw(format!(
@@ -222,14 +227,14 @@ fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
     } else {
         format!("{}…", r.route.channel)
     };
-    let fs_style = match r.failsafe {
+    let fs_style = match r.telemetry.failsafe {
         FailsafeState::Ok => t.ok(),
         FailsafeState::ChannelSilent => t.dim(),
         _ => t.alarm(),
     };
     let mut spans = vec![
-        Span::raw(format!(" {} {} ", mode_str(r.mode), route)),
-        Span::styled(failsafe_str(r.failsafe), fs_style),
+        Span::raw(format!(" {} {} ", mode_str(r.telemetry.mode), route)),
+        Span::styled(failsafe_str(r.telemetry.failsafe), fs_style),
     ];
     if let Some(s) = r.safety.filter(|s| s.intervention != Intervention::None) {
         spans.push(Span::styled(
@@ -239,10 +244,13 @@ fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
     }
     if let Some(fault) = &r.fault {
         spans.push(Span::styled(format!(" {fault}"), t.alarm()));
-    } else if r.health != Health::Ok {
-        spans.push(Span::styled(format!(" {}", health_str(r.health)), t.warn()));
+    } else if r.telemetry.health != Health::Ok {
+        spans.push(Span::styled(
+            format!(" {}", health_str(r.telemetry.health)),
+            t.warn(),
+        ));
     }
-    if let Some(m) = r.mission {
+    if let Some(m) = r.telemetry.mission {
         if m.next >= m.total {
             spans.push(Span::styled(
                 format!(" wp {}/{} arrived", m.total, m.total),
@@ -252,10 +260,10 @@ fn state_line<'a>(r: &RobotView, t: &Theme) -> Line<'a> {
             spans.push(Span::raw(format!(" wp {}/{}", m.next + 1, m.total)));
         }
     }
-    if let Some(b) = r.battery {
+    if let Some(b) = r.telemetry.battery {
         spans.push(Span::raw(format!(" {:.0}%", b * 100.0)));
     }
-    let comp = match r.computation {
+    let comp = match r.telemetry.computation {
         Computation::Onboard => "on",
         Computation::Offboard => "off",
     };
@@ -301,16 +309,16 @@ mod tests {
     #[test]
     fn speed_says_measured_or_commanded_and_a_fault_its_text() {
         let mut rover = RobotView::at("a_rover", 1, "diff-drive", 1.0, 2.0, 0.0);
-        rover.velocity = Velocity {
+        rover.telemetry.velocity = Velocity {
             vx: 0.2,
             ..Velocity::default()
         };
-        rover.velocity_source = VelocitySource::Measured;
-        rover.failsafe = FailsafeState::Fault;
-        rover.health = Health::Fault;
+        rover.telemetry.velocity_source = VelocitySource::Measured;
+        rover.telemetry.failsafe = FailsafeState::Fault;
+        rover.telemetry.health = Health::Fault;
         rover.fault = Some("left wheel stalled: driven at 60% for 0.50 s".into());
         let mut drone = RobotView::at("b_drone", 2, "quadcopter", 0.0, 0.0, 0.0);
-        drone.pose.z = 1.2;
+        drone.telemetry.pose.z = 1.2;
         let lines = cards(vec![rover, drone]);
         assert!(lines[2].contains("0.20m/s meas"), "{lines:#?}");
         assert!(
@@ -346,7 +354,7 @@ mod tests {
     #[test]
     fn a_robot_not_heard_has_its_last_state_greyed_with_its_age() {
         let mut lost = RobotView::at("a_rover", 1, "diff-drive", 1.0, 2.0, 0.0);
-        lost.velocity.vx = 0.1;
+        lost.telemetry.velocity.vx = 0.1;
         lost.link = LinkState::Lost;
         lost.stale_for = Some(3.2);
         let lines = cards(vec![lost.clone()]);

@@ -139,14 +139,20 @@ impl Column {
             Column::Platform => r.platform.clone(),
             Column::Link => link_label(r.link).into(),
             Column::Route => route_text(r),
-            Column::Mode => mode_str(r.mode).into(),
-            Column::Failsafe => failsafe_str(r.failsafe).into(),
-            Column::Pose => format!("{:6.2} {:6.2} {:4.0}°", r.pose.x, r.pose.y, r.heading_deg()),
+            Column::Mode => mode_str(r.telemetry.mode).into(),
+            Column::Failsafe => failsafe_str(r.telemetry.failsafe).into(),
+            Column::Pose => format!(
+                "{:6.2} {:6.2} {:4.0}°",
+                r.telemetry.pose.x,
+                r.telemetry.pose.y,
+                r.heading_deg()
+            ),
             Column::Speed => format!("{:.2}", r.speed()),
             Column::Battery => r
+                .telemetry
                 .battery
                 .map_or_else(|| "–".into(), |b| format!("{:.0}%", b * 100.0)),
-            Column::Mission => r.mission.map_or_else(|| "–".into(), mission_text),
+            Column::Mission => r.telemetry.mission.map_or_else(|| "–".into(), mission_text),
             Column::Rx => measured(q.rx_hz),
             Column::Tx => measured(q.tx_hz),
             Column::Loss => q.loss_text(),
@@ -177,16 +183,22 @@ impl Column {
             Column::Platform => a.platform.cmp(&b.platform),
             Column::Link => link_rank(a).cmp(&link_rank(b)),
             Column::Route => a.route.channel.cmp(&b.route.channel),
-            Column::Mode => mode_str(a.mode).cmp(mode_str(b.mode)),
-            Column::Failsafe => failsafe_rank(a.failsafe).cmp(&failsafe_rank(b.failsafe)),
+            Column::Mode => mode_str(a.telemetry.mode).cmp(mode_str(b.telemetry.mode)),
+            Column::Failsafe => {
+                failsafe_rank(a.telemetry.failsafe).cmp(&failsafe_rank(b.telemetry.failsafe))
+            }
             Column::Pose => a
+                .telemetry
                 .pose
                 .x
-                .total_cmp(&b.pose.x)
-                .then(a.pose.y.total_cmp(&b.pose.y)),
+                .total_cmp(&b.telemetry.pose.x)
+                .then(a.telemetry.pose.y.total_cmp(&b.telemetry.pose.y)),
             Column::Speed => a.speed().total_cmp(&b.speed()),
-            Column::Battery => option_cmp(a.battery, b.battery),
-            Column::Mission => option_cmp(a.mission.map(progress), b.mission.map(progress)),
+            Column::Battery => option_cmp(a.telemetry.battery, b.telemetry.battery),
+            Column::Mission => option_cmp(
+                a.telemetry.mission.map(progress),
+                b.telemetry.mission.map(progress),
+            ),
             Column::Rx => a.quality.rx_hz.total_cmp(&b.quality.rx_hz),
             Column::Tx => a.quality.tx_hz.total_cmp(&b.quality.tx_hz),
             Column::Loss => option_cmp(a.quality.loss, b.quality.loss),
@@ -307,9 +319,9 @@ pub fn matches(r: &RobotView, needle: &str) -> bool {
             r.route.channel.as_str(),
             r.platform.as_str(),
             link_label(r.link),
-            mode_str(r.mode),
-            failsafe_str(r.failsafe),
-            health_str(r.health),
+            mode_str(r.telemetry.mode),
+            failsafe_str(r.telemetry.failsafe),
+            health_str(r.telemetry.health),
         ]
         .iter()
         .any(|field| contains_ignoring_case(field, needle))

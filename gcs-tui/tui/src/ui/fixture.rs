@@ -50,8 +50,8 @@ fn robot(i: usize, n: usize) -> RobotView {
         radius * a.sin(),
         a + std::f64::consts::FRAC_PI_2,
     );
-    r.battery = Some(1.0 - (i % 10) as f64 * 0.07);
-    r.velocity = Velocity {
+    r.telemetry.battery = Some(1.0 - (i % 10) as f64 * 0.07);
+    r.telemetry.velocity = Velocity {
         vx: 0.1 * (i % 4) as f64,
         vy: 0.0,
         vz: 0.0,
@@ -73,8 +73,8 @@ fn robot(i: usize, n: usize) -> RobotView {
                 channel: "wp/gcs".into(),
                 acknowledged: true,
             };
-            r.mode = ControlMode::Waypoints;
-            r.mission = Some(MissionProgress {
+            r.telemetry.mode = ControlMode::Waypoints;
+            r.telemetry.mission = Some(MissionProgress {
                 id: 1,
                 next: 1,
                 total: 3,
@@ -85,21 +85,21 @@ fn robot(i: usize, n: usize) -> RobotView {
                 channel: "joy/0".into(),
                 acknowledged: false,
             };
-            r.mode = ControlMode::Twist;
+            r.telemetry.mode = ControlMode::Twist;
         }
         2 => {
             r.link = LinkState::Stale;
-            r.failsafe = FailsafeState::ChannelSilent;
+            r.telemetry.failsafe = FailsafeState::ChannelSilent;
             r.route = RouteView {
                 channel: "offboard/robot_3".into(),
                 acknowledged: true,
             };
-            r.computation = Computation::Offboard;
-            r.health = Health::Degraded;
+            r.telemetry.computation = Computation::Offboard;
+            r.telemetry.health = Health::Degraded;
         }
         _ => {
             r.link = LinkState::Lost;
-            r.failsafe = FailsafeState::RouterLost;
+            r.telemetry.failsafe = FailsafeState::RouterLost;
         }
     }
     r
@@ -139,13 +139,13 @@ pub fn minute(app: &mut App, n: usize) {
         let mut f = fleet(n);
         for (i, r) in f.robots.iter_mut().enumerate() {
             let phase = i as f64;
-            let speed = r.velocity.vx + 0.05;
+            let speed = r.telemetry.velocity.vx + 0.05;
             let turn = 0.004 * (i % 3) as f64;
-            r.pose.heading -= turn * ago;
-            r.pose.x -= speed * ago * r.pose.heading.cos();
-            r.pose.y -= speed * ago * r.pose.heading.sin();
-            r.velocity.vx = speed * (1.0 - ago / 120.0);
-            r.battery = r.battery.map(|b| (b + 0.002 * ago).min(1.0));
+            r.telemetry.pose.heading -= turn * ago;
+            r.telemetry.pose.x -= speed * ago * r.telemetry.pose.heading.cos();
+            r.telemetry.pose.y -= speed * ago * r.telemetry.pose.heading.sin();
+            r.telemetry.velocity.vx = speed * (1.0 - ago / 120.0);
+            r.telemetry.battery = r.telemetry.battery.map(|b| (b + 0.002 * ago).min(1.0));
             let wave = ((t / 6.0 + phase).sin() * 0.5 + 0.5) * (ago / 60.0);
             r.quality.loss = r.quality.loss.map(|l| l + 0.04 * wave);
             r.quality.rtt = r

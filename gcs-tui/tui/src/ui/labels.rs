@@ -219,7 +219,7 @@ pub fn layout(app: &App, proj: &Projection, step: f64) -> MapText {
     // Every robot's mark, the selected ones drawn last (on top).
     let mut on_map = Vec::new();
     for (i, r) in app.fleet.robots.iter().enumerate() {
-        if let Some((c, row)) = cell(r.pose.x, r.pose.y) {
+        if let Some((c, row)) = cell(r.telemetry.pose.x, r.telemetry.pose.y) {
             grid.set(c, row, MARK);
             on_map.push((i, c, row));
         }
@@ -319,7 +319,7 @@ pub fn cluster_centre(app: &App, c: &super::view::ClusterOnScreen) -> Option<(f6
 pub fn member_positions(app: &App, c: &super::view::ClusterOnScreen) -> Vec<(f64, f64)> {
     app.fleet
         .robots_named(&c.members)
-        .map(|r| (r.pose.x, r.pose.y))
+        .map(|r| (r.telemetry.pose.x, r.telemetry.pose.y))
         .collect()
 }
 

@@ -385,7 +385,7 @@ fn paint_cluster_control(
         if let Some(r) = app.robot(&s.robot) {
             ctx.draw(&Segment {
                 proj,
-                from: (r.pose.x, r.pose.y),
+                from: (r.telemetry.pose.x, r.telemetry.pose.y),
                 to: (s.x, s.y),
                 color: t.cluster(),
                 every: 3,
@@ -407,7 +407,11 @@ fn paint_cluster_control(
 fn paint_robots(ctx: &mut Context, app: &App, proj: &Projection, t: &Theme) {
     let m = proj.metres_per_dot;
     for (i, r) in app.fleet.robots.iter().enumerate() {
-        let (x, y, h) = (r.pose.x, r.pose.y, r.pose.heading);
+        let (x, y, h) = (
+            r.telemetry.pose.x,
+            r.telemetry.pose.y,
+            r.telemetry.pose.heading,
+        );
         let colour = t.robot(i);
         ctx.draw(&Segment::heading(proj, (x, y, h), 6.0 * m, colour, 1));
         let footprint = r.safety.map_or(0.0, |s| s.footprint);

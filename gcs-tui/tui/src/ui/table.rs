@@ -165,7 +165,7 @@ fn row(r: &RobotView, i: usize, selected: bool, shown: &[Column], t: &Theme) -> 
             Column::Name if selected => Style::new().fg(t.robot(i)).patch(t.title()),
             Column::Name => Style::new().fg(t.robot(i)),
             Column::Link => link_style(r.link, t),
-            Column::Failsafe => match r.failsafe {
+            Column::Failsafe => match r.telemetry.failsafe {
                 FailsafeState::Ok => t.ok(),
                 FailsafeState::ChannelSilent => t.dim(),
                 _ => t.alarm(),

@@ -101,7 +101,7 @@ fn mission_lines(app: &App, t: Theme, width: u16) -> Vec<Line<'static>> {
                 rows.into_iter()
                     .map(|row| Line::styled(format!(" {row}"), t.warn())),
             );
-        } else if let Some(m) = r.mission {
+        } else if let Some(m) = r.telemetry.mission {
             let state = if m.next >= m.total {
                 Span::styled("arrived", t.ok())
             } else {

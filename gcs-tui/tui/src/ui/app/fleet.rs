@@ -108,7 +108,10 @@ impl App {
     /// reported where they are (a robot that registered has no position
     /// until its first telemetry, and reads as the origin).
     pub(super) fn apply_snapshot(&mut self, s: FleetSnapshot) {
-        let placed = s.robots.iter().any(|r| r.pose.x != 0.0 || r.pose.y != 0.0);
+        let placed = s
+            .robots
+            .iter()
+            .any(|r| r.telemetry.pose.x != 0.0 || r.telemetry.pose.y != 0.0);
         let t = match s.replay {
             Some(clock) => clock.at,
             None => self.history.live_time(self.manual.now),

@@ -178,11 +178,11 @@ impl History {
             let known = |v: Option<f64>| v.map_or(f32::NAN, |v| v as f32);
             let sample = Sample {
                 t,
-                x: r.pose.x as f32,
-                y: r.pose.y as f32,
+                x: r.telemetry.pose.x as f32,
+                y: r.telemetry.pose.y as f32,
                 heading_deg: r.heading_deg() as f32,
                 speed: r.speed() as f32,
-                battery: known(r.battery.map(|b| b * 100.0)),
+                battery: known(r.telemetry.battery.map(|b| b * 100.0)),
                 loss: known(q.loss.map(|l| l * 100.0)),
                 rtt: known(q.rtt.map(|d| d.as_secs_f64() * 1e3)),
                 rx: known(q.measured().then_some(q.rx_hz)),
@@ -190,7 +190,7 @@ impl History {
                 xte,
             };
             let h = self.robots.entry(r.name.clone()).or_default();
-            h.measured = r.velocity_source == VelocitySource::Measured;
+            h.measured = r.telemetry.velocity_source == VelocitySource::Measured;
             h.samples.push_back(sample);
             while h.samples.len() > SAMPLES
                 || h.samples.front().is_some_and(|s| t - s.t > HISTORY_SECONDS)
@@ -207,7 +207,7 @@ impl History {
             self.sent.insert(
                 r.name.clone(),
                 SentPath {
-                    from: (r.pose.x, r.pose.y),
+                    from: (r.telemetry.pose.x, r.telemetry.pose.y),
                     waypoints: waypoints.iter().map(|w| (w.x, w.y)).collect(),
                 },
             );
@@ -226,7 +226,7 @@ impl History {
 /// the mission was sent), left of travel positive; `None` when the robot
 /// runs no mission of that length, or has arrived.
 fn cross_track(path: &SentPath, r: &RobotView) -> Option<f64> {
-    let m = r.mission?;
+    let m = r.telemetry.mission?;
     let n = path.waypoints.len();
     if m.total as usize != n || m.next as usize >= n {
         return None;
@@ -240,7 +240,7 @@ fn cross_track(path: &SentPath, r: &RobotView) -> Option<f64> {
     let b = path.waypoints[next];
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
     let len = dx.hypot(dy);
-    let (px, py) = (r.pose.x - a.0, r.pose.y - a.1);
+    let (px, py) = (r.telemetry.pose.x - a.0, r.telemetry.pose.y - a.1);
     if len < 1e-9 {
         return Some(px.hypot(py));
     }
@@ -302,17 +302,17 @@ mod tests {
             time: None,
         };
         h.mission_sent(std::slice::from_ref(&r), &[w(2.0, 0.0), w(2.0, 2.0)]);
-        r.pose.x = 1.0;
-        r.pose.y = 0.25;
-        r.mission = Some(MissionProgress {
+        r.telemetry.pose.x = 1.0;
+        r.telemetry.pose.y = 0.25;
+        r.telemetry.mission = Some(MissionProgress {
             id: 1,
             next: 0,
             total: 2,
         });
         h.record(0.0, std::slice::from_ref(&r));
-        r.pose.x = 2.1;
-        r.pose.y = 1.0;
-        r.mission = Some(MissionProgress {
+        r.telemetry.pose.x = 2.1;
+        r.telemetry.pose.y = 1.0;
+        r.telemetry.mission = Some(MissionProgress {
             id: 1,
             next: 1,
             total: 2,
@@ -325,7 +325,7 @@ mod tests {
             (xte[0].1 - 0.25).abs() < 1e-6 && (xte[1].1 + 0.1).abs() < 1e-6,
             "{xte:?}"
         );
-        r.mission = Some(MissionProgress {
+        r.telemetry.mission = Some(MissionProgress {
             id: 1,
             next: 2,
             total: 2,

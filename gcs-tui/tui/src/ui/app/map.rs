@@ -60,7 +60,7 @@ impl App {
             .fleet
             .robots
             .iter()
-            .map(|r| (r.pose.x, r.pose.y))
+            .map(|r| (r.telemetry.pose.x, r.telemetry.pose.y))
             .collect();
         if let Some(a) = self.map.arena {
             pts.push((a.min_x, a.min_y));

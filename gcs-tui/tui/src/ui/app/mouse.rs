@@ -24,9 +24,9 @@ impl App {
             .robots
             .iter()
             .filter_map(|r| {
-                let (rc, rr) = p.world_to_cell(r.pose.x, r.pose.y)?;
+                let (rc, rr) = p.world_to_cell(r.telemetry.pose.x, r.telemetry.pose.y)?;
                 (rc.abs_diff(cx) <= 1 && rr.abs_diff(cy) <= 1)
-                    .then(|| ((r.pose.x - wx).hypot(r.pose.y - wy), r))
+                    .then(|| ((r.telemetry.pose.x - wx).hypot(r.telemetry.pose.y - wy), r))
             })
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, r)| r)
