@@ -90,20 +90,6 @@ impl Fence {
         best
     }
 
-    /// Whether heading `way` from `p` takes a robot of `radius` into the
-    /// band within its margin of an edge (or deeper into it) within
-    /// `ahead` m: a way a swerve should not choose, as the fence would stop
-    /// the robot on it.
-    pub fn closes_in(&self, p: Vec2, way: Vec2, radius: f64, ahead: f64) -> bool {
-        let Some(u) = way.unit() else {
-            return false;
-        };
-        let rho = radius + self.margin;
-        let here = self.clearance(p) - rho;
-        let there = self.clearance(p + u * ahead) - rho;
-        there < 0.0 && there < here - 1e-9
-    }
-
     /// Adds this fence's constraints on a robot of `radius` at
     /// `c.position` whose braking paths reach at most `reach` m.
     pub fn constrain(&self, c: &mut Constraints, radius: f64, reach: f64) {

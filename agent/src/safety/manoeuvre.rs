@@ -1,6 +1,6 @@
 //! What the layer does on its own to keep robots moving: the right-hand
 //! rule that turns a command's way aside of the neighbours it would meet
-//! ([`circulation`], [`super::NeighbourSet::anticipate_within`]), and backing a
+//! ([`circulation`], [`super::NeighbourSet::anticipate`]), and backing a
 //! stuck robot off from its neighbours, the last resort. Safety never
 //! depends on either: whatever they choose, the constraints judge.
 
@@ -8,9 +8,7 @@ use std::time::Duration;
 
 use super::circulation;
 use super::filter::{self, Decision, Mobility, decide};
-use super::{
-    BACK_OFF_SPEED, BackOff, Constraints, STILL, SafetyLayer, Side, Vec2, along_cell_edge,
-};
+use super::{BACK_OFF_SPEED, BackOff, Constraints, STILL, SafetyLayer, Vec2, along_cell_edge};
 
 impl SafetyLayer {
     /// Ends whatever the layer was doing on its own (backing off, carrying
@@ -23,7 +21,6 @@ impl SafetyLayer {
         self.circling = None;
         self.stuck_since = None;
         self.turning_since = None;
-        self.passing = None;
     }
 
     /// The decision: a robot backing off keeps at it; otherwise the
@@ -109,41 +106,21 @@ impl SafetyLayer {
     }
 
     /// The right-hand rule: `intent` turned right by the smallest angle
-    /// that meets no neighbour within `horizon`; round neighbours standing
-    /// still, the side it passes on kept and never into the fence
-    /// ([`super::NeighbourSet::anticipate_within`]). `None`: the way is
-    /// clear (or the look-ahead is off).
-    fn swerve(
-        &mut self,
-        c: &Constraints,
-        intent: Vec2,
-        margin: f64,
-        now: Duration,
-    ) -> Option<Vec2> {
-        let swerve = self.swerve_from(c, intent, margin, now);
-        self.passing = swerve.map(|t| Side::of(intent, t));
-        swerve
-    }
-
-    fn swerve_from(
-        &self,
-        c: &Constraints,
-        intent: Vec2,
-        margin: f64,
-        now: Duration,
-    ) -> Option<Vec2> {
+    /// that meets no neighbour within `horizon`
+    /// ([`super::NeighbourSet::anticipate`]). `None`: the way is clear (or
+    /// the look-ahead is off).
+    fn swerve(&self, c: &Constraints, intent: Vec2, margin: f64, now: Duration) -> Option<Vec2> {
         let n = self
             .neighbours
             .as_ref()
             .filter(|_| self.config.horizon > 0.0)?;
-        let fence = self.arena.as_ref().and_then(|a| a.fence.as_ref());
-        let target = n.anticipate_within(
+        let target = n.anticipate(
             c.position,
             intent,
-            (self.footprint(), margin),
+            self.footprint(),
+            margin,
             self.config.horizon,
             now,
-            (fence, self.passing),
         )?;
         Some(along_cell_edge(c, target))
     }

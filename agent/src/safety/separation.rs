@@ -25,7 +25,7 @@ use std::time::Duration;
 use mech_proto::{Intervention, Neighbour, Neighbours, Obstacle};
 
 use super::constraints::{Away, Braking, Constraints, Plane, Wall};
-use super::geofence::{Fence, polygon_constraints};
+use super::geofence::polygon_constraints;
 use super::geometry::{Segment, Vec2};
 
 /// The newest [`Neighbours`] the robot has, and when it arrived.
@@ -175,28 +175,6 @@ impl NeighbourSet {
         horizon: f64,
         now: Duration,
     ) -> Option<Vec2> {
-        self.anticipate_within(p, desired, (radius, margin), horizon, now, (None, None))
-    }
-
-    /// [`NeighbourSet::anticipate`], and where every neighbour in the way
-    /// stands still (one that arrived, a static disc), inside `fence`: a
-    /// turn that would take the robot into the band within its margin of
-    /// an edge within [`FENCE_AHEAD`] is not taken (the fence would stop
-    /// it there, pressed against the wall by the rule, jammed), and when
-    /// no turn to the right up to a quarter circle is left, the robot
-    /// passes on the left; it keeps the side it is passing on (`passing`:
-    /// [`Side`] of its last swerve) until the swerve ends. Round moving
-    /// neighbours the rule is the plain right-hand one, which every robot
-    /// keeps alike.
-    pub fn anticipate_within(
-        &self,
-        p: Vec2,
-        desired: Vec2,
-        (radius, margin): (f64, f64),
-        horizon: f64,
-        now: Duration,
-        (fence, passing): (Option<&Fence>, Option<Side>),
-    ) -> Option<Vec2> {
         let others: Vec<(Vec2, Vec2, f64)> = self
             .robots
             .iter()
@@ -207,100 +185,37 @@ impl NeighbourSet {
             .filter(|(q, _, need)| (*q - p).norm() < need + horizon * 4.0)
             .collect();
         // The soonest contact at velocity `u` (infinite if none within the
-        // horizon), and whether every neighbour met then stands still.
-        let contacts = |u: Vec2| {
+        // horizon).
+        let soonest = |u: Vec2| {
             others
                 .iter()
-                .filter_map(move |&(q, w, need)| Some((contact_time(q - p, u - w, need)?, w)))
-                .filter(|(t, _)| *t <= horizon)
+                .filter_map(|&(q, w, need)| contact_time(q - p, u - w, need))
+                .filter(|t| *t <= horizon)
+                .fold(f64::INFINITY, f64::min)
         };
-        let soonest = |u: Vec2| contacts(u).map(|(t, _)| t).fold(f64::INFINITY, f64::min);
         if desired.norm() < 1e-9 || soonest(desired).is_infinite() {
             return None;
         }
-        let standing = contacts(desired).all(|(_, w)| w.norm() < STANDING);
-        let fence = fence.filter(|_| standing);
-        let open = |u: Vec2| fence.is_none_or(|f| !f.closes_in(p, u, radius, FENCE_AHEAD));
         // Turn right until clear; if no turn to the right up to half a
-        // circle clears, to the left (round a standing neighbour, the
-        // smaller turn either side); if none clears at all, the turn that
+        // circle clears, to the left; if none clears at all, the turn that
         // puts contact off longest (robots jammed together back away from
         // each other).
+        let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
+        let right = (1..=ANTICIPATION_STEPS).map(|k| -(k as f64) * step);
+        let left = (1..ANTICIPATION_STEPS).map(|k| k as f64 * step);
         let mut best = (soonest(desired), desired);
-        let order = match (standing, passing) {
-            (false, _) | (true, Some(Side::Right)) => Order::RightFirst,
-            (true, Some(Side::Left)) => Order::LeftFirst,
-            (true, None) => Order::RightQuarterFirst,
-        };
-        for a in turns(order) {
+        for a in right.chain(left) {
             let u = desired.rotated(a);
             let t = soonest(u);
-            if t.is_infinite() && open(u) {
+            if t.is_infinite() {
                 return Some(u);
             }
-            if t > best.0 + 1e-9 && open(u) {
+            if t > best.0 + 1e-9 {
                 best = (t, u);
             }
         }
         (best.1 != desired).then_some(best.1)
     }
-}
-
-/// How far ahead a swerve looks for the fence, m.
-pub const FENCE_AHEAD: f64 = 0.3;
-
-/// A neighbour slower than this stands still for the right-hand rule,
-/// m/s.
-const STANDING: f64 = 0.02;
-
-/// Which way a swerve turns from where the command heads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Side {
-    Right,
-    Left,
-}
-
-impl Side {
-    /// The side `swerve` turns to from `from`.
-    pub fn of(from: Vec2, swerve: Vec2) -> Side {
-        if from.cross(swerve) > 0.0 {
-            Side::Left
-        } else {
-            Side::Right
-        }
-    }
-}
-
-/// The order of the turns tried.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Order {
-    /// Every step to the right up to half a circle, then to the left.
-    RightFirst,
-    /// Every step to the left, then to the right.
-    LeftFirst,
-    /// To the right up to a quarter circle, then to the left, then the
-    /// rest to the right: the right-hand rule while it has room, the other
-    /// side when the right is walled.
-    RightQuarterFirst,
-}
-
-/// The turns [`NeighbourSet::anticipate_within`] tries, rad (right turns
-/// are negative), in `order`.
-fn turns(order: Order) -> impl Iterator<Item = f64> {
-    let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
-    let n = ANTICIPATION_STEPS as i32;
-    (0..2 * n - 1).map(move |i| {
-        let k = match order {
-            Order::RightQuarterFirst if i < n / 2 => -(i + 1),
-            Order::RightQuarterFirst if i < n / 2 + n - 1 => i - n / 2 + 1,
-            Order::RightQuarterFirst => -(i - n + 2),
-            Order::RightFirst if i < n => -(i + 1),
-            Order::RightFirst => i - n + 1,
-            Order::LeftFirst if i < n - 1 => i + 1,
-            Order::LeftFirst => -(i - n + 2),
-        };
-        f64::from(k) * step
-    })
 }
 
 /// How far beyond the distance it must keep a neighbour counts as near
@@ -430,92 +345,6 @@ mod tests {
         // 3 s old: somewhere about 1.5 m away, give or take 4.5 m.
         let ancient = limit_toward(&s, Duration::from_secs(3));
         assert_eq!(ancient, 0.0, "information this old still blocks");
-    }
-
-    /// A 4 m x 3 m arena fence, margin 0.1 m.
-    fn room() -> Fence {
-        let p = |x, y| mech_proto::Point { x, y };
-        Fence::from_arena(&mech_proto::Arena {
-            robot: "r1".into(),
-            id: 1,
-            enabled: true,
-            boundary: vec![p(0.0, 0.0), p(4.0, 0.0), p(4.0, 3.0), p(0.0, 3.0)],
-            keep_out: vec![],
-            slow_zones: vec![],
-            margin: 0.1,
-        })
-    }
-
-    #[test]
-    fn round_a_neighbour_standing_by_the_wall_the_swerve_takes_the_open_side() {
-        // Heading -x along the top wall (its right; the free space ends at
-        // y = 2.75), a robot standing ahead a little below: turning right
-        // of it leads into the wall, turning left round it.
-        let p = Vec2::new(3.0, 2.7);
-        let desired = Vec2::new(-0.3, 0.0);
-        let standing = set(vec![neighbour(2.2, 2.45, 0.0, true)]);
-        let fence = room();
-        let blind = standing.anticipate(p, desired, 0.15, 0.1, 3.0, Duration::ZERO);
-        assert!(blind.unwrap().y > 0.0, "without the fence: up, into it");
-        let swerve = standing
-            .anticipate_within(
-                p,
-                desired,
-                (0.15, 0.1),
-                3.0,
-                Duration::ZERO,
-                (Some(&fence), None),
-            )
-            .unwrap();
-        assert!(
-            swerve.y < 0.0 && swerve.x < 0.0,
-            "round it below: {swerve:?}"
-        );
-        assert!(!fence.closes_in(p, swerve, 0.15, FENCE_AHEAD));
-        // A neighbour coming the other way is passed on the right as ever
-        // (it turns right too), even where the left is as short a turn.
-        let coming = set(vec![neighbour(2.4, 1.45, -0.3, true)]);
-        let right = coming
-            .anticipate_within(
-                Vec2::new(1.0, 1.4),
-                Vec2::new(0.3, 0.0),
-                (0.15, 0.1),
-                3.0,
-                Duration::ZERO,
-                (Some(&fence), None),
-            )
-            .unwrap();
-        assert!(right.y < 0.0, "to the right: {right:?}");
-    }
-
-    #[test]
-    fn turns_are_right_then_left_or_round_a_standing_robot_the_smaller_first() {
-        let step = std::f64::consts::PI / ANTICIPATION_STEPS as f64;
-        let n = ANTICIPATION_STEPS as f64;
-        let of = |order| -> Vec<f64> { turns(order).map(|a| (a / step).round()).collect() };
-        let right = of(Order::RightFirst);
-        assert_eq!(right.len(), 2 * ANTICIPATION_STEPS - 1);
-        assert_eq!(&right[..3], [-1.0, -2.0, -3.0]);
-        assert_eq!(right[ANTICIPATION_STEPS], 1.0);
-        let left = of(Order::LeftFirst);
-        assert_eq!(&left[..2], [1.0, 2.0]);
-        assert_eq!(
-            left[ANTICIPATION_STEPS - 2..ANTICIPATION_STEPS + 1],
-            [n - 1.0, -1.0, -2.0]
-        );
-        assert_eq!(left.last(), Some(&-n));
-        let quarter = of(Order::RightQuarterFirst);
-        let q = ANTICIPATION_STEPS / 2;
-        assert_eq!(&quarter[q - 1..q + 2], [-(q as f64), 1.0, 2.0]);
-        assert_eq!(quarter[q + ANTICIPATION_STEPS - 1], -(q as f64) - 1.0);
-        assert_eq!(quarter.last(), Some(&-n));
-        for order in [left, quarter] {
-            let mut sorted = order.clone();
-            sorted.sort_by(f64::total_cmp);
-            let mut all = right.clone();
-            all.sort_by(f64::total_cmp);
-            assert_eq!(sorted, all, "the same turns");
-        }
     }
 
     #[test]
