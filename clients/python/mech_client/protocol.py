@@ -250,13 +250,17 @@ class SafetyReport:
     """A robot's safety layer as its telemetry reports it: `state`
     (no_arena, on, off: off is an operator's alarm), the arena id in force,
     the `intervention` limiting the command now (none when obeyed as sent),
-    how many times each intervention began, and the robot's radius (m)."""
+    how many times each intervention began, the robot's radius (m), and
+    how far its position estimate may be from the truth (m; its layer
+    keeps its distances from a disc of radius + position_error; 0 from a
+    robot that does not report it)."""
 
     state: str
     arena: int
     intervention: str
     counts: Dict[str, int]
     radius: float
+    position_error: float = 0.0
 
 
 @dataclass
@@ -438,9 +442,13 @@ def _telemetry(b: List[Any]) -> Telemetry:
 
 
 def _safety(b: Any) -> SafetyReport:
-    if not isinstance(b, list) or len(b) != 5 or not isinstance(b[3], list) or len(b[3]) != 6:
-        raise ProtocolError("a safety report has 5 fields, its counts 6")
-    state, arena, intervention, counts, radius = b
+    # Fields are added at the end (position_error after radius): a report
+    # has at least the first five, and what follows the known ones is
+    # left for a newer client.
+    if not isinstance(b, list) or len(b) < 5 or not isinstance(b[3], list) or len(b[3]) != 6:
+        raise ProtocolError("a safety report has at least 5 fields, its counts 6")
+    state, arena, intervention, counts, radius = b[:5]
+    position_error = b[5] if len(b) > 5 else 0.0
     if not (isinstance(state, int) and 0 <= state < len(SAFETY_STATES)):
         raise ProtocolError(f"unknown safety state {state!r}")
     if not (isinstance(intervention, int) and 0 <= intervention < len(INTERVENTIONS)):
@@ -453,6 +461,7 @@ def _safety(b: Any) -> SafetyReport:
         intervention=INTERVENTIONS[intervention],
         counts=dict(zip(INTERVENTIONS[1:], counts)),
         radius=_f(radius),
+        position_error=_f(position_error),
     )
 
 

@@ -146,7 +146,13 @@ class Decoding(unittest.TestCase):
         self.assertEqual(t.safety, p.SafetyReport("on", 7, "separation", {
             "fence": 0, "keep_out": 0, "separation": 2, "stale_neighbours": 0, "slow_zone": 0, "returning": 0}, 0.15))
         self.assertIsNone(p.decode(p.encode(header(p.Kind.TELEMETRY, body, "robot_1", "router", ""))).body.safety)
-        for bad in ([9, 7, 3, [0] * 6, 0.15], [1, 7, 3, [0] * 5, 0.15], [1, 7, 12, [0] * 6, 0.15], "on"):
+        # The position error a newer robot adds, and whatever an even newer
+        # one adds after it.
+        for extra in ([0.05], [0.05, "later"]):
+            t = p.decode(p.encode(header(p.Kind.TELEMETRY, body + [report + extra], "robot_1", "router", ""))).body
+            self.assertEqual((t.safety.radius, t.safety.position_error), (0.15, 0.05))
+        self.assertEqual(p.decode(p.encode(header(p.Kind.TELEMETRY, body + [report], "robot_1", "router", ""))).body.safety.position_error, 0.0)
+        for bad in ([9, 7, 3, [0] * 6, 0.15], [1, 7, 3, [0] * 6, 0.15, "far"], [1, 7, 3, [0] * 6], [1, 7, 3, [0] * 5, 0.15], [1, 7, 12, [0] * 6, 0.15], "on"):
             with self.assertRaises(p.ProtocolError):
                 p.decode(p.encode(header(p.Kind.TELEMETRY, body + [bad], "robot_1", "router", "")))
 
