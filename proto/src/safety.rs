@@ -444,7 +444,8 @@ impl Neighbours {
 
 impl SafetyReport {
     pub(crate) fn validate(&self) -> Result<(), Error> {
-        nonnegative(self.radius, "safety radius")
+        nonnegative(self.radius, "safety radius")?;
+        nonnegative(self.position_error, "safety position error")
     }
 }
 

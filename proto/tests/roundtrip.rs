@@ -717,10 +717,18 @@ fn telemetry_without_a_safety_report_keeps_its_old_bytes_and_one_with_it_round_t
         }),
         ..plain
     };
-    let env = Envelope::new(Header::default(), Body::Telemetry(reported));
+    let env = Envelope::new(Header::default(), Body::Telemetry(reported.clone()));
     let bytes = encode(&env).unwrap();
     assert!(bytes.contains(&0x9e), "14 fields");
     assert_eq!(decode(&bytes).unwrap(), env);
+    // A bound that is no distance grows nobody's disc: refused.
+    for error in [f64::NAN, -0.1, f64::INFINITY] {
+        let mut bad = reported.clone();
+        if let Some(s) = bad.safety.as_mut() {
+            s.position_error = error;
+        }
+        assert!(Body::Telemetry(bad).validate().is_err(), "{error}");
+    }
 }
 
 #[test]
