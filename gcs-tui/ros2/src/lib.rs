@@ -21,7 +21,7 @@ pub mod config;
 pub mod fleet;
 pub mod inbound;
 pub mod link;
-pub mod msgs;
+pub use mech_ros2_dds::msgs;
 pub mod outbound;
 pub mod ros;
 pub mod station;

@@ -11,18 +11,16 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use futures::StreamExt;
-use ros2_client::qos::{Durability, History, Liveliness, Reliability, WhenFull};
+use ros2_client::qos::History;
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile, ServiceMapping, ServiceTypeName, Subscription,
+    Context, ContextOptions, Name, Node, NodeName, NodeOptions, Publisher, ServiceMapping,
+    ServiceTypeName, Subscription,
 };
-use serde::Serialize;
 use serde::de::DeserializeOwned;
 use tokio::sync::{mpsc, oneshot};
 use tracing::{debug, warn};
 
 use crate::config::{CmdVelType, EStopService};
-use crate::msgs::RosMessage;
 use crate::msgs::diagnostic::DiagnosticArray;
 use crate::msgs::geometry::{PoseStamped, Twist, TwistStamped};
 use crate::msgs::nav::{Odometry, TfMessage};
@@ -56,37 +54,8 @@ pub enum CmdVel {
     Stamped(TwistStamped),
 }
 
-/// Why the node could not be made.
-#[derive(Debug, thiserror::Error)]
-#[error("ROS 2: {0}")]
-pub struct RosError(String);
-
-fn err(what: &str, e: impl std::fmt::Debug) -> RosError {
-    RosError(format!("{what}: {e:?}"))
-}
-
-/// Sensor data (rclcpp's `SensorDataQoS`): best effort, the last 5, volatile.
-pub fn sensor_data_qos() -> QosProfile {
-    QosProfile {
-        reliability: Reliability::BestEffort,
-        durability: Durability::Volatile,
-        history: History::KeepLast { depth: 5 },
-        deadline: None,
-        lifespan: None,
-        liveliness: Liveliness::Automatic,
-        liveliness_lease: None,
-    }
-}
-
-/// rclcpp's default: reliable, the last `depth`, volatile. A writer never
-/// waits on a slow reader for long (it keeps the last `depth` only).
-pub fn reliable_qos(depth: usize) -> QosProfile {
-    sensor_data_qos()
-        .reliability(Reliability::Reliable {
-            when_full: WhenFull::Wait(std::time::Duration::from_millis(10)),
-        })
-        .history(History::KeepLast { depth })
-}
+pub use mech_ros2_dds::node::{RosError, reliable_qos, sensor_data_qos};
+use mech_ros2_dds::node::{err, publisher, subscription};
 
 /// One robot's publishers.
 struct RobotTopics {
@@ -373,36 +342,6 @@ impl RosNode {
             }
         }
     }
-}
-
-fn topic<M: RosMessage>(
-    node: &mut Node,
-    name: &str,
-    qos: &QosProfile,
-) -> Result<ros2_client::dds::rustdds::Topic, RosError> {
-    let n = Name::parse(name).map_err(|e| err(name, e))?;
-    node.create_topic(&n, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
-        .map_err(|e| err(name, e))
-}
-
-fn publisher<M: RosMessage + Serialize>(
-    node: &mut Node,
-    name: &str,
-    qos: QosProfile,
-) -> Result<Publisher<M>, RosError> {
-    let t = topic::<M>(node, name, &qos)?;
-    node.create_publisher(&t, Some(qos))
-        .map_err(|e| err(name, e))
-}
-
-fn subscription<M: RosMessage + DeserializeOwned + 'static>(
-    node: &mut Node,
-    name: &str,
-    qos: QosProfile,
-) -> Result<Subscription<M>, RosError> {
-    let t = topic::<M>(node, name, &qos)?;
-    node.create_subscription(&t, Some(qos))
-        .map_err(|e| err(name, e))
 }
 
 /// Reads `sub` in a task of its own, passing each sample through `to_event`
