@@ -177,6 +177,19 @@ impl Agent {
         self.sensors.observe_position(sample, &mut self.counters);
     }
 
+    /// Counts an input from the vehicle's driver that was refused (a
+    /// sample that does not decode or is not finite).
+    pub fn count_refused(&mut self) {
+        self.counters.refused += 1;
+    }
+
+    /// The body twist the vehicle measured itself at `now` (a ROS 2 base's
+    /// odometry): telemetry, the safety layer and the moved-on estimate
+    /// use it while fresh instead of what the outputs would give.
+    pub fn observe_velocity(&mut self, twist: mech_proto::Twist, now: Duration) {
+        self.sensors.observe_velocity(twist, now);
+    }
+
     /// One reading of every wheel encoder (motor order), taken at `now`,
     /// before this period's [`Agent::tick`]: measured speeds for telemetry
     /// and the speed loops, odometry for the pose, the stall watch. A

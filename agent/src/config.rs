@@ -71,6 +71,10 @@ pub struct RobotConfig {
     /// (`docs/autopilots.md`); it then also gives the position.
     #[serde(default)]
     pub autopilot: Option<Spanned<crate::autopilot::AutopilotConfig>>,
+    /// `[ros2]`: a ROS 2 mobile base drives the vehicle (`docs/ros2.md`);
+    /// its odometry then also gives the position.
+    #[serde(default)]
+    pub ros2: Option<Spanned<crate::ros2_base::Ros2Config>>,
     /// `[safety]`: the robot's footprint and braking for the fleet safety
     /// layer (`docs/safety.md`), which the station's arena switches on.
     #[serde(default = "spanned_default")]
@@ -479,6 +483,7 @@ impl RobotConfig {
         self.validate_actuators()?;
         self.validate_encoders()?;
         self.validate_autopilot()?;
+        self.validate_ros2()?;
         self.safety
             .get_ref()
             .validate()
@@ -503,6 +508,43 @@ impl RobotConfig {
             ));
         }
         Ok(())
+    }
+
+    /// A ROS 2 base gives the position and takes the place of actuators;
+    /// an autopilot cannot fly it too.
+    fn validate_ros2(&self) -> Result<(), Problem> {
+        let Some(ros2) = &self.ros2 else {
+            return Ok(());
+        };
+        let problem = |message: String| (at(ros2.span()), message);
+        ros2.get_ref().validate().map_err(problem)?;
+        if self.autopilot.is_some() {
+            return Err(problem(
+                "[ros2] and [autopilot] both drive the vehicle: keep one".to_string(),
+            ));
+        }
+        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
+            return Err(problem(
+                "[ros2] gives the position (the base's odometry): leave out [position]".to_string(),
+            ));
+        }
+        if !matches!(self.actuators(), ActuatorConfig::None) {
+            return Err(problem(
+                "[ros2] drives the base through its cmd_vel: leave out [actuators]".to_string(),
+            ));
+        }
+        if self.encoders.is_some() {
+            return Err(problem(
+                "[ros2] measures the velocity (the base's odometry): leave out [encoders]"
+                    .to_string(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `[ros2]` section, if any.
+    pub fn ros2(&self) -> Option<&crate::ros2_base::Ros2Config> {
+        self.ros2.as_ref().map(|r| r.get_ref())
     }
 
     /// The `[autopilot]` section, if any.
@@ -1098,6 +1140,26 @@ mod tests {
         );
         let bad = format!("{MINIMAL}[failover]\nlink_timeout = 0.2\nprobe_period = 0.5\n");
         assert!(error(&bad).contains("probe_period"), "{}", error(&bad));
+    }
+
+    #[test]
+    fn a_ros2_base_gives_the_position_and_drives_alone() {
+        let ros2 = format!("{MINIMAL}[ros2]\nnamespace = \"/tb3_1\"\n");
+        let c = RobotConfig::parse(&ros2, "tb3.toml").unwrap();
+        assert_eq!(c.ros2().unwrap().resolve("odom"), "/tb3_1/odom");
+        let e = error(&format!("{ros2}odom_timeout = -1.0\n"));
+        assert!(e.contains("odom_timeout"), "{e}");
+        for (extra, says) in [
+            ("[position]\nkind = \"external\"\n", "leave out [position]"),
+            ("[autopilot]\nlink = \"udpin:0.0.0.0:14540\"\n", "keep one"),
+            (
+                "[encoders]\nkind = \"single-channel\"\ncounts_per_revolution = 40\nwheel_radius = 0.033\nchannels = [{ a = 17 }, { a = 22 }, { a = 23 }]\n",
+                "leave out [encoders]",
+            ),
+        ] {
+            let e = error(&format!("{ros2}{extra}"));
+            assert!(e.contains(says), "{extra}: {e}");
+        }
     }
 
     #[test]

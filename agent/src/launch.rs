@@ -34,6 +34,8 @@ pub enum LaunchError {
     Key(String),
     #[error("autopilot: {0}")]
     Autopilot(String),
+    #[error("{0}")]
+    Ros2(String),
 }
 
 /// Command-line overrides of the config.
@@ -76,12 +78,16 @@ pub async fn run(
         runtime::drive(sim, io, ticker, origin, shutdown).await
     } else {
         let agent = hardware_agent(&config, settings, stamp_origin, signing);
-        match config.autopilot() {
-            Some(autopilot) => {
+        match (config.autopilot(), config.ros2()) {
+            (Some(autopilot), _) => {
                 let vehicle = open_autopilot(autopilot, agent)?;
                 runtime::drive(vehicle, io, ticker, origin, shutdown).await
             }
-            None => {
+            (None, Some(ros2)) => {
+                let vehicle = open_ros2_base(ros2, agent, stamp_origin)?;
+                runtime::drive(vehicle, io, ticker, origin, shutdown).await
+            }
+            (None, None) => {
                 let vehicle = HardwareVehicle {
                     agent,
                     actuators: open_actuators(&config)?,
@@ -132,8 +138,8 @@ fn simulated_vehicle(
     sim
 }
 
-/// The agent core of a real robot (an autopilot's estimate is already
-/// filtered, so it is taken as it comes).
+/// The agent core of a real robot (an autopilot's estimate and a ROS 2
+/// base's odometry are already filtered, so they are taken as they come).
 fn hardware_agent(
     config: &RobotConfig,
     mut settings: AgentSettings,
@@ -142,6 +148,8 @@ fn hardware_agent(
 ) -> Agent {
     if config.autopilot().is_some() {
         settings.autopilot = true;
+    }
+    if config.autopilot().is_some() || config.ros2().is_some() {
         settings.has_position = true;
         settings.filter_window = 1;
     }
@@ -253,6 +261,41 @@ fn open_autopilot(
     _agent: Agent,
 ) -> Result<HardwareVehicle, LaunchError> {
     Err(LaunchError::Feature { feature: "mavlink" })
+}
+
+#[cfg(feature = "ros2")]
+fn open_ros2_base(
+    config: &crate::ros2_base::Ros2Config,
+    agent: Agent,
+    stamp_origin: u64,
+) -> Result<crate::ros2_base::vehicle::Ros2Vehicle<crate::ros2_base::link::DdsBase>, LaunchError> {
+    use crate::ros2_base::{link::DdsBase, session::BaseSession, vehicle::Ros2Vehicle};
+    let env = std::env::var("ROS_DOMAIN_ID").ok();
+    let domain = config.domain(env.as_deref()).map_err(LaunchError::Ros2)?;
+    let robot = agent.name().to_string();
+    tracing::info!(
+        domain,
+        cmd_vel = %config.resolve(&config.cmd_vel),
+        odom = %config.resolve(&config.odom),
+        "ROS 2 base"
+    );
+    let base =
+        DdsBase::open(config, &robot, domain).map_err(|e| LaunchError::Ros2(e.to_string()))?;
+    Ok(Ros2Vehicle::new(
+        agent,
+        BaseSession::new(config),
+        base,
+        stamp_origin,
+    ))
+}
+
+#[cfg(not(feature = "ros2"))]
+fn open_ros2_base(
+    _config: &crate::ros2_base::Ros2Config,
+    _agent: Agent,
+    _stamp_origin: u64,
+) -> Result<HardwareVehicle, LaunchError> {
+    Err(LaunchError::Feature { feature: "ros2" })
 }
 
 fn open_actuators(config: &RobotConfig) -> Result<Box<dyn Actuators + Send>, LaunchError> {

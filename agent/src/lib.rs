@@ -10,6 +10,7 @@
 //!   links, Pozyx, NMEA GPS, external positions, encoder edge counting.
 //! - [`platform`]: differential drive, kiwi, quadcopter.
 //! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
+//! - [`ros2_base`]: ROS 2 mobile bases driven through their `cmd_vel`.
 //! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
 //! - [`safety`]: fleet safety, the geofence and separation filter every
 //!   obeyed command passes through.
@@ -42,6 +43,7 @@ pub mod links;
 pub mod order;
 pub mod platform;
 pub mod preflight;
+pub mod ros2_base;
 pub mod runtime;
 pub mod safety;
 pub mod sim;

@@ -15,6 +15,48 @@ use crate::agent::{Agent, Counters};
 use crate::hal::{Actuators, PositionSample, WheelEncoders};
 use crate::links::LinkChoice;
 
+/// Something a vehicle's driver (an autopilot, a ROS 2 base) tells the
+/// operator: a notice in the station's event log.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    pub level: mech_proto::Level,
+    pub text: String,
+}
+
+impl Report {
+    pub fn info(text: String) -> Report {
+        Report {
+            level: mech_proto::Level::Info,
+            text,
+        }
+    }
+
+    pub fn warn(text: String) -> Report {
+        Report {
+            level: mech_proto::Level::Warn,
+            text,
+        }
+    }
+
+    pub fn error(text: String) -> Report {
+        Report {
+            level: mech_proto::Level::Error,
+            text,
+        }
+    }
+
+    /// The notice saying it (an error is a driver fault), logged too.
+    pub fn notice(&self, agent: &mut Agent, now: Duration) -> Envelope {
+        let code = if self.level >= mech_proto::Level::Error {
+            mech_proto::NoticeCode::DriverFault
+        } else {
+            mech_proto::NoticeCode::Text
+        };
+        tracing::info!(level = ?self.level, "{}", self.text);
+        agent.notice(self.level, code, &self.text, now)
+    }
+}
+
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
 pub trait Vehicle: Send {

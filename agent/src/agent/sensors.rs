@@ -62,6 +62,9 @@ pub(crate) struct Sensors {
     wheel_jacobian: Option<DMatrix<f64>>,
     /// Odometry noise per metre of wheel travel.
     odometry_sigma: f64,
+    /// The body twist the vehicle itself measures (a ROS 2 base's
+    /// odometry), and when it came.
+    measured: Option<(Twist, Duration)>,
     /// Where the robot's own motion took it, to move a lagging estimate on.
     track: Track,
     pub(crate) faults: Faults,
@@ -90,6 +93,7 @@ impl Sensors {
             fusion,
             wheel_jacobian,
             odometry_sigma: settings.fusion.odometry_sigma,
+            measured: None,
             track: Track::new(
                 settings.safety.position_error,
                 settings.safety.max_deceleration,
@@ -208,6 +212,13 @@ impl Sensors {
         self.faults.actuator_fault(&text, controller, step);
     }
 
+    /// The body twist the vehicle measured at `now` (a ROS 2 base's
+    /// odometry): the velocity while no older than the position's
+    /// staleness, unless wheel encoders measure it.
+    pub(crate) fn observe_velocity(&mut self, twist: Twist, now: Duration) {
+        self.measured = Some((twist, now));
+    }
+
     /// Once per control period, before the outputs are computed: the
     /// robot moved at the velocity `outputs` (the ones driven since the
     /// last period) give, or its encoders measured, until `now`.
@@ -259,16 +270,22 @@ impl Sensors {
     }
 
     /// The velocity in the world frame (turned by the estimated heading):
-    /// measured by the encoders while fresh, else what `outputs` give.
+    /// measured by the encoders or the vehicle while fresh, else what
+    /// `outputs` give.
     fn velocity(
         &self,
         platform: &dyn Platform,
         outputs: &[f64],
         now: Duration,
     ) -> (Velocity, VelocitySource) {
+        let vehicle = self
+            .measured
+            .filter(|(_, at)| now.saturating_sub(*at) <= self.position_stale_after)
+            .map(|(twist, _)| twist);
         let (twist, velocity_source) = match self
             .wheel_speeds(now)
             .and_then(|speeds| platform.wheel_odometry(&speeds))
+            .or(vehicle)
         {
             Some(measured) => (measured, VelocitySource::Measured),
             None => (platform.motion(outputs), VelocitySource::Commanded),

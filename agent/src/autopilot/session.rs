@@ -27,6 +27,7 @@ use mech_proto::{AutopilotAction, AutopilotNews, Level, Pose, Telemetry, Twist, 
 
 use super::config::{AutopilotConfig, Flavour};
 use super::frames::{Ned, pose_from_ned, twist_to_ned, velocity_from_ned};
+pub use crate::runtime::Report;
 
 /// Unanswered commands remembered for their acknowledgements.
 const PENDING: usize = 8;
@@ -42,28 +43,6 @@ pub struct Target {
     pub flavour: Flavour,
     /// Ground rovers and boats have no land or take-off.
     pub rover: bool,
-}
-
-/// Something the operator should hear about (a notice in the event log).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Report {
-    pub level: Level,
-    pub text: String,
-}
-
-impl Report {
-    fn info(text: String) -> Report {
-        Report {
-            level: Level::Info,
-            text,
-        }
-    }
-    fn warn(text: String) -> Report {
-        Report {
-            level: Level::Warn,
-            text,
-        }
-    }
 }
 
 /// The newest of what the autopilot reports of the vehicle.

@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
-use mech_proto::{Body, Envelope, Level, NoticeCode};
+use mech_proto::{Body, Envelope, Level};
 
 use super::link::MavlinkPort;
 use super::session::{Report, Session};
@@ -73,13 +73,7 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
     }
 
     fn report(&mut self, r: Report, now: Duration, out: &mut Vec<Envelope>) {
-        let code = if r.level >= Level::Error {
-            NoticeCode::DriverFault
-        } else {
-            NoticeCode::Text
-        };
-        tracing::info!(level = ?r.level, "{}", r.text);
-        out.push(self.agent.notice(r.level, code, &r.text, now));
+        out.push(r.notice(&mut self.agent, now));
     }
 
     /// Everything the autopilot sent since the last period.
