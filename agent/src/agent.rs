@@ -177,6 +177,17 @@ impl Agent {
         self.sensors.observe_position(sample, &mut self.counters);
     }
 
+    /// The vehicle cannot be driven now (a ROS 2 base without odometry, or
+    /// with another controller on its `cmd_vel`): the outputs are held at
+    /// zero (state `Fault`) until `until`, the controller and its mission
+    /// kept for when it can; the station is told when a hold begins.
+    pub fn hold_outputs(&mut self, what: &str, until: Duration, now: Duration) -> Option<Envelope> {
+        let mut out = Vec::new();
+        let mut step = Step::new(now, &mut self.wire, &mut self.counters, &mut out);
+        self.sensors.faults.hold(what, until, &mut step);
+        out.pop()
+    }
+
     /// Counts an input from the vehicle's driver that was refused (a
     /// sample that does not decode or is not finite).
     pub fn count_refused(&mut self) {

@@ -10,8 +10,8 @@
 //! zero, and it is published every period, since bases differ in whether
 //! they stop by themselves when `cmd_vel` goes quiet. While the base's
 //! odometry is silent or refused, or another node writes on its `cmd_vel`,
-//! the outputs are held at zero too (an actuator fault, said to the
-//! station). When the agent stops it publishes zero a few times; when it
+//! the outputs are held at zero too (state `Fault`, said to the station),
+//! and a mission waits for the base rather than ending. When the agent stops it publishes zero a few times; when it
 //! dies the stream stops and only a base's own `cmd_vel` timeout stops it.
 
 use std::time::Duration;
@@ -27,6 +27,12 @@ use crate::runtime::{Report, Vehicle};
 /// At most this many samples are taken in per control period; the rest
 /// wait for the next (a flood cannot hold the loop).
 const INTAKE: usize = 1024;
+
+/// How long a refused odometry sample holds the outputs at zero.
+const REFUSED_HOLD: Duration = Duration::from_secs(1);
+
+/// A hold for the period at hand (renewed each period while it lasts).
+const HOLD_NOW: Duration = Duration::from_millis(1);
 
 /// How many zero twists the agent publishes as it stops.
 const LAST_ZEROS: usize = 3;
@@ -74,7 +80,7 @@ impl<P: BasePort> Ros2Vehicle<P> {
                         if let Some(r) = self.session.refusal(why.clone(), now) {
                             self.say(r, now, out);
                         }
-                        out.extend(self.agent.actuator_fault(&why, now));
+                        out.extend(self.agent.hold_outputs(&why, now + REFUSED_HOLD, now));
                     }
                 },
                 FromBase::Transforms(tf) => self.session.transforms(&tf),
@@ -108,8 +114,9 @@ impl<P: BasePort> Ros2Vehicle<P> {
             });
         }
         if let Some(why) = self.session.hold(now) {
-            // Outputs held at zero (state fault) while it lasts.
-            out.extend(self.agent.actuator_fault(&why, now));
+            // Held at zero (state fault) for this period; said again each
+            // period while it lasts. A mission waits.
+            out.extend(self.agent.hold_outputs(&why, now + HOLD_NOW, now));
         }
     }
 

@@ -51,6 +51,21 @@ impl Faults {
         self.driver_fault(what, step);
     }
 
+    /// The vehicle cannot be driven now (a ROS 2 base without odometry):
+    /// the outputs are held at zero until `until`, the controller (a
+    /// mission) kept for when it can. Counted and told as a fault when a
+    /// hold begins (no fault in the second before), not for each period
+    /// it lasts.
+    pub(crate) fn hold(&mut self, what: &str, until: Duration, step: &mut Step) {
+        let held = self.actuators_held(step.now) || self.recent(step.now);
+        self.actuator_fault_until = Some(self.actuator_fault_until.map_or(until, |t| t.max(until)));
+        if held {
+            self.last_driver_fault = Some(step.now);
+        } else {
+            self.driver_fault(what, step);
+        }
+    }
+
     /// Whether the actuators are held after an actuator fault.
     pub(crate) fn actuators_held(&self, now: Duration) -> bool {
         self.actuator_fault_until.is_some_and(|t| now < t)
@@ -89,5 +104,29 @@ mod tests {
             "recovers once the driver works"
         );
         assert_eq!(a.counters().driver_faults, 2);
+    }
+
+    #[test]
+    fn a_hold_keeps_the_mission_and_is_told_once() {
+        let mut a = routed("wp/gcs");
+        a.handle(msg("wp/gcs", one_waypoint(1)), ms(10));
+        assert!(moving(&a.tick(ms(10)).outputs), "the mission drives");
+        assert!(a.hold_outputs("no odometry", ms(21), ms(20)).is_some());
+        assert!(!moving(&a.tick(ms(20)).outputs));
+        assert_eq!(a.failsafe_state(ms(20)), FailsafeState::Fault);
+        for t in (70..=1070u64).step_by(50) {
+            router_heartbeat(&mut a, ms(t));
+            assert!(a.hold_outputs("no odometry", ms(t + 1), ms(t)).is_none());
+            assert!(!moving(&a.tick(ms(t)).outputs));
+        }
+        assert_eq!(a.counters().driver_faults, 1, "one hold, however long");
+        // Held no more, a second after the last (as after any fault): the
+        // mission was kept (an actuator fault ends it), and drives again.
+        for t in (1120..=2100u64).step_by(50) {
+            router_heartbeat(&mut a, ms(t));
+            a.tick(ms(t));
+        }
+        router_heartbeat(&mut a, ms(2150));
+        assert!(moving(&a.tick(ms(2150)).outputs));
     }
 }
