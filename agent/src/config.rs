@@ -482,89 +482,11 @@ impl RobotConfig {
         self.validate_filter()?;
         self.validate_actuators()?;
         self.validate_encoders()?;
-        self.validate_autopilot()?;
-        self.validate_ros2()?;
+        self.validate_vehicle()?;
         self.safety
             .get_ref()
             .validate()
             .map_err(|m| (at(self.safety.span()), format!("[safety]: {m}")))
-    }
-
-    /// An autopilot gives the position and takes the place of actuators.
-    fn validate_autopilot(&self) -> Result<(), Problem> {
-        let Some(autopilot) = &self.autopilot else {
-            return Ok(());
-        };
-        let problem = |message: String| (at(autopilot.span()), message);
-        autopilot.get_ref().validate().map_err(problem)?;
-        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
-            return Err(problem(
-                "[autopilot] gives the position: leave out [position]".to_string(),
-            ));
-        }
-        if !matches!(self.actuators(), ActuatorConfig::None) {
-            return Err(problem(
-                "[autopilot] flies the vehicle: leave out [actuators]".to_string(),
-            ));
-        }
-        Ok(())
-    }
-
-    /// A ROS 2 base gives the position and takes the place of actuators;
-    /// an autopilot cannot fly it too.
-    fn validate_ros2(&self) -> Result<(), Problem> {
-        let Some(ros2) = &self.ros2 else {
-            return Ok(());
-        };
-        let problem = |message: String| (at(ros2.span()), message);
-        ros2.get_ref().validate().map_err(problem)?;
-        if self.autopilot.is_some() {
-            return Err(problem(
-                "[ros2] and [autopilot] both drive the vehicle: keep one".to_string(),
-            ));
-        }
-        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
-            return Err(problem(
-                "[ros2] gives the position (the base's odometry): leave out [position]".to_string(),
-            ));
-        }
-        if !matches!(self.actuators(), ActuatorConfig::None) {
-            return Err(problem(
-                "[ros2] drives the base through its cmd_vel: leave out [actuators]".to_string(),
-            ));
-        }
-        if self.encoders.is_some() {
-            return Err(problem(
-                "[ros2] measures the velocity (the base's odometry): leave out [encoders]"
-                    .to_string(),
-            ));
-        }
-        Ok(())
-    }
-
-    /// The `[ros2]` section, if any.
-    pub fn ros2(&self) -> Option<&crate::ros2_base::Ros2Config> {
-        self.ros2.as_ref().map(|r| r.get_ref())
-    }
-
-    /// The `[autopilot]` section, if any.
-    pub fn autopilot(&self) -> Option<&crate::autopilot::AutopilotConfig> {
-        self.autopilot.as_ref().map(|a| a.get_ref())
-    }
-
-    /// Replaces the `[autopilot]` section's MAVLink link (`mech-agent
-    /// --autopilot LINK`: a second simulator on another port, a flight
-    /// controller on another UART), checked as the file's would be. `Err`
-    /// says why not: a bad link, or no `[autopilot]` section to change.
-    pub fn set_autopilot_link(&mut self, link: &str) -> Result<(), String> {
-        let Some(section) = self.autopilot.as_mut() else {
-            return Err("this robot's config has no [autopilot] section".to_string());
-        };
-        let mut changed = section.get_ref().clone();
-        changed.link = link.to_string();
-        changed.validate()?;
-        *section.get_mut() = changed;
-        Ok(())
     }
 
     fn validate_rates(&self) -> Result<(), Problem> {
@@ -823,6 +745,75 @@ impl RobotConfig {
     /// The `[encoders]` section, if the robot has encoders.
     pub fn encoders(&self) -> Option<&EncoderConfig> {
         self.encoders.as_ref().map(Spanned::get_ref)
+    }
+}
+
+/// The sections of a vehicle that something else drives: an autopilot
+/// (`[autopilot]`) or a ROS 2 base (`[ros2]`).
+impl RobotConfig {
+    /// An autopilot or a ROS 2 base drives the vehicle: it gives the
+    /// position and takes the place of actuators (a base, of encoders too).
+    fn validate_vehicle(&self) -> Result<(), Problem> {
+        let (name, drives, span, checked) = match (&self.autopilot, &self.ros2) {
+            (Some(_), Some(ros2)) => {
+                let text = "[ros2] and [autopilot] both drive the vehicle: keep one";
+                return Err((at(ros2.span()), text.to_string()));
+            }
+            (Some(a), None) => (
+                "[autopilot]",
+                "flies the vehicle",
+                a.span(),
+                a.get_ref().validate(),
+            ),
+            (None, Some(r)) => (
+                "[ros2]",
+                "drives the base through its cmd_vel",
+                r.span(),
+                r.get_ref().validate(),
+            ),
+            (None, None) => return Ok(()),
+        };
+        let problem = |message: String| (at(span.clone()), message);
+        checked.map_err(problem)?;
+        if !matches!(self.position(), PositionConfig::None | PositionConfig::Sim) {
+            return Err(problem(format!(
+                "{name} gives the position: leave out [position]"
+            )));
+        }
+        if !matches!(self.actuators(), ActuatorConfig::None) {
+            return Err(problem(format!("{name} {drives}: leave out [actuators]")));
+        }
+        if self.ros2.is_some() && self.encoders.is_some() {
+            return Err(problem(
+                "[ros2] measures the velocity (the base's odometry): leave out [encoders]".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `[ros2]` section, if any.
+    pub fn ros2(&self) -> Option<&crate::ros2_base::Ros2Config> {
+        self.ros2.as_ref().map(|r| r.get_ref())
+    }
+
+    /// The `[autopilot]` section, if any.
+    pub fn autopilot(&self) -> Option<&crate::autopilot::AutopilotConfig> {
+        self.autopilot.as_ref().map(|a| a.get_ref())
+    }
+
+    /// Replaces the `[autopilot]` section's MAVLink link (`mech-agent
+    /// --autopilot LINK`: a second simulator on another port, a flight
+    /// controller on another UART), checked as the file's would be. `Err`
+    /// says why not: a bad link, or no `[autopilot]` section to change.
+    pub fn set_autopilot_link(&mut self, link: &str) -> Result<(), String> {
+        let Some(section) = self.autopilot.as_mut() else {
+            return Err("this robot's config has no [autopilot] section".to_string());
+        };
+        let mut changed = section.get_ref().clone();
+        changed.link = link.to_string();
+        changed.validate()?;
+        *section.get_mut() = changed;
+        Ok(())
     }
 }
 

@@ -94,13 +94,13 @@ pub const EXCEPTIONS: &[Exception] = &[
         COUNTERS,
     ),
     allow(
-        "gcs-tui/ros2/src/msgs/sensor.rs",
+        "ros2-dds/src/msgs/sensor.rs",
         "BatteryState",
         Limit::Fields,
         ROS_MESSAGE,
     ),
     allow(
-        "gcs-tui/ros2/src/msgs/visualization.rs",
+        "ros2-dds/src/msgs/visualization.rs",
         "Marker",
         Limit::Fields,
         ROS_MESSAGE,

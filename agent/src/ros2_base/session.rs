@@ -90,33 +90,52 @@ pub struct BaseCounters {
     pub foreign_cmd_vel: u64,
 }
 
+/// Whether the odometry comes: when it last did, and whether its silence
+/// was reported.
+#[derive(Debug, Clone, Copy, Default)]
+struct Silence {
+    /// When the session started (the first check), for a base never heard.
+    started: Option<Duration>,
+    last_odometry: Option<Duration>,
+    /// Reported lost and not back yet.
+    lost: bool,
+}
+
+/// A localised robot's `map_frame` -> odometry frame.
+#[derive(Debug, Clone, Default)]
+struct Localisation {
+    /// Empty: the odometry's own frame is the map.
+    map_frame: String,
+    map_to_odom: Option<Planar>,
+    /// The odometry's own frame (its header's), once heard.
+    odom_frame: Option<String>,
+    /// Reported as waiting for `map_to_odom`.
+    waiting: bool,
+}
+
+/// Another writer on the base's `cmd_vel`.
+#[derive(Debug, Clone, Copy, Default)]
+struct Intruder {
+    last_heard: Option<Duration>,
+    reported: bool,
+}
+
 /// The state of the base; see the module docs.
 #[derive(Debug, Clone)]
 pub struct BaseSession {
     odom_topic: String,
     cmd_vel_topic: String,
-    map_frame: String,
     origin: Planar,
     timeout: Duration,
-    /// When the session started (the first check), for a base never heard.
-    started: Option<Duration>,
-    last_odometry: Option<Duration>,
-    /// The odometry is reported lost and not yet back.
-    lost: bool,
+    silence: Silence,
+    map: Localisation,
     /// The newest pose not yet taken, arena frame.
     pose: Option<Pose>,
     /// The newest body twist and when it came.
     twist: Option<(mech_proto::Twist, Duration)>,
-    /// `map_frame` -> the odometry's frame, newest.
-    map_to_odom: Option<Planar>,
-    /// The odometry's own frame (its header's), once heard.
-    odom_frame: Option<String>,
-    waiting_for_map: bool,
     battery: Option<f64>,
     last_refusal_report: Option<Duration>,
-    /// The last sample of another writer on `cmd_vel`.
-    intruder: Option<Duration>,
-    intruder_reported: bool,
+    intruder: Intruder,
     pub counters: BaseCounters,
 }
 
@@ -125,25 +144,22 @@ impl BaseSession {
         BaseSession {
             odom_topic: config.resolve(&config.odom),
             cmd_vel_topic: config.resolve(&config.cmd_vel),
-            map_frame: frame(&config.map_frame).to_string(),
             origin: Planar {
                 x: config.origin.x,
                 y: config.origin.y,
                 heading: config.origin.heading,
             },
             timeout: config.odom_timeout(),
-            started: None,
-            last_odometry: None,
-            lost: false,
+            silence: Silence::default(),
+            map: Localisation {
+                map_frame: frame(&config.map_frame).to_string(),
+                ..Localisation::default()
+            },
             pose: None,
             twist: None,
-            map_to_odom: None,
-            odom_frame: None,
-            waiting_for_map: false,
             battery: None,
             last_refusal_report: None,
-            intruder: None,
-            intruder_reported: false,
+            intruder: Intruder::default(),
             counters: BaseCounters::default(),
         }
     }
@@ -169,8 +185,8 @@ impl BaseSession {
             ));
         };
         self.counters.odometry += 1;
-        self.last_odometry = Some(now);
-        self.odom_frame = Some(frame(&o.header.frame_id).to_string());
+        self.silence.last_odometry = Some(now);
+        self.map.odom_frame = Some(frame(&o.header.frame_id).to_string());
         self.twist = Some((
             mech_proto::Twist {
                 vx: t.linear.x,
@@ -180,15 +196,17 @@ impl BaseSession {
             },
             now,
         ));
-        let placed = if self.map_frame.is_empty() {
+        let placed = if self.map.map_frame.is_empty() {
             Some(self.origin.then(local))
         } else {
-            self.map_to_odom.map(|m| self.origin.then(m).then(local))
+            self.map
+                .map_to_odom
+                .map(|m| self.origin.then(m).then(local))
         };
         let mut report = None;
         match placed {
             Some(pose) => {
-                self.waiting_for_map = false;
+                self.map.waiting = false;
                 self.pose = Some(Pose {
                     x: pose.x,
                     y: pose.y,
@@ -196,12 +214,12 @@ impl BaseSession {
                     heading: pose.heading,
                 });
             }
-            None if !self.waiting_for_map => {
-                self.waiting_for_map = true;
+            None if !self.map.waiting => {
+                self.map.waiting = true;
                 report = Some(Report::warn(format!(
                     "waiting for {} -> {} on the transforms: no pose until then",
-                    self.map_frame,
-                    self.odom_frame.as_deref().unwrap_or("odom")
+                    self.map.map_frame,
+                    self.map.odom_frame.as_deref().unwrap_or("odom")
                 )));
             }
             None => {}
@@ -212,16 +230,16 @@ impl BaseSession {
     /// Takes in the transforms: `map_frame` -> the odometry's frame, if
     /// among them.
     pub fn transforms(&mut self, tf: &TfMessage) {
-        if self.map_frame.is_empty() {
+        if self.map.map_frame.is_empty() {
             return;
         }
-        let odom = self.odom_frame.as_deref().unwrap_or("odom");
+        let odom = self.map.odom_frame.as_deref().unwrap_or("odom");
         for t in &tf.transforms {
-            if frame(&t.header.frame_id) == self.map_frame
+            if frame(&t.header.frame_id) == self.map.map_frame
                 && frame(&t.child_frame_id) == odom
                 && let Some(p) = Planar::from(&t.transform.translation, &t.transform.rotation)
             {
-                self.map_to_odom = Some(p);
+                self.map.map_to_odom = Some(p);
             }
         }
     }
@@ -241,8 +259,8 @@ impl BaseSession {
     /// Another writer's sample on the base's `cmd_vel`, heard at `now`.
     pub fn foreign_cmd_vel(&mut self, writer: &str, now: Duration) -> Option<Report> {
         self.counters.foreign_cmd_vel += 1;
-        self.intruder = Some(now);
-        if std::mem::replace(&mut self.intruder_reported, true) {
+        self.intruder.last_heard = Some(now);
+        if std::mem::replace(&mut self.intruder.reported, true) {
             return None;
         }
         Some(Report::error(format!(
@@ -265,26 +283,26 @@ impl BaseSession {
     /// Once per control period: silence reported (once), and the end of
     /// silence or of another writer.
     pub fn check(&mut self, now: Duration) -> Vec<Report> {
-        let started = *self.started.get_or_insert(now);
+        let started = *self.silence.started.get_or_insert(now);
         let mut out = Vec::new();
-        let since = self.last_odometry.unwrap_or(started);
+        let since = self.silence.last_odometry.unwrap_or(started);
         let silent = now.saturating_sub(since) > self.timeout;
-        if silent && !self.lost {
-            self.lost = true;
+        if silent && !self.silence.lost {
+            self.silence.lost = true;
             out.push(Report::error(format!(
                 "no odometry on {} for {:.0} s: is the base up, is ROS_DOMAIN_ID the same? Held at zero until it comes",
                 self.odom_topic,
                 self.timeout.as_secs_f64()
             )));
-        } else if !silent && self.lost {
-            self.lost = false;
+        } else if !silent && self.silence.lost {
+            self.silence.lost = false;
             out.push(Report::info(format!(
                 "odometry on {} again",
                 self.odom_topic
             )));
         }
-        if self.intruder_reported && !self.intruder_heard(now) {
-            self.intruder_reported = false;
+        if self.intruder.reported && !self.intruder_heard(now) {
+            self.intruder.reported = false;
             out.push(Report::info(format!(
                 "no other writer on {} now",
                 self.cmd_vel_topic
@@ -295,12 +313,13 @@ impl BaseSession {
 
     fn intruder_heard(&self, now: Duration) -> bool {
         self.intruder
+            .last_heard
             .is_some_and(|t| now.saturating_sub(t) <= INTRUDER_QUIET)
     }
 
     /// Why the outputs must be held at zero now, if they must.
     pub fn hold(&self, now: Duration) -> Option<String> {
-        if self.lost || self.last_odometry.is_none() {
+        if self.silence.lost || self.silence.last_odometry.is_none() {
             Some(format!("no odometry on {}", self.odom_topic))
         } else if self.intruder_heard(now) {
             Some(format!("another writer on {}", self.cmd_vel_topic))
