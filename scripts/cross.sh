@@ -4,7 +4,7 @@
 # Raspberry Pi OS), armhf (armv7: 32-bit Raspberry Pi OS) and amd64;
 # mech-gcs for arm64 (a Pi 5 as the station of a small fleet) and amd64.
 # Builds of the `dist` profile (release without link-time optimisation,
-# stripped: Cargo.toml), each agent with GPIO (`rpi`), serial ports
+# stripped: Cargo.toml), each agent with GPIO (`rpi`), ROS 2 bases (`ros2`), serial ports
 # and MAVLink; then `mech-agent_*.deb` and `mech-gcs_*.deb` per
 # architecture, made by cargo-deb, under target/cross/debian/.
 #
@@ -74,7 +74,7 @@ say() { printf '[cross %4d s] %s\n' $((SECONDS - step_started)) "$*"; }
 # while the root is made (mostly downloads). Stopped with the script,
 # failed or not.
 CARGO_TARGET_DIR="$out/build-amd64" cargo build --profile dist --locked --quiet \
-    --features mech-agent/rpi --target x86_64-unknown-linux-gnu -p mech-agent -p mech-gcs &
+    --features mech-agent/rpi,mech-agent/ros2 --target x86_64-unknown-linux-gnu -p mech-agent -p mech-gcs &
 amd64=$!
 # cargo-deb, the one packaging tool (Debian package metadata stays in the
 # crates' Cargo.toml, [package.metadata.deb]), built by the host's
@@ -163,11 +163,11 @@ wait "$amd64" || failed+=(amd64)
 [ -z "$cargo_deb" ] || wait "$cargo_deb" || failed+=(cargo-deb)
 say "building: arm64 (mech-agent, mech-gcs)"
 in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build" /bin/sh -c \
-    'cd /src && cargo build --profile dist --locked --quiet --features mech-agent/rpi \
+    'cd /src && cargo build --profile dist --locked --quiet --features mech-agent/rpi,mech-agent/ros2 \
         --target aarch64-unknown-linux-gnu -p mech-agent -p mech-gcs' || failed+=(arm64)
 say "building: armhf (mech-agent)"
 in_root /usr/bin/env CARGO_TARGET_DIR="/src/$out/build-armhf" /bin/sh -c \
-    'cd /src && cargo build --profile dist --locked --quiet --features rpi \
+    'cd /src && cargo build --profile dist --locked --quiet --features rpi,ros2 \
         --target armv7-unknown-linux-gnueabihf -p mech-agent' || failed+=(armhf)
 [ ${#failed[@]} -eq 0 ] || {
     echo "cross build failed: ${failed[*]}" >&2

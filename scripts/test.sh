@@ -93,12 +93,17 @@ if $cross; then
     fi
 fi
 
-step "build: binaries" cargo build --workspace --bins
-step "build: tests" cargo test --workspace --no-run
+# The agent with its ROS 2 base platform (feature `ros2`): its unit tests
+# run, and the end-to-end tests drive a ROS 2 base with it
+# (gcs-tui/ros2/tests/base.rs). One feature set for every step, so each
+# builds on the one before.
+features=mech-agent/ros2
+step "build: binaries" cargo build --workspace --bins --features "$features"
+step "build: tests" cargo test --workspace --no-run --features "$features"
 
 tests=0
 rm -f target/cross/emulated.log
-step "tests" cargo test --workspace --no-fail-fast || tests=$?
+step "tests" cargo test --workspace --no-fail-fast --features "$features" || tests=$?
 [ "$tests" -eq 0 ] || failed+=(tests)
 # What the Pi binaries did under qemu (the test `cross` writes it).
 if [ -f target/cross/emulated.log ]; then
@@ -111,7 +116,7 @@ fi
 # tests run, with the Foxglove build.
 fox=0
 step "foxglove (build and test)" cargo test --workspace \
-    --features mech-station/foxglove,mech-gcs/foxglove --test foxglove_live || fox=$?
+    --features "$features,mech-station/foxglove,mech-gcs/foxglove" --test foxglove_live || fox=$?
 [ "$fox" -eq 0 ] || failed+=(foxglove)
 
 echo

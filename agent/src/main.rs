@@ -51,7 +51,11 @@ fn main() -> ExitCode {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                // DDS (a ROS 2 base) logs its discovery at info: errors
+                // only, as the bridge does; RUST_LOG=rustdds=info shows it.
+                .unwrap_or_else(|_| {
+                    tracing_subscriber::EnvFilter::new("info,rustdds=error,ros2_client=error")
+                }),
         )
         .init();
     match run(cli) {

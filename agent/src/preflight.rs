@@ -21,6 +21,8 @@ pub trait Devices {
     fn gpio(&mut self, pins: &[u8]) -> Result<(), String>;
     /// Opens a serial port at `baud`.
     fn serial(&mut self, port: &str, baud: u32) -> Result<(), String>;
+    /// Joins DDS domain `domain` (a ROS 2 base's), and leaves it.
+    fn dds(&mut self, domain: u16) -> Result<(), String>;
 }
 
 /// A device the config names that this machine could not open.
@@ -67,6 +69,19 @@ pub fn check(config: &RobotConfig, devices: &mut impl Devices) -> Vec<Unopened> 
             unopened.push(Unopened {
                 device: format!("serial port {port} at {baud} baud"),
                 users,
+                why,
+            });
+        }
+    }
+    if let Some(ros2) = config.ros2() {
+        let env = std::env::var("ROS_DOMAIN_ID").ok();
+        let joined = ros2
+            .domain(env.as_deref())
+            .and_then(|domain| devices.dds(domain).map(|()| domain));
+        if let Err(why) = joined {
+            unopened.push(Unopened {
+                device: "DDS domain".to_string(),
+                users: vec!["ros2".to_string()],
                 why,
             });
         }
@@ -171,6 +186,19 @@ impl Devices for HostDevices {
     fn serial(&mut self, _port: &str, _baud: u32) -> Result<(), String> {
         Err("this build has no serial support; rebuild with `--features serial`".to_string())
     }
+
+    #[cfg(feature = "ros2")]
+    fn dds(&mut self, domain: u16) -> Result<(), String> {
+        let options = ros2_client::ContextOptions::new().domain_id(domain);
+        ros2_client::Context::with_options(options)
+            .map(drop)
+            .map_err(|e| format!("cannot join DDS domain {domain}: {e:?}"))
+    }
+
+    #[cfg(not(feature = "ros2"))]
+    fn dds(&mut self, _domain: u16) -> Result<(), String> {
+        Err("this build has no ROS 2 support; rebuild with `--features ros2`".to_string())
+    }
 }
 
 #[cfg(test)]
@@ -193,6 +221,15 @@ mod tests {
                 Ok(())
             } else {
                 Err("Unknown SoC".into())
+            }
+        }
+
+        fn dds(&mut self, domain: u16) -> Result<(), String> {
+            self.asked.push(format!("dds {domain}"));
+            if domain == 0 {
+                Ok(())
+            } else {
+                Err("no multicast interface".into())
             }
         }
 
@@ -275,6 +312,24 @@ mod tests {
             "serial port /dev/ttyAMA0 at 921600 baud (autopilot): No such file or directory"
         );
         assert!(check(&drone("udpin:0.0.0.0:14540"), &mut Fake::default()).is_empty());
+    }
+
+    #[test]
+    fn a_ros2_base_joins_its_dds_domain() {
+        let base = |domain: u16| {
+            let text = format!(
+                "name = \"tb3_1\"\n[platform]\nkind = \"diff-drive\"\ntrack_width = 0.16\nmax_wheel_speed = 0.22\n[ros2]\ndomain_id = {domain}\n"
+            );
+            RobotConfig::parse(&text, "tb3.toml").unwrap()
+        };
+        let mut devices = Fake::default();
+        assert!(check(&base(0), &mut devices).is_empty());
+        assert_eq!(devices.asked, ["dds 0"]);
+        let unopened = check(&base(7), &mut Fake::default());
+        assert_eq!(
+            unopened[0].to_string(),
+            "DDS domain (ros2): no multicast interface"
+        );
     }
 
     #[test]

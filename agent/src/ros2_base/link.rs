@@ -53,10 +53,10 @@ enum CmdVelReader {
     Stamped(Subscription<TwistStamped>),
 }
 
-/// The agent's node on the base's DDS domain.
+/// The agent's node on the base's DDS domain. The endpoints are declared
+/// before the node and the context, so they are dropped first (RustDDS
+/// removes an endpoint through its participant).
 pub struct DdsBase {
-    _context: Context,
-    _node: Node,
     cmd_vel: CmdVelWriter,
     own_writer: Gid,
     cmd_vel_topic: String,
@@ -66,6 +66,8 @@ pub struct DdsBase {
     tf: Option<(Subscription<TfMessage>, String)>,
     battery: Option<(Subscription<BatteryState>, String)>,
     queue: VecDeque<FromBase>,
+    _node: Node,
+    _context: Context,
 }
 
 impl std::fmt::Debug for DdsBase {
@@ -100,7 +102,12 @@ impl DdsBase {
         };
         let name = NodeName::new(namespace, &node_name(robot)).map_err(|e| err("node name", e))?;
         let mut node = context
-            .new_node(name, NodeOptions::new().enable_rosout(false))
+            .new_node(
+                name,
+                NodeOptions::new()
+                    .enable_rosout(false)
+                    .start_parameter_services(false),
+            )
             .map_err(|e| err("cannot make the node", e))?;
         let spinner = node.spinner().map_err(|e| err("spinner", e))?;
         tokio::spawn(async move {
@@ -151,8 +158,6 @@ impl DdsBase {
             Some((sub, topic))
         };
         Ok(DdsBase {
-            _context: context,
-            _node: node,
             cmd_vel,
             own_writer,
             cmd_vel_topic,
@@ -162,6 +167,8 @@ impl DdsBase {
             tf,
             battery,
             queue: VecDeque::new(),
+            _node: node,
+            _context: context,
         })
     }
 
