@@ -13,13 +13,13 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::agent::AgentSettings;
 use crate::control::Gains;
 use crate::drivers::edge_counter::EncoderPins;
 use crate::drivers::l298::{DutyRange, L298Pins};
 use crate::failsafe::{FailsafeConfig, FailsafeToml};
 use crate::fusion::FusionSettings;
 use crate::hal::Counting;
+use crate::machine::AgentSettings;
 use crate::platform::PlatformSpec;
 use crate::wheels::{PiGains, StallSettings, WheelSettings};
 

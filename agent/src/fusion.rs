@@ -312,7 +312,7 @@ fn joseph(cov: &mut Matrix3<f64>, kh: &Matrix3<f64>, krk: &Matrix3<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::filter::MedianFilter;
+    use crate::median::MedianFilter;
     use crate::sim::{UwbNoise, UwbNoiseModel};
 
     fn fix(x: f64, y: f64, heading: f64, ms: u64) -> PositionSample {

@@ -10,10 +10,10 @@ use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use crate::agent::{Agent, AgentSettings, Counters};
 use crate::config::{ActuatorConfig, LinkConfig, PositionConfig, RobotConfig};
 use crate::hal::{Actuators, NoActuators, PositionSample, PositionSource, WheelEncoders};
 use crate::links::LinkChoice;
+use crate::machine::{Agent, AgentSettings, Counters};
 use crate::runtime::{self, HardwareVehicle, Io, Ticker};
 use crate::sim::{SimAgent, SimEncoderModel, UwbNoise, UwbNoiseModel};
 

@@ -11,15 +11,16 @@
 //! - [`platform`]: differential drive, kiwi, quadcopter.
 //! - [`autopilot`]: vehicles flown by PX4 or ArduPilot over MAVLink 2.
 //! - [`ros2_base`]: ROS 2 mobile bases driven through their `cmd_vel`.
-//! - [`control`], [`failsafe`], [`filter`]: onboard control and safety.
+//! - [`control`], [`failsafe`]: onboard control and the failsafe;
+//!   [`median`]: the moving median of position fixes.
 //! - [`safety`]: fleet safety, the geofence and separation filter every
 //!   obeyed command passes through.
 //! - [`wheels`], [`fusion`]: wheel encoders (measured speed, closed-loop
 //!   wheel speed, stall detection) and odometry fused with position fixes.
-//! - [`agent`]: the socket-free core, one state machine per concern
-//!   (registration, command intake, the e-stop, missions, sensors and
-//!   faults, the autopilot queue, actuation, telemetry); [`runtime`]: the
-//!   tokio loop around it.
+//! - [`machine`]: the agent core ([`Agent`]), socket-free, one state
+//!   machine per concern (registration, command intake, the e-stop,
+//!   missions, sensors and faults, the autopilot queue, actuation, fleet
+//!   safety, telemetry); [`runtime`]: the tokio loop around it.
 //! - [`sim`]: simulated robots and fleets; [`config`]: the robot's TOML;
 //!   [`launch`]: bringing a robot up from its config; [`preflight`]:
 //!   `--check`'s opening of the devices the config names.
@@ -27,7 +28,6 @@
 // Tests may unwrap: a panic there is a failed test, not a crashed robot.
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
-pub mod agent;
 pub mod auth;
 pub mod autopilot;
 pub mod clock;
@@ -35,11 +35,12 @@ pub mod config;
 pub mod control;
 pub mod drivers;
 pub mod failsafe;
-pub mod filter;
 pub mod fusion;
 pub mod hal;
 pub mod launch;
 pub mod links;
+pub mod machine;
+pub mod median;
 pub mod order;
 pub mod platform;
 pub mod preflight;
@@ -49,6 +50,6 @@ pub mod safety;
 pub mod sim;
 pub mod wheels;
 
-pub use agent::{Agent, AgentSettings, Counters, Tick};
 pub use clock::{Clock, ManualClock, MonotonicClock};
+pub use machine::{Agent, AgentSettings, Counters, Tick};
 pub use platform::{Platform, PlatformSpec};

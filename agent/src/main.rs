@@ -160,7 +160,7 @@ fn check(
 
 /// The agent's counters, as one line on stdout when it stops (for logs
 /// and the fault-injection tests).
-fn report(c: &mech_agent::agent::Counters) {
+fn report(c: &mech_agent::machine::Counters) {
     println!(
         "{{\"agent_counters\":{{\"commands\":{},\"failsafe_trips\":{},\"stale_commands\":{},\"stale_estops\":{},\"not_routed\":{},\"ignored_estopped\":{},\"bad_messages\":{},\"reregistered\":{},\"tripped_at_us\":{},\"estopped_at_us\":{}}}}}",
         c.commands,

@@ -11,9 +11,9 @@ use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use crate::agent::{Agent, Counters};
 use crate::hal::{Actuators, PositionSample, WheelEncoders};
 use crate::links::LinkChoice;
+use crate::machine::{Agent, Counters};
 
 /// Something a vehicle's driver (an autopilot, a ROS 2 base) tells the
 /// operator: a notice in the station's event log.
@@ -542,8 +542,8 @@ async fn send<V: Vehicle>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::AgentSettings;
     use crate::hal::{ErrorKind, HalError};
+    use crate::machine::AgentSettings;
     use crate::platform::PlatformSpec;
     use mech_proto::{Body, Command, FailsafeState, Header, Health, Pose, Route, Twist, Welcome};
 

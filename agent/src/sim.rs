@@ -23,7 +23,7 @@ pub use encoder::{SimEncoderModel, SimEncoders};
 pub use noise::{UwbNoise, UwbNoiseModel};
 pub use robot::SimRobot;
 
-use crate::agent::AgentSettings;
+use crate::machine::AgentSettings;
 use crate::platform::PlatformSpec;
 use crate::runtime::{self, Ticker};
 

@@ -69,7 +69,7 @@ const fn allow(
 pub const EXCEPTIONS: &[Exception] = &[
     // Structs.
     allow(
-        "agent/src/agent/counters.rs",
+        "agent/src/machine/counters.rs",
         "Counters",
         Limit::Fields,
         COUNTERS,

@@ -24,8 +24,8 @@ use mech_proto::{Body, Envelope, Level};
 
 use super::link::MavlinkPort;
 use super::session::{Report, Session};
-use crate::agent::Agent;
 use crate::hal::PositionSample;
+use crate::machine::Agent;
 use crate::runtime::Vehicle;
 
 /// How often the agent's own HEARTBEAT goes to the autopilot.
@@ -143,11 +143,11 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
 }
 
 impl<L: MavlinkPort> Vehicle for AutopilotVehicle<L> {
-    fn agent(&self) -> &crate::agent::Agent {
+    fn agent(&self) -> &crate::machine::Agent {
         &self.agent
     }
 
-    fn agent_mut(&mut self) -> &mut crate::agent::Agent {
+    fn agent_mut(&mut self) -> &mut crate::machine::Agent {
         &mut self.agent
     }
 
@@ -199,9 +199,9 @@ impl<L: MavlinkPort> Vehicle for AutopilotVehicle<L> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::AgentSettings;
     use crate::autopilot::config::AutopilotConfig;
     use crate::hal::HalError;
+    use crate::machine::AgentSettings;
     use crate::platform::PlatformSpec;
     use mavlink::dialects::common::{
         ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavCmd, MavModeFlag,

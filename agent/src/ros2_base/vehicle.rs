@@ -20,8 +20,8 @@ use mech_proto::{Body, Envelope};
 
 use super::link::{BasePort, FromBase};
 use super::session::BaseSession;
-use crate::agent::Agent;
 use crate::hal::PositionSample;
+use crate::machine::Agent;
 use crate::runtime::{Report, Vehicle};
 
 /// At most this many samples are taken in per control period; the rest
@@ -168,8 +168,8 @@ impl<P: BasePort> Vehicle for Ros2Vehicle<P> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::AgentSettings;
     use crate::hal::HalError;
+    use crate::machine::AgentSettings;
     use crate::platform::PlatformSpec;
     use crate::ros2_base::config::Ros2Config;
     use mech_proto::{Command, EStop, FailsafeState, Header, Heartbeat, Route, Twist, Welcome};

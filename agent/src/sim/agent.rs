@@ -13,8 +13,8 @@ use mech_proto::{Envelope, Pose};
 use super::encoder::{SimEncoderModel, SimEncoders};
 use super::noise::UwbNoise;
 use super::robot::SimRobot;
-use crate::agent::{Agent, AgentSettings};
 use crate::hal::{PositionSample, WheelEncoders};
+use crate::machine::{Agent, AgentSettings};
 use crate::platform::PlatformSpec;
 use crate::runtime::Vehicle;
 
@@ -123,10 +123,10 @@ impl SimAgent {
 /// The simulator runs in the same loop as a robot: a simulated agent is a
 /// [`Vehicle`] whose actuators move its simulated body.
 impl Vehicle for SimAgent {
-    fn agent(&self) -> &crate::agent::Agent {
+    fn agent(&self) -> &crate::machine::Agent {
         &self.agent
     }
-    fn agent_mut(&mut self) -> &mut crate::agent::Agent {
+    fn agent_mut(&mut self) -> &mut crate::machine::Agent {
         &mut self.agent
     }
     fn handle_bytes(&mut self, bytes: &[u8], now: Duration) -> Vec<Envelope> {

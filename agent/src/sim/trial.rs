@@ -12,8 +12,8 @@ use mech_proto::{Body, Envelope, Header, Heartbeat, Mission, Pose, Route, Waypoi
 use super::agent::SimAgent;
 use super::encoder::SimEncoderModel;
 use super::noise::{UwbNoise, UwbNoiseModel};
-use crate::agent::AgentSettings;
 use crate::fusion::FusionSettings;
+use crate::machine::AgentSettings;
 use crate::platform::PlatformSpec;
 use crate::wheels::{PiGains, StallSettings, WheelSettings};
 

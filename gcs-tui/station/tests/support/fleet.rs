@@ -33,7 +33,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use mech_agent::PlatformSpec;
-use mech_agent::agent::AgentSettings;
+use mech_agent::machine::AgentSettings;
 use mech_agent::safety::{Fence, SafetyConfig, Vec2};
 use mech_agent::sim::safety_trial::clearance;
 use mech_agent::sim::{SimAgent, UwbNoise, UwbNoiseModel};

@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use mech_proto::{FailsafeState, Pose};
 
-use super::safety::Safety;
+use super::fleet_safety::Safety;
 use super::sensors::Sensors;
 use super::step::Step;
 use crate::control::{Controller, MissionRun, Mode};

@@ -22,7 +22,7 @@
 //! - `autopilot_requests`: operators' requests queued for the autopilot.
 //! - `actuation`: the failsafe's verdict, and `Actuation::obey`, the one
 //!   place every obeyed command becomes actuator outputs.
-//! - `safety`: fleet safety, the [`crate::safety::SafetyLayer`] fed with
+//! - `fleet_safety`: fleet safety, the [`crate::safety::SafetyLayer`] fed with
 //!   the station's arena and neighbours, which `Actuation::obey` applies
 //!   to whatever is about to be obeyed.
 //! - `telemetry` and `counters`: what the robot reports.
@@ -36,10 +36,10 @@ mod actuation;
 mod autopilot_requests;
 mod counters;
 mod estop;
+mod fleet_safety;
 mod intake;
 mod missions;
 mod registration;
-mod safety;
 mod sensors;
 mod settings;
 mod step;
@@ -65,10 +65,10 @@ use crate::platform::Platform;
 use actuation::{Actuation, Permit};
 use autopilot_requests::AutopilotRequests;
 use estop::EStopLatch;
+use fleet_safety::Safety;
 use intake::Intake;
 use missions::Missions;
 use registration::Registration;
-use safety::Safety;
 use sensors::Sensors;
 use step::Step;
 use telemetry::{Snapshot, TelemetrySchedule};

@@ -15,9 +15,9 @@ use super::counters::Counters;
 use super::settings::AgentSettings;
 use super::step::Step;
 use crate::control::Controller;
-use crate::filter::MedianFilter;
 use crate::fusion::{FusionCounters, FusionSettings, PoseFusion};
 use crate::hal::{EdgeCount, PositionSample};
+use crate::median::MedianFilter;
 use crate::platform::Platform;
 use crate::wheels::Wheels;
 
