@@ -535,3 +535,27 @@ fn the_architecture_doc_states_the_crate_graph_of_the_manifests() {
         "docs/architecture.md's crate table (left) against the manifests (right)"
     );
 }
+
+/// Only what runs simulated robots links the agent's code: the station
+/// with its `sim` feature (the demo's `spawn`), so the TUI and the Zenoh
+/// bridge; the ROS 2 bridge, which only attaches to a station, does not,
+/// nor does the station built without it.
+#[test]
+fn only_the_programs_that_simulate_robots_link_the_agent() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let links = |args: &[&str]| {
+        let tree = cargo_stdout(
+            &cargo,
+            &[&["tree", "-e", "normal,build", "--prefix", "none"], args].concat(),
+        );
+        tree.lines().any(|l| l.starts_with("mech-agent "))
+    };
+    for krate in ["mech-gcs", "mech-zenoh"] {
+        assert!(links(&["-p", krate]), "{krate} runs the demo's robots");
+    }
+    assert!(
+        !links(&["-p", "mech-ros2"]),
+        "the ROS 2 bridge links mech-agent"
+    );
+    assert!(!links(&["-p", "mech-station", "--no-default-features"]));
+}

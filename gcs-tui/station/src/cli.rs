@@ -152,8 +152,10 @@ pub async fn run_script_in_process(
     }
     let mut executor = Executor::new(gcs.clone())
         .with_clusters(&config.cluster)
-        .with_spawner(crate::sim::simulator())
         .with_source("script");
+    if let Some(simulator) = crate::simulator() {
+        executor = executor.with_spawner(simulator);
+    }
     if let Some(dir) = config.record_dir() {
         executor = executor.with_record_dir(dir);
     }

@@ -57,12 +57,7 @@ impl Launched {
                 return Err(e);
             }
         };
-        let station = Station::start(
-            gcs,
-            &config.cluster,
-            Some(crate::sim::simulator()),
-            &config.station,
-        );
+        let station = Station::start(gcs, &config.cluster, crate::simulator(), &config.station);
         station.set_record_dir(config.record_dir());
         Ok(Launched {
             station,

@@ -45,6 +45,7 @@ pub mod replay;
 pub mod serve;
 mod server;
 mod session;
+#[cfg(feature = "sim")]
 pub mod sim;
 pub mod view;
 pub mod wire;
@@ -55,3 +56,26 @@ pub use launch::{Launched, Recording};
 pub use listen::{ListenError, bind_tcp, bind_unix};
 pub use operator::{check_operator, login_name};
 pub use server::{Station, StationConfig, Via, default_socket};
+
+/// The simulator `spawn` and `--demo` use, in a build with one (feature
+/// `sim`); `None` otherwise, and those commands then say so.
+pub fn simulator() -> Option<Box<dyn mech_control::lang::SimSpawner>> {
+    #[cfg(feature = "sim")]
+    return Some(sim::simulator());
+    #[cfg(not(feature = "sim"))]
+    None
+}
+
+/// The arena the demo's simulated fleet is spread over (the 2017 lab's
+/// Pozyx area, `mech_core::ArenaConfig::demo`), for the map outline.
+pub fn demo_arena() -> view::ArenaBounds {
+    let shape = mech_core::ArenaConfig::demo().shape();
+    let xs = shape.boundary.iter().map(|p| p.x);
+    let ys = shape.boundary.iter().map(|p| p.y);
+    view::ArenaBounds {
+        min_x: xs.clone().fold(f64::INFINITY, f64::min),
+        min_y: ys.clone().fold(f64::INFINITY, f64::min),
+        max_x: xs.fold(f64::NEG_INFINITY, f64::max),
+        max_y: ys.fold(f64::NEG_INFINITY, f64::max),
+    }
+}

@@ -142,7 +142,7 @@ pub async fn spawn_demo(station: &Station, n: usize) -> anyhow::Result<()> {
     exec.execute_line(&format!("spawn {n}"))
         .await
         .map_err(|e| anyhow::anyhow!("--demo {n}: {}", e.message))?;
-    station.set_arena(Some(crate::sim::demo_arena()));
+    station.set_arena(Some(crate::demo_arena()));
     Ok(())
 }
 

@@ -110,18 +110,6 @@ pub fn shape(a: &mech_agent::sim::Arena) -> ArenaShape {
     }
 }
 
-/// The arena the demo's simulated fleet is spread over (the agent
-/// simulator's default, the 2017 lab's Pozyx area), for the map outline.
-pub fn demo_arena() -> crate::view::ArenaBounds {
-    let a = mech_agent::sim::Arena::default();
-    crate::view::ArenaBounds {
-        min_x: a.min_x,
-        min_y: a.min_y,
-        max_x: a.max_x,
-        max_y: a.max_y,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,5 +118,11 @@ mod tests {
     fn the_simulators_arena_is_the_demo_arena() {
         let demo = mech_core::ArenaConfig::demo().shape();
         assert_eq!(shape(&mech_agent::sim::Arena::default()), demo);
+        let a = mech_agent::sim::Arena::default();
+        let bounds = crate::demo_arena();
+        assert_eq!(
+            (bounds.min_x, bounds.min_y, bounds.max_x, bounds.max_y),
+            (a.min_x, a.min_y, a.max_x, a.max_y)
+        );
     }
 }

@@ -279,7 +279,7 @@ async fn run_tui(config: ConfigFile, teleop: TeleopConfig, cli: &Cli) -> anyhow:
     }
     if let Some(n) = cli.station.demo {
         options.startup.push(format!("spawn {n}"));
-        options.arena = Some(mech_station::sim::demo_arena());
+        options.arena = Some(mech_station::demo_arena());
     }
     let recording = cli
         .station
