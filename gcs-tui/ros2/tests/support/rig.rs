@@ -3,7 +3,9 @@
 //! (`mech-gcs serve --demo N`), the bridge (`mech-ros2`) and a ROS 2 node
 //! made of Cyclone DDS's Python binding (`ros2_node.py`), each a process
 //! in the namespace. Every part is a guard: processes are killed and the
-//! namespace deleted when the test ends, however it ends.
+//! namespace deleted when the test ends, however it ends. The parts
+//! (namespace, station, Python nodes, polling) are public for other rigs
+//! (`base_rig.rs`: the agent's ROS 2 base).
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
@@ -19,7 +21,7 @@ pub const WAIT: Duration = Duration::from_secs(30);
 
 /// The router's UDP port inside the namespace (outside DDS domain 0's
 /// 7400-7649).
-const ROUTER: &str = "127.0.0.1:17400";
+pub const ROUTER: &str = "127.0.0.1:17400";
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 const PREFIX: &str = "mechros-";
@@ -212,58 +214,17 @@ impl Rig {
         let ns = Netns::create();
         let dir = tempfile::tempdir().expect("temp dir");
         keygen(dir.path(), keys);
-        let socket = dir.path().join("gcs.sock");
-        let log = |name: &str| std::fs::File::create(dir.path().join(name)).expect("log file");
-        let mut station = ns.command(binary("mech-gcs"));
-        station.args(["serve", "--demo", &robots.to_string(), "--udp", ROUTER]);
-        if let Some(toml) = station_toml {
-            let path = dir.path().join("gcs.toml");
-            std::fs::write(&path, toml).expect("station config");
-            station.arg("--config").arg(path);
-        }
-        station
-            .args(["--tcp", "127.0.0.1:17401", "--socket"])
-            .arg(&socket)
-            .env("XDG_STATE_HOME", dir.path())
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(log("station.log"));
-        let mut station = Proc(station.spawn().expect("mech-gcs serve starts"));
-        let out = station.0.stdout.take().expect("stdout");
-        let mut lines = BufReader::new(out).lines();
-        loop {
-            match lines.next() {
-                Some(Ok(l)) if l.contains("mech-gcs serving") => break,
-                Some(Ok(_)) => continue,
-                _ => panic!("the station did not start: see {}", dir.path().display()),
-            }
-        }
-        std::thread::spawn(move || for _ in lines {});
+        let station = start_station(&ns, dir.path(), robots, station_toml);
         let mut bridge = ns.command(binary("mech-ros2"));
         let dir_text = dir.path().display().to_string();
         bridge
             .args(["--router", ROUTER, "--summary-every", "1"])
             .args(bridge_args.iter().map(|a| a.replace("@DIR@", &dir_text)))
             .stdin(Stdio::null())
-            .stdout(log("bridge.out"))
-            .stderr(log("bridge.log"));
+            .stdout(log_file(dir.path(), "bridge.out"))
+            .stderr(log_file(dir.path(), "bridge.log"));
         let bridge = Proc(bridge.spawn().expect("mech-ros2 starts"));
-        let cyclone = dir.path().join("cyclonedds.xml");
-        std::fs::write(
-            &cyclone,
-            "<CycloneDDS><Domain id=\"any\"><General><Interfaces>\
-             <NetworkInterface name=\"lo\" multicast=\"true\"/></Interfaces>\
-             <AllowMulticast>true</AllowMulticast></General></Domain></CycloneDDS>\n",
-        )
-        .expect("cyclone config");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros2_node.py");
-        let mut node = ns.command("python3");
-        node.arg(script)
-            .env("CYCLONEDDS_URI", format!("file://{}", cyclone.display()))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(log("node.log"));
-        let mut node = Node::start(node);
+        let mut node = Node::python(&ns, dir.path(), "ros2_node.py", &[], "node.log");
         let names: Vec<String> = (1..=robots).map(|i| format!("robot_{i}")).collect();
         node.ask(serde_json::json!({"op": "watch", "robots": names, "stamped": stamped}));
         Rig {
@@ -315,17 +276,57 @@ impl Rig {
 
     /// The bridge's log, for failure messages.
     pub fn logs(&self) -> String {
-        let read = |n: &str| std::fs::read_to_string(self.dir.path().join(n)).unwrap_or_default();
-        let tail = |s: String| {
-            let lines: Vec<&str> = s.lines().collect();
-            lines[lines.len().saturating_sub(30)..].join("\n")
-        };
         format!(
             "--- bridge.log\n{}\n--- node.log\n{}",
-            tail(read("bridge.log")),
-            tail(read("node.log"))
+            tail(self.dir.path(), "bridge.log", 30),
+            tail(self.dir.path(), "node.log", 30)
         )
     }
+}
+
+/// A log file `name` in `dir`, for a process's output.
+pub fn log_file(dir: &Path, name: &str) -> std::fs::File {
+    std::fs::File::create(dir.join(name)).expect("log file")
+}
+
+/// The last `lines` lines of the log `name` in `dir`, for failure
+/// messages.
+pub fn tail(dir: &Path, name: &str, lines: usize) -> String {
+    let text = std::fs::read_to_string(dir.join(name)).unwrap_or_default();
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n")
+}
+
+/// Starts the station in `ns` (`mech-gcs serve --demo ROBOTS`, router on
+/// [`ROUTER`], control socket `gcs.sock` in `dir`, its log `station.log`),
+/// configured by `station_toml` if given; returns once it serves.
+pub fn start_station(ns: &Netns, dir: &Path, robots: usize, station_toml: Option<&str>) -> Proc {
+    let mut station = ns.command(binary("mech-gcs"));
+    station.args(["serve", "--demo", &robots.to_string(), "--udp", ROUTER]);
+    if let Some(toml) = station_toml {
+        let path = dir.join("gcs.toml");
+        std::fs::write(&path, toml).expect("station config");
+        station.arg("--config").arg(path);
+    }
+    station
+        .args(["--tcp", "127.0.0.1:17401", "--socket"])
+        .arg(dir.join("gcs.sock"))
+        .env("XDG_STATE_HOME", dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(log_file(dir, "station.log"));
+    let mut station = Proc(station.spawn().expect("mech-gcs serve starts"));
+    let out = station.0.stdout.take().expect("stdout");
+    let mut lines = BufReader::new(out).lines();
+    loop {
+        match lines.next() {
+            Some(Ok(l)) if l.contains("mech-gcs serving") => break,
+            Some(Ok(_)) => continue,
+            _ => panic!("the station did not start: see {}", dir.display()),
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    station
 }
 
 /// The ROS 2 node: one JSON command in, one JSON answer out.
@@ -337,6 +338,28 @@ pub struct Node {
 }
 
 impl Node {
+    /// Runs the Python node `script` (in this directory) with `args` in
+    /// `ns`, Cyclone DDS on `lo` only (its configuration written to
+    /// `dir`), its standard error into `log` in `dir`.
+    pub fn python(ns: &Netns, dir: &Path, script: &str, args: &[String], log: &str) -> Node {
+        let cyclone = dir.join("cyclonedds.xml");
+        std::fs::write(
+            &cyclone,
+            "<CycloneDDS><Domain id=\"any\"><General><Interfaces>\
+             <NetworkInterface name=\"lo\" multicast=\"true\"/></Interfaces>\
+             <AllowMulticast>true</AllowMulticast></General></Domain></CycloneDDS>\n",
+        )
+        .expect("cyclone config");
+        let mut node = ns.command("python3");
+        node.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests").join(script))
+            .args(args)
+            .env("CYCLONEDDS_URI", format!("file://{}", cyclone.display()))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(log_file(dir, log));
+        Node::start(node)
+    }
+
     fn start(mut command: Command) -> Node {
         let mut proc = Proc(command.spawn().expect("python3 runs the node"));
         let stdin = proc.0.stdin.take().expect("stdin");
@@ -379,20 +402,32 @@ impl Node {
     }
 }
 
-/// Polls `check` on the node's state until it returns Some, or panics
-/// with `what` and the logs after [`WAIT`].
-pub fn eventually<T>(rig: &mut Rig, what: &str, mut check: impl FnMut(&Value) -> Option<T>) -> T {
-    let deadline = Instant::now() + WAIT;
-    let mut last = Value::Null;
-    while Instant::now() < deadline {
-        last = rig.node.state();
-        if let Some(t) = check(&last) {
-            return t;
+/// Polls `f` every 50 ms until it returns Some, or None after `timeout`.
+pub fn poll<T>(timeout: Duration, mut f: impl FnMut() -> Option<T>) -> Option<T> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(t) = f() {
+            return Some(t);
+        }
+        if Instant::now() >= deadline {
+            return None;
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    panic!(
-        "{what}: not within {WAIT:?}\nlast state: {last:#}\n{}",
-        rig.logs()
-    );
+}
+
+/// Polls `check` on the node's state until it returns Some, or panics
+/// with `what` and the logs after [`WAIT`].
+pub fn eventually<T>(rig: &mut Rig, what: &str, mut check: impl FnMut(&Value) -> Option<T>) -> T {
+    let mut last = Value::Null;
+    poll(WAIT, || {
+        last = rig.node.state();
+        check(&last)
+    })
+    .unwrap_or_else(|| {
+        panic!(
+            "{what}: not within {WAIT:?}\nlast state: {last:#}\n{}",
+            rig.logs()
+        )
+    })
 }
