@@ -131,7 +131,10 @@ fn registers_obeys_nobody_until_routed_and_drives_a_mission_to_arrival() {
     let t0 = now();
 
     let robot = rig.robot();
-    assert_eq!(robot["route"]["channel"], "", "routed to none at first: {robot}");
+    assert_eq!(
+        robot["route"]["channel"], "",
+        "routed to none at first: {robot}"
+    );
     reported_pose_is_origin_composed_with_odometry(&mut rig);
     rig.eventually("the base's battery (80 %) in telemetry", |r| {
         let b = num(&r.robot()["battery"]);
@@ -175,14 +178,10 @@ fn registers_obeys_nobody_until_routed_and_drives_a_mission_to_arrival() {
         .run(&format!("waypoint {NAME} 0.8,1.5 {},{}", goal.0, goal.1));
     rig.op.run(&format!("send {NAME}"));
     route(&mut rig, "wp/gcs");
-    let arrived = rig.eventually_within(
-        WAIT_MISSION,
-        "the mission finished",
-        |r| {
-            let m = &r.robot()["mission"];
-            (m["total"].as_u64() == Some(2) && m["next"] == m["total"]).then(now)
-        },
-    );
+    let arrived = rig.eventually_within(WAIT_MISSION, "the mission finished", |r| {
+        let m = &r.robot()["mission"];
+        (m["total"].as_u64() == Some(2) && m["next"] == m["total"]).then(now)
+    });
     // Standing still, then measured on the truth.
     until_held(&mut rig, arrived, "the base stopped at the goal");
     let truth = rig.truth();
@@ -230,7 +229,7 @@ fn an_estop_and_the_stations_loss_bring_its_cmd_vel_to_zero() {
     rig.kill_station();
     let zero = until_held(&mut rig, t, "the base stopped after the station's loss");
     eprintln!(
-        "figure: ros2 base station killed -> zero cmd_vel at the base {:.3} s (router_timeout 1 s)",
+        "figure: ros2 base station killed -> zero cmd_vel at the base {:.3} s (channel_timeout 0.5 s, router_timeout 1 s)",
         zero - t
     );
     // Held: zeros keep coming while the station is gone.
@@ -300,14 +299,21 @@ fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
     // robot_1 (diff-drive) at (1.17, 1.4) and robot_2 (kiwi) at (2.73,
     // 1.4) swap places while the base crosses their path from the bottom
     // edge to the top, all through the centre.
+    // They start once the base is 0.4 m from the centre, so that the
+    // three meet there (the simulated robots are faster).
     let mut rig = BaseRig::start(Setup::new(2, Pose2::new(1.95, 0.45, FRAC_PI_2)));
     let t0 = now();
     rig.op.run("waypoint robot_1 2.73,1.4");
     rig.op.run("waypoint robot_2 1.17,1.4");
     rig.op.run(&format!("waypoint {NAME} 1.95,2.35"));
-    rig.op.run(&format!("cluster crossing robot_1 robot_2 {NAME}"));
-    rig.op.run("send crossing");
-    rig.op.run("route crossing wp/gcs");
+    rig.op.run("cluster pair robot_1 robot_2");
+    rig.op.run("send pair");
+    rig.op.run(&format!("send {NAME}"));
+    route(&mut rig, "wp/gcs");
+    rig.eventually("the base near the centre", |r| {
+        (r.truth().y > 1.0).then_some(())
+    });
+    rig.op.run("route pair wp/gcs");
     let finished = |r: &serde_json::Value| {
         let m = &r["mission"];
         m["total"].as_u64() == Some(1) && m["next"] == m["total"]
@@ -333,7 +339,9 @@ fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
     let mut demo_gap = f64::INFINITY;
     let mut demo_dist = f64::INFINITY;
     for (t, fleet) in &snaps {
-        let Some(truth) = at(&track, *t) else { continue };
+        let Some(truth) = at(&track, *t) else {
+            continue;
+        };
         let robots = fleet["robots"].as_array().unwrap();
         let demo: Vec<_> = robots
             .iter()
@@ -356,8 +364,16 @@ fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
     eprintln!(
         "figure: ros2 base among 2 simulated robots: min centre distance to robot_1 {:.3} m, \
          robot_2 {:.3} m, robot_1-robot_2 {:.3} m; min gap between discs {:.3} m, {:.3} m, {:.3} m \
-         (margin {MARGIN} m); all arrived: {arrived}, base ends at ({:.2}, {:.2})",
-        base_dist[0], base_dist[1], demo_dist, base_gap[0], base_gap[1], demo_gap, end.x, end.y
+         (margin {MARGIN} m) over {} snapshots; all arrived: {arrived}, base ends at ({:.2}, {:.2})",
+        base_dist[0],
+        base_dist[1],
+        demo_dist,
+        base_gap[0],
+        base_gap[1],
+        demo_gap,
+        snaps.len(),
+        end.x,
+        end.y
     );
     assert!(snaps.len() > 100, "{} snapshots", snaps.len());
     // The paths crossed: the base went through the centre line.
@@ -384,38 +400,64 @@ fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
 
 /// A controller drives the base on a small circle (0.2 m radius) at
 /// (0.8, 0.8), well away from robot_1 at the arena's centre.
-fn circling(ros2: &str) -> (BaseRig, Pad) {
-    let mut setup = Setup::new(1, Pose2::new(0.8, 0.6, 0.0));
-    setup.ros2 = ros2.to_string();
+fn circling(setup: Setup) -> (BaseRig, Pad) {
     let mut rig = BaseRig::start(setup);
     route(&mut rig, PAD);
     let pad = Pad::start(&rig.op, PAD, NAME, 0.12, 0.6);
-    rig.eventually("the base circling", |r| {
-        let s = r.state();
-        (num(&s["v"]) > 0.1 && num(&s["w"]) > 0.5).then_some(())
-    });
+    until_circling(&mut rig, "the base circling");
     (rig, pad)
 }
 
+fn until_circling(rig: &mut BaseRig, what: &str) {
+    rig.eventually(what, |r| {
+        let s = r.state();
+        (num(&s["v"]) > 0.1 && num(&s["w"]) > 0.5).then_some(())
+    });
+}
+
+/// Waits until the robot reports its outputs held for a fault.
+fn until_fault(rig: &mut BaseRig, what: &str) {
+    rig.eventually(what, |r| {
+        (r.robot()["failsafe"].as_u64() == Some(FAULT)).then_some(())
+    });
+}
+
+/// The failsafe state of a robot whose outputs are held because its
+/// vehicle cannot be driven (`FailsafeState` 4).
+const FAULT: u64 = 4;
+
+/// The count a refusal notice gives (`... (N refused)`).
+fn refused_count(notice: &serde_json::Value) -> Option<u64> {
+    let text = notice["text"].as_str()?;
+    let open = text.rfind('(')?;
+    text[open + 1..].strip_suffix(" refused)")?.parse().ok()
+}
+
 #[test]
-fn nan_odometry_is_refused_told_and_never_the_pose() {
+fn nan_odometry_is_refused_counted_told_and_never_the_pose() {
     if base_rig::skip_unless_available() {
         return;
     }
-    let (mut rig, _pad) = circling("");
+    let (mut rig, pad) = circling(Setup::new(1, Pose2::new(0.8, 0.6, 0.0)));
     let t = now();
     rig.base.ask(json!({"op": "nan", "on": true, "field": "x"}));
-    let (_, notice) = rig.eventually("the station told of NaN odometry", |r| {
-        r.op
-            .heard(t, &[NAME, "odometry", "nan"])
-            .or_else(|| r.op.heard(t, &[NAME, "odometry", "finite"]))
+    let (first, notice) = rig.eventually("the station told of NaN odometry", |r| {
+        r.op.heard(t, &[NAME, "odometry", "/tb3_1/odom", "refused"])
     });
-    eprintln!("figure: ros2 base NaN odometry notice: {notice}");
-    // With no usable odometry the base is held at zero.
+    // With no usable odometry the base is held at zero, as a fault.
     let zero = until_held(&mut rig, t, "the base held on NaN odometry");
+    until_fault(&mut rig, "the robot reports the hold as a fault");
+    // Refusals are told again (at most every 5 s), counted.
+    let (_, again) = rig.eventually_within(WAIT_MISSION, "the refusals told again, counted", |r| {
+        r.op.heard_all(first, &[NAME, "odometry", "/tb3_1/odom", "refused"])
+            .into_iter()
+            .find(|(_, m)| refused_count(m) > Some(1))
+    });
     eprintln!(
-        "figure: ros2 base NaN odometry -> zero cmd_vel {:.3} s",
-        zero - t
+        "figure: ros2 base NaN odometry -> zero cmd_vel {:.3} s; notices: {} | {}",
+        zero - t,
+        notice["text"],
+        again["text"]
     );
     let snaps = rig.op.snapshots_since(t);
     let nan_pose = snaps.iter().find_map(|(_, f)| {
@@ -424,42 +466,76 @@ fn nan_odometry_is_refused_told_and_never_the_pose() {
         (!(p.x.is_finite() && p.y.is_finite() && p.heading.is_finite())).then(|| r.clone())
     });
     assert!(nan_pose.is_none(), "a NaN became the pose: {nan_pose:?}");
+    // A NaN orientation and a NaN speed are refused alike.
+    for field in ["yaw", "vx"] {
+        rig.base
+            .ask(json!({"op": "nan", "on": true, "field": field}));
+        std::thread::sleep(Duration::from_secs(1));
+        let s = rig.state();
+        assert_eq!(num(&s["v"]), 0.0, "NaN {field}: the base moves: {s}");
+    }
 
-    // Good odometry again: it is obeyed again, and the pose follows it.
+    // Good odometry again: it is obeyed again, and the pose follows it
+    // (compared once the controller is gone and the base stands).
     rig.base.ask(json!({"op": "nan", "on": false}));
-    rig.eventually("the base circling again on good odometry", |r| {
-        let s = r.state();
-        (num(&s["v"]) > 0.1).then_some(())
-    });
+    until_circling(&mut rig, "the base circling again on good odometry");
+    drop(pad);
+    reported_pose_is_origin_composed_with_odometry(&mut rig);
 }
 
 #[test]
-fn odometry_gone_silent_holds_the_base_and_tells_the_station() {
+fn odometry_gone_silent_holds_the_base_and_its_mission_goes_on_after() {
     if base_rig::skip_unless_available() {
         return;
     }
-    let (mut rig, _pad) = circling("");
+    let mut rig = BaseRig::start(Setup::new(1, Pose2::new(0.6, 0.5, FRAC_PI_2)));
+    let goal = (0.6, 1.9);
+    rig.op
+        .run(&format!("waypoint {NAME} {},{}", goal.0, goal.1));
+    rig.op.run(&format!("send {NAME}"));
+    route(&mut rig, "wp/gcs");
+    until_driving(&mut rig, "the base driving its mission");
+
     let t = now();
     rig.base.ask(json!({"op": "silence", "on": true}));
     let zero = until_held(&mut rig, t, "the base held without odometry");
     let (heard, notice) = rig.eventually("the station told of no odometry", |r| {
-        r.op.heard(t, &[NAME, "no odometry", "/tb3_1/odom"])
+        r.op.heard(t, &[NAME, "no odometry", "/tb3_1/odom", "ROS_DOMAIN_ID"])
     });
+    until_fault(&mut rig, "the robot reports the hold as a fault");
     eprintln!(
-        "figure: ros2 base odometry silent -> zero cmd_vel {:.3} s, notice after {:.3} s (odom_timeout 2 s): {notice}",
+        "figure: ros2 base odometry silent -> zero cmd_vel {:.3} s, notice after {:.3} s (odom_timeout 2 s): {}",
         zero - t,
-        heard - t
+        heard - t,
+        notice["text"]
     );
     assert!(
         zero - t > 1.0,
         "held before the odometry timed out ({:.3} s)",
         zero - t
     );
+    let held_at = rig.truth();
+
+    // Odometry back: the mission goes on from where the base stood.
+    let t = now();
     rig.base.ask(json!({"op": "silence", "on": false}));
-    rig.eventually("the base circling again once odometry is back", |r| {
-        let s = r.state();
-        (num(&s["v"]) > 0.1).then_some(())
+    rig.eventually("the station told the odometry is back", |r| {
+        r.op.heard(t, &[NAME, "odometry", "/tb3_1/odom", "again"])
     });
+    rig.eventually_within(WAIT_MISSION, "the mission finished after the hold", |r| {
+        let m = &r.robot()["mission"];
+        (m["total"].as_u64() == Some(1) && m["next"] == m["total"]).then_some(())
+    });
+    let end = rig.truth();
+    let error = end.distance(goal.0, goal.1);
+    eprintln!(
+        "figure: ros2 base mission after an odometry hold at y = {:.3}: arrival error {error:.3} m",
+        held_at.y
+    );
+    assert!(
+        error <= ARRIVAL_RADIUS + 0.02 && held_at.distance(goal.0, goal.1) > 0.3,
+        "held at {held_at:?}, ended at {end:?}"
+    );
 }
 
 #[test]
@@ -467,35 +543,58 @@ fn a_second_writer_on_its_cmd_vel_holds_the_base_and_tells_the_station() {
     if base_rig::skip_unless_available() {
         return;
     }
-    let (mut rig, _pad) = circling("");
+    let (mut rig, _pad) = circling(Setup::new(1, Pose2::new(0.8, 0.6, 0.0)));
     let t = now();
     rig.base.ask(json!({"op": "intruder", "vx": 0.1}));
     let (heard, notice) = rig.eventually("the station told of a second cmd_vel writer", |r| {
-        r.op.heard(t, &[NAME, "/tb3_1/cmd_vel"])
-            .filter(|(_, m)| m.to_string().to_lowercase().contains("publisher")
-                || m.to_string().to_lowercase().contains("writer"))
+        r.op.heard(t, &[NAME, "/tb3_1/cmd_vel", "another"])
     });
-    let zero = rig.eventually("the agent's cmd_vel at zero while the other is heard", |r| {
-        zero_from(&r.cmds(t), t)
-    });
+    let zero = rig.eventually(
+        "the agent's cmd_vel at zero while the other is heard",
+        |r| zero_from(&r.cmds(t), t),
+    );
+    until_fault(&mut rig, "the robot reports the hold as a fault");
     eprintln!(
-        "figure: ros2 base second cmd_vel writer -> notice {:.3} s, agent's cmd_vel zero {:.3} s: {notice}",
+        "figure: ros2 base second cmd_vel writer -> notice {:.3} s, agent's cmd_vel zero {:.3} s: {}",
         heard - t,
-        zero - t
+        zero - t,
+        notice["text"]
     );
     let s = rig.state();
     assert!(s["cmd_writers"].as_u64() >= Some(2), "{s}");
-    // Still zero a second later, the intruder still writing.
+    // Still zero a second later, the other writer still at it.
     std::thread::sleep(Duration::from_secs(1));
     let mine = agents(&rig.cmds(now() - 1.0));
     assert!(
         mine.len() >= 5 && mine.iter().all(is_zero),
         "the agent's cmd_vel while another writes: {mine:?}"
     );
+    let t = now();
     rig.base.ask(json!({"op": "intruder_stop"}));
-    rig.eventually("the base circling again once the other writer left", |r| {
-        let s = r.state();
-        let mine = agents(&r.cmds(now() - 0.5));
-        (num(&s["v"]) > 0.1 && mine.iter().any(|c| !is_zero(c))).then_some(())
+    rig.eventually("the station told the other writer left", |r| {
+        r.op.heard(t, &[NAME, "no other writer", "/tb3_1/cmd_vel"])
     });
+    rig.eventually("the base circling again once the other writer left", |r| {
+        let mine = agents(&r.cmds(now() - 0.5));
+        mine.iter().any(|c| !is_zero(c)).then_some(())
+    });
+    until_circling(&mut rig, "the base circling again");
+}
+
+#[test]
+fn twist_stamped_and_best_effort_odometry_drive_it_too() {
+    if base_rig::skip_unless_available() {
+        return;
+    }
+    // A TurtleBot 4 on Jazzy: TwistStamped, odometry best effort.
+    let mut setup = Setup::new(1, Pose2::new(0.8, 0.6, 0.0));
+    setup.ros2 = "cmd_vel_type = \"twist-stamped\"\nodom_qos = \"best-effort\"".into();
+    setup.base_args = ["--stamped", "--odom-qos", "best-effort"]
+        .map(String::from)
+        .to_vec();
+    let (mut rig, pad) = circling(setup);
+    let s = rig.state();
+    assert_eq!(s["cmd"]["frame"], "base_link", "{s}");
+    drop(pad);
+    reported_pose_is_origin_composed_with_odometry(&mut rig);
 }

@@ -71,7 +71,9 @@ impl Operator {
         op.send(&json!({"type": "hello", "protocol": 1, "operator": "test",
             "stream": {"snapshots": true, "events": true, "log": true}}));
         let mut line = String::new();
-        reader.read_line(&mut line).expect("the station answers hello");
+        reader
+            .read_line(&mut line)
+            .expect("the station answers hello");
         let welcome: Value = serde_json::from_str(&line).expect("JSON");
         assert_eq!(welcome["type"], "welcome", "{welcome}");
         let heard = op.heard.clone();
@@ -139,8 +141,10 @@ impl Operator {
 
     /// Publishes a body-frame twist on `channel` for `robot`, once.
     pub fn twist(&self, channel: &str, robot: &str, vx: f64, wz: f64) {
-        self.send(&json!({"type": "publish", "channel": channel, "robots": [robot],
-            "command": [4, {"vx": vx, "vy": 0.0, "vz": 0.0, "wz": wz}]}));
+        self.send(
+            &json!({"type": "publish", "channel": channel, "robots": [robot],
+            "command": [4, {"vx": vx, "vy": 0.0, "vz": 0.0, "wz": wz}]}),
+        );
     }
 
     /// The newest snapshot's robot `name`, with its arrival time.
@@ -174,12 +178,18 @@ impl Operator {
             .collect()
     }
 
-    /// The first event or log line after `since` whose text (any of its
+    /// The events and log lines after `since` whose text (any of their
     /// string fields) has every word of `words`, ignoring case.
-    pub fn heard(&self, since: f64, words: &[&str]) -> Option<(f64, Value)> {
+    pub fn heard_all(&self, since: f64, words: &[&str]) -> Vec<(f64, Value)> {
         self.events_since(since)
             .into_iter()
-            .find(|(_, m)| texts(m).iter().any(|t| has_all(t, words)))
+            .filter(|(_, m)| texts(m).iter().any(|t| has_all(t, words)))
+            .collect()
+    }
+
+    /// The first of [`Operator::heard_all`].
+    pub fn heard(&self, since: f64, words: &[&str]) -> Option<(f64, Value)> {
+        self.heard_all(since, words).into_iter().next()
     }
 
     /// The last events and log lines, for failure messages.

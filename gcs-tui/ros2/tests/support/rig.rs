@@ -351,12 +351,16 @@ impl Node {
         )
         .expect("cyclone config");
         let mut node = ns.command("python3");
-        node.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests").join(script))
-            .args(args)
-            .env("CYCLONEDDS_URI", format!("file://{}", cyclone.display()))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(log_file(dir, log));
+        node.arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests")
+                .join(script),
+        )
+        .args(args)
+        .env("CYCLONEDDS_URI", format!("file://{}", cyclone.display()))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(log_file(dir, log));
         Node::start(node)
     }
 
