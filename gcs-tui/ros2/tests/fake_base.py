@@ -12,7 +12,9 @@ and battery, under ROS 2's topic and type names (`ros2_types.py`).
 - publishes nav_msgs/Odometry on `<ns>/odom` at `--odom-hz` (frame
   `odom`, child `base_link`, pose in `odom`, twist in the body frame),
   reliable or best effort (`--odom-qos`), and sensor_msgs/BatteryState on
-  `<ns>/battery_state` once a second.
+  `<ns>/battery_state` once a second;
+- with `--map X,Y,YAW`, publishes `map` -> `odom` (where a localiser such
+  as AMCL puts the odometry's frame in the map) on `/tf` 10 times a second.
 
 Its true pose is what the tests measure against. One JSON command per line
 on stdin, one JSON answer per line on stdout (the first line says it is
@@ -49,8 +51,8 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ros2_types import (BatteryState, Header, Odometry, Point, Pose, PoseWithCovariance,
-                        Quaternion, Twist, TwistStamped, TwistWithCovariance, Vector3, now_stamp,
-                        plain)
+                        Quaternion, TFMessage, Transform, TransformStamped, Twist, TwistStamped,
+                        TwistWithCovariance, Vector3, now_stamp, plain)
 
 NAN = float("nan")
 PHYSICS_HZ = 100.0
@@ -85,6 +87,7 @@ def arguments():
     p.add_argument("--x", type=float, default=0.0, help="start pose in the odom frame, m")
     p.add_argument("--y", type=float, default=0.0)
     p.add_argument("--yaw", type=float, default=0.0, help="rad")
+    p.add_argument("--map", default="", help="X,Y,YAW: map -> odom on /tf")
     return p.parse_args()
 
 
@@ -116,6 +119,16 @@ class Base:
         self.battery_writer = DataWriter(
             self.dp, Topic(self.dp, topic_name(args.namespace, "battery_state"), BatteryState),
             qos=qos("reliable"))
+        self.map = [float(v) for v in args.map.split(",")] if args.map else None
+        self.tf_writer = DataWriter(self.dp, Topic(self.dp, "rt/tf", TFMessage),
+                                    qos=qos("reliable")) if self.map else None
+
+    def map_to_odom(self):
+        x, y, yaw = self.map
+        return TFMessage(transforms=[TransformStamped(
+            header=Header(stamp=now_stamp(), frame_id="map"), child_frame_id="odom",
+            transform=Transform(translation=Vector3(x=x, y=y),
+                                rotation=Quaternion(z=math.sin(yaw / 2), w=math.cos(yaw / 2))))])
 
     def receive(self, now):
         for s in self.cmd_reader.take(N=64):
@@ -181,11 +194,12 @@ class Base:
                             power_supply_status=2)  # discharging
 
     def run(self):
-        """Physics at PHYSICS_HZ, odometry at the asked rate, battery at 1 Hz."""
+        """Physics at PHYSICS_HZ, odometry at the asked rate, map -> odom at
+        10 Hz, battery at 1 Hz."""
         period = 1.0 / PHYSICS_HZ
         odom_every = 1.0 / self.args.odom_hz
         last = time.time()
-        next_odom = next_battery = last
+        next_odom = next_battery = next_tf = last
         while True:
             now = time.time()
             with self.lock:
@@ -201,6 +215,9 @@ class Base:
                 if now >= next_battery:
                     next_battery += 1.0
                     self.battery_writer.write(self.battery())
+                if self.tf_writer is not None and now >= next_tf:
+                    next_tf += 0.1
+                    self.tf_writer.write(self.map_to_odom())
             time.sleep(max(0.0, period - (time.time() - now)))
 
     def start_intruder(self, vx, wz):

@@ -73,8 +73,12 @@ pub fn wrap(a: f64) -> f64 {
 pub struct Setup {
     /// Simulated robots of the station (`--demo N`).
     pub demo: usize,
-    /// `[ros2.origin]`: the arena pose of the odometry frame's origin.
+    /// `[ros2.origin]`: the arena pose of the odometry frame's origin
+    /// (of the map's, with `map`).
     pub origin: Pose2,
+    /// `map` -> `odom` the base publishes on `/tf` (the agent's
+    /// `map_frame = "map"` is then set).
+    pub map: Option<Pose2>,
     /// Where the base starts, in arena coordinates (the fake is told it
     /// in its odometry frame).
     pub start: Pose2,
@@ -89,10 +93,19 @@ impl Setup {
         Setup {
             demo,
             origin: Pose2::new(0.0, 0.0, 0.0),
+            map: None,
             start,
             ros2: String::new(),
             base_args: Vec::new(),
         }
+    }
+}
+
+impl Setup {
+    /// The arena pose of the odometry frame's origin: the origin, composed
+    /// with `map` -> `odom` if there is one.
+    pub fn odom_frame(&self) -> Pose2 {
+        self.map.map_or(self.origin, |m| self.origin.compose(m))
     }
 }
 
@@ -102,20 +115,24 @@ pub fn agent_config(setup: &Setup) -> String {
     format!(
         "name = \"{NAME}\"\ncontrol_rate_hz = 20\ntelemetry_rate_hz = 10\n\
          [platform]\nkind = \"diff-drive\"\ntrack_width = 0.16\nmax_wheel_speed = {MAX_SPEED}\n\
-         [ros2]\nnamespace = \"/{NAME}\"\nodom_timeout = 2.0\n{}\n\
+         [ros2]\nnamespace = \"/{NAME}\"\nodom_timeout = 2.0\nmap_frame = \"{}\"\n{}\n\
          [ros2.origin]\nx = {}\ny = {}\nheading = {}\n\
          [link]\nkind = \"udp\"\nrouter = \"{ROUTER}\"\n\
          [failsafe]\nchannel_timeout = 0.5\nrouter_timeout = 1.0\n\
          [safety]\nradius = {RADIUS}\n",
-        setup.ros2, o.x, o.y, o.heading
+        if setup.map.is_some() { "map" } else { "" },
+        setup.ros2,
+        o.x,
+        o.y,
+        o.heading
     )
 }
 
 /// Why this machine cannot run the base tests, if it cannot: what the
 /// DDS rig needs, and a `mech-agent` built with ROS 2 (its feature
-/// `ros2`). A build without it refuses a `[ros2]` config at once, saying
-/// so; one with it runs (here in a namespace of its own, with no station
-/// and no base) until killed. Asked once per test run.
+/// `ros2`): `mech-agent --check` joins the base's DDS domain (here in a
+/// namespace of its own), or says the build has no ROS 2 support. Asked
+/// once per test run.
 pub fn unavailable() -> Option<String> {
     static WHY: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
     WHY.get_or_init(ask_unavailable).clone()
@@ -133,16 +150,15 @@ fn ask_unavailable() -> Option<String> {
         agent_config(&Setup::new(0, Pose2::new(0.0, 0.0, 0.0))),
     )
     .expect("agent config");
-    let agent = ns
+    let out = ns
         .command(binary("mech-agent"))
         .arg("--config")
         .arg(&config)
+        .arg("--check")
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(log_file(dir.path(), "agent.log"))
-        .spawn();
-    let mut agent = match agent {
-        Ok(a) => Proc(a),
+        .output();
+    let out = match out {
+        Ok(o) => o,
         Err(e) => {
             return Some(format!(
                 "{} does not run ({e}): {BUILD}",
@@ -150,17 +166,22 @@ fn ask_unavailable() -> Option<String> {
             ));
         }
     };
-    let ended = rig::poll(Duration::from_secs(2), || agent.0.try_wait().ok().flatten());
-    let log = tail(dir.path(), "agent.log", 5);
-    let said = log.lines().find(|l| l.contains("no ros2 support"));
-    match (ended, said) {
-        (Some(_), Some(said)) => Some(format!(
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    // "no ROS 2 support" (--check), "no ros2 support" (an agent started).
+    let said = text.lines().find(|l| {
+        l.to_lowercase()
+            .replace("ros 2", "ros2")
+            .contains("no ros2 support")
+    });
+    // Otherwise ready, or failing for another reason (which the test
+    // shows).
+    said.map(|said| {
+        format!(
             "mech-agent was built without ROS 2 ({}): {BUILD}",
             said.trim()
-        )),
-        // Running, or ended for another reason (which the test shows).
-        _ => None,
-    }
+        )
+    })
 }
 
 /// How to build what the tests run.
@@ -200,7 +221,7 @@ impl BaseRig {
         let ns = Netns::create();
         let dir = tempfile::tempdir().expect("temp dir");
         let station = rig::start_station(&ns, dir.path(), setup.demo, None);
-        let odom_start = setup.start.relative_to(setup.origin);
+        let odom_start = setup.start.relative_to(setup.odom_frame());
         let mut args: Vec<String> = vec![
             "--namespace".to_string(),
             format!("/{NAME}"),
@@ -213,6 +234,9 @@ impl BaseRig {
             "--yaw".into(),
             odom_start.heading.to_string(),
         ];
+        if let Some(m) = setup.map {
+            args.extend(["--map".into(), format!("{},{},{}", m.x, m.y, m.heading)]);
+        }
         args.extend(setup.base_args.iter().cloned());
         let base = Node::python(&ns, dir.path(), "fake_base.py", &args, "base.log");
         let config = dir.path().join("tb3.toml");
@@ -252,7 +276,7 @@ impl BaseRig {
     /// The base's true pose in the arena.
     pub fn truth(&mut self) -> Pose2 {
         let s = self.state();
-        self.setup.origin.compose(pose_of(&s))
+        self.setup.odom_frame().compose(pose_of(&s))
     }
 
     /// cmd_vel samples the base received after `since`: (t, vx, wz, writer).
@@ -278,7 +302,7 @@ impl BaseRig {
     /// The base's true poses in the arena after `since`, with their times.
     pub fn track(&mut self, since: f64) -> Vec<(f64, Pose2)> {
         let a = self.base.ask(json!({"op": "track", "since": since}));
-        let origin = self.setup.origin;
+        let origin = self.setup.odom_frame();
         a["track"]
             .as_array()
             .map(|v| {
