@@ -270,7 +270,7 @@ fn an_estop_and_the_stations_loss_bring_its_cmd_vel_to_zero() {
     rig.kill_station();
     let zero = until_held(&mut rig, t, "the base stopped after the station's loss");
     eprintln!(
-        "figure: ros2 base station killed -> zero cmd_vel at the base {:.3} s (channel_timeout 0.5 s, router_timeout 1 s)",
+        "figure: ros2 base station killed -> zero cmd_vel at the base {:.3} s (on an onboard mission the router's silence counts from channel_timeout, 0.5 s)",
         zero - t
     );
     // Held: zeros keep coming while the station is gone.

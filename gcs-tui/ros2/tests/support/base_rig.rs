@@ -245,7 +245,6 @@ impl BaseRig {
             .command(binary("mech-agent"))
             .arg("--config")
             .arg(&config)
-            .env("RUST_LOG", "info")
             .stdin(Stdio::null())
             .stdout(log_file(dir.path(), "agent.out"))
             .stderr(log_file(dir.path(), "agent.log"))
