@@ -267,6 +267,11 @@ impl BaseRig {
         rig
     }
 
+    /// The agent's process id (for its CPU time and memory).
+    pub fn agent_pid(&self) -> u32 {
+        self.agent.0.id()
+    }
+
     /// The fake base's state (true pose, the last cmd_vel...).
     pub fn state(&mut self) -> Value {
         self.base.ask(json!({"op": "state"}))
