@@ -267,7 +267,8 @@ impl BaseRig {
         rig
     }
 
-    /// The agent's process id (for its CPU time and memory).
+    /// The agent's process id (for its CPU time and memory: the bench).
+    #[allow(dead_code)]
     pub fn agent_pid(&self) -> u32 {
         self.agent.0.id()
     }
