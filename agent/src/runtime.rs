@@ -57,6 +57,19 @@ impl Report {
     }
 }
 
+/// Puts what a vehicle's driver measures (an autopilot's, a ROS 2 base's)
+/// into each telemetry among `outgoing`.
+pub fn patch_telemetry(
+    outgoing: &mut [Envelope],
+    mut patch: impl FnMut(&mut mech_proto::Telemetry),
+) {
+    for env in outgoing {
+        if let mech_proto::Body::Telemetry(t) = &mut env.body {
+            patch(t);
+        }
+    }
+}
+
 /// What the loop drives: an agent core with its vehicle (hardware or
 /// simulated).
 pub trait Vehicle: Send {

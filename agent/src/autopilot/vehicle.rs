@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use mavlink::MavHeader;
 use mavlink::dialects::common::MavMessage;
-use mech_proto::{Body, Envelope, Level};
+use mech_proto::{Envelope, Level};
 
 use super::link::MavlinkPort;
 use super::session::{Report, Session};
@@ -174,11 +174,7 @@ impl<L: MavlinkPort> Vehicle for AutopilotVehicle<L> {
             self.send(&header, &hb, now, &mut out);
         }
         let mut outgoing = tick.outgoing;
-        for env in &mut outgoing {
-            if let Body::Telemetry(t) = &mut env.body {
-                self.session.patch(t);
-            }
-        }
+        crate::runtime::patch_telemetry(&mut outgoing, |t| self.session.patch(t));
         outgoing.extend(out);
         outgoing
     }
@@ -208,8 +204,8 @@ mod tests {
         MavState, MavType,
     };
     use mech_proto::{
-        AutopilotAction, AutopilotRequest, Command, EStop, FailsafeState, Header, Route, Twist,
-        Welcome,
+        AutopilotAction, AutopilotRequest, Body, Command, EStop, FailsafeState, Header, Route,
+        Twist, Welcome,
     };
     use std::collections::VecDeque;
 

@@ -16,7 +16,7 @@
 
 use std::time::Duration;
 
-use mech_proto::{Body, Envelope};
+use mech_proto::Envelope;
 
 use super::link::{BasePort, FromBase};
 use super::session::BaseSession;
@@ -145,11 +145,7 @@ impl<P: BasePort> Vehicle for Ros2Vehicle<P> {
         let twist = self.agent.platform().motion(&tick.outputs);
         self.publish(&twist, now, &mut out);
         let mut outgoing = tick.outgoing;
-        for env in &mut outgoing {
-            if let Body::Telemetry(t) = &mut env.body {
-                self.session.patch(t);
-            }
-        }
+        crate::runtime::patch_telemetry(&mut outgoing, |t| self.session.patch(t));
         outgoing.extend(out);
         outgoing
     }
@@ -172,7 +168,9 @@ mod tests {
     use crate::machine::AgentSettings;
     use crate::platform::PlatformSpec;
     use crate::ros2_base::config::Ros2Config;
-    use mech_proto::{Command, EStop, FailsafeState, Header, Heartbeat, Route, Twist, Welcome};
+    use mech_proto::{
+        Body, Command, EStop, FailsafeState, Header, Heartbeat, Route, Twist, Welcome,
+    };
     use mech_ros2_dds::msgs::geometry::{Quaternion, Twist as RosTwist};
     use mech_ros2_dds::msgs::nav::Odometry;
     use mech_ros2_dds::msgs::sensor::BatteryState;

@@ -57,11 +57,17 @@ pub fn unavailable() -> Option<String> {
 /// Skips a test this machine cannot run, saying why; under CI (`CI` set)
 /// that is a failure instead, since CI must run them.
 pub fn skip_unless_available() -> bool {
-    let Some(why) = unavailable() else {
+    skip_if(unavailable(), "the ROS 2 tests")
+}
+
+/// Whether to skip `tests` for `why` (if any), saying so; under CI a
+/// reason is a failure instead.
+pub fn skip_if(why: Option<String>, tests: &str) -> bool {
+    let Some(why) = why else {
         return false;
     };
     if std::env::var_os("CI").is_some() {
-        panic!("CI must run the ROS 2 tests: {why}");
+        panic!("CI must run {tests}: {why}");
     }
     eprintln!("skipped: {why}");
     true
