@@ -335,6 +335,54 @@ fn driven_at_the_fence_it_stays_inside_the_arena() {
     );
 }
 
+/// The closest the base's true centre came to each simulated robot's
+/// reported one (`base_dist`) and their discs (`base_gap`), and the two
+/// simulated robots to each other.
+struct Closest {
+    base_dist: [f64; 2],
+    base_gap: [f64; 2],
+    demo_dist: f64,
+    demo_gap: f64,
+}
+
+/// Every snapshot: the base's true centre at its arrival against each
+/// simulated robot's reported one, and the simulated robots' between
+/// them; each robot's own disc from its telemetry.
+fn closest(track: &[(f64, Pose2)], snaps: &[(f64, serde_json::Value)]) -> Closest {
+    let radius = |r: &serde_json::Value| {
+        num(&r["safety"]["footprint"]) - num(&r["safety"]["position_error"])
+    };
+    let mut c = Closest {
+        base_dist: [f64::INFINITY; 2],
+        base_gap: [f64::INFINITY; 2],
+        demo_dist: f64::INFINITY,
+        demo_gap: f64::INFINITY,
+    };
+    for (t, fleet) in snaps {
+        let Some(truth) = at(track, *t) else {
+            continue;
+        };
+        let robots = fleet["robots"].as_array().unwrap();
+        let demo: Vec<_> = robots
+            .iter()
+            .filter(|r| r["name"] == "robot_1" || r["name"] == "robot_2")
+            .collect();
+        for (i, r) in demo.iter().enumerate() {
+            let p = reported(r);
+            let d = truth.distance(p.x, p.y);
+            c.base_dist[i] = c.base_dist[i].min(d);
+            c.base_gap[i] = c.base_gap[i].min(d - RADIUS - radius(r));
+        }
+        if let [a, b] = demo[..] {
+            let (pa, pb) = (reported(a), reported(b));
+            let d = pa.distance(pb.x, pb.y);
+            c.demo_dist = c.demo_dist.min(d);
+            c.demo_gap = c.demo_gap.min(d - radius(a) - radius(b));
+        }
+    }
+    c
+}
+
 #[test]
 fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
     if base_rig::skip_unless_available() {
@@ -372,38 +420,12 @@ fn among_simulated_robots_crossing_its_path_every_disc_keeps_its_distance() {
     let track = rig.track(t0);
     let snaps = rig.op.snapshots_since(t0);
 
-    // Every snapshot: the base's true centre at its arrival against each
-    // simulated robot's reported one, and the simulated robots' between
-    // them; each robot's own disc from its telemetry.
-    let radius = |r: &serde_json::Value| {
-        num(&r["safety"]["footprint"]) - num(&r["safety"]["position_error"])
-    };
-    let mut base_gap = [f64::INFINITY; 2];
-    let mut base_dist = [f64::INFINITY; 2];
-    let mut demo_gap = f64::INFINITY;
-    let mut demo_dist = f64::INFINITY;
-    for (t, fleet) in &snaps {
-        let Some(truth) = at(&track, *t) else {
-            continue;
-        };
-        let robots = fleet["robots"].as_array().unwrap();
-        let demo: Vec<_> = robots
-            .iter()
-            .filter(|r| r["name"] == "robot_1" || r["name"] == "robot_2")
-            .collect();
-        for (i, r) in demo.iter().enumerate() {
-            let p = reported(r);
-            let d = truth.distance(p.x, p.y);
-            base_dist[i] = base_dist[i].min(d);
-            base_gap[i] = base_gap[i].min(d - RADIUS - radius(r));
-        }
-        if let [a, b] = demo[..] {
-            let (pa, pb) = (reported(a), reported(b));
-            let d = pa.distance(pb.x, pb.y);
-            demo_dist = demo_dist.min(d);
-            demo_gap = demo_gap.min(d - radius(a) - radius(b));
-        }
-    }
+    let Closest {
+        base_dist,
+        base_gap,
+        demo_dist,
+        demo_gap,
+    } = closest(&track, &snaps);
     let end = rig.truth();
     eprintln!(
         "figure: ros2 base among 2 simulated robots: min centre distance to robot_1 {:.3} m, \
