@@ -310,6 +310,20 @@ impl Session {
         Some(velocity_from_ned(v, rate))
     }
 
+    /// The same velocity in the body frame (REP 103: x forward, y left),
+    /// turned by the autopilot's heading.
+    pub fn body_twist(&self) -> Option<Twist> {
+        let v = self.velocity()?;
+        let (yaw, _) = self.vehicle.yaw?;
+        let (sin, cos) = super::frames::yaw_to_heading(yaw).sin_cos();
+        Some(Twist {
+            vx: cos * v.vx + sin * v.vy,
+            vy: -sin * v.vx + cos * v.vy,
+            vz: v.vz,
+            wz: v.wz,
+        })
+    }
+
     /// Battery charge, a fraction.
     pub fn battery(&self) -> Option<f64> {
         self.vehicle.battery

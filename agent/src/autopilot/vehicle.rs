@@ -106,6 +106,11 @@ impl<L: MavlinkPort> AutopilotVehicle<L> {
                 quality: 1.0,
                 has_heading: true,
             });
+            // The velocity the autopilot measures, not the one commanded,
+            // is what the safety layer judges.
+            if let Some(twist) = self.session.body_twist() {
+                self.agent.observe_velocity(twist, now);
+            }
         }
     }
 
@@ -591,5 +596,15 @@ mod tests {
         // 0.4 m/s north is vy = 0.4 in ENU.
         assert!((t.velocity.vy - 0.4).abs() < 1e-6 && t.velocity.vx.abs() < 1e-6);
         assert_eq!(t.velocity_source, mech_proto::VelocitySource::Measured);
+        // The core itself knows it (the safety layer judges it), not only
+        // the telemetry sent: facing east, 0.4 m/s north is to its left.
+        let own = v.agent.telemetry(MS);
+        assert_eq!(own.velocity_source, mech_proto::VelocitySource::Measured);
+        assert!(
+            (own.velocity.vy - 0.4).abs() < 1e-6 && own.velocity.vx.abs() < 1e-6,
+            "{:?}",
+            own.velocity
+        );
+        assert!((v.session.body_twist().unwrap().vy - 0.4).abs() < 1e-6);
     }
 }
