@@ -361,11 +361,6 @@ impl BaseSession {
             },
         }
     }
-
-    /// The odometry topic, resolved.
-    pub fn odom_topic(&self) -> &str {
-        &self.odom_topic
-    }
 }
 
 #[cfg(test)]
